@@ -1,0 +1,17 @@
+"""The scene library: case files, their loader and validation, and exact solutions."""
+
+from cases.case import Case, Gate, OdeSpec, StabilitySpec
+from cases.errors import CaseError
+from cases.loader import CASE_DIR, case_files, load_case, load_cases
+
+__all__ = [
+    "CASE_DIR",
+    "Case",
+    "CaseError",
+    "Gate",
+    "OdeSpec",
+    "StabilitySpec",
+    "case_files",
+    "load_case",
+    "load_cases",
+]

@@ -1,0 +1,119 @@
+"""The typed form of a case file."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from reference_impl.model import ParticleModel
+
+
+@dataclass
+class OdeSpec:
+    """A plain ODE scene: a named system of :mod:`reference_impl.odes` and its start.
+
+    system : ``"circle-field"``, ``"kepler"`` or ``"arenstorf"``
+    y0 : ndarray, shape (dim,)  initial state
+    params : keyword parameters of the system (``mu`` ...)
+    """
+
+    system: str
+    y0: np.ndarray
+    params: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Gate:
+    """One accuracy gate of a case, in the units of the quantity it checks.
+
+    kind : ``order`` (fitted convergence order within ``tol`` of ``expect``), ``error``,
+    ``energy_drift`` (at most ``max``), ``status`` (equals ``expect``), ``property``
+    (a named metric between ``min`` and ``max``), ``stability-limit`` (measured within
+    ``rel_tol`` of the exact limit) or ``speedup``.
+    engine, method : the rows the gate reads; dt : the step (or tolerance) it reads, if one
+    params : the kind's numbers (``expect``, ``tol``, ``max``, ``min``, ``name`` ...)
+    where : ``gates[i]`` in the case file, for messages
+    """
+
+    kind: str
+    engine: str
+    method: str
+    dt: float | None
+    params: dict[str, Any]
+    where: str
+
+
+@dataclass
+class StabilitySpec:
+    """A stability search: bisection on dt over a fixed horizon.
+
+    horizon : s;  dt_lo, dt_hi : bracket, s;  max_runs : simulations per search;
+    rel_tol : relative width at which bisection stops.
+    """
+
+    horizon: float
+    dt_lo: float
+    dt_hi: float
+    max_runs: int = 30
+    rel_tol: float = 1e-3
+
+
+@dataclass
+class Case:
+    """A scene, how to run it, what it is measured against and its gates.
+
+    name : the file name without ``.toml``;  kind : ``ode`` or ``particles``
+    duration : simulated time, s
+    dts, quick_dts : fixed-step sweep (s) for full and ``--quick`` runs
+    tolerances, quick_tolerances : rtol = atol sweep for adaptive methods
+    exact : name of the exact solution in :mod:`cases.exact` (``None``: property checks only)
+    error_norm : ``final`` (positions at the end) or ``max`` (worst over the run)
+    properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
+    skip : ``(engine, method, reason)`` pairs that are not run (rows say why)
+    """
+
+    name: str
+    file: str
+    title: str
+    description: str
+    kind: str
+    duration: float
+    dts: list[float]
+    quick_dts: list[float]
+    tolerances: list[float]
+    quick_tolerances: list[float]
+    model: ParticleModel | None = None
+    ode: OdeSpec | None = None
+    exact: str | None = None
+    exact_params: dict[str, Any] = field(default_factory=dict)
+    error_norm: str = "final"
+    error_scale: float = 1.0
+    conservative: bool = False
+    max_records: int = 2000
+    gates: list[Gate] = field(default_factory=list)
+    stability: StabilitySpec | None = None
+    properties: list[str] = field(default_factory=list)
+    skip: list[tuple[str, str, str]] = field(default_factory=list)
+    hard: str | None = None
+    tags: list[str] = field(default_factory=list)
+    timeout_s: float = 120.0
+
+    @property
+    def features(self) -> set[str]:
+        """Modelling features the scene needs (an ODE needs ``ode``)."""
+        if self.model is not None:
+            return self.model.features()
+        return {"ode"} | ({"second-order"} if self.ode and self.ode.system != "circle-field" else set())
+
+    def sweep(self, *, adaptive: bool, quick: bool) -> list[float]:
+        """Steps (s) for fixed-step methods, or tolerances for adaptive ones."""
+        if adaptive:
+            return self.quick_tolerances if quick else self.tolerances
+        return self.quick_dts if quick else self.dts
+
+    def steps_for(self, dt: float) -> tuple[int, float]:
+        """The number of steps for a nominal ``dt`` and the exact step that fills the run."""
+        n = max(1, int(round(self.duration / dt)))
+        return n, self.duration / n

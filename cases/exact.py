@@ -1,0 +1,147 @@
+"""Exact solutions the cases are measured against.
+
+Each solution is a function ``exact(case, t) -> Exact`` of the case and the times
+``t`` (s, shape ``(T,)``) at which a run was recorded. Positions come back in the same
+layout as a trajectory's: particle scenes ``(T, n, 3)``, ODE scenes the whole state as
+``(T, 1, dim)``. A solution known only at some times (a periodic orbit's period) returns
+those times alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from cases.case import Case
+
+
+@dataclass
+class Exact:
+    """Exact positions (and velocities, energy where known) at times ``t`` (s)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray | None = None
+    energy: np.ndarray | None = None
+
+
+ExactFn = Callable[[Case, np.ndarray], Exact]
+EXACT: dict[str, ExactFn] = {}
+
+
+def exact_solution(name: str) -> Callable[[ExactFn], ExactFn]:
+    """Register an exact solution under ``name``."""
+
+    def register(fn: ExactFn) -> ExactFn:
+        EXACT[name] = fn
+        return fn
+
+    return register
+
+
+@exact_solution("circle")
+def circle(case: Case, t: np.ndarray) -> Exact:
+    """``x' = (-y, x)``: the start rotated by angle ``t``; half the squared radius is kept."""
+    y0 = case.ode.y0
+    c, s = np.cos(t), np.sin(t)
+    x = np.stack([c * y0[0] - s * y0[1], s * y0[0] + c * y0[1]], axis=1)
+    return Exact(t, x[:, None, :], None, np.full(t.shape, 0.5 * float(y0 @ y0)))
+
+
+def oscillator(m: float, k: float, c: float, u0: float, w0: float, t: np.ndarray):
+    """Displacement and velocity of ``m u'' + c u' + k u = 0`` from ``u(0)=u0, u'(0)=w0``.
+
+    Handles under-, critically and over-damped cases; ``m`` kg, ``k`` N/m, ``c`` N s/m.
+    """
+    omega0 = np.sqrt(k / m)
+    zeta = c / (2.0 * np.sqrt(k * m))
+    if zeta < 1.0:
+        wd = omega0 * np.sqrt(1.0 - zeta**2)
+        a = zeta * omega0
+        B = (w0 + a * u0) / wd
+        e = np.exp(-a * t)
+        u = e * (u0 * np.cos(wd * t) + B * np.sin(wd * t))
+        du = e * ((-a * u0 + B * wd) * np.cos(wd * t) + (-a * B - u0 * wd) * np.sin(wd * t))
+    elif zeta == 1.0:
+        a = omega0
+        B = w0 + a * u0
+        e = np.exp(-a * t)
+        u = e * (u0 + B * t)
+        du = e * (B - a * (u0 + B * t))
+    else:
+        r = omega0 * np.sqrt(zeta**2 - 1.0)
+        l1, l2 = -zeta * omega0 + r, -zeta * omega0 - r
+        A = (w0 - l2 * u0) / (l1 - l2)
+        B = u0 - A
+        u = A * np.exp(l1 * t) + B * np.exp(l2 * t)
+        du = A * l1 * np.exp(l1 * t) + B * l2 * np.exp(l2 * t)
+    return u, du
+
+
+@exact_solution("anchored-oscillator")
+def anchored_oscillator(case: Case, t: np.ndarray) -> Exact:
+    """One particle on one anchored spring-damper, moving along the spring's line.
+
+    With the start on the spring's axis and the velocity along it, the motion stays on
+    that line: ``u`` (extension beyond rest) obeys ``m u'' + k_d u' + k_s u = 0``.
+    Energy: ``m v^2 / 2 + k_s u^2 / 2`` (gravity must be zero).
+    """
+    m = case.model
+    a = m.anchors
+    d0 = m.x0[0] - a.point[0]
+    axis = d0 / np.linalg.norm(d0)
+    u0 = float(np.linalg.norm(d0) - a.rest[0])
+    w0 = float(m.v0[0] @ axis)
+    u, du = oscillator(float(m.mass[0]), float(a.stiffness[0]), float(a.damping[0]), u0, w0, t)
+    x = a.point[0] + (a.rest[0] + u)[:, None] * axis
+    v = du[:, None] * axis
+    energy = 0.5 * m.mass[0] * du**2 + 0.5 * a.stiffness[0] * u**2
+    return Exact(t, x[:, None, :], v[:, None, :], energy)
+
+
+def kepler_state(e: float, mu: float, a: float, t: np.ndarray) -> np.ndarray:
+    """State ``(x, y, vx, vy)`` at times ``t`` of a Kepler orbit starting at pericentre.
+
+    Solves Kepler's equation ``E - e sin E = n t`` by Newton's method to machine
+    precision; semi-major axis ``a``, mean motion ``n = sqrt(mu / a^3)``.
+    """
+    n = np.sqrt(mu / a**3)
+    M = np.mod(n * t, 2 * np.pi)
+    E = M + e * np.sin(M) if e < 0.8 else np.full_like(M, np.pi)
+    for _ in range(50):
+        dE = (E - e * np.sin(E) - M) / (1 - e * np.cos(E))
+        E = E - dE
+        if np.max(np.abs(dE)) < 1e-15:
+            break
+    b = a * np.sqrt(1 - e**2)
+    denom = 1 - e * np.cos(E)
+    x = a * (np.cos(E) - e)
+    y = b * np.sin(E)
+    vx = -a * n * np.sin(E) / denom
+    vy = b * n * np.cos(E) / denom
+    return np.stack([x, y, vx, vy], axis=1)
+
+
+@exact_solution("kepler")
+def kepler(case: Case, t: np.ndarray) -> Exact:
+    """The Kepler orbit from pericentre ``(a (1 - e), 0)``; energy ``-mu / (2 a)``."""
+    mu = case.ode.params.get("mu", 1.0)
+    q0, v0 = case.ode.y0[:2], case.ode.y0[2:]
+    r0 = float(np.linalg.norm(q0))
+    energy = 0.5 * float(v0 @ v0) - mu / r0
+    a = -mu / (2 * energy)
+    e = 1 - r0 / a
+    state = kepler_state(e, mu, a, t)
+    return Exact(t, state[:, None, :], None, np.full(t.shape, energy))
+
+
+@exact_solution("periodic")
+def periodic(case: Case, t: np.ndarray) -> Exact:
+    """A periodic orbit known only at its start and after whole periods (``period``, s)."""
+    period = float(case.exact_params["period"])
+    k = np.round(t / period)
+    keep = np.abs(t - k * period) <= 1e-9 * max(1.0, period)
+    y0 = case.ode.y0
+    return Exact(t[keep], np.tile(y0, (int(keep.sum()), 1))[:, None, :])

@@ -1,0 +1,208 @@
+"""Read the ``[scene]`` table of a case file into a :class:`ParticleModel`.
+
+Particles are numbered in the order they are declared: the groups of
+``[[scene.particles]]`` first, then each ``[[scene.meshes]]`` in turn. Springs and
+anchors refer to those global numbers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cases.fields import Fields
+from cases.meshes import MeshPart, read_emitter, read_mesh
+from reference_impl.model import (
+    Anchors,
+    ForceField,
+    Gravitation,
+    ParticleModel,
+    Plane,
+    Springs,
+)
+
+FIELD_KINDS = {"vortex", "wind"}
+
+
+def read_scene(f: Fields) -> ParticleModel:
+    """Build the model described by the ``scene`` table ``f``."""
+    dimension = f.integer("dimension", 3)
+    if dimension not in (2, 3):
+        raise f.error("dimension", f"must be 2 or 3, got {dimension}")
+    parts = [_read_particles(p) for p in f.subs("particles")]
+    parts += [read_mesh(m) for m in f.subs("meshes")]
+    emitters = [read_emitter(e) for e in f.subs("emitters")]
+    for e in emitters:
+        parts.append(MeshPart.pool(e.capacity, e.particle_mass))
+
+    offsets = np.cumsum([0] + [len(p.mass) for p in parts])
+    n = int(offsets[-1])
+
+    def cat(attr: str, width: int | None = None) -> np.ndarray:
+        arrays = [getattr(p, attr) for p in parts]
+        if not arrays:
+            return np.zeros((0, width) if width else 0)
+        return np.concatenate(arrays)
+
+    mass, x0, v0 = cat("mass"), cat("x0", 3), cat("v0", 3)
+    radius, fixed = cat("radius"), cat("fixed").astype(bool)
+
+    spring_sets = [_offset(p.springs, off) for p, off in zip(parts, offsets, strict=False)]
+    spring_sets += [_read_springs(s, x0, n) for s in f.subs("springs")]
+    springs = _concat_springs(spring_sets)
+    anchors = _read_anchors(f.subs("anchors"), x0, n)
+
+    gravitation = None
+    if f.has("gravitation"):
+        g = f.sub("gravitation")
+        gravitation = Gravitation(
+            G=g.number("G", 6.67384e-11, positive=True),
+            softening=g.number("softening", 0.0, nonnegative=True),
+        )
+        g.done()
+
+    model = ParticleModel(
+        mass=mass,
+        x0=x0,
+        v0=v0,
+        radius=radius,
+        fixed=fixed,
+        gravity=f.vec3("gravity", [0.0, 0.0, 0.0]),
+        drag=f.number("drag", 0.0, nonnegative=True),
+        springs=springs,
+        anchors=anchors,
+        gravitation=gravitation,
+        fields=[_read_field(x) for x in f.subs("fields")],
+        planes=[_read_plane(p) for p in f.subs("planes")],
+        emitters=emitters,
+        impulses=[_read_impulse(i, n) for i in f.subs("impulses")],
+        dimension=dimension,
+    )
+    f.done()
+    if dimension == 2:
+        _check_planar(f, model)
+    return model
+
+
+def _read_particles(f: Fields) -> MeshPart:
+    x0 = f.array("position", shape=(None, 3))
+    n = len(x0)
+    v0 = f.array("velocity", np.zeros((n, 3)), shape=(n, 3))
+    mass = _per_particle(f, "mass", n, positive=True)
+    radius = _per_particle(f, "radius", n, default=0.0)
+    fixed_raw = f.raw("fixed", False)
+    fixed = np.broadcast_to(np.asarray(fixed_raw, dtype=bool), (n,)).copy()
+    f.done()
+    return MeshPart(mass, x0, v0, radius, fixed, Springs.empty())
+
+
+def _per_particle(f: Fields, name: str, n: int, *, default=None, positive=False) -> np.ndarray:
+    raw = f.raw(name, default) if default is not None else f.raw(name)
+    if isinstance(raw, list):
+        arr = f.array(name, shape=(n,))
+    else:
+        arr = np.full(n, f.number(name, default, nonnegative=True))
+    if positive and np.any(arr <= 0):
+        raise f.error(name, "every mass must be positive (pin a particle with fixed = true)")
+    if np.any(arr < 0):
+        raise f.error(name, "must not be negative")
+    return arr
+
+
+def _read_springs(f: Fields, x0: np.ndarray, n: int) -> Springs:
+    pairs = f.array("pairs", shape=(None, 2)).astype(int)
+    if np.any(pairs < 0) or np.any(pairs >= n):
+        raise f.error("pairs", f"particle index out of range 0..{n - 1}")
+    if np.any(pairs[:, 0] == pairs[:, 1]):
+        raise f.error("pairs", "a spring needs two different particles")
+    m = len(pairs)
+    length = np.linalg.norm(x0[pairs[:, 0]] - x0[pairs[:, 1]], axis=1)
+    rest = np.full(m, f.number("rest", None, nonnegative=True)) if f.has("rest") else length
+    springs = Springs(
+        pairs[:, 0],
+        pairs[:, 1],
+        np.full(m, f.number("stiffness", nonnegative=True)),
+        np.full(m, f.number("damping", 0.0, nonnegative=True)),
+        rest,
+    )
+    f.done()
+    return springs
+
+
+def _read_anchors(tables: list[Fields], x0: np.ndarray, n: int) -> Anchors:
+    if not tables:
+        return Anchors.empty()
+    rows = []
+    for f in tables:
+        i = f.integer("particle", minimum=0)
+        if i >= n:
+            raise f.error("particle", f"index {i} out of range 0..{n - 1}")
+        point = f.vec3("point")
+        rest = f.number("rest", float(np.linalg.norm(x0[i] - point)), nonnegative=True)
+        rows.append((i, point, f.number("stiffness", nonnegative=True),
+                     f.number("damping", 0.0, nonnegative=True), rest))
+        f.done()
+    return Anchors(
+        np.array([r[0] for r in rows]),
+        np.array([r[1] for r in rows]),
+        np.array([r[2] for r in rows]),
+        np.array([r[3] for r in rows]),
+        np.array([r[4] for r in rows]),
+    )
+
+
+def _read_plane(f: Fields) -> Plane:
+    normal = f.vec3("normal")
+    norm = float(np.linalg.norm(normal))
+    if norm == 0:
+        raise f.error("normal", "must not be the zero vector")
+    plane = Plane(
+        point=f.vec3("point"),
+        normal=normal / norm,
+        restitution=f.number("restitution", 1.0, nonnegative=True, at_most=1.0),
+        friction=f.number("friction", 0.0, nonnegative=True),
+    )
+    f.done()
+    return plane
+
+
+def _read_field(f: Fields) -> ForceField:
+    kind = f.string("kind", choices=FIELD_KINDS)
+    params = {k: v for k, v in f.table.items() if k != "kind"}
+    for k, v in params.items():
+        ok = isinstance(v, int | float) and not isinstance(v, bool)
+        ok = ok or (isinstance(v, list) and len(v) == 3)
+        if not ok:
+            raise f.error(k, f"expected a number or a 3-vector, got {v!r}")
+        f.raw(k)
+    f.done()
+    return ForceField(kind, params)
+
+
+def _read_impulse(f: Fields, n: int) -> tuple[int, np.ndarray, float, float]:
+    i = f.integer("particle", minimum=0)
+    if i >= n:
+        raise f.error("particle", f"index {i} out of range 0..{n - 1}")
+    start = f.number("start", 0.0, nonnegative=True)
+    end = f.number("end", positive=True)
+    if end <= start:
+        raise f.error("end", f"must be after start ({start:g}), got {end:g}")
+    impulse = (i, f.vec3("force"), start, end)
+    f.done()
+    return impulse
+
+
+def _offset(s: Springs, off: int) -> Springs:
+    return Springs(s.i + off, s.j + off, s.stiffness, s.damping, s.rest)
+
+
+def _concat_springs(sets: list[Springs]) -> Springs:
+    sets = [s for s in sets if len(s)]
+    if not sets:
+        return Springs.empty()
+    return Springs(*(np.concatenate([getattr(s, a) for s in sets])
+                     for a in ("i", "j", "stiffness", "damping", "rest")))
+
+
+def _check_planar(f: Fields, m: ParticleModel) -> None:
+    if np.any(m.x0[:, 2] != 0) or np.any(m.v0[:, 2] != 0) or m.gravity[2] != 0:
+        raise f.error("dimension", "a 2-D scene must keep positions, velocities and gravity at z = 0")

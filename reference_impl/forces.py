@@ -1,0 +1,153 @@
+"""Force objects: each adds its force into the accumulator ``f`` and does nothing else.
+
+"Unlike particles, forces are heterogeneous. Force objects: black boxes, point to the
+particles they influence, add in their own forces." Every function here takes the
+positions ``x`` and velocities ``v`` (shape ``(n, 3)``, m and m/s), the time ``t``
+(s) and the accumulator ``f`` (shape ``(n, 3)``, N), vectorised over all particles,
+and adds into ``f`` in place. Potential energies (J) sit beside the forces that have one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from reference_impl.model import Anchors, ForceField, Gravitation, Springs
+
+EARTH_MASS = 5.972e24
+"""kg."""
+EARTH_RADIUS = 6.371e6
+"""Mean radius, m."""
+
+
+def earth_gravity(G: float = 6.67384e-11) -> float:
+    """The lecture's Earth model ``a_e = G m_e / r_e^2`` (m/s^2), about 9.8."""
+    return G * EARTH_MASS / EARTH_RADIUS**2
+
+
+def add_gravity(f: np.ndarray, mass: np.ndarray, g: np.ndarray) -> None:
+    """Constant gravity ``f = m g``; ``mass`` shape (n,), ``g`` shape (3,) m/s^2."""
+    f += mass[:, None] * g
+
+
+def add_drag(f: np.ndarray, v: np.ndarray, k_drag: float) -> None:
+    """Viscous drag ``f = -k_drag v`` (``k_drag`` in N s/m): "Highly recommended!"."""
+    f -= k_drag * v
+
+
+def spring_forces(
+    dx: np.ndarray,
+    dv: np.ndarray,
+    stiffness: np.ndarray,
+    damping: np.ndarray,
+    rest: np.ndarray,
+) -> np.ndarray:
+    """The lecture's damped spring, force on the first end of each spring.
+
+    ``f_1 = -[k_s (|dx| - r) + k_d (dv . dx) / |dx|] dx / |dx|`` with ``dx = x_1 - x_2``
+    and ``dv = v_1 - v_2``, all shape (m, 3); ``f_2 = -f_1``. A zero-length spring
+    (``|dx| = 0``) exerts no force: its direction is undefined.
+    """
+    length = np.sqrt(np.einsum("ij,ij->i", dx, dx))
+    safe = np.where(length > 0, length, 1.0)
+    unit = dx / safe[:, None]
+    rate = np.einsum("ij,ij->i", dv, unit)
+    magnitude = stiffness * (length - rest) + damping * rate
+    magnitude = np.where(length > 0, magnitude, 0.0)
+    return -magnitude[:, None] * unit
+
+
+def add_springs(f: np.ndarray, x: np.ndarray, v: np.ndarray, s: Springs) -> None:
+    """Damped springs between particle pairs ``(s.i, s.j)``, many at once."""
+    if not len(s):
+        return
+    f1 = spring_forces(x[s.i] - x[s.j], v[s.i] - v[s.j], s.stiffness, s.damping, s.rest)
+    np.add.at(f, s.i, f1)
+    np.subtract.at(f, s.j, f1)
+
+
+def add_anchors(f: np.ndarray, x: np.ndarray, v: np.ndarray, a: Anchors) -> None:
+    """Damped springs from particles ``a.i`` to fixed points ``a.point``."""
+    if not len(a):
+        return
+    f1 = spring_forces(x[a.i] - a.point, v[a.i], a.stiffness, a.damping, a.rest)
+    np.add.at(f, a.i, f1)
+
+
+def spring_energy(x: np.ndarray, s: Springs) -> float:
+    """Potential energy ``sum k_s (|dx| - r)^2 / 2`` of springs between pairs, J."""
+    if not len(s):
+        return 0.0
+    length = np.linalg.norm(x[s.i] - x[s.j], axis=1)
+    return float(0.5 * np.sum(s.stiffness * (length - s.rest) ** 2))
+
+
+def anchor_energy(x: np.ndarray, a: Anchors) -> float:
+    """Potential energy of anchored springs, J."""
+    if not len(a):
+        return 0.0
+    length = np.linalg.norm(x[a.i] - a.point, axis=1)
+    return float(0.5 * np.sum(a.stiffness * (length - a.rest) ** 2))
+
+
+def add_gravitation(f: np.ndarray, x: np.ndarray, mass: np.ndarray, g: Gravitation) -> None:
+    """Universal gravitation between all pairs, ``G m_i m_j / (r^2 + eps^2)`` toward each other.
+
+    Vectorised over the (n, n) pair matrix: fine for the n-body scenes of the lecture
+    (tens of bodies), not meant for thousands.
+    """
+    d = x[None, :, :] - x[:, None, :]  # d[i, j] = x_j - x_i
+    r2 = np.einsum("ijk,ijk->ij", d, d) + g.softening**2
+    np.fill_diagonal(r2, np.inf)
+    w = g.G * mass[None, :] / (r2 * np.sqrt(r2))
+    f += mass[:, None] * np.einsum("ij,ijk->ik", w, d)
+
+
+def gravitation_energy(x: np.ndarray, mass: np.ndarray, g: Gravitation) -> float:
+    """Potential energy ``-sum_{i<j} G m_i m_j / sqrt(r^2 + eps^2)``, J."""
+    d = x[None, :, :] - x[:, None, :]
+    r = np.sqrt(np.einsum("ijk,ijk->ij", d, d) + g.softening**2)
+    iu = np.triu_indices(len(mass), 1)
+    return float(-np.sum(g.G * mass[iu[0]] * mass[iu[1]] / r[iu]))
+
+
+def field_force(
+    field: ForceField, x: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float
+) -> np.ndarray:
+    """The force (N, shape (n, 3)) of a position/time-dependent field on every particle.
+
+    ``vortex``: ``f = strength * m * (axis x r_perp) / max(|r_perp|, core)^... `` where
+    ``r_perp`` is the offset from the axis through ``center``; the swirl speed falls
+    off outside the ``core`` radius (a Rankine-like vortex), parameters
+    ``center`` (3,), ``axis`` (3,), ``strength`` (1/s^2), ``core`` (m).
+
+    ``wind``: a gusting wind velocity ``w(t) = direction * (speed + gust * sin(2 pi freq t))``
+    that drags particles toward it, ``f = k (w(t) - v)``, parameters ``direction`` (3,),
+    ``speed`` (m/s), ``gust`` (m/s), ``freq`` (Hz), ``k`` (N s/m).
+    """
+    p = field.params
+    if field.kind == "vortex":
+        center = np.asarray(p.get("center", [0.0, 0.0, 0.0]), float)
+        axis = np.asarray(p.get("axis", [0.0, 1.0, 0.0]), float)
+        axis = axis / np.linalg.norm(axis)
+        r = x - center
+        r_perp = r - np.outer(r @ axis, axis)
+        dist = np.linalg.norm(r_perp, axis=1)
+        core = float(p.get("core", 0.5))
+        falloff = np.where(dist < core, 1.0, (core / np.maximum(dist, 1e-300)) ** 2)
+        return float(p["strength"]) * mass[:, None] * falloff[:, None] * np.cross(axis, r_perp)
+    if field.kind == "wind":
+        direction = np.asarray(p["direction"], float)
+        direction = direction / np.linalg.norm(direction)
+        speed = float(p.get("speed", 0.0)) + float(p.get("gust", 0.0)) * np.sin(
+            2 * np.pi * float(p.get("freq", 0.0)) * t
+        )
+        return float(p.get("k", 1.0)) * (speed * direction - v)
+    raise ValueError(f"force field: unknown kind {field.kind!r} (known: vortex, wind)")
+
+
+def add_fields(
+    f: np.ndarray, fields: list[ForceField], x: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float
+) -> None:
+    """Add every force field's force."""
+    for fld in fields:
+        f += field_force(fld, x, v, mass, t)

@@ -1,0 +1,119 @@
+"""The simulation loop: a solver step, then the events that act between steps."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from reference_impl.solvers.base import Solver
+
+BLOWUP = 1e12
+"""A state component beyond this magnitude counts as a blow-up (SI units throughout)."""
+
+
+@dataclass
+class Run:
+    """What :func:`integrate` returns.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Recorded times, seconds; ``t[0]`` is the start.
+    x : ndarray, shape (T, dim)
+        The system's flat state at those times.
+    nfev : int
+        Derivative evaluations made by the solver.
+    steps : int
+        Solver steps taken.
+    wall_s : float
+        Seconds spent stepping (recording included, setup excluded).
+    extra : dict of str to ndarray, shape (T, ...)
+        The system's :meth:`~reference_impl.system.System.observe` at each record.
+    status : str
+        ``ok``, or ``unstable`` if the state went non-finite or beyond ``BLOWUP``.
+    t_fail : float or None
+        Time of the first step at which the state was found unstable.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    nfev: int
+    steps: int
+    wall_s: float
+    extra: dict[str, np.ndarray]
+    status: str = "ok"
+    t_fail: float | None = None
+
+
+def record_indices(n_steps: int, max_records: int) -> np.ndarray:
+    """Step indices (``0..n_steps``) at which to record, at most ``max_records + 1``."""
+    if n_steps <= max_records:
+        return np.arange(n_steps + 1)
+    return np.unique(np.linspace(0, n_steps, max_records + 1).round().astype(int))
+
+
+def integrate(
+    solver: Solver, t_end: float, dt: float, *, max_records: int = 2000
+) -> Run:
+    """Step ``solver.system`` from its current time to ``t_end``.
+
+    Fixed-step solvers take ``round((t_end - t0) / dt)`` steps of ``dt`` seconds; an
+    adaptive solver takes steps of its own choosing, at most ``t_end - t`` each, and
+    every accepted step is recorded. After each step the system's ``between_steps``
+    runs (collisions, emitters, lifetimes). Stepping stops at the first non-finite or
+    runaway state, which is recorded with status ``unstable``.
+    """
+    system = solver.system
+    t0 = system.get_time()
+    ts, xs, obs = [t0], [system.get_state()], [system.observe()]
+    status, t_fail, steps = "ok", None, 0
+    start = time.perf_counter()
+    if solver.adaptive:
+        t = t0
+        while t_end - t > 1e-12 * max(1.0, abs(t_end)):
+            try:
+                h = solver.step(t_end - t)
+            except FloatingPointError:
+                status, t_fail = "unstable", t
+                break
+            system.between_steps(h)
+            steps += 1
+            t = system.get_time()
+            x = system.get_state()
+            ts.append(t)
+            xs.append(x)
+            obs.append(system.observe())
+            if not _finite(x):
+                status, t_fail = "unstable", t
+                break
+    else:
+        n_steps = int(round((t_end - t0) / dt))
+        marks = np.zeros(n_steps + 1, dtype=bool)
+        marks[record_indices(n_steps, max_records)] = True
+        for i in range(1, n_steps + 1):
+            try:
+                solver.step(dt)
+            except FloatingPointError:
+                status, t_fail = "unstable", system.get_time()
+                break
+            system.between_steps(dt)
+            steps = i
+            if marks[i] or i % 64 == 0:
+                x = system.get_state()
+                bad = not _finite(x)
+                if marks[i] or bad:
+                    ts.append(system.get_time())
+                    xs.append(x)
+                    obs.append(system.observe())
+                if bad:
+                    status, t_fail = "unstable", system.get_time()
+                    break
+    wall = time.perf_counter() - start
+    extra = {k: np.array([o[k] for o in obs]) for k in obs[0]}
+    return Run(np.array(ts), np.array(xs), solver.nfev, steps, wall, extra, status, t_fail)
+
+
+def _finite(x: np.ndarray) -> bool:
+    return bool(np.all(np.isfinite(x)) and np.max(np.abs(x), initial=0.0) < BLOWUP)

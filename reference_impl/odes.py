@@ -1,0 +1,69 @@
+"""Plain ODE systems of the lecture and the classic test problems, in canonical form."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from reference_impl.system import SecondOrderSystem, System
+
+
+class CircleField(System):
+    """The lecture's vector field ``x' = (-y, x)``: integral curves are circles.
+
+    State ``(x, y)``, dimensionless. Explicit Euler turns the circle into an outward
+    spiral ("the spiral of your choice").
+    """
+
+    _J = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+    def derivative(self, x: np.ndarray, t: float) -> np.ndarray:
+        return np.array([-x[1], x[0]])
+
+    def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
+        return self._J
+
+    def energy(self, x: np.ndarray, t: float) -> float:
+        """Half the squared radius: conserved along the exact flow."""
+        return 0.5 * float(x @ x)
+
+
+class KeplerProblem(SecondOrderSystem):
+    """A point in the plane around a fixed centre of gravitational parameter ``mu``.
+
+    ``q'' = -mu q / |q|^3``; state ``(qx, qy, vx, vy)``. Energy
+    ``|v|^2 / 2 - mu / |q|`` and angular momentum ``qx vy - qy vx`` are conserved.
+    """
+
+    def __init__(self, x0: np.ndarray, t0: float = 0.0, *, mu: float = 1.0) -> None:
+        super().__init__(x0, t0)
+        self.mu = mu
+
+    def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+        r = np.sqrt(q @ q)
+        return -self.mu * q / r**3
+
+    def energy(self, x: np.ndarray, t: float) -> float:
+        q, v = x[:2], x[2:]
+        return 0.5 * float(v @ v) - self.mu / float(np.sqrt(q @ q))
+
+
+class Arenstorf(SecondOrderSystem):
+    """The restricted three-body problem in the rotating frame (Hairer et al., I.0).
+
+    A light body moves under an Earth of mass ``1 - mu`` at ``(-mu, 0)`` and a Moon of
+    mass ``mu`` at ``(1 - mu, 0)``; Coriolis terms make the acceleration depend on
+    the velocity. State ``(x, y, vx, vy)``, dimensionless units.
+    """
+
+    def __init__(self, x0: np.ndarray, t0: float = 0.0, *, mu: float = 0.012277471) -> None:
+        super().__init__(x0, t0)
+        self.mu = mu
+
+    def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+        mu, nu = self.mu, 1.0 - self.mu
+        x, y = q
+        d1 = ((x + mu) ** 2 + y**2) ** 1.5
+        d2 = ((x - nu) ** 2 + y**2) ** 1.5
+        ax = x + 2 * v[1] - nu * (x + mu) / d1 - mu * (x - nu) / d2
+        ay = y - 2 * v[0] - nu * y / d1 - mu * y / d2
+        return np.array([ax, ay])

@@ -1,0 +1,48 @@
+"""The solver base class: the one place where derivative evaluations are counted."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from reference_impl.system import SecondOrderSystem, System
+
+
+class Solver(ABC):
+    """A one-step solver written only against :class:`~reference_impl.system.System`.
+
+    A subclass must:
+
+    1. implement :meth:`step`, which reads the state with ``system.get_state()`` and
+       ``system.get_time()``, and writes the new one with ``system.set_state``;
+    2. evaluate the right-hand side only through :meth:`fun` (or :meth:`accel` for
+       second-order systems), so that :attr:`nfev` counts every evaluation;
+    3. set ``adaptive = True`` if it chooses its own step sizes; then :meth:`step` takes
+       the largest step it may try and returns the step it actually took.
+    """
+
+    name: str = ""
+    order: int = 0
+    adaptive: bool = False
+    needs_second_order: bool = False
+
+    def __init__(self, system: System) -> None:
+        if self.needs_second_order and not isinstance(system, SecondOrderSystem):
+            raise TypeError(f"{self.name} needs a system with a position/velocity split")
+        self.system = system
+        self.nfev = 0
+
+    def fun(self, x: np.ndarray, t: float) -> np.ndarray:
+        """Evaluate ``f(x, t)`` of the system, counting the evaluation."""
+        self.nfev += 1
+        return self.system.derivative(x, t)
+
+    def accel(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+        """Evaluate ``a(q, v, t)`` of a second-order system, counting the evaluation."""
+        self.nfev += 1
+        return self.system.acceleration(q, v, t)  # type: ignore[attr-defined]
+
+    @abstractmethod
+    def step(self, dt: float) -> float:
+        """Advance the system by one step of ``dt`` seconds; return the step taken."""

@@ -1,0 +1,97 @@
+"""The lecture's modular solver interface.
+
+"Generic operations: get dim(x); get/set x and t; deriv eval at current (x, t).
+Write solvers in terms of these." Every solver in :mod:`reference_impl.solvers`
+talks to a system through this interface and nothing else.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+
+class System(ABC):
+    """A first-order ODE system ``dx/dt = f(x, t)`` as the lecture's solvers see it.
+
+    A subclass must:
+
+    1. set ``dim``, the length of the flat state vector ``x``;
+    2. keep its state and time, returned by :meth:`get_state` as a copy and replaced by
+       :meth:`set_state` (the system may keep richer structured state behind it, but the
+       flat vector is what solvers see);
+    3. implement :meth:`derivative` as a pure function of its arguments: it returns a new
+       array of shape ``(dim,)`` and never changes the stored state;
+    4. optionally implement :meth:`jacobian` (``(dim, dim)``), used by implicit solvers;
+       returning ``None`` makes them fall back to finite differences;
+    5. optionally implement :meth:`energy` (total energy in joules, or ``None``) and
+       :meth:`between_steps`, the place for collisions, emitters and lifetimes, which the
+       lecture applies between solver steps, never inside one; and :meth:`observe`, extra
+       arrays recorded with every stored state.
+    """
+
+    dim: int
+
+    def __init__(self, x0: np.ndarray, t0: float = 0.0) -> None:
+        self._x = np.array(x0, dtype=float).reshape(-1)
+        self._t = float(t0)
+        self.dim = self._x.size
+
+    def get_state(self) -> np.ndarray:
+        """Return a copy of the flat state vector, shape ``(dim,)``."""
+        return self._x.copy()
+
+    def get_time(self) -> float:
+        """Return the current time in seconds."""
+        return self._t
+
+    def set_state(self, x: np.ndarray, t: float) -> None:
+        """Replace the state with ``x`` (shape ``(dim,)``) at time ``t`` seconds."""
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.dim,):
+            raise ValueError(f"set_state: x has shape {x.shape}, expected ({self.dim},)")
+        self._x = x.copy()
+        self._t = float(t)
+
+    @abstractmethod
+    def derivative(self, x: np.ndarray, t: float) -> np.ndarray:
+        """Return ``dx/dt`` at ``(x, t)``, shape ``(dim,)``; must not modify ``x``."""
+
+    def jacobian(self, x: np.ndarray, t: float) -> np.ndarray | None:
+        """Return ``df/dx`` at ``(x, t)``, shape ``(dim, dim)``, or ``None`` if unknown."""
+        return None
+
+    def energy(self, x: np.ndarray, t: float) -> float | None:
+        """Return the total energy (J) at ``(x, t)``, or ``None`` if it has no meaning."""
+        return None
+
+    def between_steps(self, dt: float) -> None:
+        """Apply discrete events after a solver step of ``dt`` seconds (default: none)."""
+
+    def observe(self) -> dict[str, np.ndarray]:
+        """Per-record observables beyond the state (e.g. which particles are alive)."""
+        return {}
+
+
+class SecondOrderSystem(System):
+    """A system ``q'' = a(q, v, t)`` with state layout ``x = [q, v]``, each of ``dim // 2``.
+
+    Besides the :class:`System` contract, a subclass must implement
+    :meth:`acceleration`. Splitting methods (symplectic Euler, velocity Verlet and the
+    lecture's update) step ``q`` and ``v`` separately through it; all other solvers
+    see the derivative ``[v, a(q, v, t)]``.
+    """
+
+    @property
+    def half(self) -> int:
+        """Number of position coordinates, ``dim // 2``."""
+        return self.dim // 2
+
+    @abstractmethod
+    def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+        """Return ``q''`` at positions ``q`` and velocities ``v``, both shape ``(dim//2,)``."""
+
+    def derivative(self, x: np.ndarray, t: float) -> np.ndarray:
+        q, v = x[: self.half], x[self.half :]
+        return np.concatenate([v, self.acceleration(q, v, t)])

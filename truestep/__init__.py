@@ -1,0 +1,1 @@
+"""truestep: the harness (CLI, runner, metrics, stability search, gates, reports)."""
