@@ -115,5 +115,5 @@ class Case:
 
     def steps_for(self, dt: float) -> tuple[int, float]:
         """The number of steps for a nominal ``dt`` and the exact step that fills the run."""
-        n = max(1, int(round(self.duration / dt)))
+        n = max(1, round(self.duration / dt))
         return n, self.duration / n

@@ -145,3 +145,94 @@ def periodic(case: Case, t: np.ndarray) -> Exact:
     keep = np.abs(t - k * period) <= 1e-9 * max(1.0, period)
     y0 = case.ode.y0
     return Exact(t[keep], np.tile(y0, (int(keep.sum()), 1))[:, None, :])
+
+
+def linear_modes(case: Case) -> tuple[float, float] | None:
+    """Highest angular frequency (rad/s) and its damping ratio, if the scene is linear.
+
+    Linear here: point masses joined by springs (and anchored springs) that start at rest
+    length along straight lines or have zero rest length, no gravity, drag, fields,
+    gravitation or planes. ``omega_max^2`` is the largest eigenvalue of
+    ``M^(-1/2) K M^(-1/2)`` with ``K`` the stiffness matrix of the springs at the start;
+    the damping ratio is reported for a single damped spring, and NaN otherwise.
+    """
+    m = case.model
+    if m is None or m.planes or m.fields or m.gravitation is not None or m.drag:
+        return None
+    if np.any(m.gravity) or m.emitters or m.impulses:
+        return None
+    n = m.n
+    free = ~m.fixed
+    K = np.zeros((3 * n, 3 * n))
+
+    def block(i: int, j: int | None, k: float, d: np.ndarray, rest: float) -> bool:
+        length = float(np.linalg.norm(d))
+        if rest == 0.0:
+            kk = k * np.eye(3)
+        elif abs(length - rest) <= 1e-12 * max(rest, 1.0):
+            u = d / length
+            kk = k * np.outer(u, u)
+        else:
+            return False
+        K[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += kk
+        if j is not None:
+            K[3 * j : 3 * j + 3, 3 * j : 3 * j + 3] += kk
+            K[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] -= kk
+            K[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] -= kk
+        return True
+
+    s, a = m.springs, m.anchors
+    for i, j, k, r in zip(s.i, s.j, s.stiffness, s.rest, strict=True):
+        if not block(int(i), int(j), float(k), m.x0[i] - m.x0[j], float(r)):
+            return None
+    for i, p, k, r in zip(a.i, a.point, a.stiffness, a.rest, strict=True):
+        if not block(int(i), None, float(k), m.x0[i] - p, float(r)):
+            return None
+    dof = np.repeat(free, 3)
+    inv_sqrt_m = 1.0 / np.sqrt(np.repeat(m.mass, 3)[dof])
+    Kf = K[np.ix_(dof, dof)] * inv_sqrt_m[:, None] * inv_sqrt_m[None, :]
+    omega_max = float(np.sqrt(max(np.max(np.linalg.eigvalsh(Kf)), 0.0)))
+    damping = np.concatenate([s.damping, a.damping])
+    if not np.any(damping):
+        zeta = 0.0
+    elif n == 1 and len(a) == 1 and not len(s):
+        zeta = float(a.damping[0] / (2 * np.sqrt(a.stiffness[0] * m.mass[0])))
+    else:
+        zeta = float("nan")
+    return omega_max, zeta
+
+
+def stability_limit(case: Case, scheme: str | None) -> float | None:
+    """The exact largest stable step (s) of an integration scheme on a linear scene.
+
+    ``0.0`` means unstable at every step, ``inf`` stable at every step, ``None`` unknown.
+    Undamped (``dt * omega_max`` on the imaginary axis of each method's stability region):
+    symplectic Euler and velocity Verlet ``2 / omega`` (trace of the step matrix
+    ``2 - (omega dt)^2`` must stay above -2); RK4 ``2 sqrt(2) / omega`` (where
+    ``|R(i y)|^2 = 1 - y^6/72 + y^8/576`` returns to 1); explicit Euler
+    (``|1 + i y|^2 = 1 + y^2``), midpoint and Heun (``1 + y^4/4``) never; the lecture's
+    update never: its step matrix ``[[1 - y^2/2, dt], [-omega^2 dt, 1]]`` has determinant
+    ``1 + y^2/2 > 1``; implicit Euler always. With damping ratio ``zeta``, explicit Euler
+    is stable while ``|1 + z|^2 = 1 - 2 zeta y + y^2 < 1``: ``dt < 2 zeta / omega``.
+    """
+    modes = linear_modes(case)
+    if modes is None or scheme is None:
+        return None
+    omega, zeta = modes
+    if omega == 0:
+        return None
+    if scheme == "implicit-euler":
+        return float("inf")
+    if zeta == 0.0:
+        return {
+            "symplectic-euler": 2.0 / omega,
+            "verlet": 2.0 / omega,
+            "rk4": 2.0 * np.sqrt(2.0) / omega,
+            "euler": 0.0,
+            "midpoint": 0.0,
+            "heun": 0.0,
+            "lecture": 0.0,
+        }.get(scheme)
+    if scheme == "euler" and np.isfinite(zeta) and zeta < 1:
+        return 2.0 * zeta / omega
+    return None

@@ -118,8 +118,12 @@ class Fields:
         try:
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
-            raise self.error(name, f"expected numbers of shape {_fmt(shape)}, got {value!r}") from None
-        if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape, strict=True)):
+            reason = f"expected numbers of shape {_fmt(shape)}, got {value!r}"
+            raise self.error(name, reason) from None
+        wrong = arr.ndim != len(shape) or any(
+            s is not None and s != a for s, a in zip(shape, arr.shape, strict=True)
+        )
+        if wrong:
             raise self.error(name, f"expected shape {_fmt(shape)}, got {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise self.error(name, "every value must be finite")

@@ -100,7 +100,7 @@ def _per_particle(f: Fields, name: str, n: int, *, default=None, positive=False)
     if isinstance(raw, list):
         arr = f.array(name, shape=(n,))
     else:
-        arr = np.full(n, f.number(name, default, nonnegative=True))
+        arr = np.full(n, f.number(name, default, nonnegative=True, positive=positive))
     if positive and np.any(arr <= 0):
         raise f.error(name, "every mass must be positive (pin a particle with fixed = true)")
     if np.any(arr < 0):

@@ -89,7 +89,7 @@ def integrate(
                 status, t_fail = "unstable", t
                 break
     else:
-        n_steps = int(round((t_end - t0) / dt))
+        n_steps = round((t_end - t0) / dt)
         marks = np.zeros(n_steps + 1, dtype=bool)
         marks[record_indices(n_steps, max_records)] = True
         for i in range(1, n_steps + 1):

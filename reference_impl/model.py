@@ -95,7 +95,12 @@ class ForceField:
 
 @dataclass
 class Gravitation:
-    """Universal gravitation between all particle pairs: ``G m_i m_j / (r^2 + eps^2)``."""
+    """Universal gravitation between all particle pairs, with Plummer softening ``eps``.
+
+    Force on ``i`` toward ``j``: ``G m_i m_j r_ij / (r^2 + eps^2)^(3/2)`` (magnitude
+    ``G m_i m_j / r^2`` when ``eps = 0``, the lecture's law); potential
+    ``-G m_i m_j / sqrt(r^2 + eps^2)``. G in m^3 kg^-1 s^-2, eps in m.
+    """
 
     G: float = G_UNIVERSAL
     softening: float = 0.0
@@ -110,6 +115,12 @@ class EmitterSpec:
     (per unit area when ``per_area``); speed (m/s) along the face normal with
     ``spread`` (radians, cone half-angle); lifetime in frames ``lifetime +- lifetime_jitter``;
     frame_dt: seconds per frame; capacity: size of the particle pool; seed.
+    speed_jitter: relative spread of the speed (uniform in ``speed * (1 +- jitter)``);
+    particle_size (m) and size_jitter (relative): the shape parameter of each particle;
+    color_birth, color_death (RGB in 0..1): colour at the start and end of a life;
+    fade_height (m): particles grow transparent with height above the emitter.
+    The pool's particles come after every other particle of the scene, one pool per
+    emitter in the order the emitters are listed.
     """
 
     shape: str
@@ -127,6 +138,12 @@ class EmitterSpec:
     normal: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
     particle_mass: float = 1.0
     seed: int = 0
+    speed_jitter: float = 0.0
+    particle_size: float = 0.01
+    size_jitter: float = 0.0
+    color_birth: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.9, 0.5]))
+    color_death: np.ndarray = field(default_factory=lambda: np.array([0.6, 0.1, 0.0]))
+    fade_height: float = 1.0
 
 
 @dataclass
@@ -147,6 +164,9 @@ class ParticleModel:
     impulses : list of (particle, force (3,), t_start, t_end)
         a force applied to one particle for a time window (the triangle example)
     dimension : 2 or 3                   2: all motion stays in the z = 0 plane
+    surfaces : list of ndarray of int, shape (k, 3)
+        closed triangle meshes (global particle indices, outward orientation), one per
+        closed mass-spring object: their signed volume tells when one turned inside out
     """
 
     mass: np.ndarray
@@ -164,6 +184,7 @@ class ParticleModel:
     emitters: list[EmitterSpec] = field(default_factory=list)
     impulses: list[tuple[int, np.ndarray, float, float]] = field(default_factory=list)
     dimension: int = 3
+    surfaces: list[np.ndarray] = field(default_factory=list)
 
     @property
     def n(self) -> int:

@@ -11,13 +11,18 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import scipy.sparse as sp
 
-from reference_impl import forces
+from reference_impl import collisions, forces
 from reference_impl.model import ParticleModel
 from reference_impl.system import SecondOrderSystem
 
 Pass = Callable[["ParticleSystem", float], None]
-"""Something that acts on the system between solver steps, given the step (s)."""
+"""Something that acts on the system between solver steps, given the step (s).
+
+A pass that needs the initial state (contact at rest, an emitter's first frame) also has
+a method ``start(system)``, called once when the system is built.
+"""
 
 
 class ParticleSystem(SecondOrderSystem):
@@ -34,6 +39,10 @@ class ParticleSystem(SecondOrderSystem):
     ----------
     alive : ndarray of bool, shape (n,)
         Particles taking part (all, unless an emitter manages a pool).
+    contact : ndarray of bool, shape (len(model.planes), n)
+        Particles in resting or sliding contact with each plane, set by the collision
+        pass (:mod:`reference_impl.collisions`); the derivative adds the contact force
+        (and friction) for them.
     f : ndarray, shape (n, 3), N
         The force accumulator, reused between evaluations.
     """
@@ -44,8 +53,16 @@ class ParticleSystem(SecondOrderSystem):
         self.n = model.n
         self.passes = list(passes or [])
         self.alive = np.ones(self.n, dtype=bool)
+        self.alive[self.n - sum(e.capacity for e in model.emitters) :] = False  # empty pools
+        self.contact = np.zeros((len(model.planes), self.n), dtype=bool)
         self.f = np.zeros((self.n, 3))
         self._inv_mass = np.where(model.fixed, 0.0, 1.0 / model.mass)
+        self._spring_scatter = forces.incidence(model.springs.i, model.springs.j, self.n)
+        self._anchor_scatter = forces.incidence(model.anchors.i, None, self.n)
+        for p in self.passes:
+            start = getattr(p, "start", None)
+            if start is not None:
+                start(self)
 
     # -- structured views of the flat state ------------------------------------------
     @property
@@ -60,7 +77,10 @@ class ParticleSystem(SecondOrderSystem):
 
     # -- the lecture's derivative loop -----------------------------------------------
     def accumulate_forces(self, x: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
-        """Clear the accumulator and let each force object add in; return ``f`` (n, 3)."""
+        """Clear the accumulator and let each force object add in; return ``f`` (n, 3).
+
+        These are the applied forces; the contact force is added by :meth:`acceleration`.
+        """
         m = self.model
         f = self.f
         f[:] = 0.0
@@ -68,8 +88,8 @@ class ParticleSystem(SecondOrderSystem):
             forces.add_gravity(f, m.mass, m.gravity)
         if m.drag:
             forces.add_drag(f, v, m.drag)
-        forces.add_springs(f, x, v, m.springs)
-        forces.add_anchors(f, x, v, m.anchors)
+        forces.add_springs(f, x, v, m.springs, self._spring_scatter)
+        forces.add_anchors(f, x, v, m.anchors, self._anchor_scatter)
         if m.gravitation is not None:
             forces.add_gravitation(f, x, m.mass, m.gravitation)
         if m.fields:
@@ -83,9 +103,49 @@ class ParticleSystem(SecondOrderSystem):
         x = q.reshape(self.n, 3)
         vel = v.reshape(self.n, 3)
         f = self.accumulate_forces(x, vel, t)
+        if self.contact.any():
+            collisions.add_contact_forces(f, vel, self.contact, self.model.planes)
         a = f * self._inv_mass[:, None]
-        a[~self.alive] = 0.0
+        if self.model.emitters:
+            a[~self.alive] = 0.0
         return a.ravel()
+
+    def jacobian(self, x: np.ndarray, t: float) -> sp.csr_matrix | None:
+        """Sparse ``d[v, a]/d[x, v]`` (dim, dim) for gravity, drag, springs and anchors.
+
+        Contact removes the normal rows of pushing particles (``F' = F_T``); friction and
+        impulses are left out (they are piecewise constant in the state, and implicit
+        Euler uses the Jacobian only as its Newton matrix). Scenes with universal
+        gravitation or force fields return ``None``: the solver then differences.
+        """
+        m = self.model
+        if m.gravitation is not None or m.fields:
+            return None
+        n = self.n
+        pos = x[: 3 * n].reshape(n, 3)
+        vel = x[3 * n :].reshape(n, 3)
+        kx = sp.csr_matrix((3 * n, 3 * n))
+        kv = -m.drag * sp.identity(3 * n, format="csr")
+        s, a = m.springs, m.anchors
+        if len(s):
+            jx, jv = forces.spring_jacobians(pos[s.i] - pos[s.j], vel[s.i] - vel[s.j],
+                                             s.stiffness, s.damping, s.rest)
+            kx = kx + _pair_blocks(jx, s.i, s.j, n)
+            kv = kv + _pair_blocks(jv, s.i, s.j, n)
+        if len(a):
+            jx, jv = forces.spring_jacobians(pos[a.i] - a.point, vel[a.i],
+                                             a.stiffness, a.damping, a.rest)
+            kx = kx + _blocks(jx, a.i, a.i, n)
+            kv = kv + _blocks(jv, a.i, a.i, n)
+        scale = np.repeat(self._inv_mass * (self.alive if m.emitters else 1.0), 3)
+        if self.contact.any():
+            f = self.accumulate_forces(pos, vel, t)
+            scale = sp.diags(scale) @ collisions.contact_projection(f, self.contact, m.planes)
+        else:
+            scale = sp.diags(scale)
+        ax, av = scale @ kx, scale @ kv
+        top = sp.hstack([sp.csr_matrix((3 * n, 3 * n)), sp.identity(3 * n)])
+        return sp.vstack([top, sp.hstack([ax, av])]).tocsr()
 
     def between_steps(self, dt: float) -> None:
         for p in self.passes:
@@ -121,3 +181,15 @@ def total_energy(
     if model.gravitation is not None:
         potential += forces.gravitation_energy(x, model.mass, model.gravitation)
     return kinetic + potential
+
+
+def _blocks(b: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> sp.csr_matrix:
+    """A (3n, 3n) sparse matrix with the 3x3 blocks ``b[s]`` (m, 3, 3) at ``(i[s], j[s])``."""
+    r = (3 * i[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+    c = (3 * j[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+    return sp.csr_matrix((b.ravel(), (r.ravel(), c.ravel())), shape=(3 * n, 3 * n))
+
+
+def _pair_blocks(b: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> sp.csr_matrix:
+    """Blocks of a pair force ``f_i = F(x_i - x_j)``, ``f_j = -f_i`` with ``dF = b``."""
+    return _blocks(b, i, i, n) - _blocks(b, i, j, n) - _blocks(b, j, i, n) + _blocks(b, j, j, n)

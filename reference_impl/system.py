@@ -68,6 +68,7 @@ class System(ABC):
 
     def between_steps(self, dt: float) -> None:
         """Apply discrete events after a solver step of ``dt`` seconds (default: none)."""
+        return None
 
     def observe(self) -> dict[str, np.ndarray]:
         """Per-record observables beyond the state (e.g. which particles are alive)."""

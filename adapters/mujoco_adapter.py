@@ -1,0 +1,594 @@
+"""MuJoCo behind the Adapter protocol: a particle case as an MJCF model.
+
+The model
+---------
+Every case is written out as an MJCF string (:func:`mjcf`) and compiled once per run,
+outside the timed region.
+
+* **Particles.** Each free particle is a body at the origin with three slide joints
+  along the world axes x, y, z (only x and y in a ``2d`` scene), so ``qpos`` *is* the
+  particle's position and ``qvel`` its velocity. Slide joints make the point-mass
+  dynamics exact in generalized coordinates: the mass matrix is ``m I``, there is no
+  rotation and no Coriolis term. The body carries its mass in an explicit
+  ``<inertial>`` (``inertiafromgeom="false"``), a sphere geom of the case's radius (a
+  radius of 0, a point, becomes :data:`POINT_RADIUS`, 1 um, rather than a visible 1 cm
+  that would move the contact surface) and a site that springs attach to.
+  Pinned particles are sites on the world body: no joints, no degrees of freedom.
+* **Defaults that would distort a comparison are zeroed**: joint armature,
+  frictionloss and stiffness are written as 0 in the default class (joint damping is
+  the drag, below); joint limits are off; contact margin and gap are 0.
+  ``autoreset`` is disabled so that MuJoCo does not silently reset a diverging state
+  to ``qpos0``: its bad-qpos/qvel/qacc warnings mark the run ``unstable`` instead
+  (:func:`unstable_warnings`).
+* **Gravity** is ``<option gravity>``; the step is ``<option timestep>`` =
+  ``case.steps_for(dt)[1]``; the integrator is ``<option integrator>``, one of the
+  adapter's methods. ``<flag energy="enable"/>`` makes MuJoCo compute its own
+  ``mjData.energy`` (potential, kinetic), which the tests compare with
+  :func:`reference_impl.particles.total_energy`; the Trajectory's energy is
+  ``total_energy`` on the read-back state, as for every engine.
+* **Springs** (between particles and anchored) are two-site spatial tendons with
+  ``stiffness`` = k_s, ``damping`` = k_d and ``springlength`` = r. A tendon of length L
+  between sites produces the force ``k_s (L - r) + k_d dL/dt`` along it, which is the
+  lecture's spring-damper (``dL/dt = dv . dx / |dx|``); anchors are sites on the world
+  body. The test checks the force against :func:`reference_impl.forces.spring_forces`.
+* **Drag** ``f = -k v`` is the slide joints' ``damping`` = k: with axis-aligned slide
+  joints, joint damping is exactly a viscous force on the particle, and MuJoCo
+  evaluates it at every RK4 stage.
+* **Universal gravitation, force fields, impulses** have no MJCF element. They are
+  computed with the reference force functions (:mod:`reference_impl.forces`) on the
+  engine's own state and handed to MuJoCo in one of two ways (``stage_forces``):
+
+  - ``True`` (default): a passive-force callback (``mujoco.set_mjcb_passive``), which
+    MuJoCo calls inside every force evaluation, so RK4 sees the force at each of its
+    four stages and their stage times;
+  - ``False``: ``mjData.qfrc_applied`` set from the state before each ``mj_step``. The
+    force is then held constant through the RK4 stages, which lowers RK4 to first order
+    for position-dependent forces (a two-body circular orbit, one period: error 0.38 at
+    h = 0.02 s and 0.052 at h = 0.0025 s, against 5.4e-8 and 1.1e-11 with the callback).
+
+* **Planes** are ``<geom type="plane">`` with ``zaxis`` = the plane normal (planes are
+  infinite for collision; ``size="0 0 1"``). Every (particle, plane) pair is an explicit
+  ``<contact><pair>`` with its own ``solref``/``solimp`` (no mixing rules); particle
+  geoms have ``contype = conaffinity = 0`` so particles never collide with each other.
+  Frictionless planes use ``condim="1"``. Planes with a Coulomb coefficient mu use
+  ``condim="3"``, ``friction`` mu and an elliptic cone, whose friction rows take their
+  own ``solreffriction``: ``"2h 1"``, the stiffest MuJoCo allows, removes the tangential
+  velocity in one step while the force stays inside the cone (sticking) and otherwise
+  decelerates at mu times the normal force. (A pyramidal cone mixes normal and
+  friction rows, and the direct-form normal damping, zero for ``e = 1``, would also be
+  the friction rows' damping: a sliding particle would never slow down.)
+
+Stepping and read-back
+----------------------
+``round(duration / dt)`` steps; between the recorded steps
+(:func:`reference_impl.integrate.record_indices`) MuJoCo steps in C with
+``mj_step(m, d, nstep=k)``, at most 64 steps per call so that a diverged state stops the
+run early (``mujoco.rollout`` was as fast for one trajectory, 0.39 s per 1e5 steps
+either way, but stores every step's state). With ``stage_forces=False`` and applied
+forces the loop is per step in Python. Positions and velocities are ``qpos``/``qvel``
+at the records; pinned particles are their sites' ``site_xpos``. ``autoreset`` is off:
+a bad-state warning (qpos, qvel or qacc NaN or beyond 1e10) ends the run as
+``unstable`` at the time of the check that saw it, as does
+:func:`adapters.base.finite_until` on the recorded positions.
+
+Integrators and damping
+-----------------------
+``Euler`` is semi-implicit Euler (``v' = v + h a(q, v)``, ``q' = q + h v'``), except that
+joint damping -- here the drag -- is integrated implicitly ("eulerdamp": backward Euler
+on the drag, ``v' = v / (1 + h k / m)`` for drag alone); tendon damping (the spring
+dampers) stays explicit in ``Euler``. ``implicit`` and ``implicitfast`` are
+implicit-in-velocity Euler, ``(M + h D) (v' - v) = h M a(q, v)`` then ``q' = q + h v'``,
+with ``D`` the velocity derivative of the passive forces: joint damping (drag) and
+tendon damping (spring dampers); stiffness, a position derivative, stays explicit in
+all of them. The documentation says ``implicit`` restricts ``D`` to the sparsity of
+``M`` (dropping the damping of a tendon between two kinematic trees) and
+``implicitfast`` drops the Coriolis/centripetal derivatives (there are none with slide
+joints) and symmetrises ``D``; measured in 4.0.0, both integrate the damper between two
+particles implicitly (a spring with k = 100 N/m, k_d = 50 N s/m between two 1 kg
+particles stays stable at h = 0.05 s under both, where ``Euler`` and ``RK4`` diverge).
+With no velocity-dependent force (a free fall) the three are the same semi-implicit
+Euler: ``y_n = y_0 + v_0 n h + g h^2 n (n + 1) / 2``. ``RK4`` is the classical
+fourth-order Runge-Kutta method, fully explicit, four force evaluations per step at the
+stage times ``t, t + h/2, t + h/2, t + h`` (``nfev`` counts steps, the run's message
+says so); it is exact for constant gravity. Forces from the passive callback are never
+in ``D``: they are explicit in every integrator.
+
+Contacts and restitution
+------------------------
+MuJoCo's contact is soft. A contact row obeys approximately
+``a + d (b v + k r) = (1 - d) a_u`` (r: signed distance, v: normal velocity, a_u: the
+unconstrained acceleration, d: the impedance from ``solimp``, b and k from ``solref``).
+With the "direct" ``solref = (-K, -B)`` MuJoCo sets ``b = B / d_w`` and
+``k = K d(r) / d_w^2``; a constant impedance ``d(r) = d_0 = d_w = d`` (:data:`SOLIMP`:
+``0.9999 0.9999``, MuJoCo's maximum impedance, so the width, midpoint and power of the
+sigmoid do not matter) turns this into a unit-mass spring-damper, independent of the
+particle's mass, that overrides gravity during the contact up to the term
+``(1 - d) a_u = 1e-4 a_u``::
+
+    r'' + B r' + K r = 0       while the contact pushes (a_ref >= a_u)
+
+MuJoCo has no coefficient of restitution, so ``K`` and ``B`` are derived from the
+case's ``e``. Write ``omega = sqrt(K)``, ``zeta = B / (2 omega)``,
+``omega_d = omega sqrt(1 - zeta^2)``. From ``r(0) = 0``, ``r'(0) = -v``:
+``r = -(v / omega_d) exp(-zeta omega t) sin(omega_d t)``. The contact is unilateral: it
+releases when its force ``-(B r' + K r)`` reaches zero, i.e. at ``r'' = 0``, which
+happens at ``omega_d t* = 2 arccos(zeta)`` (before ``r`` returns to 0; the half period
+would be ``pi``). There ``r'(t*) = v exp(-zeta omega t*)``, so::
+
+    e = exp(-2 zeta arccos(zeta) / sqrt(1 - zeta^2))        (zeta < 1)
+    e = exp(-2 zeta arccosh(zeta) / sqrt(zeta^2 - 1))       (zeta > 1, overdamped)
+
+(the linear spring-dashpot result of Schwager and Poeschel, 2007). It is not the
+textbook ``exp(-zeta pi / sqrt(1 - zeta^2))`` of a full half oscillation, which holds
+only if the contact could pull. ``e = 1`` gives ``zeta = 0`` (no damping); critical
+damping gives ``e = exp(-2) = 0.135`` -- the restitution of MuJoCo's default critically
+damped contact in fast impacts -- and smaller ``e`` needs overdamping,
+``e ~ 1 / (4 zeta^2)``; ``e = 0`` would need infinite damping. :func:`damping_ratio`
+inverts the relation. The stiffness follows from a contact time ``t_c`` (the undamped
+half period): ``omega = pi / t_c``, ``K = omega^2``, ``B = 2 zeta omega``, with
+``t_c = contact_steps * h`` (default :data:`CONTACT_STEPS` = 10 steps; MuJoCo's own rule
+asks for a time constant of at least two steps). Tying ``t_c`` to the step keeps the
+contact resolved by the same number of steps at every ``h``, so the relative error of
+the restitution hardly depends on ``h`` and the trajectory converges to the rigid
+bounce of the reference as ``h -> 0``; the price is a penetration of about
+``v t_c / pi``. An explicit damper with ``h B > 1`` reverses the normal velocity within
+a step (``h B > 2`` diverges), so ``zeta`` is capped at ``h B = 1``
+(:func:`max_damping_ratio`, 1.59 at 10 steps, continuous-contact ``e = 0.069``); the
+run's message names the cap when it applies (always for ``e = 0``). The remaining
+discrete-time errors come from the step resolution of the contact and from contact
+detection at step starts: a contact begins up to one step of travel deep, and the
+energy the spring finds stored there, up to ``(omega h)^2 = (pi / contact_steps)^2`` of
+the impact energy, comes back out in the rebound.
+
+Measured with a ball (r = 0.05 m) dropped from 1 m, first three bounces, h = 1/240 and
+1/1000 s: the rebound/impact speed ratio lands within 0.03 of ``e`` for e = 0.8 to 1 and
+within 0.07 for e = 0.5 under ``Euler``/``implicit``/``implicitfast`` (identical: the
+contact is not in ``D``), and within 0.03 under ``RK4`` (0.01 at h = 1/1000); the ball
+penetrates 9-14 mm at 1/1000 and 41-58 mm at 1/240 (more than its radius). For e = 0
+the Euler family keeps the ball on the floor; ``RK4`` lets it rebound once at 0.05 of
+the impact speed at h = 1/1000 s.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from adapters.base import Trajectory, finite_until
+from cases.case import Case
+from reference_impl import forces
+from reference_impl.integrate import record_indices
+from reference_impl.model import ParticleModel
+from reference_impl.particles import total_energy
+
+INTEGRATORS: dict[str, int] = {
+    "Euler": int(mujoco.mjtIntegrator.mjINT_EULER),
+    "implicit": int(mujoco.mjtIntegrator.mjINT_IMPLICIT),
+    "implicitfast": int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST),
+    "RK4": int(mujoco.mjtIntegrator.mjINT_RK4),
+}
+"""Method name (the MJCF ``<option integrator>`` value) -> ``mjtIntegrator``."""
+
+EVALUATIONS_PER_STEP = {"Euler": 1, "implicit": 1, "implicitfast": 1, "RK4": 4}
+"""Force evaluations MuJoCo makes per step; ``nfev`` counts steps, the message says this."""
+
+POINT_RADIUS = 1e-6
+"""Sphere radius (m) for a point particle (radius 0): small enough that the contact
+surface sits where the point's plane would be, 1 um being far below any penetration."""
+
+SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+"""Constant impedance d = 0.9999 (MuJoCo's maximum): the contact follows the reference
+spring-damper and only 1e-4 of the unconstrained acceleration leaks through."""
+
+CONTACT_STEPS = 10.0
+"""Default contact time t_c in time steps (the undamped half period of the contact spring)."""
+
+_BAD_STATE = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
+_CHECK_EVERY = 64
+"""Steps between checks for a diverged state when no record falls sooner."""
+
+
+def restitution_of(zeta: float) -> float:
+    """Restitution of a unit-mass spring-dashpot contact that releases at zero force.
+
+    ``e = exp(-2 zeta arccos(zeta) / sqrt(1 - zeta^2))`` for ``zeta < 1``, its analytic
+    continuation with ``arccosh`` for ``zeta > 1``, and ``exp(-2)`` at ``zeta = 1``.
+    """
+    if zeta < 0:
+        raise ValueError(f"zeta: must be non-negative, got {zeta}")
+    if abs(zeta - 1.0) < 1e-9:
+        return float(np.exp(-2.0))
+    if zeta < 1.0:
+        return float(np.exp(-2.0 * zeta * np.arccos(zeta) / np.sqrt(1.0 - zeta**2)))
+    return float(np.exp(-2.0 * zeta * np.arccosh(zeta) / np.sqrt(zeta**2 - 1.0)))
+
+
+def damping_ratio(e: float) -> float:
+    """The contact damping ratio zeta that gives restitution ``e``; inverts :func:`restitution_of`.
+
+    ``e = 0`` needs infinite damping and returns ``inf``; :func:`contact_solref` caps it.
+    """
+    if not 0.0 <= e <= 1.0:
+        raise ValueError(f"e: restitution must lie in [0, 1], got {e}")
+    if e == 0.0:
+        return float("inf")
+    if e == 1.0:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    while restitution_of(hi) > e:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(200):  # bisection: restitution_of decreases monotonically in zeta
+        mid = 0.5 * (lo + hi)
+        if restitution_of(mid) > e:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def max_damping_ratio(t_c: float, h: float) -> float:
+    """The largest contact damping ratio at contact time ``t_c`` and step ``h``: ``h B = 1``.
+
+    An explicit damper with ``h B > 1`` reverses the normal velocity within a step (and
+    for ``h B > 2`` it diverges), so the contact would throw the particle out.
+    """
+    return t_c / (2.0 * np.pi * h)
+
+
+def contact_solref(e: float, t_c: float, h: float) -> tuple[float, float, bool]:
+    """Direct-form contact stiffness K (1/s^2) and damping B (1/s) for restitution ``e``.
+
+    ``omega = pi / t_c``, ``K = omega^2``, ``B = 2 zeta omega`` with ``zeta`` from
+    :func:`damping_ratio`, capped at :func:`max_damping_ratio`; the flag says whether the
+    cap applied. MJCF wants the numbers as ``solref="-K -B"``.
+    """
+    omega = np.pi / t_c
+    zeta = damping_ratio(e)
+    cap = max_damping_ratio(t_c, h)
+    return float(omega**2), float(2.0 * min(zeta, cap) * omega), zeta > cap
+
+
+@dataclass
+class Layout:
+    """Where each particle lives in the compiled model.
+
+    free : ndarray of int, shape (n_free,)   particle indices that have joints
+    pinned : ndarray of int, shape (n_pin,)  particle indices that are world sites
+    dim : 2 or 3                             slide joints per free particle
+    pinned_sites : list of str               site names of the pinned particles
+    notes : list of str                      modelling compromises, for the run's message
+    """
+
+    free: np.ndarray
+    pinned: np.ndarray
+    dim: int
+    pinned_sites: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def _check_method(method: str) -> None:
+    if method not in INTEGRATORS:
+        known = ", ".join(INTEGRATORS)
+        raise ValueError(f"method: unknown MuJoCo integrator {method!r}; known: {known}")
+
+
+def _vec(a: np.ndarray) -> str:
+    return " ".join(f"{float(v):.17g}" for v in a)
+
+
+def mjcf(
+    model: ParticleModel, method: str, h: float, *, contact_steps: float = CONTACT_STEPS
+) -> tuple[str, Layout]:
+    """The MJCF text of a particle scene, and where its particles are in the model.
+
+    ``method`` is one of :data:`INTEGRATORS`, ``h`` the time step (s); plane contacts
+    last about ``contact_steps`` steps (``t_c = contact_steps * h``).
+    """
+    _check_method(method)
+    dim = 2 if model.dimension == 2 else 3
+    fixed = np.asarray(model.fixed, bool)
+    layout = Layout(np.flatnonzero(~fixed), np.flatnonzero(fixed), dim)
+    radius = np.where(model.radius > 0, model.radius, POINT_RADIUS)
+    axes = ("1 0 0", "0 1 0", "0 0 1")[:dim]
+
+    world: list[str] = []
+    for k, plane in enumerate(model.planes):
+        world.append(
+            f'<geom name="plane{k}" type="plane" pos="{_vec(plane.point)}" '
+            f'zaxis="{_vec(plane.normal)}" size="0 0 1"/>'
+        )
+    for i in layout.pinned:
+        world.append(f'<site name="s{i}" pos="{_vec(model.x0[i])}"/>')
+        layout.pinned_sites.append(f"s{i}")
+    for a, (point, i) in enumerate(zip(model.anchors.point, model.anchors.i, strict=True)):
+        if not fixed[i]:
+            world.append(f'<site name="anchor{a}" pos="{_vec(point)}"/>')
+    for i in layout.free:
+        joints = "".join(
+            f'<joint name="p{i}{c}" type="slide" axis="{ax}"/>'
+            for c, ax in zip("xyz", axes, strict=False)
+        )
+        # rotational inertia plays no part (no rotational joints) but must be positive
+        inertia = _vec(np.full(3, max(0.4 * model.mass[i] * radius[i] ** 2, 1e-12)))
+        world.append(
+            f'<body name="p{i}">'
+            f'<inertial pos="0 0 0" mass="{model.mass[i]:.17g}" diaginertia="{inertia}"/>'
+            f'{joints}<geom name="g{i}" type="sphere" size="{radius[i]:.17g}"/>'
+            f'<site name="s{i}"/></body>'
+        )
+
+    tendons: list[str] = []
+    s = model.springs
+    for i, j, k, c, r in zip(s.i, s.j, s.stiffness, s.damping, s.rest, strict=True):
+        if fixed[i] and fixed[j]:
+            continue
+        tendons.append(_tendon(f"s{i}", f"s{j}", k, c, r))
+    a = model.anchors
+    for n, (i, k, c, r) in enumerate(zip(a.i, a.stiffness, a.damping, a.rest, strict=True)):
+        if not fixed[i]:
+            tendons.append(_tendon(f"anchor{n}", f"s{i}", k, c, r))
+
+    pairs: list[str] = []
+    t_c = contact_steps * h
+    solimp = _vec(np.array(SOLIMP))
+    for k, plane in enumerate(model.planes):
+        stiffness, damping, capped = contact_solref(plane.restitution, t_c, h)
+        if capped:
+            zeta = max_damping_ratio(t_c, h)
+            layout.notes.append(
+                f"plane {k}: restitution {plane.restitution:g} needs more contact damping than "
+                f"a step of {h:.3g} s can integrate; damping ratio capped at {zeta:.3g} "
+                f"(h B = 1), continuous-contact restitution {restitution_of(zeta):.3f}"
+            )
+        if plane.friction > 0:
+            mu = f"{plane.friction:.17g}"
+            # friction rows: positive (timeconst) form; timeconst = 2 h kills the
+            # tangential velocity in one step inside the cone: Coulomb friction
+            rest = f'condim="3" friction="{mu} {mu} 0 0 0" solreffriction="{2 * h:.17g} 1"'
+        else:
+            rest = 'condim="1"'
+        for i in layout.free:
+            pairs.append(
+                f'<pair geom1="plane{k}" geom2="g{i}" {rest} margin="0" gap="0" '
+                f'solref="{-stiffness:.17g} {-damping:.17g}" solimp="{solimp}"/>'
+            )
+
+    text = "\n".join([
+        '<mujoco model="truestep">',
+        '  <compiler inertiafromgeom="false" angle="radian"/>',
+        f'  <option timestep="{h:.17g}" integrator="{method}" gravity="{_vec(model.gravity)}" '
+        'cone="elliptic">',
+        '    <flag energy="enable" autoreset="disable"/>',
+        "  </option>",
+        "  <default>",
+        f'    <joint armature="0" damping="{model.drag:.17g}" frictionloss="0" stiffness="0" '
+        'limited="false"/>',
+        '    <geom contype="0" conaffinity="0"/>',
+        "  </default>",
+        "  <worldbody>",
+        *("    " + w for w in world),
+        "  </worldbody>",
+        *(["  <tendon>", *("    " + t for t in tendons), "  </tendon>"] if tendons else []),
+        *(["  <contact>", *("    " + p for p in pairs), "  </contact>"] if pairs else []),
+        "</mujoco>",
+    ])
+    return text, layout
+
+
+def _tendon(site1: str, site2: str, k: float, c: float, rest: float) -> str:
+    return (
+        f'<spatial stiffness="{k:.17g}" damping="{c:.17g}" springlength="{rest:.17g}" '
+        f'frictionloss="0"><site site="{site1}"/><site site="{site2}"/></spatial>'
+    )
+
+
+def has_applied_forces(model: ParticleModel) -> bool:
+    """Whether the scene needs forces MJCF cannot express (gravitation, fields, impulses)."""
+    return model.gravitation is not None or bool(model.fields) or bool(model.impulses)
+
+
+class AppliedForces:
+    """Universal gravitation, force fields and impulses on MuJoCo's state, as generalized forces.
+
+    Parameters
+    ----------
+    model : ParticleModel
+    layout : Layout
+        Which particles have joints.
+
+    Calling it with ``(qpos, qvel, t)`` returns the generalized force (shape ``(nv,)``, N)
+    of :mod:`reference_impl.forces` at that state: the same functions the reference
+    implementation accumulates, with pinned particles at their fixed positions.
+    """
+
+    def __init__(self, model: ParticleModel, layout: Layout) -> None:
+        self.model = model
+        self.layout = layout
+        self.x = np.array(model.x0, float)
+        self.v = np.zeros_like(self.x)
+        self.f = np.zeros_like(self.x)
+
+    def __call__(self, qpos: np.ndarray, qvel: np.ndarray, t: float) -> np.ndarray:
+        m, lay = self.model, self.layout
+        self.x[lay.free, : lay.dim] = qpos.reshape(-1, lay.dim)
+        self.v[lay.free, : lay.dim] = qvel.reshape(-1, lay.dim)
+        f = self.f
+        f[:] = 0.0
+        if m.gravitation is not None:
+            forces.add_gravitation(f, self.x, m.mass, m.gravitation)
+        if m.fields:
+            forces.add_fields(f, m.fields, self.x, self.v, m.mass, t)
+        for i, force, t_on, t_off in m.impulses:
+            if t_on <= t < t_off:
+                f[i] += force
+        return f[lay.free, : lay.dim].ravel()
+
+
+@dataclass
+class Scene:
+    """A compiled case: MuJoCo's model and data, the particle layout and the applied forces."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    layout: Layout
+    xml: str
+    applied: AppliedForces | None
+    pinned_x: np.ndarray
+    """Positions of the pinned particles read from MuJoCo (site_xpos), shape (n_pin, 3), m."""
+
+    def positions(self, n: int) -> np.ndarray:
+        """All particle positions, shape (n, 3), m, from ``qpos`` and the pinned sites."""
+        x = np.zeros((n, 3))
+        x[self.layout.free, : self.layout.dim] = self.data.qpos.reshape(-1, self.layout.dim)
+        x[self.layout.pinned] = self.pinned_x
+        return x
+
+    def velocities(self, n: int) -> np.ndarray:
+        """All particle velocities, shape (n, 3), m/s (pinned particles: 0)."""
+        v = np.zeros((n, 3))
+        v[self.layout.free, : self.layout.dim] = self.data.qvel.reshape(-1, self.layout.dim)
+        return v
+
+
+def build(case: Case, method: str, dt: float, *, contact_steps: float = CONTACT_STEPS) -> Scene:
+    """Compile ``case`` for ``method`` at nominal step ``dt`` and set the initial state."""
+    model = case.model
+    h = case.steps_for(dt)[1]
+    xml, layout = mjcf(model, method, h, contact_steps=contact_steps)
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    d.qpos[:] = model.x0[layout.free, : layout.dim].ravel()
+    d.qvel[:] = model.v0[layout.free, : layout.dim].ravel()
+    mujoco.mj_forward(m, d)
+    pinned_x = np.array([d.site(s).xpos for s in layout.pinned_sites]).reshape(-1, 3)
+    applied = AppliedForces(model, layout) if has_applied_forces(model) else None
+    return Scene(m, d, layout, xml, applied, pinned_x)
+
+
+def unstable_warnings(d: mujoco.MjData) -> int:
+    """How many times MuJoCo flagged a NaN, infinite or huge qpos, qvel or qacc."""
+    return sum(d.warning[w].number for w in _BAD_STATE)
+
+
+class MujocoAdapter:
+    """MuJoCo's four integrators on particle scenes (see the module docstring for the model).
+
+    Parameters
+    ----------
+    stage_forces : bool
+        Evaluate gravitation, force fields and impulses at every force evaluation of
+        the integrator (passive callback; default) rather than once per step
+        (``qfrc_applied`` held through the RK4 stages).
+    contact_steps : float
+        Plane contacts last about this many time steps (see the module docstring).
+    """
+
+    name = "mujoco"
+    methods = tuple(INTEGRATORS)
+    adaptive_methods: tuple[str, ...] = ()
+    capabilities = frozenset(
+        {
+            "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",
+            "anchored-springs", "universal-gravitation", "force-fields", "planes", "friction",
+            "pinned-particles", "impulses",
+        }
+    )
+
+    def __init__(self, *, stage_forces: bool = True, contact_steps: float = CONTACT_STEPS) -> None:
+        if contact_steps <= 0:
+            raise ValueError(f"contact_steps: must be positive, got {contact_steps}")
+        self.stage_forces = stage_forces
+        self.contact_steps = contact_steps
+
+    def missing(self, case: Case, method: str) -> set[str]:
+        """Features of ``case`` beyond MuJoCo's (ODE scenes and emitters)."""
+        return set(case.features) - self.capabilities
+
+    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+        """Run ``case`` with MuJoCo's integrator ``method`` at step ``dt`` (s)."""
+        _check_method(method)
+        lacking = self.missing(case, method)
+        if lacking:
+            needs = ", ".join(sorted(lacking))
+            raise ValueError(f"case: {case.name} needs {needs}, beyond MuJoCo's capabilities")
+        scene = build(case, method, dt, contact_steps=self.contact_steps)
+        n_steps = case.steps_for(dt)[0]
+        marks = record_indices(n_steps, case.max_records)
+        warnings: list[str] = []
+        previous_warning = mujoco.get_mju_user_warning()
+        previous_passive = mujoco.get_mjcb_passive()
+        mujoco.set_mju_user_warning(warnings.append)
+        try:
+            if scene.applied is not None and self.stage_forces:
+                applied = scene.applied
+
+                def passive(m: mujoco.MjModel, d: mujoco.MjData) -> None:
+                    d.qfrc_passive += applied(d.qpos, d.qvel, d.time)
+
+                mujoco.set_mjcb_passive(passive)
+            held = scene.applied is not None and not self.stage_forces
+            run = _step(case, scene, marks, held=held)
+        finally:
+            mujoco.set_mjcb_passive(previous_passive)
+            mujoco.set_mju_user_warning(previous_warning)
+
+        t, x, v, steps, wall, bad = run
+        status, t_fail = finite_until(x, t)
+        if bad and status == "ok":
+            status, t_fail = "unstable", float(t[-1])
+        energy = np.array([total_energy(case.model, xi, vi) for xi, vi in zip(x, v, strict=True)])
+        notes = [f"{EVALUATIONS_PER_STEP[method]} force evaluation(s) per step; nfev counts steps"]
+        notes += scene.layout.notes
+        if scene.applied is not None and not self.stage_forces and method == "RK4":
+            notes.append("applied forces held constant through the RK4 stages")
+        if warnings:
+            notes.append(warnings[0].strip())
+        return Trajectory(
+            t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail, nfev=steps,
+            steps=steps, wall_s=wall, message="; ".join(notes),
+        )
+
+
+def _step(
+    case: Case, scene: Scene, marks: np.ndarray, *, held: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, bool]:
+    """Step to the end, reading the state back at the step indices ``marks``.
+
+    ``held``: set ``qfrc_applied`` from the state before every step (a Python loop);
+    otherwise MuJoCo takes the steps between records in one call. Stops at the first
+    check that finds MuJoCo's bad-state warning. Returns ``t`` (T,), ``x`` and ``v``
+    (T, n, 3), the steps taken, the wall time (s) and whether it stopped on a warning.
+    """
+    m, d, n = scene.model, scene.data, case.model.n
+    ts, xs, vs = [d.time], [scene.positions(n)], [scene.velocities(n)]
+    step = 0
+    bad = False
+    applied = scene.applied
+    start = time.perf_counter()
+    for target in marks[1:]:
+        while step < target:
+            chunk = int(min(target - step, _CHECK_EVERY))
+            if held:
+                for _ in range(chunk):
+                    d.qfrc_applied[:] = applied(d.qpos, d.qvel, d.time)
+                    mujoco.mj_step(m, d)
+            else:
+                mujoco.mj_step(m, d, nstep=chunk)
+            step += chunk
+            if unstable_warnings(d):
+                bad = True
+                break
+        ts.append(d.time)
+        xs.append(scene.positions(n))
+        vs.append(scene.velocities(n))
+        if bad:
+            break
+    wall = time.perf_counter() - start
+    return np.array(ts), np.array(xs), np.array(vs), step, wall, bad

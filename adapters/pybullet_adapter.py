@@ -1,0 +1,399 @@
+"""pybullet (Bullet 3, double precision) behind the Adapter protocol: 2-D and 3-D particle scenes.
+
+What the engine is asked to do, and what integration scheme results
+--------------------------------------------------------------------
+Each :meth:`PybulletAdapter.simulate` opens its own ``p.connect(p.DIRECT)`` client and
+always disconnects it (``finally``); the runner also forks a fresh process per run, so no
+engine state set in one run can reach the next.
+The step is ``setPhysicsEngineParameter(fixedTimeStep=h, numSubSteps=0)`` with
+``h = case.steps_for(dt)[1]``, and the run is ``round(duration / h)`` calls of
+``p.stepSimulation()``. One call integrates semi-implicit (symplectic) Euler with the
+**velocity update first**: ``v_{n+1} = v_n + h (g + f_n / m) + contact impulses / m``,
+``x_{n+1} = x_n + h v_{n+1}`` (the reference's ``symplectic-euler``). From rest under
+gravity this gives ``y_n = y_0 - g h^2 n (n + 1) / 2`` exactly (checked in the tests to
+1e-9 m; pybullet is built in double precision).
+
+The model in pybullet
+---------------------
+- **Particles**: one body per particle, ``createMultiBody`` with a ``GEOM_SPHERE`` of the
+  particle's radius (``POINT_RADIUS`` = 0.01 m for a radius-0 particle, see planes) and its
+  mass. A point mass must not rotate, so ``changeDynamics`` sets
+  ``localInertiaDiagonal = (0, 0, 0)``, which Bullet treats as infinite inertia (its inverse
+  is set to 0): friction torques never spin a particle up, and a particle never rolls.
+  ``linearDamping`` and ``angularDamping`` are set to 0: a pybullet multibody's default is
+  0.04 for both (Bullet's ``btMultiBody`` constructor, ``m_linearDamping(0.04f)``), applied
+  as a force ``m v (0.04 + 0.04 |v|)``; left there it takes 0.35 m off a 1 s free fall at
+  ``h`` = 1/240 s (measured). ``maxJointVelocity`` is set to infinity: a ``btMultiBody``
+  clamps every velocity coordinate, its base's included, to ``m_maxCoordinateVelocity``
+  = 100 (``btClamp`` in ``applyDeltaVeeMultiDof``); left there a free fall stops
+  accelerating at 100 m/s and a blow-up is silently held at 100 m/s (measured), both
+  hidden clamps. A pinned particle is a static body (mass 0).
+- **Gravity**: ``p.setGravity``.
+- **Springs, anchored springs, drag, universal gravitation, force fields, impulses**:
+  summed per step in numpy by the functions the reference uses
+  (:mod:`reference_impl.forces`) from the state read back at the start of the step
+  (``x_n``, ``v_n``, ``t_n``; impulses act in the steps with ``t_on <= t_n < t_off``, as in
+  the reference), and handed to each body with
+  ``p.applyExternalForce(body, -1, f, x, p.WORLD_FRAME)`` at the body's own position
+  before each ``p.stepSimulation()`` (Bullet clears external forces after every step).
+  Springs thus get exactly the reference's ``symplectic-euler`` (spring damping included,
+  explicit in ``v_n``). Only what the forces need is read: the positions (and, for damped
+  springs, drag and wind, the velocities) of the particles the forces touch, one
+  ``getBasePositionAndOrientation`` / ``getBaseVelocity`` call per body (pybullet has no
+  batched read of base states); a state read at a recorded step is reused. Mass-spring
+  cloth goes through the same path: pybullet's deformable world (``loadSoftBody`` with
+  mass-spring) is not used, since it needs a mesh file and its own implicit integrator
+  and damping would not be the lecture's springs.
+- **Planes**: a static ``GEOM_PLANE`` body per plane, with ``planeNormal`` the plane's
+  normal, placed at the plane's point: a half-space (no tunnelling through it however
+  fast a particle moves). Radius-0 particles collide, in their own collision group, with a
+  copy of each plane moved ``POINT_RADIUS`` back against its normal, so the centre of
+  their small sphere touches exactly the case's plane. Collision filter groups keep particles
+  from colliding with each other (the lecture's particles collide with planes only).
+- **Restitution and friction**: Bullet combines the two bodies' coefficients by product
+  (``btManifoldResult::calculateCombinedRestitution`` returns
+  ``body0->getRestitution() * body1->getRestitution()``; friction likewise, clamped to
+  +-10), so each particle gets ``restitution = 1`` and ``lateralFriction = 1`` and the plane
+  the case's ``k_r`` and Coulomb ``mu`` (pybullet's default ``lateralFriction`` is 0.5, its
+  default restitution 0). Spinning and rolling friction stay 0.
+
+Methods: ``default`` and ``clean``
+----------------------------------
+pybullet's contact solver (sequential impulses) gives a contact a target normal velocity
+made of a restitution term and a penetration-correction term. Measured on a ball hitting
+a plane (normal velocity ``v_n < 0`` before the contact step, depth ``d`` at its start),
+to rounding:
+
+- ``btMultiBody`` bodies (``default``):
+  ``v_out = e (|v_n| + g h) + contactERP (d - contactSlop) / h`` (restitution of the
+  velocity *after* the step's gravity kick, plus a Baumgarte push in the velocity);
+- ``btRigidBody`` bodies with split impulse (``clean``): ``v_out = e |v_n|``, the push
+  moving the position only.
+
+What each ``setPhysicsEngineParameter`` setting does (the pybullet quickstart guide's
+descriptions, checked against Bullet's ``btSequentialImpulseConstraintSolver::
+setupContactConstraint`` and pybullet's ``PhysicsServerCommandProcessor``, which sets
+contact ERP 0.08, friction ERP 0.2, contact slop 1e-5, 50 solver iterations and
+warm-starting factor 0.1 at start-up):
+
+- ``contactBreakingThreshold``: contact points farther apart than this are not processed
+  by the solver, and AABBs are grown by it (Bullet's ``gContactBreakingThreshold``, 0.02,
+  scaled by the shape's size: a 5 cm sphere 2.2 mm above a plane had no contact point,
+  one 1.2 mm above had a speculative one, measured). Left at its default.
+- ``erp`` / ``contactERP`` / ``frictionERP``: Baumgarte error-reduction fractions for
+  joints, contacts and friction anchors. A contact at depth ``d`` gets the velocity target
+  ``contactERP * (d - contactSlop) / h`` *added to its velocity* unless split impulse
+  handles it: the default 0.08 turns 15.8 mm of penetration at ``h`` = 1/240 s into
+  +0.30 m/s of rebound. ``frictionERP`` only acts with friction anchors (off here).
+- ``restitutionVelocityThreshold`` (default 0.2 m/s): below this relative normal speed
+  the restitution is zero, so slow bounces die.
+- ``useSplitImpulse`` / ``splitImpulsePenetrationThreshold`` (default on / -0.04 m): a
+  contact deeper than the threshold is pushed out by a separate pseudo-velocity that moves
+  the position without entering the velocity; shallower contacts use the Baumgarte term
+  above. pybullet only applies a threshold >= 0. It works for ``btRigidBody`` contacts
+  only: pybullet's default ``createMultiBody`` bodies are ``btMultiBody`` objects, whose
+  contacts (``btMultiBodyConstraintSolver``) always feed the correction into the velocity
+  (measured: the same bounces with split impulse on and off).
+- ``contactSlop`` (1e-5 m): penetration not corrected, so a resting particle sits 10 um
+  deep.
+- ``enableConeFriction`` (on): implicit cone (isotropic Coulomb) friction in the
+  multibody solver; off, the pyramid approximation lets a multibody point mass sliding
+  diagonally feel sqrt(2) mu (measured at 2 m/s, mu = 0.5: it slid 0.287 m instead of
+  0.407 m). ``btRigidBody`` friction (``clean``) takes its first direction along the
+  sliding velocity and is exact Coulomb either way.
+- ``allowedCcdPenetration``: continuous collision detection (per body,
+  ``ccdSweptSphereRadius``) is not used when the penetration is below this; CCD is off
+  here (it clamps motion at the time of impact, losing time), so it has no effect.
+
+``default`` is the engine as a user gets it, apart from the scene's own parameters and
+the point-mass settings above: ``createMultiBody``'s default ``btMultiBody`` bodies,
+``fixedTimeStep = h``, ``numSubSteps = 0``, every solver and contact setting at pybullet's
+defaults. ``clean`` changes only the contact treatment, each change justified by the bounce
+and slide measurements of ``/work/scratch_pybullet.py`` (a 5 cm ball dropped from 1 m):
+
+- bodies created with ``useMaximalCoordinates=True`` (``btRigidBody``, for particles and
+  planes): required for split impulse, see above;
+- ``useSplitImpulse = 1``, ``splitImpulsePenetrationThreshold = 0``: every penetration is
+  pushed out without touching the velocity. The rebound ratio becomes ``e`` to rounding
+  (default at ``h`` = 1/240, ``e`` = 0.8: 0.878; at ``e`` = 0: 0.070 instead of 0);
+- ``restitutionVelocityThreshold = 0``: slow bounces keep their restitution (a ball
+  hitting at 0.198 m/s with ``e`` = 0.8 at ``h`` = 1 ms: 0.8 instead of 0);
+- ``contactProcessingThreshold = 0`` on every body (``changeDynamics``): the solver
+  ignores *speculative* contacts (points still apart). Left on, a particle within a
+  contact distance of the plane at the start of a step is stopped short and bounced from
+  above the plane with ``e v - gap / h``: at ``h`` = 1 ms and ``e`` = 0.5 the second
+  bounce measured 0.25 instead of 0.5, and the 0.198 m/s impact above 0.016;
+- ``contactERP`` stays 0.08: it now only sets how fast the push removes a penetration;
+  larger values lift the particle by more of its depth in one step and add potential
+  energy (``e`` = 1, ``h`` = 1/240: apex ratio 1.0006 at 0.08, 1.0041 at 0.5);
+- ``contactSlop`` stays 1e-5 m: at 0 a particle sliding on a plane with friction loses
+  its contact every few steps once slow and keeps sliding at about 1 cm/s (measured);
+- ``enableConeFriction``, ``warmStartingFactor``, ``contactBreakingThreshold``,
+  ``allowedCcdPenetration`` stay at their defaults (no measurable effect on these scenes).
+
+Reading back
+------------
+At each recorded step (``reference_impl.integrate.record_indices``) the positions and
+velocities of every movable particle are read with ``getBasePositionAndOrientation`` and
+``getBaseVelocity``; pinned particles stay at their initial position with zero velocity.
+Energy is :func:`reference_impl.particles.total_energy` of that state; ``nfev`` and
+``steps`` count ``stepSimulation`` calls. A recorded state that is non-finite or beyond
+:data:`reference_impl.integrate.BLOWUP` ends the run with status ``unstable``.
+
+Not modelled: emitters, plain ODE cases.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from adapters.base import Trajectory, finite_until
+from cases.case import Case
+from reference_impl import forces
+from reference_impl.integrate import BLOWUP, record_indices
+from reference_impl.model import ParticleModel
+from reference_impl.particles import total_energy
+
+POINT_RADIUS = 0.01
+"""Radius (m) of the sphere standing in for a radius-0 particle; its planes move back as much."""
+
+SPHERES, PLANES, POINTS, POINT_PLANES = 1, 2, 4, 8
+"""Collision filter groups: spheres hit planes, points hit the shifted planes, nothing else."""
+
+CLEAN_PARAMETERS: dict[str, float] = {
+    "useSplitImpulse": 1,
+    "splitImpulsePenetrationThreshold": 0.0,
+    "restitutionVelocityThreshold": 0.0,
+}
+"""``setPhysicsEngineParameter`` settings of the ``clean`` method (see the module docstring)."""
+
+CLEAN_CONTACT_PROCESSING_THRESHOLD = 0.0
+"""m, per body: contacts still this far apart or farther are not handed to the solver."""
+
+CHECK_EVERY = 64
+"""Steps between blow-up checks of the recorded state; a blow-up found ends the run there."""
+
+
+@dataclass
+class BulletScene:
+    """A particle scene built in one pybullet client.
+
+    client : the physicsClientId
+    bodies : ndarray of int, shape (n,)     body id of each particle
+    movable : ndarray of int                particles that move (not pinned)
+    read_x, read_v : ndarray of int         particles whose position / velocity the per-step
+                                             forces need (movable ones only)
+    forced : ndarray of int                 movable particles that may receive a force
+    """
+
+    client: int
+    bodies: np.ndarray
+    movable: np.ndarray
+    read_x: np.ndarray
+    read_v: np.ndarray
+    forced: np.ndarray
+
+
+def _needs(model: ParticleModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masks (n,) of particles whose x, whose v the forces read, and which may get a force."""
+    n = model.n
+    need_x, need_v, forced = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+    s, a = model.springs, model.anchors
+    if len(s):
+        for ends in (s.i, s.j):
+            need_x[ends] = forced[ends] = True
+            need_v[ends[s.damping != 0]] = True
+    if len(a):
+        need_x[a.i] = forced[a.i] = True
+        need_v[a.i[a.damping != 0]] = True
+    if model.drag:
+        need_v[:] = forced[:] = True
+    if model.gravitation is not None:
+        need_x[:] = forced[:] = True
+    for fld in model.fields:
+        forced[:] = True
+        if fld.kind == "wind":
+            need_v[:] = True
+        else:
+            need_x[:] = True
+    for i, _, _, _ in model.impulses:
+        forced[i] = True
+    movable = ~model.fixed
+    forced &= movable
+    need_x = (need_x | forced) & movable
+    return need_x, need_v & movable, forced
+
+
+def build_scene(model: ParticleModel, h: float, *, clean: bool) -> BulletScene:
+    """Build ``model`` in a new DIRECT client with step ``h`` (s); see the module docstring."""
+    cid = p.connect(p.DIRECT)
+    try:
+        p.setPhysicsEngineParameter(fixedTimeStep=h, numSubSteps=0, physicsClientId=cid)
+        if clean:
+            p.setPhysicsEngineParameter(**CLEAN_PARAMETERS, physicsClientId=cid)
+        p.setGravity(*(float(g) for g in model.gravity), physicsClientId=cid)
+        maximal = bool(clean)
+        extra = {"contactProcessingThreshold": CLEAN_CONTACT_PROCESSING_THRESHOLD} if clean else {}
+
+        movable = ~model.fixed
+        point = movable & (model.radius <= 0)
+        sphere = movable & (model.radius > 0)
+        shapes: dict[float, int] = {}
+        bodies = np.zeros(model.n, dtype=int)
+        for i in range(model.n):
+            radius = float(model.radius[i]) if model.radius[i] > 0 else POINT_RADIUS
+            if radius not in shapes:
+                shapes[radius] = p.createCollisionShape(p.GEOM_SPHERE, radius=radius,
+                                                        physicsClientId=cid)
+            mass = 0.0 if model.fixed[i] else float(model.mass[i])
+            body = p.createMultiBody(mass, shapes[radius], -1, model.x0[i].tolist(),
+                                     useMaximalCoordinates=maximal, physicsClientId=cid)
+            bodies[i] = body
+            if model.fixed[i]:
+                p.setCollisionFilterGroupMask(body, -1, 0, 0, physicsClientId=cid)
+                continue
+            p.changeDynamics(body, -1, mass=mass, localInertiaDiagonal=[0.0, 0.0, 0.0],
+                             linearDamping=0.0, angularDamping=0.0, maxJointVelocity=np.inf,
+                             restitution=1.0, lateralFriction=1.0, **extra, physicsClientId=cid)
+            group, mask = (POINTS, POINT_PLANES) if point[i] else (SPHERES, PLANES)
+            if not model.planes:
+                group = mask = 0
+            p.setCollisionFilterGroupMask(body, -1, group, mask, physicsClientId=cid)
+            p.resetBaseVelocity(body, model.v0[i].tolist(), [0.0, 0.0, 0.0], physicsClientId=cid)
+
+        for plane in model.planes:
+            for present, shift, group, mask in ((sphere, 0.0, PLANES, SPHERES),
+                                                (point, -POINT_RADIUS, POINT_PLANES, POINTS)):
+                if not np.any(present):
+                    continue
+                shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=plane.normal.tolist(),
+                                               physicsClientId=cid)
+                at = plane.point + shift * plane.normal
+                body = p.createMultiBody(0.0, shape, -1, at.tolist(),
+                                         useMaximalCoordinates=maximal, physicsClientId=cid)
+                p.changeDynamics(body, -1, restitution=float(plane.restitution),
+                                 lateralFriction=float(plane.friction), **extra,
+                                 physicsClientId=cid)
+                p.setCollisionFilterGroupMask(body, -1, group, mask, physicsClientId=cid)
+    except BaseException:
+        p.disconnect(cid)
+        raise
+    need_x, need_v, forced = _needs(model)
+    return BulletScene(cid, bodies, np.flatnonzero(movable), np.flatnonzero(need_x),
+                       np.flatnonzero(need_v), np.flatnonzero(forced))
+
+
+def external_forces(model: ParticleModel, f: np.ndarray, x: np.ndarray, v: np.ndarray,
+                    t: float) -> np.ndarray:
+    """Every force but gravity into ``f`` (n, 3), N, at ``x``, ``v`` (n, 3) and time ``t`` (s)."""
+    f[:] = 0.0
+    if model.drag:
+        forces.add_drag(f, v, model.drag)
+    forces.add_springs(f, x, v, model.springs)
+    forces.add_anchors(f, x, v, model.anchors)
+    if model.gravitation is not None:
+        forces.add_gravitation(f, x, model.mass, model.gravitation)
+    if model.fields:
+        forces.add_fields(f, model.fields, x, v, model.mass, t)
+    for i, force, t_on, t_off in model.impulses:
+        if t_on <= t < t_off:
+            f[i] += force
+    return f
+
+
+class PybulletAdapter:
+    """pybullet's own step on particle scenes, as shipped and with clean contacts.
+
+    See the module docstring for the model, the scheme and what ``clean`` changes.
+    """
+
+    name = "pybullet"
+    methods = ("default", "clean")
+    adaptive_methods = ()
+    capabilities = frozenset(
+        {
+            "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",
+            "anchored-springs", "universal-gravitation", "force-fields", "planes", "friction",
+            "pinned-particles", "impulses",
+        }
+    )
+
+    def missing(self, case: Case, method: str) -> set[str]:
+        return case.features - self.capabilities
+
+    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+        if method not in self.methods:
+            raise ValueError(
+                f"pybullet: unknown method {method!r}; known: {', '.join(self.methods)}")
+        lacking = self.missing(case, method)
+        if lacking:
+            raise ValueError(f"pybullet cannot model {case.name}: needs {', '.join(sorted(lacking))}")
+        model = case.model
+        n_steps, h = case.steps_for(dt)
+        scene = build_scene(model, h, clean=method == "clean")
+        try:
+            return self._run(case, scene, n_steps, h)
+        finally:
+            p.disconnect(scene.client)
+
+    def _run(self, case: Case, scene: BulletScene, n_steps: int, h: float) -> Trajectory:
+        """Step the built scene ``n_steps`` times of ``h`` seconds, recording as the case asks."""
+        model, cid = case.model, scene.client
+        marks = np.zeros(n_steps + 1, dtype=bool)
+        marks[record_indices(n_steps, case.max_records)] = True
+        get_x, get_v = p.getBasePositionAndOrientation, p.getBaseVelocity
+        apply, step, world = p.applyExternalForce, p.stepSimulation, p.WORLD_FRAME
+
+        x, v, f = model.x0.copy(), np.zeros((model.n, 3)), np.zeros((model.n, 3))
+        v[scene.movable] = model.v0[scene.movable]
+        moving = scene.bodies[scene.movable].tolist()
+        bx, bv = scene.bodies[scene.read_x].tolist(), scene.bodies[scene.read_v].tolist()
+        forced, bf = scene.forced, scene.bodies[scene.forced].tolist()
+        xs, vs, ts = [x.copy()], [v.copy()], [0.0]
+        fresh, steps, checked = True, 0, 0
+
+        start = time.perf_counter()
+        for k in range(1, n_steps + 1):
+            if len(forced):
+                if not fresh:
+                    if bx:
+                        x[scene.read_x] = [get_x(b, cid)[0] for b in bx]
+                    if bv:
+                        v[scene.read_v] = [get_v(b, cid)[0] for b in bv]
+                external_forces(model, f, x, v, (k - 1) * h)
+                for b, fi, xi in zip(bf, f[forced].tolist(), x[forced].tolist(), strict=True):
+                    apply(b, -1, fi, xi, world, cid)
+            step(cid)
+            steps, fresh = k, False
+            if marks[k]:
+                x[scene.movable] = [get_x(b, cid)[0] for b in moving]
+                v[scene.movable] = [get_v(b, cid)[0] for b in moving]
+                xs.append(x.copy())
+                vs.append(v.copy())
+                ts.append(k * h)
+                fresh = True
+                if k - checked >= CHECK_EVERY or k == n_steps:
+                    checked = k
+                    if not _sane(x, v):
+                        break
+        wall = time.perf_counter() - start
+
+        t, xr, vr = np.array(ts), np.array(xs), np.array(vs)
+        status, t_fail = finite_until(np.concatenate([xr, vr], axis=1), t, limit=BLOWUP)
+        with np.errstate(all="ignore"):
+            energy = np.array([total_energy(model, a, b) for a, b in zip(xr, vr, strict=True)])
+        return Trajectory(
+            t=t, x=xr, v=vr, energy=energy, status=status, t_fail=t_fail,
+            nfev=steps, steps=steps, wall_s=wall,
+            message="" if status == "ok" else "non-finite or runaway state read back",
+        )
+
+
+def _sane(x: np.ndarray, v: np.ndarray) -> bool:
+    """Whether positions and velocities (n, 3) are finite and below :data:`BLOWUP` in size."""
+    with np.errstate(invalid="ignore"):
+        return bool(np.abs(x).max(initial=0.0) < BLOWUP and np.abs(v).max(initial=0.0) < BLOWUP)

@@ -1,0 +1,98 @@
+"""The stability criterion and the restitution estimator on known inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from truestep.restitution import bounces
+from truestep.stability import bisect_limit, energy_grows
+
+T = np.linspace(0.0, 100.0, 20001)
+
+
+@pytest.mark.parametrize(
+    "energy",
+    [
+        1.0 + 0.3 * np.sin(7.3 * T) ** 2,  # bounded oscillation, like symplectic Euler
+        1.0 + 0.99 * np.sin(0.4 * T) ** 2,  # large, slow but bounded
+        np.exp(-0.01 * T),  # decaying, like implicit Euler
+        np.full_like(T, 2.5),  # conserved
+        -0.5 + 1e-13 * np.sin(3 * T),  # round-off around a negative energy
+    ],
+    ids=["oscillating", "slow-oscillating", "decaying", "constant", "roundoff"],
+)
+def test_bounded_energy_is_stable(energy):
+    assert not energy_grows(T, energy)
+
+
+@pytest.mark.parametrize(
+    "energy",
+    [
+        np.exp(0.001 * T),  # slow exponential growth (explicit Euler at a small step)
+        1.0 + 1e-3 * T,  # secular linear drift upward
+        (1.0 + 0.3 * np.sin(7.3 * T) ** 2) * np.exp(0.02 * T),  # growing oscillation
+        np.where(T < 90, 1.0, np.inf),  # blow-up to infinity
+    ],
+    ids=["slow-exponential", "linear-drift", "growing-oscillation", "non-finite"],
+)
+def test_growing_energy_is_unstable(energy):
+    assert energy_grows(T, energy)
+
+
+def test_bisection_finds_a_known_boundary_within_its_budget():
+    calls = []
+
+    def stable_at(dt):
+        calls.append(dt)
+        return dt <= 0.2
+
+    r = bisect_limit(stable_at, 1e-3, 0.5, rel_tol=1e-3, max_runs=30)
+    assert r.dt_limit <= 0.2 < r.dt_unstable
+    assert r.dt_unstable / r.dt_limit - 1 <= 1e-3
+    assert len(calls) == r.runs <= 30
+
+
+def exact_bouncing_ball(t, h0, e, g=9.81):
+    """Height above contact and velocity of an ideal ball: apexes h0 e^(2n)."""
+    h, v = np.empty_like(t), np.empty_like(t)
+    t1 = np.sqrt(2 * h0 / g)
+    starts, speeds = [0.0, t1], [g * t1]
+    for _ in range(30):
+        speeds.append(speeds[-1] * e)
+        starts.append(starts[-1] + 2 * speeds[-1] / g)
+    for i, ti in enumerate(t):
+        if ti < t1:
+            h[i], v[i] = h0 - 0.5 * g * ti**2, -g * ti
+            continue
+        k = np.searchsorted(starts, ti) - 1
+        tau, u = ti - starts[k], speeds[k]
+        h[i], v[i] = u * tau - 0.5 * g * tau**2, u - g * tau
+    return h, v
+
+
+@pytest.mark.parametrize("e", [0.5, 0.8, 0.9, 1.0])
+@pytest.mark.parametrize("dt", [1 / 240, 1 / 1000])
+def test_restitution_estimator_is_exact_on_an_exact_trajectory(e, dt):
+    t1 = np.sqrt(2 / 9.81)
+    zeno = t1 * (1 + 2 * e / (1 - e)) if e < 1 else np.inf  # infinitely many bounces by then
+    t = np.arange(0.0, min(2.5, 0.9 * zeno), dt)
+    h, v = exact_bouncing_ball(t, 1.0, e)
+    found = bounces(t, h, v, 9.81)
+    assert len(found) >= 3
+    for k, b in enumerate(found[:3], start=1):
+        # Ballistic extrapolation is exact on exact flight: only round-off remains.
+        assert b.e_velocity == pytest.approx(e, abs=1e-9)
+        assert b.e_apex == pytest.approx(e, abs=1e-9)
+        assert b.apex == pytest.approx(e ** (2 * k), rel=1e-9)
+        assert b.penetration == 0.0
+
+
+def test_a_ball_that_stops_has_zero_rebound():
+    t = np.arange(0.0, 1.0, 1 / 240)
+    h, v = exact_bouncing_ball(t, 1.0, 0.5)
+    stop = t > 0.4515
+    h[stop], v[stop] = -1e-4, 0.0  # lands and rests, slightly sunk
+    found = bounces(t, h, v, 9.81)
+    assert len(found) == 1
+    assert found[0].e_velocity == 0.0 and found[0].penetration == pytest.approx(1e-4)

@@ -1,0 +1,162 @@
+"""The analyses beyond the main sweep: stability limits and restitution per bounce."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from adapters import get_adapter
+from cases.case import Case
+from cases.exact import stability_limit
+from reference_impl.model import ParticleModel, Plane
+from truestep.isolation import run_isolated
+from truestep.restitution import bounces, heights
+from truestep.stability import search_case
+
+STABILITY_COLUMNS = ["case", "engine", "method", "dt_limit", "dt_limit_exact", "dt_unstable",
+                     "runs", "status", "note"]
+RESTITUTION_COLUMNS = ["engine", "method", "dt", "e_set", "bounce", "e_measured", "e_apex",
+                       "v_in", "v_out", "apex", "penetration", "status", "note"]
+
+RESTITUTION_SET = (0.0, 0.5, 0.8, 0.9, 1.0)
+RESTITUTION_DTS = (1 / 240, 1 / 1000)
+QUICK_RESTITUTION_SET = (0.5, 0.9)
+QUICK_RESTITUTION_DTS = (1 / 240,)
+REFERENCE_BOUNCE_METHODS = ("lecture", "symplectic-euler", "rk4")
+"""Reference methods in the bounce test: the collision pass is the same for all, so a
+first-order, a symplectic and a fourth-order integrator show whether the integrator
+matters at all."""
+BALL_RADIUS = 0.05
+DROP_HEIGHT = 1.0
+GRAVITY = 9.81
+BOUNCES = 3
+
+
+def scheme_of(engine: str, method: str) -> str | None:
+    """The integration scheme an engine's method amounts to, for exact stability limits."""
+    adapter = get_adapter(engine)
+    schemes = getattr(adapter, "schemes", None)
+    if schemes is not None:
+        return schemes.get(method)
+    return method if engine == "reference" else None
+
+
+def _search(engine: str, case: Case, method: str):
+    adapter = get_adapter(engine)
+    return search_case(case, lambda c, dt: adapter.simulate(c, method, dt))
+
+
+def stability_table(cases: list[Case], engines: list[str], *, quick: bool) -> pd.DataFrame:
+    """Bisect the largest stable step for every case that declares a search."""
+    rows = []
+    for case in cases:
+        if case.stability is None:
+            continue
+        for engine in engines:
+            adapter = get_adapter(engine)
+            for method in adapter.methods:
+                row = {"case": case.name, "engine": engine, "method": method}
+                missing = adapter.missing(case, method)
+                exact = stability_limit(case, scheme_of(engine, method))
+                row["dt_limit_exact"] = np.nan if exact is None else exact
+                if missing:
+                    rows.append({**row, "status": "unsupported", "note": ",".join(sorted(missing))})
+                    continue
+                if method in adapter.adaptive_methods:
+                    rows.append({**row, "status": "skipped",
+                                 "note": "adaptive: chooses its own step"})
+                    continue
+                if quick and exact is None:
+                    rows.append({**row, "status": "skipped",
+                                 "note": "--quick searches only where the exact limit is known"})
+                    continue
+                out = run_isolated(_search, (engine, case, method),
+                                   timeout=case.timeout_s * case.stability.max_runs)
+                if out.status != "ok":
+                    rows.append({**row, "status": out.status, "note": out.message})
+                    continue
+                r = out.value
+                rows.append({**row, "dt_limit": r.dt_limit, "dt_unstable": r.dt_unstable,
+                             "runs": r.runs, "status": "ok", "note": r.note})
+    return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
+
+
+def bounce_case(e: float, dt: float) -> Case:
+    """A ball of radius 0.05 m dropped from 1 m (surface above the floor) onto y = 0."""
+    model = ParticleModel(
+        mass=np.array([1.0]),
+        x0=np.array([[0.0, DROP_HEIGHT + BALL_RADIUS, 0.0]]),
+        v0=np.zeros((1, 3)),
+        radius=np.array([BALL_RADIUS]),
+        fixed=np.zeros(1, bool),
+        gravity=np.array([0.0, -GRAVITY, 0.0]),
+        planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), restitution=e)],
+        dimension=2,
+    )
+    t_first = np.sqrt(2 * DROP_HEIGHT / GRAVITY)
+    duration = t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25
+    return Case(
+        name=f"bounce-e{e:g}", file="<restitution sweep>", title="restitution sweep",
+        description="", kind="particles", duration=duration, dts=[dt], quick_dts=[dt],
+        tolerances=[], quick_tolerances=[], model=model,
+        max_records=int(np.ceil(duration / dt)) + 1, timeout_s=60.0,
+    )
+
+
+def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
+    case = bounce_case(e, dt)
+    traj = get_adapter(engine).simulate(case, method, dt)
+    base = {"engine": engine, "method": method, "dt": dt, "e_set": e}
+    if traj.status != "ok":
+        return [{**base, "bounce": 1, "status": traj.status, "note": traj.message}]
+    plane = case.model.planes[0]
+    h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, BALL_RADIUS)
+    found = bounces(traj.t, h, vn, GRAVITY)
+    rows = []
+    for k in range(1, BOUNCES + 1):
+        if k <= len(found):
+            b = found[k - 1]
+            rows.append({**base, "bounce": k, "e_measured": b.e_velocity, "e_apex": b.e_apex,
+                         "v_in": b.v_in, "v_out": b.v_out, "apex": b.apex,
+                         "penetration": b.penetration, "status": "ok", "note": ""})
+        else:
+            why = "ball at rest after the previous contact" if found else "no contact found"
+            rows.append({**base, "bounce": k, "status": "ok", "note": why})
+    return rows
+
+
+def restitution_table(engines: list[str], *, quick: bool) -> pd.DataFrame:
+    """Drop a ball at every requested restitution and step, in every engine and method."""
+    rows = []
+    e_set = QUICK_RESTITUTION_SET if quick else RESTITUTION_SET
+    dts = QUICK_RESTITUTION_DTS if quick else RESTITUTION_DTS
+    for engine in engines:
+        adapter = get_adapter(engine)
+        probe = bounce_case(0.5, dts[0])
+        for method in adapter.methods:
+            if engine == "reference" and method not in REFERENCE_BOUNCE_METHODS:
+                continue
+            missing = adapter.missing(probe, method)
+            if missing or method in adapter.adaptive_methods:
+                why = ",".join(sorted(missing)) or "adaptive integrator: no collision events"
+                rows.append({"engine": engine, "method": method, "status": "unsupported",
+                             "note": why})
+                continue
+            for dt in dts:
+                for e in e_set:
+                    out = run_isolated(_bounce_rows, (engine, method, e, dt), timeout=60.0)
+                    if out.status == "ok":
+                        rows.extend(out.value)
+                    else:
+                        rows.append({"engine": engine, "method": method, "dt": dt, "e_set": e,
+                                     "bounce": 1, "status": out.status, "note": out.message})
+    return pd.DataFrame(rows, columns=RESTITUTION_COLUMNS)
+
+
+def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *,
+                 quick: bool) -> dict[str, pd.DataFrame]:
+    """Every table besides ``results``: ``stability`` and ``restitution``."""
+    return {
+        "stability": stability_table(cases, engines, quick=quick),
+        "restitution": restitution_table(engines, quick=quick),
+    }

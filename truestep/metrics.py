@@ -1,0 +1,86 @@
+"""Pure functions from a trajectory and its reference to numbers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from adapters.base import Trajectory
+from cases.case import Case
+from cases.exact import EXACT, Exact
+
+
+def exact_for(case: Case, t: np.ndarray) -> Exact | None:
+    """The case's exact solution at times ``t`` (s), or ``None`` if it has none."""
+    if case.exact is None:
+        return None
+    return EXACT[case.exact](case, t)
+
+
+def _matching(t: np.ndarray, t_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices into ``t`` and ``t_ref`` of times both contain (to 1e-9 relative)."""
+    if len(t_ref) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    k = np.clip(np.searchsorted(t, t_ref), 0, len(t) - 1)
+    k_lo = np.clip(k - 1, 0, len(t) - 1)
+    k = np.where(np.abs(t[k_lo] - t_ref) < np.abs(t[k] - t_ref), k_lo, k)
+    ok = np.abs(t[k] - t_ref) <= 1e-9 * np.maximum(1.0, np.abs(t_ref))
+    return k[ok], np.nonzero(ok)[0]
+
+
+def position_error(case: Case, traj: Trajectory, exact: Exact) -> float:
+    """Distance between computed and exact positions, m (or state units for an ODE).
+
+    ``final``: at the last time both share (which must be the end of the run);
+    ``max``: the largest over every shared time. Per record, the largest distance over
+    particles (Euclidean; for an ODE state, the largest component).
+    """
+    k, j = _matching(traj.t, exact.t)
+    if len(k) == 0:
+        return float("nan")
+    d = traj.x[k] - exact.x[j]
+    per_record = np.max(np.abs(d), axis=(1, 2)) if case.kind == "ode" else np.max(
+        np.linalg.norm(d, axis=2), axis=1
+    )
+    if case.error_norm == "final":
+        if abs(traj.t[k[-1]] - case.duration) > 1e-9 * max(1.0, case.duration):
+            return float("nan")
+        return float(per_record[-1])
+    return float(np.max(per_record))
+
+
+def energy_drift(case: Case, traj: Trajectory, exact: Exact | None) -> tuple[float, float]:
+    """Relative energy error: (largest over the run, at the end).
+
+    Conservative scenes: ``|E(t) - E(0)| / |E(0)|``. Scenes whose exact solution gives the
+    energy curve (damped oscillators): ``|E(t) - E_exact(t)| / |E_exact(0)|``. Otherwise NaN.
+    """
+    e = traj.energy
+    if e is None or len(e) == 0:
+        return float("nan"), float("nan")
+    if case.conservative:
+        scale = abs(e[0]) if e[0] != 0 else float(np.max(np.abs(e))) or 1.0
+        dev = np.abs(e - e[0]) / scale
+        return float(np.max(dev)), float(dev[-1])
+    if exact is not None and exact.energy is not None and len(exact.t) == len(exact.energy):
+        k, j = _matching(traj.t, exact.t)
+        if len(k) == 0:
+            return float("nan"), float("nan")
+        scale = abs(exact.energy[0]) or 1.0
+        dev = np.abs(e[k] - exact.energy[j]) / scale
+        return float(np.max(dev)), float(dev[-1])
+    return float("nan"), float("nan")
+
+
+def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0) -> float:
+    """Order of convergence: the least-squares slope of log(error) against log(dt).
+
+    Points outside the asymptotic range are left out: errors above ``0.1 * scale``
+    (the method has not converged yet) and below ``1e-11 * scale`` (round-off).
+    Returns NaN with fewer than two usable points.
+    """
+    dts, errors = np.asarray(dts, float), np.asarray(errors, float)
+    ok = np.isfinite(errors) & (errors > 1e-11 * scale) & (errors < 0.1 * scale)
+    if np.count_nonzero(ok) < 2:
+        return float("nan")
+    slope, _ = np.polyfit(np.log(dts[ok]), np.log(errors[ok]), 1)
+    return float(slope)

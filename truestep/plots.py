@@ -1,0 +1,125 @@
+"""Figures of the report: one colour per engine, one line style per method, everywhere."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+ENGINE_COLOURS = {
+    "reference": "#1f77b4",
+    "scipy": "#7f7f7f",
+    "pymunk": "#2ca02c",
+    "pybullet": "#d62728",
+    "mujoco": "#9467bd",
+}
+METHOD_STYLES = {
+    "euler": ("-", "o"), "midpoint": ("--", "s"), "heun": ("-.", "^"), "rk4": (":", "D"),
+    "dopri5": ("-", "*"), "symplectic-euler": ("--", "v"), "verlet": ("-.", "P"),
+    "implicit-euler": (":", "X"), "lecture": ("-", "h"),
+    "RK45": ("-", "*"), "DOP853": ("--", "p"), "Radau": (":", "X"),
+    "default": ("-", "o"), "clean": ("--", "s"),
+    "Euler": ("-", "o"), "implicit": ("--", "s"), "implicitfast": ("-.", "^"), "RK4": (":", "D"),
+}
+"""Engines by colour, methods by line style and marker; within an engine the
+(line style, marker) pair tells its methods apart."""
+
+
+def series_style(engine: str, method: str) -> dict:
+    ls, marker = METHOD_STYLES.get(method, ("-", "o"))
+    return {"color": ENGINE_COLOURS.get(engine, "black"), "linestyle": ls, "marker": marker,
+            "markersize": 4, "linewidth": 1.3}
+
+
+def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path | None:
+    """Error against wall time and against derivative evaluations (log-log), per series.
+
+    ``df`` holds one case's rows; only runs with status ok and a positive error appear.
+    Returns the figure's path, or ``None`` when no row has an error to plot.
+    """
+    ok = df[(df["status"] == "ok") & (df["error"].astype(float) > 0)]
+    if ok.empty:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
+    for (engine, method), g in ok.groupby(["engine", "method"], sort=False):
+        g = g.sort_values("wall_s")
+        style = series_style(engine, method)
+        label = f"{engine} / {method}"
+        axes[0].plot(g["wall_s"], g["error"], label=label, **style)
+        g = g.sort_values("nfev")
+        axes[1].plot(g["nfev"], g["error"], label=label, **style)
+    axes[0].set_xlabel("wall time per run (s, median of repeats)")
+    axes[1].set_xlabel("derivative evaluations (engine steps for engines)")
+    axes[0].set_ylabel("error against the exact solution")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.grid(True, which="major", alpha=0.3)
+    fig.suptitle(f"{title}: work against precision")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.86, 0.5), fontsize=7,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0, 0.86, 1))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
+    """Measured largest stable step per engine/method, the exact limit marked beside it."""
+    s = stab[(stab["case"] == case) & (stab["status"] == "ok")]
+    if s.empty:
+        return None
+    labels = [f"{e} / {m}" for e, m in zip(s["engine"], s["method"], strict=True)]
+    y = np.arange(len(s))
+    fig, ax = plt.subplots(figsize=(8, 0.32 * len(s) + 1.4))
+    colours = [ENGINE_COLOURS.get(e, "black") for e in s["engine"]]
+    limits = s["dt_limit"].astype(float).to_numpy()
+    floor = np.nanmin(np.where(limits > 0, limits, np.nan)) / 10 if np.any(limits > 0) else 1e-4
+    ax.barh(y, np.where(limits > 0, limits, floor), color=colours, alpha=0.8)
+    exact = s["dt_limit_exact"].astype(float).to_numpy()
+    for yi, ex in zip(y, exact, strict=True):
+        if np.isfinite(ex) and ex > 0:
+            ax.plot([ex, ex], [yi - 0.4, yi + 0.4], color="black", linewidth=2)
+    ax.set_yticks(y, labels, fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel("largest stable step (s); black tick: exact limit")
+    ax.set_title(f"{case}: stability limits (bars at the floor: unstable at every step tried)")
+    ax.invert_yaxis()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
+    """Requested against measured restitution (first bounce), per engine and method."""
+    r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
+    if r.empty:
+        return None
+    dts = sorted(r["dt"].astype(float).unique(), reverse=True)
+    fig, axes = plt.subplots(1, len(dts), figsize=(5.2 * len(dts), 4.4), squeeze=False)
+    for ax, dt in zip(axes[0], dts, strict=True):
+        d = r[np.isclose(r["dt"].astype(float), dt)]
+        for (engine, method), g in d.groupby(["engine", "method"], sort=False):
+            g = g.sort_values("e_set")
+            ax.plot(g["e_set"], g["e_measured"], label=f"{engine} / {method}",
+                    **series_style(engine, method))
+        ax.plot([0, 1], [0, 1], color="black", linewidth=0.8, label="requested = measured")
+        ax.set_xlabel("requested restitution")
+        ax.set_ylabel("measured (rebound / impact speed, bounce 1)")
+        ax.set_title(f"dt = 1/{1 / dt:.0f} s")
+        ax.grid(True, alpha=0.3)
+    axes[0][-1].legend(fontsize=7, loc="upper left", frameon=False)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

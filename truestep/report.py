@@ -1,0 +1,242 @@
+"""Write the tables, figures and the report pages of one ``truestep run``.
+
+Every sentence that states a result is generated from the tables. The HTML page embeds
+its figures, so it is one file that opens offline.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import os
+import platform
+import re
+import shutil
+import subprocess
+import tempfile
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cases.case import Case
+from truestep import plots
+from truestep.metrics import fit_order
+
+PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "pymunk", "pybullet", "mujoco")
+
+
+def _fmt(x: object, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "" if x is None or np.isnan(x) else ("inf" if x > 0 else "-inf")
+    if isinstance(x, float | np.floating):
+        return f"{x:.{digits}g}"
+    return str(x)
+
+
+def md_table(df: pd.DataFrame) -> str:
+    """A pipe table with numbers to three significant digits."""
+    if df.empty:
+        return "_(no rows)_\n"
+    head = "| " + " | ".join(str(c) for c in df.columns) + " |"
+    sep = "|" + "|".join("---" for _ in df.columns) + "|"
+    body = ["| " + " | ".join(_fmt(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    return "\n".join([head, sep, *body]) + "\n"
+
+
+def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
+    """Fitted order of convergence per case, engine and fixed-step method."""
+    rows = []
+    scales = {c.name: c.error_scale for c in cases}
+    steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
+    for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
+        order = fit_order(g["dt"].astype(float), g["error"].astype(float),
+                          scale=scales.get(case, 1.0))
+        rows.append({"case": case, "engine": engine, "method": method, "order": order,
+                     "points": int(g["error"].notna().sum())})
+    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "points"])
+
+
+def best_per_case(results: pd.DataFrame) -> pd.DataFrame:
+    """For each case, the run with the least error per second spent (error x wall time)."""
+    ok = results[(results["status"] == "ok") & (results["error"].astype(float) > 0)].copy()
+    if ok.empty:
+        return pd.DataFrame(columns=["case", "engine", "method", "dt", "error", "wall_s"])
+    ok["cost"] = ok["error"].astype(float) * ok["wall_s"].astype(float)
+    best = ok.loc[ok.groupby("case")["cost"].idxmin()]
+    return best[["case", "engine", "method", "dt", "error", "wall_s"]]
+
+
+def footer(argv: list[str]) -> str:
+    """Machine, package versions, git revision and the command that reproduces the page."""
+    versions = []
+    for p in PACKAGES:
+        try:
+            versions.append(f"{p} {metadata.version(p)}")
+        except metadata.PackageNotFoundError:
+            versions.append(f"{p} (not installed)")
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
+    except OSError:
+        rev = ""
+    return (
+        "---\n\n"
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.system()} "
+        f"{platform.release()}, Python {platform.python_version()}.  \n"
+        f"Packages: {', '.join(versions)}.  \n"
+        f"Revision: {rev or 'unknown'}.  \n"
+        f"Reproduce: `truestep {' '.join(argv) if argv else 'run'}`\n"
+    )
+
+
+def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
+                    tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str]) -> str:
+    """The report as Markdown; figures are written under ``out/figures``."""
+    fig_dir = out / "figures"
+    parts = ["# truestep report\n"]
+    int((results["status"] == "ok").sum())
+    counts = results["status"].value_counts().to_dict()
+    parts.append(
+        f"{len(results)} runs over {results['case'].nunique()} cases and "
+        f"{results['engine'].nunique()} engines: "
+        + ", ".join(f"{v} {k}" for k, v in counts.items())
+        + (". A `--quick` run: short sweeps." if quick else ".") + "\n"
+    )
+    parts.append("## Summary\n")
+    best = best_per_case(results)
+    for row in best.itertuples(index=False):
+        parts.append(f"- **{row.case}**: least error for the time spent: {row.engine} / "
+                     f"{row.method} at dt {_fmt(float(row.dt))} (error {_fmt(float(row.error))} "
+                     f"in {_fmt(float(row.wall_s))} s).")
+    parts.append("")
+    orders = orders_table(results, cases)
+    parts.append("## Measured orders of convergence\n")
+    parts.append("Least-squares slope of log(error) against log(dt) over the sweep, leaving "
+                 "out errors above a tenth of the case's scale (not yet converged) and below "
+                 "1e-11 of it (round-off).\n")
+    parts.append(md_table(orders.dropna(subset=["order"])))
+    for case in cases:
+        df = results[results["case"] == case.name]
+        parts.append(f"## {case.name}: {case.title}\n")
+        parts.append(" ".join(case.description.split()) + "\n")
+        if case.hard:
+            parts.append(f"What makes it hard: {' '.join(case.hard.split())}\n")
+        fig = plots.work_precision(df, case.name, case.title,
+                                   fig_dir / f"{case.name}-work-precision.png")
+        if fig is not None:
+            parts.append(f"![work-precision plot of {case.name}](figures/{fig.name})\n")
+        shown = df[~df["status"].isin(["unsupported", "skipped"])]
+        cols = ["engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev",
+                "wall_s", "t_fail", *case.properties]
+        parts.append(md_table(shown[cols]))
+        absent = df[df["status"].isin(["unsupported", "skipped"])]
+        if len(absent):
+            parts.append("Not run:\n")
+            parts.append(md_table(absent[["engine", "method", "status", "missing", "message"]]))
+    stab = tables.get("stability")
+    if stab is not None and len(stab):
+        parts.append("## Stability limits\n")
+        parts.append("Largest stable step by bisection over a fixed horizon (at least 5000 "
+                     "steps); a run is unstable when its state goes non-finite or its energy "
+                     "peaks higher in the second half of the run than in the first. "
+                     "`dt_limit_exact` is 0 where the method is unstable at every step and "
+                     "inf where it is stable at every step.\n")
+        for case_name in stab["case"].unique():
+            fig = plots.stability_bars(stab, case_name, fig_dir / f"{case_name}-stability.png")
+            if fig is not None:
+                parts.append(f"![stability limits of {case_name}](figures/{fig.name})\n")
+        parts.append(md_table(stab))
+    rest = tables.get("restitution")
+    if rest is not None and len(rest):
+        parts.append("## Restitution\n")
+        parts.append("A ball of radius 0.05 m dropped from 1 m onto a floor; restitution per "
+                     "bounce from rebound speeds and from apex heights, both extrapolated "
+                     "ballistically to contact height.\n")
+        fig = plots.restitution_plot(rest, fig_dir / "restitution.png")
+        if fig is not None:
+            parts.append(f"![requested against measured restitution](figures/{fig.name})\n")
+        parts.append(md_table(rest))
+    parts.append(footer(argv))
+    return "\n".join(parts)
+
+
+def markdown_to_html(md: str, base: Path) -> str:
+    """A small Markdown-to-HTML conversion for the report's own subset, images inlined."""
+    out: list[str] = []
+    lines = md.splitlines()
+    i = 0
+
+    def inline(text: str) -> str:
+        text = html.escape(text)
+        text = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", text)
+        text = re.sub(r"`(.+?)`", r"<code>\1</code>", text)
+        return text.replace("  ", "<br>") if text.endswith("  ") else text
+
+    while i < len(lines):
+        line = lines[i]
+        if line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{inline(line[level:].strip())}</h{level}>")
+        elif line.startswith("!["):
+            m = re.match(r"!\[(.*?)\]\((.*?)\)", line)
+            if m:
+                data = base64.b64encode((base / m.group(2)).read_bytes()).decode()
+                out.append(f'<figure><img alt="{html.escape(m.group(1))}" '
+                           f'src="data:image/png;base64,{data}"></figure>')
+        elif line.startswith("|"):
+            rows = []
+            while i < len(lines) and lines[i].startswith("|"):
+                rows.append([c.strip() for c in lines[i].strip("|").split("|")])
+                i += 1
+            head, body = rows[0], rows[2:]
+            out.append("<table><thead><tr>" + "".join(f"<th>{inline(c)}</th>" for c in head)
+                       + "</tr></thead><tbody>")
+            out.extend("<tr>" + "".join(f"<td>{inline(c)}</td>" for c in r) + "</tr>" for r in body)
+            out.append("</tbody></table>")
+            continue
+        elif line.startswith("- "):
+            out.append("<ul>")
+            while i < len(lines) and lines[i].startswith("- "):
+                out.append(f"<li>{inline(lines[i][2:])}</li>")
+                i += 1
+            out.append("</ul>")
+            continue
+        elif line.strip() == "---":
+            out.append("<hr>")
+        elif line.strip():
+            out.append(f"<p>{inline(line)}</p>")
+        i += 1
+    style = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;"
+             "padding:0 1em;color:#222}table{border-collapse:collapse;font-size:12px;"
+             "margin:1em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
+             "th{background:#f3f3f3}img{max-width:100%}code{background:#f3f3f3}")
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>truestep report</title><style>{style}</style></head><body>\n"
+            + "\n".join(out) + "\n</body></html>\n")
+
+
+def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
+                 tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str]) -> None:
+    """Write results.csv, stability.csv, restitution.csv, index.md, index.html, figures/.
+
+    Everything is written into a scratch directory first and moved into ``out`` at the
+    end, so a failure midway leaves the previous report whole.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent if out.parent.exists() else None) as tmp:
+        stage = Path(tmp)
+        results.to_csv(stage / "results.csv", index=False)
+        for name in ("stability", "restitution"):
+            tables[name].to_csv(stage / f"{name}.csv", index=False)
+        md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv)
+        (stage / "index.md").write_text(md)
+        (stage / "index.html").write_text(markdown_to_html(md, stage))
+        figures = out / "figures"
+        if (stage / "figures").exists():
+            if figures.exists():
+                shutil.rmtree(figures)
+            shutil.move(str(stage / "figures"), figures)
+        for f in stage.iterdir():
+            os.replace(f, out / f.name)
