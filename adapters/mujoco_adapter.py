@@ -493,6 +493,11 @@ class MujocoAdapter:
     name = "mujoco"
     methods = tuple(INTEGRATORS)
     adaptive_methods: tuple[str, ...] = ()
+    schemes = {"Euler": "symplectic-euler", "implicit": "symplectic-euler",
+               "implicitfast": "symplectic-euler", "RK4": "rk4"}
+    """The reference scheme each integrator equals on an undamped spring scene (used for
+    exact stability limits): Euler updates velocity then position; the implicit variants
+    add only velocity derivatives (damping), so without damping they are the same step."""
     capabilities = frozenset(
         {
             "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",

@@ -230,6 +230,9 @@ class PymunkAdapter:
     name = "pymunk"
     methods = ("default",)
     adaptive_methods = ()
+    schemes = {"default": "symplectic-euler"}
+    """Position first, then velocity from forces at the new position: the adjoint of the
+    reference's symplectic Euler, with the same stability region (``omega dt < 2``)."""
     capabilities = frozenset(
         {
             "point-masses", "2d", "uniform-gravity", "drag", "springs", "spring-damping",

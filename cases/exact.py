@@ -236,3 +236,89 @@ def stability_limit(case: Case, scheme: str | None) -> float | None:
     if scheme == "euler" and np.isfinite(zeta) and zeta < 1:
         return 2.0 * zeta / omega
     return None
+
+
+@exact_solution("linear")
+def linear(case: Case, t: np.ndarray) -> Exact:
+    """Any scene of zero-rest-length springs, uniform gravity and drag: a linear ODE.
+
+    With zero rest lengths every spring force is ``-k (x_i - x_j) - k_d (v_i - v_j)``
+    (all directions at once), so ``M x'' + C x' + K x = M g`` with constant matrices and
+    ``y(t) = expm(A t) y(0)`` for the first-order system augmented by a constant 1 that
+    carries gravity. Pinned particles are held where they start. Energy: kinetic +
+    spring + gravitational, exact along the solution.
+    """
+    from scipy.linalg import expm
+
+    m = case.model
+    if np.any(m.springs.rest != 0) or np.any(m.anchors.rest != 0) or m.planes or m.fields:
+        raise ValueError(f"{case.file}: reference.exact: 'linear' needs zero-rest-length "
+                         "springs and no planes or fields")
+    n = m.n
+    free = ~m.fixed
+    K = np.zeros((n, n))
+    C = np.zeros((n, n))
+    s, a = m.springs, m.anchors
+    for i, j, k, c in zip(s.i, s.j, s.stiffness, s.damping, strict=True):
+        for mat, val in ((K, k), (C, c)):
+            mat[i, i] += val
+            mat[j, j] += val
+            mat[i, j] -= val
+            mat[j, i] -= val
+    anchor_force = np.zeros((n, 3))
+    for i, p, k, c in zip(a.i, a.point, a.stiffness, a.damping, strict=True):
+        K[i, i] += k
+        C[i, i] += c
+        anchor_force[i] += k * p
+    C += m.drag * np.eye(n)
+    # Pinned particles: their positions enter as constant forcing on the free ones.
+    inv_m = np.where(free, 1.0 / m.mass, 0.0)
+    forcing = inv_m[:, None] * (anchor_force - K[:, ~free] @ m.x0[~free]) \
+        + np.where(free[:, None], m.gravity, 0.0)
+    Kf = inv_m[free, None] * K[np.ix_(free, free)]
+    Cf = inv_m[free, None] * C[np.ix_(free, free)]
+    nf = int(free.sum())
+    A = np.zeros((2 * nf + 1, 2 * nf + 1))
+    A[:nf, nf : 2 * nf] = np.eye(nf)
+    A[nf : 2 * nf, :nf] = -Kf
+    A[nf : 2 * nf, nf : 2 * nf] = -Cf
+    x = np.repeat(m.x0[None], len(t), axis=0)
+    v = np.zeros_like(x)
+    for d in range(3):
+        A[nf : 2 * nf, -1] = forcing[free, d]
+        y0 = np.concatenate([m.x0[free, d], m.v0[free, d], [1.0]])
+        ys = np.array([expm(A * ti) @ y0 for ti in t])
+        x[:, free, d] = ys[:, :nf]
+        v[:, free, d] = ys[:, nf : 2 * nf]
+    from reference_impl.particles import total_energy
+
+    energy = np.array([total_energy(m, xi, vi) for xi, vi in zip(x, v, strict=True)])
+    return Exact(t, x, v, energy)
+
+
+@exact_solution("reference-run")
+def reference_run(case: Case, t: np.ndarray) -> Exact:
+    """No closed form: the reference's Dormand-Prince at a tight tolerance (``rtol``,
+    default 1e-12), known at the end of the run only. Valid for smooth scenes (no
+    collisions, no emitters)."""
+    from reference_impl.integrate import integrate
+    from reference_impl.odes import Arenstorf, CircleField, KeplerProblem
+    from reference_impl.particles import ParticleSystem
+    from reference_impl.solvers import DormandPrince54
+
+    tol = float(case.exact_params.get("rtol", 1e-12))
+    if case.kind == "ode":
+        cls = {"circle-field": CircleField, "kepler": KeplerProblem, "arenstorf": Arenstorf}
+        system = cls[case.ode.system](case.ode.y0, **case.ode.params)
+    else:
+        system = ParticleSystem(case.model)
+    run = integrate(DormandPrince54(system, rtol=tol, atol=tol), case.duration, case.duration,
+                    max_records=1)
+    final = run.x[-1]
+    if case.kind == "ode":
+        return Exact(np.array([case.duration]), final[None, None, :])
+    n = case.model.n
+    return Exact(np.array([case.duration]), final[: 3 * n].reshape(1, n, 3),
+                 final[3 * n :].reshape(1, n, 3))
+
+import cases.exact_particles  # noqa: F401,E402

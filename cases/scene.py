@@ -76,6 +76,7 @@ def read_scene(f: Fields) -> ParticleModel:
         emitters=emitters,
         impulses=[_read_impulse(i, n) for i in f.subs("impulses")],
         dimension=dimension,
+        surfaces=[p.faces + off for p, off in zip(parts, offsets, strict=False) if p.faces is not None],
     )
     f.done()
     if dimension == 2:

@@ -31,11 +31,13 @@ distance from the plane is ``d = (X - P) . N - r``):
 4. **Friction** (beyond the lecture, planes with ``friction = mu > 0``). For a particle in
    contact the derivative adds kinetic Coulomb friction ``-mu |F_N| V_T / |V_T|``; at
    ``V_T = 0`` static friction cancels ``F_T`` up to ``mu |F_N|``. Friction can stop a
-   particle but never reverse it within one step: a tangential velocity that turned by
-   more than a right angle during a step in contact is set to zero (the particle
-   stopped inside the step).
+   particle but never reverse it: when friction could take the tangential speed within
+   one step (``|V_T| <= eps_v + mu |F_N| dt / m``) and static friction can hold the
+   particle (``|F_T| <= mu |F_N|``), the pass sets ``V_T = 0`` (it stops within the step).
 
-A box is six planes. Planes are treated one after the other within a pass.
+A box is six planes. Planes are treated one after the other within a pass. The applied
+force is evaluated once per pass, at the end of the step, and only when some particle is
+within ``eps`` of a plane.
 """
 
 from __future__ import annotations
@@ -43,7 +45,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from reference_impl.model import Plane
 
@@ -110,20 +111,18 @@ def add_contact_forces(
         f[idx] = fk
 
 
-def contact_projection(f: np.ndarray, contact: np.ndarray, planes: list[Plane]) -> sp.csr_matrix:
-    """(3n, 3n) block-diagonal ``d F'/d F`` of the contact force: ``I - N N^T`` for pushers.
+def contact_projection(f: np.ndarray, contact: np.ndarray, planes: list[Plane]) -> np.ndarray:
+    """Per-particle ``d F' / d F`` (n, 3, 3) of the contact force: ``I - N N^T`` for pushers.
 
     The derivative of ``F' = F_T`` with respect to the applied force, for the particles
-    that :func:`add_contact_forces` would treat as pushing at forces ``f`` (n, 3).
+    that :func:`add_contact_forces` would treat as pushing at forces ``f`` (n, 3); the
+    identity for every other particle.
     """
-    n = len(f)
-    blocks = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    blocks = np.broadcast_to(np.eye(3), (len(f), 3, 3)).copy()
     for plane, on in zip(planes, contact, strict=True):
         push = on & (f @ plane.normal < 0)
         blocks[push] = (np.eye(3) - np.outer(plane.normal, plane.normal)) @ blocks[push]
-    rows = (3 * np.arange(n)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
-    cols = (3 * np.arange(n)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
-    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * n, 3 * n))
+    return blocks
 
 
 class PlaneCollisions:
@@ -160,9 +159,6 @@ class PlaneCollisions:
         self.eps_distance = eps_distance
         self.eps_speed = eps_speed
         self.collisions = 0
-        self._slide: list[tuple[np.ndarray, np.ndarray]] = [
-            (np.zeros(0, int), np.zeros((0, 3))) for _ in planes
-        ]
 
     def start(self, system: ParticleSystem) -> None:
         """Apply the pass to the initial state (a particle may start on a plane)."""
@@ -170,7 +166,6 @@ class PlaneCollisions:
 
     def __call__(self, system: ParticleSystem, dt: float) -> None:
         x, v = system.positions, system.velocities
-        self._stop_reversed_sliding(v)
         system.contact[:] = False
         close = [
             (system.alive & ~self.fixed & (signed_distances(x, self.radius, p) < self.eps_distance))
@@ -182,7 +177,6 @@ class PlaneCollisions:
                 idx = np.flatnonzero(close[k])
                 if len(idx):
                     system.contact[k, idx] = self._collide(system, plane, idx, f[idx], dt)
-        self._remember_sliding(system.contact, v)
 
     def _collide(
         self, system: ParticleSystem, plane: Plane, idx: np.ndarray, f: np.ndarray, dt: float
@@ -211,24 +205,24 @@ class PlaneCollisions:
         on = (np.abs(d) < self.eps_distance) & (an < 0) & (np.abs(vn_new) <= tol)
         vn_new = np.where(on, 0.0, vn_new)
         x[idx[on]] -= d[on, None] * n
-        v[idx] = vk + (vn_new - vn)[:, None] * n
+        vk += (vn_new - vn)[:, None] * n
+        if plane.friction > 0:
+            vk -= self._sticking(plane, on, vk, f, an, dt)[:, None] * (vk - vn_new[:, None] * n)
+        v[idx] = vk
         return on
 
-    def _remember_sliding(self, contact: np.ndarray, v: np.ndarray) -> None:
-        """Keep the tangential velocity of particles in contact with a rough plane."""
-        for k, plane in enumerate(self.planes):
-            if plane.friction > 0:
-                idx = np.flatnonzero(contact[k])
-                vk = v[idx]
-                self._slide[k] = (idx, vk - (vk @ plane.normal)[:, None] * plane.normal)
+    def _sticking(
+        self, plane: Plane, on: np.ndarray, v: np.ndarray, f: np.ndarray, an: np.ndarray, dt: float
+    ) -> np.ndarray:
+        """Which contact particles friction stops now (1.0) or lets slide (0.0), shape (k,).
 
-    def _stop_reversed_sliding(self, v: np.ndarray) -> None:
-        """Friction stops a particle, never reverses it: zero a V_T that turned over."""
-        for plane, (idx, vt_before) in zip(self.planes, self._slide, strict=True):
-            if not len(idx):
-                continue
-            vk = v[idx]
-            vt = vk - (vk @ plane.normal)[:, None] * plane.normal
-            turned = np.einsum("ij,ij->i", vt, vt_before) < 0
-            if turned.any():
-                v[idx[turned]] -= vt[turned]
+        A particle stops when friction could take its tangential speed within one step,
+        ``|V_T| <= eps_v + mu |a_N| dt``, and static friction can hold it,
+        ``|F_T| <= mu |F_N|``: so friction never reverses a particle inside a step.
+        """
+        n, mu = plane.normal, plane.friction
+        fn = f @ n
+        speed = np.linalg.norm(v - (v @ n)[:, None] * n, axis=1)
+        ft = np.linalg.norm(f - fn[:, None] * n, axis=1)
+        stop = on & (speed <= self.eps_speed - mu * an * dt) & (ft <= -mu * fn)
+        return stop.astype(float)

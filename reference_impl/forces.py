@@ -52,9 +52,9 @@ def spring_forces(
     must carry the same sign, as in this form, or the damper would pump energy in.)
     A zero-length spring (``|dx| = 0``) exerts no force: its direction is undefined.
     """
-    length = np.sqrt(np.einsum("ij,ij->i", dx, dx))
-    unit = np.divide(dx, length[:, None], out=np.zeros_like(dx), where=length[:, None] > 0)
-    magnitude = stiffness * (length - rest) + damping * np.einsum("ij,ij->i", dv, unit)
+    length = np.sqrt(np.vecdot(dx, dx))
+    unit = dx / np.where(length > 0, length, 1.0)[:, None]  # dx = 0 gives unit = 0: no force
+    magnitude = stiffness * (length - rest) + damping * np.vecdot(dv, unit)
     return -magnitude[:, None] * unit
 
 
@@ -168,6 +168,23 @@ def add_gravitation(f: np.ndarray, x: np.ndarray, mass: np.ndarray, g: Gravitati
     np.fill_diagonal(r2, np.inf)
     w = g.G * mass[None, :] / (r2 * np.sqrt(r2))
     f += mass[:, None] * np.einsum("ij,ijk->ik", w, d)
+
+
+def gravitation_jacobian(x: np.ndarray, mass: np.ndarray, g: Gravitation) -> np.ndarray:
+    """Blocks ``d f_i / d x_j`` (n, n, 3, 3) of :func:`add_gravitation`.
+
+    For ``j != i``: ``G m_i m_j (I / s^3 - 3 d d^T / s^5)`` with ``d = x_j - x_i`` and
+    ``s^2 = |d|^2 + eps^2``; the diagonal block is minus the sum of the others.
+    """
+    n = len(mass)
+    d = x[None, :, :] - x[:, None, :]
+    s2 = np.einsum("ijk,ijk->ij", d, d) + g.softening**2
+    np.fill_diagonal(s2, np.inf)
+    w = g.G * mass[:, None] * mass[None, :] / (s2 * np.sqrt(s2))
+    blocks = w[:, :, None, None] * (np.eye(3) - 3.0 * d[:, :, :, None] * d[:, :, None, :]
+                                    / s2[:, :, None, None])
+    blocks[np.arange(n), np.arange(n)] = -blocks.sum(axis=1)
+    return blocks
 
 
 def gravitation_energy(x: np.ndarray, mass: np.ndarray, g: Gravitation) -> float:

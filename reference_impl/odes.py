@@ -42,6 +42,16 @@ class KeplerProblem(SecondOrderSystem):
         r = np.sqrt(q @ q)
         return -self.mu * q / r**3
 
+    def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
+        """``d[v, a]/d[q, v]``; ``da/dq = -mu (I / r^3 - 3 q q^T / r^5)``."""
+        q = x[:2]
+        r2 = float(q @ q)
+        r = np.sqrt(r2)
+        jac = np.zeros((4, 4))
+        jac[:2, 2:] = np.eye(2)
+        jac[2:, :2] = -self.mu * (np.eye(2) / r**3 - 3.0 * np.outer(q, q) / (r**3 * r2))
+        return jac
+
     def energy(self, x: np.ndarray, t: float) -> float:
         q, v = x[:2], x[2:]
         return 0.5 * float(v @ v) - self.mu / float(np.sqrt(q @ q))
@@ -67,3 +77,19 @@ class Arenstorf(SecondOrderSystem):
         ax = x + 2 * v[1] - nu * (x + mu) / d1 - mu * (x - nu) / d2
         ay = y - 2 * v[0] - nu * y / d1 - mu * y / d2
         return np.array([ax, ay])
+
+    def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
+        """``d[v, a]/d[q, v]``: the two point-mass pulls, the centrifugal and Coriolis terms."""
+        mu, nu = self.mu, 1.0 - self.mu
+        q = x[:2]
+        jac = np.zeros((4, 4))
+        jac[:2, 2:] = np.eye(2)
+        da = np.eye(2)
+        for m, centre in ((nu, np.array([-mu, 0.0])), (mu, np.array([nu, 0.0]))):
+            d = q - centre
+            r2 = float(d @ d)
+            r = np.sqrt(r2)
+            da -= m * (np.eye(2) / r**3 - 3.0 * np.outer(d, d) / (r**3 * r2))
+        jac[2:, :2] = da
+        jac[2:, 2:] = np.array([[0.0, 2.0], [-2.0, 0.0]])
+        return jac

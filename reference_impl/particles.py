@@ -57,6 +57,7 @@ class ParticleSystem(SecondOrderSystem):
         self.contact = np.zeros((len(model.planes), self.n), dtype=bool)
         self.f = np.zeros((self.n, 3))
         self._inv_mass = np.where(model.fixed, 0.0, 1.0 / model.mass)
+        self._has_gravity = bool(np.any(model.gravity))
         self._spring_scatter = forces.incidence(model.springs.i, model.springs.j, self.n)
         self._anchor_scatter = forces.incidence(model.anchors.i, None, self.n)
         for p in self.passes:
@@ -84,7 +85,7 @@ class ParticleSystem(SecondOrderSystem):
         m = self.model
         f = self.f
         f[:] = 0.0
-        if np.any(m.gravity):
+        if self._has_gravity:
             forces.add_gravity(f, m.mass, m.gravity)
         if m.drag:
             forces.add_drag(f, v, m.drag)
@@ -111,41 +112,59 @@ class ParticleSystem(SecondOrderSystem):
         return a.ravel()
 
     def jacobian(self, x: np.ndarray, t: float) -> sp.csr_matrix | None:
-        """Sparse ``d[v, a]/d[x, v]`` (dim, dim) for gravity, drag, springs and anchors.
+        """Sparse ``d[v, a]/d[x, v]`` (dim, dim): gravity, drag, springs, anchors, gravitation.
 
-        Contact removes the normal rows of pushing particles (``F' = F_T``); friction and
-        impulses are left out (they are piecewise constant in the state, and implicit
-        Euler uses the Jacobian only as its Newton matrix). Scenes with universal
-        gravitation or force fields return ``None``: the solver then differences.
+        The rows of ``a`` are the force derivatives (3x3 blocks per particle pair) times the
+        inverse mass; for a particle pushing into a plane it is in contact with they are
+        also projected by ``I - N N^T`` (the contact force ``F' = F_T``). Friction and
+        impulses are left out (piecewise constant in the state; implicit Euler uses the
+        Jacobian only as its Newton matrix). Scenes with force fields return ``None``: the
+        solver then differences.
         """
         m = self.model
-        if m.gravitation is not None or m.fields:
+        if m.fields:
             return None
         n = self.n
         pos = x[: 3 * n].reshape(n, 3)
         vel = x[3 * n :].reshape(n, 3)
-        kx = sp.csr_matrix((3 * n, 3 * n))
-        kv = -m.drag * sp.identity(3 * n, format="csr")
+        rows, cols, kx, kv = [np.arange(n)], [np.arange(n)], [np.zeros((n, 3, 3))], [
+            np.broadcast_to(-m.drag * np.eye(3), (n, 3, 3))]
         s, a = m.springs, m.anchors
         if len(s):
             jx, jv = forces.spring_jacobians(pos[s.i] - pos[s.j], vel[s.i] - vel[s.j],
                                              s.stiffness, s.damping, s.rest)
-            kx = kx + _pair_blocks(jx, s.i, s.j, n)
-            kv = kv + _pair_blocks(jv, s.i, s.j, n)
+            rows += [s.i, s.i, s.j, s.j]
+            cols += [s.i, s.j, s.i, s.j]
+            kx += [jx, -jx, -jx, jx]
+            kv += [jv, -jv, -jv, jv]
         if len(a):
             jx, jv = forces.spring_jacobians(pos[a.i] - a.point, vel[a.i],
                                              a.stiffness, a.damping, a.rest)
-            kx = kx + _blocks(jx, a.i, a.i, n)
-            kv = kv + _blocks(jv, a.i, a.i, n)
-        scale = np.repeat(self._inv_mass * (self.alive if m.emitters else 1.0), 3)
+            rows += [a.i]
+            cols += [a.i]
+            kx += [jx]
+            kv += [jv]
+        if m.gravitation is not None:
+            ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+            rows += [ii.ravel()]
+            cols += [jj.ravel()]
+            kx += [forces.gravitation_jacobian(pos, m.mass, m.gravitation).reshape(-1, 3, 3)]
+            kv += [np.zeros((n * n, 3, 3))]
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        scale = self._inv_mass * (self.alive if m.emitters else 1.0)
+        left = scale[:, None, None] * np.eye(3)  # (n, 3, 3): what multiplies a row of forces
         if self.contact.any():
             f = self.accumulate_forces(pos, vel, t)
-            scale = sp.diags(scale) @ collisions.contact_projection(f, self.contact, m.planes)
-        else:
-            scale = sp.diags(scale)
-        ax, av = scale @ kx, scale @ kv
-        top = sp.hstack([sp.csr_matrix((3 * n, 3 * n)), sp.identity(3 * n)])
-        return sp.vstack([top, sp.hstack([ax, av])]).tocsr()
+            left = left @ collisions.contact_projection(f, self.contact, m.planes)
+        ax = left[r] @ np.concatenate(kx)
+        av = left[r] @ np.concatenate(kv)
+        block_rows = np.concatenate([np.arange(n), n + r, n + r])
+        block_cols = np.concatenate([n + np.arange(n), c, n + c])
+        blocks = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)), ax, av])
+        ri = 3 * block_rows[:, None, None] + np.arange(3)[None, :, None]
+        ci = 3 * block_cols[:, None, None] + np.arange(3)[None, None, :]
+        ri, ci = np.broadcast_arrays(ri, ci)
+        return sp.csr_matrix((blocks.ravel(), (ri.ravel(), ci.ravel())), shape=(self.dim, self.dim))
 
     def between_steps(self, dt: float) -> None:
         for p in self.passes:
@@ -182,14 +201,3 @@ def total_energy(
         potential += forces.gravitation_energy(x, model.mass, model.gravitation)
     return kinetic + potential
 
-
-def _blocks(b: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> sp.csr_matrix:
-    """A (3n, 3n) sparse matrix with the 3x3 blocks ``b[s]`` (m, 3, 3) at ``(i[s], j[s])``."""
-    r = (3 * i[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
-    c = (3 * j[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
-    return sp.csr_matrix((b.ravel(), (r.ravel(), c.ravel())), shape=(3 * n, 3 * n))
-
-
-def _pair_blocks(b: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> sp.csr_matrix:
-    """Blocks of a pair force ``f_i = F(x_i - x_j)``, ``f_j = -f_i`` with ``dF = b``."""
-    return _blocks(b, i, i, n) - _blocks(b, i, j, n) - _blocks(b, j, i, n) + _blocks(b, j, j, n)

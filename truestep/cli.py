@@ -51,7 +51,20 @@ def _engines(text: str | None) -> list[str]:
     return names
 
 
+def _reproduce(args: argparse.Namespace) -> list[str]:
+    """The ``truestep run`` arguments that reproduce this run."""
+    argv = ["run"] + (["--quick"] if args.quick else [])
+    if args.cases != "*":
+        argv += ["--cases", args.cases]
+    if args.engines:
+        argv += ["--engines", args.engines]
+    if args.out != "reports":
+        argv += ["--out", args.out]
+    return argv
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    from truestep.analyses import run_analyses
     from truestep.report import write_report
     from truestep.runner import run_matrix
 
@@ -59,11 +72,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     engines = _engines(args.engines)
     out = Path(args.out)
     start = time.perf_counter()
-    results = run_matrix(cases, engines, quick=args.quick)
-    from truestep.analyses import run_analyses
-
+    traces: dict = {}
+    results = run_matrix(cases, engines, quick=args.quick, traces=traces)
     tables = run_analyses(cases, engines, results, quick=args.quick)
-    write_report(out, cases, results, tables, quick=args.quick, argv=sys.argv[1:])
+    write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
+                 traces=traces)
     print(f"wrote {out}/ ({len(results)} result rows) in {time.perf_counter() - start:.1f} s")
     return 0
 
@@ -111,9 +124,8 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_figures(args: argparse.Namespace) -> int:
     from truestep.figures import write_lecture_figures
 
-    paths = write_lecture_figures(Path(args.out) / "figures")
-    for p in paths:
-        print(p)
+    for path, caption in write_lecture_figures(Path(args.out) / "figures"):
+        print(f"{path}: {caption}")
     return 0
 
 

@@ -123,3 +123,34 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
+                     tol: float | None, path: Path) -> Path | None:
+    """Relative energy error ``|E(t) - E(0)| / |E(0)|`` over time (log scale), one line per
+    engine/method: fixed-step methods at step ``dt_step``, adaptive ones at tolerance ``tol``.
+
+    ``traces`` maps ``(case, engine, method, dt_kind, dt)`` to ``(t, energy)``.
+    """
+    wanted = {"step": dt_step, "tolerance": tol}
+    chosen = {k: v for k, v in traces.items()
+              if k[0] == case and wanted[k[3]] is not None and np.isclose(k[4], wanted[k[3]])}
+    if not chosen:
+        return None
+    fig, ax = plt.subplots(figsize=(9.5, 4.4))
+    for (_, engine, method, kind, dt), (t, e) in chosen.items():
+        scale = abs(e[0]) if e[0] != 0 else (np.max(np.abs(e)) or 1.0)
+        rel = np.maximum(np.abs(e - e[0]) / scale, 1e-16)
+        label = f"{engine} / {method} ({'tol' if kind == 'tolerance' else 'dt'} {dt:g})"
+        ax.plot(t, rel, label=label, **{**series_style(engine, method), "marker": None})
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("|E(t) - E(0)| / |E(0)|  (floor 1e-16)")
+    ax.set_title(f"{title}: energy error over time")
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

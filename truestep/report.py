@@ -91,35 +91,95 @@ def footer(argv: list[str]) -> str:
     )
 
 
+def middle(values: list[float]) -> float | None:
+    """The middle entry of a sweep (the geometric middle for an even count's upper half)."""
+    return sorted(values)[len(values) // 2] if values else None
+
+
+def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> list[str]:
+    """The summary bullets, every one generated from the tables."""
+    lines = ["## Summary\n"]
+    best = best_per_case(results)
+    kinds: dict[str, list[str]] = {}
+    for c in cases:
+        kinds.setdefault(c.tags[0] if c.tags else "other", []).append(c.name)
+    lines.append("Least error for the time spent (smallest error x wall time over the sweep), "
+                 "by kind of scene:\n")
+    for kind, names in kinds.items():
+        rows = best[best["case"].isin(names)]
+        if rows.empty:
+            continue
+        picks = "; ".join(
+            f"{r.case}: {r.engine} / {r.method} at {_fmt(float(r.dt))} "
+            f"(error {_fmt(float(r.error))} in {_fmt(float(r.wall_s))} s)"
+            for r in rows.itertuples(index=False))
+        lines.append(f"- **{kind}**: {picks}.")
+    lines.append("")
+    rest = tables.get("restitution")
+    if rest is not None and len(rest):
+        r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
+        if len(r):
+            r = r.assign(gap=(r["e_measured"] - r["e_set"]).abs())
+            worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
+            lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
+            for w in worst.itertuples(index=False):
+                lines.append(f"- {w.engine} / {w.method}: requested {w.e_set:g}, measured "
+                             f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s.")
+            lines.append("")
+    hard = [c for c in cases if c.hard]
+    if hard:
+        lines.append("Hard cases: which engine/method runs finish stable at the largest step "
+                     "of the sweep:\n")
+        for c in hard:
+            d = results[(results["case"] == c.name) & (results["dt_kind"] == "step")]
+            if d.empty:
+                continue
+            largest = d["dt"].astype(float).max()
+            at = d[np.isclose(d["dt"].astype(float), largest)]
+            ok = [f"{e}/{m}" for e, m, st in zip(at["engine"], at["method"], at["status"], strict=True)
+                  if st == "ok"]
+            bad = [f"{e}/{m} ({st})" for e, m, st in zip(at["engine"], at["method"], at["status"],
+                                                        strict=True) if st != "ok"]
+            lines.append(f"- **{c.name}** at dt {_fmt(largest)} s: survive: {', '.join(ok) or 'none'}"
+                         f"; fail: {', '.join(bad) or 'none'}.")
+        lines.append("")
+    return lines
+
+
 def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
-                    tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str]) -> str:
+                    tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
+                    traces: dict | None = None,
+                    lecture_figures: list[tuple[Path, str]] | None = None) -> str:
     """The report as Markdown; figures are written under ``out/figures``."""
     fig_dir = out / "figures"
     parts = ["# truestep report\n"]
-    int((results["status"] == "ok").sum())
     counts = results["status"].value_counts().to_dict()
     parts.append(
+        "Which engine and which integrator should animate a scene: how far from the exact "
+        "solution each one lands for the time it spends, how its energy drifts, how large a "
+        "step it survives and how well it keeps a requested restitution. "
         f"{len(results)} runs over {results['case'].nunique()} cases and "
         f"{results['engine'].nunique()} engines: "
         + ", ".join(f"{v} {k}" for k, v in counts.items())
-        + (". A `--quick` run: short sweeps." if quick else ".") + "\n"
+        + (". This is a `--quick` run: short sweeps." if quick else ".") + "\n"
     )
-    parts.append("## Summary\n")
-    best = best_per_case(results)
-    for row in best.itertuples(index=False):
-        parts.append(f"- **{row.case}**: least error for the time spent: {row.engine} / "
-                     f"{row.method} at dt {_fmt(float(row.dt))} (error {_fmt(float(row.error))} "
-                     f"in {_fmt(float(row.wall_s))} s).")
-    parts.append("")
+    parts.append("Comparisons are normalised: scenes are built outside the timed region; "
+                 "every run is warmed up and timed as the median of repeats, alone on the "
+                 "machine; engine defaults that would distort a comparison are switched off "
+                 "(pybullet's linear and angular damping; pymunk's pixel-scale collision "
+                 "slop; MuJoCo's joint armature, damping and friction loss) and no damping "
+                 "or clamp is added anywhere.\n")
+    parts += summary(cases, results, tables)
     orders = orders_table(results, cases)
     parts.append("## Measured orders of convergence\n")
     parts.append("Least-squares slope of log(error) against log(dt) over the sweep, leaving "
                  "out errors above a tenth of the case's scale (not yet converged) and below "
                  "1e-11 of it (round-off).\n")
     parts.append(md_table(orders.dropna(subset=["order"])))
+    parts.append("## Work against precision, per case\n")
     for case in cases:
         df = results[results["case"] == case.name]
-        parts.append(f"## {case.name}: {case.title}\n")
+        parts.append(f"### {case.name}: {case.title}\n")
         parts.append(" ".join(case.description.split()) + "\n")
         if case.hard:
             parts.append(f"What makes it hard: {' '.join(case.hard.split())}\n")
@@ -127,14 +187,17 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
                                    fig_dir / f"{case.name}-work-precision.png")
         if fig is not None:
             parts.append(f"![work-precision plot of {case.name}](figures/{fig.name})\n")
+        if traces and case.conservative:
+            steps = df.loc[df["dt_kind"] == "step", "dt"].dropna().astype(float).unique().tolist()
+            tols = df.loc[df["dt_kind"] == "tolerance", "dt"].dropna().astype(float).unique().tolist()
+            fig = plots.energy_over_time(traces, case.name, case.title, middle(steps),
+                                         middle(tols), fig_dir / f"{case.name}-energy.png")
+            if fig is not None:
+                parts.append(f"![energy over time of {case.name}](figures/{fig.name})\n")
         shown = df[~df["status"].isin(["unsupported", "skipped"])]
         cols = ["engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev",
                 "wall_s", "t_fail", *case.properties]
         parts.append(md_table(shown[cols]))
-        absent = df[df["status"].isin(["unsupported", "skipped"])]
-        if len(absent):
-            parts.append("Not run:\n")
-            parts.append(md_table(absent[["engine", "method", "status", "missing", "message"]]))
     stab = tables.get("stability")
     if stab is not None and len(stab):
         parts.append("## Stability limits\n")
@@ -158,6 +221,17 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
         if fig is not None:
             parts.append(f"![requested against measured restitution](figures/{fig.name})\n")
         parts.append(md_table(rest))
+    absent = results[results["status"].isin(["unsupported", "skipped"])]
+    if len(absent):
+        parts.append("## Pairs not run\n")
+        parts.append("Every case, engine and method that was not run, and why: `unsupported` "
+                     "names the features the engine cannot model.\n")
+        parts.append(md_table(absent[["case", "engine", "method", "status", "missing", "message"]]))
+    if lecture_figures:
+        parts.append("## The lecture's figures, reproduced\n")
+        for path, caption in lecture_figures:
+            parts.append(f"![{caption}](figures/{path.name})\n")
+            parts.append(f"{caption}\n")
     parts.append(footer(argv))
     return "\n".join(parts)
 
@@ -218,7 +292,8 @@ def markdown_to_html(md: str, base: Path) -> str:
 
 
 def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
-                 tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str]) -> None:
+                 tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
+                 traces: dict | None = None, with_lecture_figures: bool = True) -> None:
     """Write results.csv, stability.csv, restitution.csv, index.md, index.html, figures/.
 
     Everything is written into a scratch directory first and moved into ``out`` at the
@@ -230,7 +305,13 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
         results.to_csv(stage / "results.csv", index=False)
         for name in ("stability", "restitution"):
             tables[name].to_csv(stage / f"{name}.csv", index=False)
-        md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv)
+        lecture = None
+        if with_lecture_figures:
+            from truestep.figures import write_lecture_figures
+
+            lecture = write_lecture_figures(stage / "figures")
+        md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,
+                             traces=traces, lecture_figures=lecture)
         (stage / "index.md").write_text(md)
         (stage / "index.html").write_text(markdown_to_html(md, stage))
         figures = out / "figures"

@@ -62,9 +62,25 @@ def measure(case: Case, traj: Trajectory) -> dict[str, float]:
     return out
 
 
+TRACE_POINTS = 400
+"""Energy traces kept for the report are thinned to at most this many points."""
+
+
+def energy_trace(traj: Trajectory) -> tuple[np.ndarray, np.ndarray] | None:
+    """Times (s) and energies (J), thinned to :data:`TRACE_POINTS`, or ``None``."""
+    if traj.energy is None or len(traj.t) < 2:
+        return None
+    keep = np.unique(np.linspace(0, len(traj.t) - 1, TRACE_POINTS).round().astype(int))
+    return traj.t[keep], traj.energy[keep]
+
+
 def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
-            timing: Timing) -> dict:
-    """One row of ``results.csv``: run in isolation, then measure."""
+            timing: Timing, traces: dict | None = None) -> dict:
+    """One row of ``results.csv``: run in isolation, then measure.
+
+    If ``traces`` is given, the run's thinned energy trace is stored in it under
+    ``(case, engine, method, dt_kind, dt)``.
+    """
     row = {
         "case": case.name, "engine": engine, "method": method, "dt": dt,
         "dt_kind": "tolerance" if adaptive else "step",
@@ -84,6 +100,10 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         message=traj.message,
     )
     row.update(measure(case, traj))
+    if traces is not None:
+        trace = energy_trace(traj)
+        if trace is not None:
+            traces[(case.name, engine, method, row["dt_kind"], dt)] = trace
     return row
 
 
@@ -115,8 +135,12 @@ def run_matrix(
     quick: bool = False,
     timing: Timing | None = None,
     progress: Callable[[str], None] | None = None,
+    traces: dict | None = None,
 ) -> pd.DataFrame:
-    """Run every (case, engine, method, dt) and return the tidy results table."""
+    """Run every (case, engine, method, dt) and return the tidy results table.
+
+    Energy traces of the runs go into ``traces`` when it is given (see :func:`run_one`).
+    """
     timing = timing or Timing(budget_s=0.2 if quick else 1.0, max_repeats=3 if quick else 5)
     say = progress or (lambda msg: print(msg, file=sys.stderr))
     rows = []
@@ -132,7 +156,8 @@ def run_matrix(
                         "message": detail if status == "skipped" else "",
                     })
                     continue
-                row = run_one(case, engine, method, dt, adaptive=adaptive, timing=timing)
+                row = run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
+                              traces=traces)
                 rows.append(row)
                 say(f"{case.name:24s} {engine:9s} {method:17s} {dt:<9.3g} {row['status']:9s}"
                     f" err={row.get('error', np.nan):.3g} wall={row.get('wall_s', np.nan):.3g}s")
