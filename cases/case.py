@@ -50,7 +50,8 @@ class StabilitySpec:
     """A stability search: bisection on dt over a fixed horizon.
 
     horizon : s;  dt_lo, dt_hi : bracket, s;  max_runs : simulations per search;
-    rel_tol : relative width at which bisection stops.
+    rel_tol : relative width at which bisection stops;
+    quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses).
     """
 
     horizon: float
@@ -58,6 +59,7 @@ class StabilitySpec:
     dt_hi: float
     max_runs: int = 30
     rel_tol: float = 1e-3
+    quick: bool = False
 
 
 @dataclass

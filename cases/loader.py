@@ -102,6 +102,7 @@ def load_case(path: str | Path) -> Case:
             dt_hi=s.number("dt_hi", positive=True),
             max_runs=s.integer("max_runs", 30, minimum=3),
             rel_tol=s.number("rel_tol", 1e-3, positive=True),
+            quick=s.boolean("quick", False),
         )
         if stability.dt_lo >= stability.dt_hi:
             raise s.error("dt_hi", f"must exceed dt_lo ({stability.dt_lo:g})")

@@ -5,9 +5,9 @@ A ``[[scene.meshes]]`` table builds one mass-spring object of
 
     [[scene.meshes]]
     kind = "cube"            # triangle, tetrahedron, cube, rope, cloth
-    size = 1.0               # cube / tetrahedron edge, m (triangle: side)
-    center = [0, 0.5, 0]     # m
-    bracing = "volume"       # cube only: edges, faces, volume
+    size = 1.0               # edge, m
+    center = [0, 0.5, 0]     # m (default: the origin)
+    bracing = "volume"       # edges (default), faces, volume
     mass = 1.0               # the whole object's, kg, spread evenly over the vertices
     stiffness = 200.0        # every spring, N/m
     damping = 1.0            # every spring, N s/m (default 0)
@@ -15,13 +15,20 @@ A ``[[scene.meshes]]`` table builds one mass-spring object of
     radius = 0.0             # every vertex's collision radius, m (default 0)
     pinned = [0, 1]          # local vertex numbers that never move (default none)
 
-A rope takes ``count``, ``start`` and ``end`` instead of size and center; a cloth takes
-``rows``, ``cols``, ``spacing``, ``origin`` and optionally the unit grid directions ``u``
-and ``w``, and ``shear_stiffness`` and ``bend_stiffness`` (default: ``stiffness``).
+The fields that place the mesh depend on its kind: a tetrahedron takes ``size`` and
+``center`` like a cube (no ``bracing``); a triangle ``side`` and ``center``; a rope
+``count`` (vertices), ``start`` and ``end``; a cloth ``rows``, ``cols``, ``spacing``,
+``origin`` and optionally the unit grid directions ``u`` and ``w``, and
+``shear_stiffness`` and ``bend_stiffness`` (default: ``stiffness``). Vertex numbers are
+those of the builders in :mod:`reference_impl.meshes`; the mesh's particles follow the
+``[[scene.particles]]`` groups and earlier meshes in the global numbering.
 
 A ``[[scene.emitters]]`` table is an :class:`~reference_impl.model.EmitterSpec`, with the
-same field names (``shape``, ``center``, ``size``, ``rate_n``, ``rate_r``, ``speed``,
-``spread`` ...).
+same field names (``shape``, ``center``, ``size``, ``normal`` for a plane, ``rate_n``,
+``rate_r``, ``per_area``, ``speed``, ``speed_jitter``, ``spread``, ``lifetime``,
+``lifetime_jitter``, ``frame_dt``, ``capacity``, ``particle_mass``, ``particle_size``,
+``size_jitter``, ``color_birth``, ``color_death``, ``fade_height``, ``seed``). The pool
+must hold the largest possible population, ``ceil(n + r) x (lifetime + jitter)``.
 """
 
 from __future__ import annotations

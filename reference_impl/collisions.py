@@ -166,17 +166,16 @@ class PlaneCollisions:
 
     def __call__(self, system: ParticleSystem, dt: float) -> None:
         x, v = system.positions, system.velocities
+        movable = system.alive & ~self.fixed
         system.contact[:] = False
-        close = [
-            (system.alive & ~self.fixed & (signed_distances(x, self.radius, p) < self.eps_distance))
-            for p in self.planes
-        ]
-        if any(c.any() for c in close):
-            f = system.accumulate_forces(x, v, system.get_time())
-            for k, plane in enumerate(self.planes):
-                idx = np.flatnonzero(close[k])
-                if len(idx):
-                    system.contact[k, idx] = self._collide(system, plane, idx, f[idx], dt)
+        f = None
+        for k, plane in enumerate(self.planes):
+            idx = np.flatnonzero(movable & (signed_distances(x, self.radius, plane) < self.eps_distance))
+            if not len(idx):
+                continue
+            if f is None:  # the applied force at the end of the step, once per pass
+                f = system.accumulate_forces(x, v, system.get_time()).copy()
+            system.contact[k, idx] = self._collide(system, plane, idx, f[idx], dt)
 
     def _collide(
         self, system: ParticleSystem, plane: Plane, idx: np.ndarray, f: np.ndarray, dt: float

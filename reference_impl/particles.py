@@ -17,6 +17,9 @@ from reference_impl import collisions, forces
 from reference_impl.model import ParticleModel
 from reference_impl.system import SecondOrderSystem
 
+DENSE_JACOBIAN = 240
+"""Up to this state dimension the Jacobian is returned as a dense array."""
+
 Pass = Callable[["ParticleSystem", float], None]
 """Something that acts on the system between solver steps, given the step (s).
 
@@ -48,7 +51,8 @@ class ParticleSystem(SecondOrderSystem):
     """
 
     def __init__(self, model: ParticleModel, passes: list[Pass] | None = None) -> None:
-        super().__init__(np.concatenate([model.x0.ravel(), model.v0.ravel()]))
+        v0 = np.where(model.fixed[:, None], 0.0, model.v0)  # pinned particles never move
+        super().__init__(np.concatenate([model.x0.ravel(), v0.ravel()]))
         self.model = model
         self.n = model.n
         self.passes = list(passes or [])
@@ -111,7 +115,7 @@ class ParticleSystem(SecondOrderSystem):
             a[~self.alive] = 0.0
         return a.ravel()
 
-    def jacobian(self, x: np.ndarray, t: float) -> sp.csr_matrix | None:
+    def jacobian(self, x: np.ndarray, t: float) -> sp.csr_matrix | np.ndarray | None:
         """Sparse ``d[v, a]/d[x, v]`` (dim, dim): gravity, drag, springs, anchors, gravitation.
 
         The rows of ``a`` are the force derivatives (3x3 blocks per particle pair) times the
@@ -119,7 +123,8 @@ class ParticleSystem(SecondOrderSystem):
         also projected by ``I - N N^T`` (the contact force ``F' = F_T``). Friction and
         impulses are left out (piecewise constant in the state; implicit Euler uses the
         Jacobian only as its Newton matrix). Scenes with force fields return ``None``: the
-        solver then differences.
+        solver then differences. Small systems (``dim <= DENSE_JACOBIAN``) get a dense
+        array, for which a dense LU is faster than a sparse one.
         """
         m = self.model
         if m.fields:
@@ -164,6 +169,10 @@ class ParticleSystem(SecondOrderSystem):
         ri = 3 * block_rows[:, None, None] + np.arange(3)[None, :, None]
         ci = 3 * block_cols[:, None, None] + np.arange(3)[None, None, :]
         ri, ci = np.broadcast_arrays(ri, ci)
+        if self.dim <= DENSE_JACOBIAN:
+            jac = np.zeros((self.dim, self.dim))
+            np.add.at(jac, (ri, ci), blocks)
+            return jac
         return sp.csr_matrix((blocks.ravel(), (ri.ravel(), ci.ravel())), shape=(self.dim, self.dim))
 
     def between_steps(self, dt: float) -> None:

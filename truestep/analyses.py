@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pandas as pd
 
@@ -41,16 +43,23 @@ def scheme_of(engine: str, method: str) -> str | None:
     return method if engine == "reference" else None
 
 
-def _search(engine: str, case: Case, method: str):
+def _search(engine: str, case: Case, method: str, quick: bool):
     adapter = get_adapter(engine)
-    return search_case(case, lambda c, dt: adapter.simulate(c, method, dt))
+    return search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr)
 
 
 def stability_table(cases: list[Case], engines: list[str], *, quick: bool) -> pd.DataFrame:
-    """Bisect the largest stable step for every case that declares a search."""
+    """Bisect the largest stable step for every case that declares a search.
+
+    ``--quick`` searches only cases whose search says ``quick = true``, to 1%.
+    """
     rows = []
     for case in cases:
-        if case.stability is None:
+        if case.stability is None or (quick and not case.stability.quick):
             continue
         for engine in engines:
             adapter = get_adapter(engine)
@@ -66,16 +75,15 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool) -> pd
                     rows.append({**row, "status": "skipped",
                                  "note": "adaptive: chooses its own step"})
                     continue
-                if quick and exact is None:
-                    rows.append({**row, "status": "skipped",
-                                 "note": "--quick searches only where the exact limit is known"})
-                    continue
-                out = run_isolated(_search, (engine, case, method),
+                out = run_isolated(_search, (engine, case, method, quick),
                                    timeout=case.timeout_s * case.stability.max_runs)
                 if out.status != "ok":
                     rows.append({**row, "status": out.status, "note": out.message})
+                    _say(f"stability {case.name} {engine}/{method}: {out.status}")
                     continue
                 r = out.value
+                _say(f"stability {case.name:20s} {engine:9s} {method:17s} dt_limit "
+                     f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs")
                 rows.append({**row, "dt_limit": r.dt_limit, "dt_unstable": r.dt_unstable,
                              "runs": r.runs, "status": "ok", "note": r.note})
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
@@ -145,6 +153,7 @@ def restitution_table(engines: list[str], *, quick: bool) -> pd.DataFrame:
             for dt in dts:
                 for e in e_set:
                     out = run_isolated(_bounce_rows, (engine, method, e, dt), timeout=60.0)
+                    _say(f"restitution {engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
                     if out.status == "ok":
                         rows.extend(out.value)
                     else:

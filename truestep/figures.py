@@ -10,7 +10,9 @@ Colours: a line that is an engine/method series is styled by
 :func:`truestep.plots.series_style` (every line here is the reference engine; shades of
 its colour tell step sizes apart). Things that are not engines (particles, scene
 variants) take :data:`SCENE_COLOURS`, none of which is an engine's colour; exact
-solutions are black.
+solutions are a light grey band under the computed lines.
+
+Each ``fig_*`` function draws one figure into the PNG ``path`` and returns its caption.
 """
 
 from __future__ import annotations
@@ -122,6 +124,7 @@ class LinearDecay(System):
 
 # -- 1. vector field and integral curves ----------------------------------------------------
 def fig_vector_field(path: Path) -> str:
+    """The circle field as arrows, and integral curves followed by the adaptive solver."""
     field = CircleField(np.zeros(2))
     g = np.linspace(-2.0, 2.0, 15)
     gx, gy = np.meshgrid(g, g)
@@ -162,23 +165,25 @@ def fig_vector_field(path: Path) -> str:
 
 # -- 2. Euler's spiral ----------------------------------------------------------------------
 def fig_euler_spiral(path: Path) -> str:
+    """Explicit Euler's spiral on the circle field for three step sizes, and its radius error."""
     steps = (0.2, 0.1, 0.05)
     t_end = 4 * np.pi
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.4), gridspec_kw={"width_ratios": [1, 1.15]})
     theta = np.linspace(0, 2 * np.pi, 400)
     axes[0].plot(np.cos(theta), np.sin(theta), label="exact: the unit circle",
                  **_exact_style())
-    finals = []
+    finals, worst = [], 0.0
     for k, h in enumerate(steps):
         run = _simulate(CircleField(np.array([1.0, 0.0])), "euler", t_end, h)
         r = np.linalg.norm(run.x, axis=1)
         finals.append(r[-1])
+        growth = (1 + h * h) ** (np.arange(len(r)) / 2)
+        worst = max(worst, float(np.max(np.abs(r / growth - 1))))
         style = _ref("euler", k, len(steps))
         every = max(1, len(run.t) // 30)
         axes[0].plot(run.x[:, 0], run.x[:, 1], markevery=every, label=f"Euler, h = {h}", **style)
         axes[1].plot(run.t[1:], r[1:] - 1.0, markevery=every, label=f"Euler, h = {h}", **style)
-        n = np.arange(1, len(run.t))
-        axes[1].plot(run.t[1:], (1 + h * h) ** (n / 2) - 1, label=(
+        axes[1].plot(run.t[1:], growth[1:] - 1, label=(
             "(1 + h²)^(n/2) − 1: Euler's growth per step, exact" if k == 0 else None),
             **_exact_style())
     axes[0].set_aspect("equal")
@@ -198,12 +203,13 @@ def fig_euler_spiral(path: Path) -> str:
     return ('Reproduces the lecture slide "Problem I: Inaccuracy" (Euler\'s method): explicit '
             "Euler on the circle field for three step sizes turns the circle into a spiral; "
             f"the radius after two turns is {shown} (exact: 1). Halving the step does not cure "
-            "the error, it only slows its growth; every run matches Euler's exact growth "
-            "factor sqrt(1 + h²) per step.")
+            "the error, it only slows its growth. Every run follows Euler's exact growth "
+            f"factor sqrt(1 + h²) per step (to {worst:.0e} relative, round-off).")
 
 
 # -- 3. Euler's instability -------------------------------------------------------------------
 def fig_euler_instability(path: Path) -> str:
+    """Explicit Euler on ``x' = -k x`` below, near and beyond ``k h = 2``."""
     k_rate = 1.0
     khs = (0.5, 1.5, 2.5)
     t_end = 40.0
@@ -246,6 +252,7 @@ def fig_euler_instability(path: Path) -> str:
 
 # -- 4. midpoint against Euler -----------------------------------------------------------------
 def fig_midpoint(path: Path) -> str:
+    """Midpoint against Euler on the circle field, and one midpoint step taken apart."""
     fig, axes = plt.subplots(1, 3, figsize=(14, 5.2), gridspec_kw={"width_ratios": [1, 1, 1.2]})
     theta = np.linspace(0, 2 * np.pi, 400)
     h = 0.3
@@ -329,6 +336,7 @@ def fig_midpoint(path: Path) -> str:
 
 # -- 5. undamped against damped spring ------------------------------------------------------------
 def fig_springs(path: Path) -> str:
+    """The harmonic-oscillator and damped-oscillator cases: position and energy."""
     names = ("harmonic-oscillator", "damped-oscillator")
     method, dt = "rk4", 4e-3
     fig, axes = plt.subplots(2, 2, figsize=(11, 6.4), sharex=True, sharey="row")
@@ -340,13 +348,14 @@ def fig_springs(path: Path) -> str:
         energy = np.array([total_energy(case.model, xi, vi) for xi, vi in zip(x, v, strict=True)])
         exact = EXACT[case.exact](case, run.t)
         axes[0, col].plot(run.t, x[:, 0, 0], markevery=25, label=f"reference / {method}, dt = {dt:g} s",
-                          **_ref(method))
+                          **_ref(method, linewidth=1.6))
         axes[0, col].plot(run.t, exact.x[:, 0, 0], label="exact", **_exact_style())
-        axes[1, col].plot(run.t, energy, markevery=25, label=f"reference / {method}", **_ref(method))
+        axes[1, col].plot(run.t, energy, markevery=25, label=f"reference / {method}",
+                          **_ref(method, linewidth=1.6))
         axes[1, col].plot(run.t, exact.energy, label="exact", **_exact_style())
         a = case.model.anchors
-        axes[0, col].set_title(f"{case.title}: k_s = {a.stiffness[0]:g} N/m, "
-                               f"k_d = {a.damping[0]:g} N s/m")
+        axes[0, col].set_title(f"{case.title} (case {name})\nk_s = {a.stiffness[0]:g} N/m, "
+                               f"k_d = {a.damping[0]:g} N s/m", fontsize=10)
         axes[1, col].set_xlabel("time (s)")
     axes[0, 0].set_ylabel("position x (m)")
     axes[1, 0].set_ylabel("total energy (J)")
@@ -365,9 +374,10 @@ def fig_springs(path: Path) -> str:
 
 # -- 6. spring-damper pair -----------------------------------------------------------------------
 def fig_spring_damper_pair(path: Path) -> str:
+    """Two free masses on one spring-damper, with and without the damper."""
     m1, m2, k_s, rest, length0 = 1.0, 2.0, 40.0, 1.0, 1.5
     dampings = (1.5, 0.0)
-    method, dt, t_end = "rk4", 5e-3, 5.0
+    method, dt, t_end = "rk4", 1e-2, 5.0
     mu = m1 * m2 / (m1 + m2)
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.0))
     for k, k_d in enumerate(dampings):
@@ -381,20 +391,21 @@ def fig_spring_damper_pair(path: Path) -> str:
         x, _ = _split(run, 2)
         length = np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
         u, _ = oscillator(mu, k_s, k_d, length0 - rest, 0.0, run.t)
-        style = _ref(method, k, 2)
-        axes[1].plot(run.t, length, markevery=50, label=f"reference / {method}, k_d = {k_d:g} N s/m",
-                     **style)
-        axes[1].plot(run.t, rest + u, label="exact (reduced mass μ = m1 m2 / (m1 + m2))"
-                     if k == 0 else None, **_exact_style())
+        worst = np.max(np.abs(length - (rest + u)))
+        axes[1].plot(run.t, length, markevery=25, label=f"reference / {method}, k_d = {k_d:g} N s/m "
+                     f"(deviation from exact ≤ {worst:.0e} m)", **_ref(method, k, 2, linewidth=1.6))
         if k == 0:
-            com = (m1 * x[:, 0, 0] + m2 * x[:, 1, 0]) / (m1 + m2)
+            axes[1].plot(run.t, rest + u, label="exact (reduced mass μ = m1 m2 / (m1 + m2))",
+                         **_exact_style())
+            com0 = m2 * length0 / (m1 + m2)
             axes[0].plot(run.t, x[:, 0, 0], color=SCENE_COLOURS[0], linewidth=1.5,
                          label=f"p1, m1 = {m1:g} kg")
             axes[0].plot(run.t, x[:, 1, 0], color=SCENE_COLOURS[1], linewidth=1.5,
                          label=f"p2, m2 = {m2:g} kg")
-            axes[0].plot(run.t, com, color="black", linewidth=1.0, label="centre of mass")
+            axes[0].plot(run.t, (m1 * x[:, 0, 0] + m2 * x[:, 1, 0]) / (m1 + m2), color="black",
+                         linewidth=1.0, label="centre of mass")
             for i, (mi, sign) in enumerate(((m2, -1.0), (m1, 1.0))):
-                axes[0].plot(run.t, com + sign * mi / (m1 + m2) * (rest + u),
+                axes[0].plot(run.t, com0 + sign * mi / (m1 + m2) * (rest + u),
                              label="exact" if i == 0 else None, **_exact_style())
     axes[1].axhline(rest, color="0.5", linewidth=0.8, linestyle=":", label="rest length L_r")
     axes[0].set_title(f"Positions along x, k_s = {k_s:g} N/m, k_d = {dampings[0]:g} N s/m")
@@ -404,19 +415,21 @@ def fig_spring_damper_pair(path: Path) -> str:
     for ax in axes:
         ax.set_xlabel("time (s)")
         ax.grid(True, alpha=0.3)
-        _legend_below(ax, ncol=2)
+    _legend_below(axes[0], ncol=2)
+    _legend_below(axes[1], ncol=1)
     fig.tight_layout()
     _save(fig, path)
     return ('Reproduces the lecture slide "Spring-Damper Pair": two free point masses (1 kg and '
             "2 kg) joined by the lecture's spring-damper f = (k_s (L_c − L_r) + k_d (ṗ2 − ṗ1)·u) u, "
             "u = (p2 − p1)/|p2 − p1| (the damper's sign taken so that it resists the change of "
             "length, as the damped-spring slide writes it), released 0.5 m stretched. Reference "
-            "RK4 at dt = 5 ms against the exact solution; the centre of mass stays put, and "
+            "RK4 at dt = 10 ms against the exact solution; the centre of mass stays put, and "
             "without the damper (k_d = 0) the pair oscillates for ever.")
 
 
 # -- 7. the triangle, step by step ---------------------------------------------------------------
 def fig_triangle(path: Path) -> str:
+    """The triangle of springs, a force on V2 for one step, then step by step."""
     mesh = meshes.triangle(1.0)
     mass, springs = meshes.mass_spring(mesh, 3.0, 300.0, 0.0)
     dt, force, n_show = 0.04, np.array([25.0, 0.0, 0.0]), 8
@@ -472,8 +485,8 @@ def fig_triangle(path: Path) -> str:
     for ax in axes[:, 0]:
         ax.set_ylabel("y (m)")
     handles = [
-        plt.Line2D([], [], color=ext_colour, lw=2.4,
-                   label=f"external force F = {force[0]:g} N on V2, first step only ({ext_scale * 1000:g} mm per N)"),
+        plt.Line2D([], [], color=ext_colour, lw=2.4, label=f"external force F = {force[0]:g} N on V2, "
+                   f"first step only ({ext_scale * 1000:g} mm per N)"),
         plt.Line2D([], [], color=spring_colour, lw=2.0,
                    label=f"spring forces acting in the next step ({spring_scale * 1000:g} mm per N)"),
         plt.Line2D([], [], color="0.7", lw=1.0, ls="--", label="rest shape"),
@@ -496,6 +509,12 @@ def fig_triangle(path: Path) -> str:
 
 
 # -- 8. the cube: edge springs alone against face and volume springs -----------------------------
+CUBE_PUSH = np.array([20.0, -20.0, 0.0])
+"""Force on each top vertex of the cube figure, N."""
+CUBE_TOP, CUBE_BOTTOM = (2, 3, 6, 7), (0, 1, 4, 5)
+"""Vertices of the top (pushed) and bottom (pinned) faces of :func:`reference_impl.meshes.cube`."""
+
+
 @dataclass
 class CubeRun:
     """A pinned-base cube pushed sideways: its mesh, times (T,), positions (T, 8, 3), volume (T,)."""
@@ -507,15 +526,15 @@ class CubeRun:
 
 
 def simulate_cube(bracing: str, *, t_end: float = 3.0, dt: float = 2e-3) -> CubeRun:
-    """A 1 m, 8 kg cube, bottom face pinned, top face pushed along (1, -1, 0) by 20 N per vertex.
+    """A 1 m, 8 kg cube, bottom face pinned, each top vertex pushed by :data:`CUBE_PUSH`.
 
     Springs 200 N/m with 1 N s/m dampers, viscous drag 2 N s/m; velocity Verlet.
     """
     mesh = meshes.cube(1.0, np.array([0.0, 0.5, 0.0]), bracing)
     mass, springs = meshes.mass_spring(mesh, 8.0, 200.0, 1.0)
     fixed = np.zeros(8, bool)
-    fixed[[0, 1, 4, 5]] = True
-    push = [(i, np.array([20.0, -20.0, 0.0]), 0.0, np.inf) for i in (2, 3, 6, 7)]
+    fixed[list(CUBE_BOTTOM)] = True
+    push = [(i, CUBE_PUSH, 0.0, np.inf) for i in CUBE_TOP]
     model = ParticleModel(mass, mesh.vertices.copy(), np.zeros((8, 3)), np.zeros(8), fixed,
                           drag=2.0, springs=springs, impulses=push, surfaces=[mesh.faces])
     run = _simulate(ParticleSystem(model), "verlet", t_end, dt)
@@ -523,27 +542,41 @@ def simulate_cube(bracing: str, *, t_end: float = 3.0, dt: float = 2e-3) -> Cube
     return CubeRun(mesh, run.t, x, meshes.signed_volume(x, mesh.faces))
 
 
+def _up(x: np.ndarray) -> np.ndarray:
+    """Scene coordinates (..., 3) in matplotlib's 3-D order: x, z, then y (up) as the vertical."""
+    return x[..., [0, 2, 1]]
+
+
 def _draw_cube(ax: plt.Axes, mesh: meshes.Mesh, x: np.ndarray, colour: str) -> None:
-    tris = x[mesh.faces]
-    ax.add_collection3d(Poly3DCollection(tris, facecolor=colour, alpha=0.18, edgecolor="none"))
-    styles = {0: ("black", 1.8), 1: ("0.45", 0.8), 2: ("0.6", 0.8)}
+    p = _up(x)
+    ax.add_collection3d(Poly3DCollection(p[mesh.faces], facecolor=colour, alpha=0.2,
+                                         edgecolor="none"))
+    styles = {0: ("black", 2.0), 1: ("0.4", 0.8), 2: ("0.55", 0.8)}
     for kind, (col, lw) in styles.items():
         sel = mesh.edges[mesh.kind == kind]
         if len(sel):
-            ax.add_collection3d(Line3DCollection(x[sel], colors=col, linewidths=lw))
-    ax.scatter(*x.T, color="black", s=8)
-    ax.set_xlim(-0.6, 1.6)
-    ax.set_ylim(-1.1, 1.1)
-    ax.set_zlim(-0.6, 0.6)
-    ax.set_box_aspect((2.2, 2.2, 1.2))
-    ax.view_init(elev=18, azim=-70, vertical_axis="y")
-    ax.set_xlabel("x (m)", fontsize=7, labelpad=-6)
-    ax.set_ylabel("y (m)", fontsize=7, labelpad=-6)
-    ax.set_zlabel("z (m)", fontsize=7, labelpad=-6)
+            ax.add_collection3d(Line3DCollection(p[sel], colors=col, linewidths=lw))
+    ax.scatter(*p.T, color="black", s=10, depthshade=False)
+    ax.scatter(*p[list(CUBE_BOTTOM)].T, color="black", marker="s", s=28, depthshade=False)
+    top = p[list(CUBE_TOP)]
+    arrow = np.broadcast_to(_up(CUBE_PUSH) / np.linalg.norm(CUBE_PUSH) * 0.35, top.shape)
+    ax.quiver(*top.T, *arrow.T, color=SCENE_COLOURS[4], linewidth=1.5, arrow_length_ratio=0.3)
+    ax.set_xlim(-0.6, 1.4)
+    ax.set_ylim(-0.7, 0.7)
+    ax.set_zlim(-0.9, 1.1)
+    ax.set_box_aspect((2.0, 1.4, 2.0))
+    ax.view_init(elev=20, azim=-60)
+    ax.set_xlabel("x (m)", fontsize=7, labelpad=-8)
+    ax.set_ylabel("z (m)", fontsize=7, labelpad=-8)
+    ax.set_zlabel("y (m, up)", fontsize=7, labelpad=-8)
+    ax.set_xticks([-0.5, 0.0, 0.5, 1.0])
+    ax.set_yticks([-0.5, 0.0, 0.5])
+    ax.set_zticks([-0.5, 0.0, 0.5, 1.0])
     ax.tick_params(labelsize=6, pad=-3)
 
 
 def fig_cube(path: Path) -> str:
+    """Edge-sprung against fully braced cube under the same push: snapshots and volume."""
     runs = {"edges": simulate_cube("edges"), "volume": simulate_cube("volume")}
     labels = {"edges": "edge springs only (12)", "volume": "edge, face and volume springs (28)"}
     colours = {"edges": SCENE_COLOURS[0], "volume": SCENE_COLOURS[1]}
@@ -551,32 +584,46 @@ def fig_cube(path: Path) -> str:
     t = runs["edges"].t
     flat = int(np.argmax(v_edges <= 0))
     times = (0.0, float(t[flat]), float(t[-1]))
-    fig = plt.figure(figsize=(14, 7.0))
-    grid = fig.add_gridspec(2, 4, width_ratios=[1, 1, 1, 1.35])
+    fig = plt.figure(figsize=(14, 7.6))
+    grid = fig.add_gridspec(2, 4, width_ratios=[1, 1, 1, 1.25], left=0.03, right=0.98, top=0.9,
+                            bottom=0.2, hspace=0.25, wspace=0.25)
     for row, key in enumerate(runs):
         r = runs[key]
         for col, when in enumerate(times):
             ax = fig.add_subplot(grid[row, col], projection="3d")
             s = int(np.argmin(np.abs(r.t - when)))
             _draw_cube(ax, r.mesh, r.x[s], colours[key])
-            ax.set_title(f"{labels[key]}\nt = {r.t[s]:.2f} s, volume {r.volume[s]:+.2f} m³", fontsize=9)
+            volume = np.round(r.volume[s], 2) + 0.0  # no "-0.00"
+            ax.set_title(f"t = {r.t[s]:.2f} s, volume {volume:+.2f} m³", fontsize=9, pad=0)
+        fig.text(0.01, 0.73 - 0.36 * row, labels[key], rotation=90, va="center", fontsize=11,
+                 color=colours[key], weight="bold")
     ax = fig.add_subplot(grid[:, 3])
     for key, r in runs.items():
         ax.plot(r.t, r.volume, color=colours[key], linewidth=1.8, label=labels[key])
+    for when in times:
+        ax.axvline(when, color="0.6", linewidth=0.8, linestyle=":")
     ax.axhline(0.0, color="0.5", linewidth=0.8)
     ax.text(r.t[-1], 0.03, "flat", ha="right", fontsize=8, color="0.4")
     ax.text(r.t[-1], -0.1, "inside out", ha="right", fontsize=8, color="0.4")
-    ax.set_xlabel("time (s)")
+    ax.set_xlabel("time (s); dotted: the snapshots")
     ax.set_ylabel("signed volume (m³)")
     ax.set_title("Signed volume of the cube's surface")
     ax.grid(True, alpha=0.3)
-    _legend_below(ax, ncol=1)
-    fig.tight_layout()
+    handles = [
+        *ax.get_legend_handles_labels()[0],
+        plt.Line2D([], [], color=SCENE_COLOURS[4], lw=1.5,
+                   label=f"push: {np.linalg.norm(CUBE_PUSH):.0f} N on each top vertex"),
+        plt.Line2D([], [], color="black", marker="s", ls="none", label="pinned vertices"),
+    ]
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), fontsize=8,
+              frameon=False)
+    fig.suptitle("A cube of springs pushed sideways: edge springs alone let it turn inside out",
+                 fontsize=12)
     _save(fig, path)
     return ('Reproduces the lecture slide on the cube that turns inside out (7.2 Spring Animation '
             'Examples: "the cube can turn inside out; additional springs can be added across '
             "the object's faces and its volume\"): two 1 m, 8 kg cubes with the bottom face "
-            "pinned and the top face pushed along (1, −1, 0) by 20 N per vertex (springs "
+            "pinned (squares) and the top face pushed along (1, −1, 0) by 28 N per vertex (springs "
             "200 N/m with 1 N s/m dampers, drag 2 N s/m, velocity Verlet at 2 ms). With edge "
             "springs alone nothing resists shear: the cube folds flat at "
             f"t = {times[1]:.2f} s and ends inside out (signed volume {v_edges[-1]:+.2f} m³); "
@@ -608,15 +655,20 @@ class Fountain:
 
 
 FOUNTAIN_SPEC = EmitterSpec(
-    shape="cube", center=np.zeros(3), size=0.3, rate_n=90.0, rate_r=20.0, speed=2.5,
-    spread=0.35, lifetime=55, lifetime_jitter=10, capacity=8000, speed_jitter=0.2,
-    particle_size=0.006, size_jitter=0.5, fade_height=1.5, seed=7,
+    shape="cube", center=np.zeros(3), size=0.3, rate_n=260.0, rate_r=20.0, speed=3.0,
+    spread=0.35, lifetime=20, lifetime_jitter=5, capacity=12000, speed_jitter=0.2,
+    particle_size=0.006, size_jitter=0.5, fade_height=1.0, seed=7,
 )
-"""The fountain: a 0.3 m cube spraying about 100 particles a frame at 30 frames a second."""
+"""The fountain: a 0.3 m cube spraying about 270 particles a frame at 30 frames a second,
+each living 20 +- 5 frames: about 5400 alive once the first ones expire."""
+STRAND_FRAMES = 4
+"""The strand figure draws the whole lives of the particles born in the first frames."""
+FOUNTAIN_VIEW = ((-2.5, 2.5), (-4.4, 1.0))
+"""x and y limits (m) of the side views of the fountain and its strands."""
 
 
 def simulate_fountain(spec: EmitterSpec = FOUNTAIN_SPEC, *, target: int = 5000,
-                      strand_frames: int = 12) -> Fountain:
+                      strand_frames: int = STRAND_FRAMES) -> Fountain:
     """Run the emitter frame by frame (one lecture-update step per frame) under gravity -y.
 
     Stops once ``target`` particles are alive and every particle born in the first
@@ -652,13 +704,32 @@ def simulate_fountain(spec: EmitterSpec = FOUNTAIN_SPEC, *, target: int = 5000,
                     snapshot, colors, shapes)
 
 
-def _night(ax: plt.Axes) -> None:
+def _night(ax: plt.Axes, view: tuple = FOUNTAIN_VIEW) -> None:
     ax.set_facecolor(NIGHT)
     ax.set_aspect("equal")
-    ax.set_xlim(-2.2, 2.2)
-    ax.set_ylim(-2.6, 1.3)
+    ax.set_xlim(*view[0])
+    ax.set_ylim(*view[1])
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m, up)")
+
+
+def _add_night_3d(fig: plt.Figure, spec: object) -> plt.Axes:
+    """A dark 3-D box with y up (scene coordinates drawn through :func:`_up`)."""
+    with plt.rc_context({"grid.color": (1.0, 1.0, 1.0, 0.15)}):
+        ax = fig.add_subplot(spec, projection="3d")
+    ax.set_facecolor(NIGHT)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_pane_color(mcolors.to_rgba(NIGHT))
+    (x0, x1), (y0, y1) = FOUNTAIN_VIEW
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(x0, x1)
+    ax.set_zlim(y0, y1)
+    ax.set_box_aspect((x1 - x0, x1 - x0, y1 - y0))
+    for name, label in (("x", "x (m)"), ("y", "z (m)"), ("z", "y (m, up)")):
+        getattr(ax, f"set_{name}label")(label, fontsize=8, color="0.55")
+    ax.tick_params(labelsize=7, colors="0.55")
+    ax.view_init(elev=12, azim=-60)
+    return ax
 
 
 def _emitter_outline(ax: plt.Axes, spec: EmitterSpec) -> None:
@@ -669,34 +740,28 @@ def _emitter_outline(ax: plt.Axes, spec: EmitterSpec) -> None:
 
 
 def fig_fountain(path: Path, fountain: Fountain) -> str:
+    """The cube emitter's particles at the first frame with 5000 alive, and the population."""
     f, spec = fountain, fountain.spec
     s = f.snapshot
     live = f.alive[s]
     pos, vel = f.x[s][live], f.v[s][live]
-    rgba, axes_m = f.colors[live], f.shapes[live]
-    fig = plt.figure(figsize=(15, 5.6))
-    grid = fig.add_gridspec(1, 3, width_ratios=[1.25, 1.1, 1])
+    rgba, semi = f.colors[live], f.shapes[live]
+    fig = plt.figure(figsize=(15, 6.0))
+    grid = fig.add_gridspec(1, 3, width_ratios=[1, 1.1, 1], left=0.05, right=0.98, bottom=0.1,
+                            top=0.88, wspace=0.22)
     ax = fig.add_subplot(grid[0])
     angles = np.degrees(np.arctan2(vel[:, 1], vel[:, 0]))
-    ax.add_collection(EllipseCollection(2 * axes_m[:, 0], 2 * axes_m[:, 1], angles, units="xy",
+    ax.add_collection(EllipseCollection(2 * semi[:, 0], 2 * semi[:, 1], angles, units="xy",
                                         offsets=pos[:, :2], offset_transform=ax.transData,
                                         facecolors=rgba, edgecolors="none"))
     _night(ax)
     _emitter_outline(ax, spec)
-    ax.set_title(f"Side view at frame {s} (t = {f.t[s]:.2f} s): {live.sum()} live particles\n"
+    ax.set_title(f"Side view at frame {s} (t = {f.t[s]:.2f} s): {live.sum()} live particles,\n"
                  "ellipses stretched along the velocity by one frame's travel", fontsize=10)
 
-    ax3 = fig.add_subplot(grid[1], projection="3d")
-    ax3.set_facecolor(NIGHT)
-    ax3.scatter(pos[:, 0], pos[:, 2], pos[:, 1], c=rgba, s=2.0, depthshade=False, linewidths=0)
-    ax3.set_xlim(-2.2, 2.2)
-    ax3.set_ylim(-2.2, 2.2)
-    ax3.set_zlim(-2.6, 1.3)
-    ax3.set_xlabel("x (m)", fontsize=8)
-    ax3.set_ylabel("z (m)", fontsize=8)
-    ax3.set_zlabel("y (m, up)", fontsize=8)
-    ax3.tick_params(labelsize=7)
-    ax3.view_init(elev=15, azim=-60)
+    ax3 = _add_night_3d(fig, grid[1])
+    p3 = _up(pos)
+    ax3.scatter(p3[:, 0], p3[:, 1], p3[:, 2], c=rgba, s=1.5, depthshade=False, linewidths=0)
     ax3.set_title("The same particles in 3-D, as points", fontsize=10)
 
     ax = fig.add_subplot(grid[2])
@@ -704,39 +769,37 @@ def fig_fountain(path: Path, fountain: Fountain) -> str:
     frames = np.arange(len(e.population))
     mean, _ = spawn_count_moments(spawn_mean(spec), spec.rate_r)
     lives = lifetime_values(spec)
-    survive = np.array([(lives > a).mean() for a in frames])
-    expected = mean * np.cumsum(survive)
-    ax.plot(frames * spec.frame_dt, e.population, color=SCENE_COLOURS[0], linewidth=1.6,
+    expected = mean * np.cumsum([(lives > a).mean() for a in frames])
+    ax.plot(frames, e.population, color=SCENE_COLOURS[0], linewidth=1.8, marker="o", markersize=3,
             label="live particles (reference emitter)")
-    ax.plot(frames * spec.frame_dt, expected, label="expected: (n + r/2) Σ P(lifetime > age)",
-            **_exact_style())
-    ax.axvline(f.t[s], color="0.5", linewidth=0.8, linestyle=":")
+    ax.plot(frames, expected, label="expected: (n + r/2) Σ P(lifetime > age)", **_exact_style())
+    ax.axvline(s, color="0.5", linewidth=0.8, linestyle=":")
     ax.axhline(5000, color="0.5", linewidth=0.8, linestyle=":")
-    ax.text(f.t[s], 200, " snapshot", fontsize=8, color="0.3")
-    ax.set_xlabel("time (s)")
+    ax.annotate("the snapshot", (s, 5000), xytext=(s - 8, 2500), fontsize=9,
+                arrowprops={"arrowstyle": "->", "color": "0.3"})
+    ax.set_xlabel(f"frame (1/{1 / spec.frame_dt:.0f} s each)")
     ax.set_ylabel("particles alive")
     ax.set_title(f"# new per frame = n + Rand() r, n = {spec.rate_n:g}, r = {spec.rate_r:g};\n"
                  f"lifetime {spec.lifetime} ± {spec.lifetime_jitter} frames", fontsize=10)
     ax.grid(True, alpha=0.3)
-    _legend_below(ax, ncol=1)
-    fig.tight_layout()
+    ax.legend(loc="lower right", fontsize=8, frameon=False)
     _save(fig, path)
     return ('Reproduces the lecture slide "A cube emitting 5000 animated particles, obeying a '
-            '"gravitational" force in -Y direction" (Snowflakes vs Hair): the reference emitter '
+            "'gravitational' force in -Y direction\" (Snowflakes vs Hair): the reference emitter "
             f"sprays from all six faces of a {spec.size:g} m cube along the face normals "
-            f"({spec.speed:g} m/s ± {100 * spec.speed_jitter:g} %, cone {spec.spread:g} rad), "
-            "one lecture-update step per frame at 30 frames/s under g = 9.81 m/s² along −y, "
-            f"shown at the first frame with {live.sum()} particles alive. Colour goes from "
-            "yellow at birth to red at death; opacity falls with age and with height "
-            f"(e-folding {spec.fade_height:g} m): the particle attributes of the emitter, "
-            "drawn as point light sources.")
+            f"({spec.speed:g} m/s ± {100 * spec.speed_jitter:g} %, within {spec.spread:g} rad), "
+            "one lecture-update step per frame at 30 frames/s under g = 9.81 m/s² along −y, run "
+            f"until the first frame with at least 5000 particles alive ({live.sum()} at frame "
+            f"{s}). Colour goes from yellow at birth to red at death; opacity falls with age and "
+            f"with height (e-folding {spec.fade_height:g} m); each particle is an ellipse "
+            "stretched along its velocity: the lecture's particle attributes, drawn as point "
+            "light sources. Right: the population against its expectation.")
 
 
 def _strand_segments(st: Strands) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Segments (k, 2, 3), their thickness (k,) in m and their life fraction (k,) of strands."""
+    """Segments (k, 2, 3) of all strands, their thickness (k,) in m and life fraction (k,)."""
     idx = st.strand_index()
-    same = idx[1:] == idx[:-1]
-    a = np.flatnonzero(same)
+    a = np.flatnonzero(idx[1:] == idx[:-1])
     seg = np.stack([st.points[a], st.points[a + 1]], axis=1)
     thick = 0.5 * (st.thickness[a] + st.thickness[a + 1])
     born = st.times[st.start[:-1]][idx[a]]
@@ -745,59 +808,69 @@ def _strand_segments(st: Strands) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return seg, thick, frac
 
 
-def fig_strands(path: Path, fountain: Fountain) -> str:
-    f, spec = fountain, fountain.spec
-    e = f.emitter
-    strand_frames = 12
-    st = collect_strands(f.t, f.x, f.v, f.alive, root_thickness=e.size, taper=0.8)
+def _first_lives(st: Strands, t_born: float, alive_at_end: np.ndarray) -> Strands:
+    """The strands born before ``t_born`` (s) whose particle has died by the end: whole lives."""
     born = st.times[st.start[:-1]]
-    keep = np.flatnonzero(born < strand_frames * spec.frame_dt - 1e-9)
-    ends = st.start[keep + 1] - 1
-    finished = ~f.alive[-1, st.slot[keep]]
-    keep = keep[finished & (ends > st.start[keep])]
+    keep = np.flatnonzero((born < t_born) & ~alive_at_end[st.slot] & (np.diff(st.start) > 1))
     sel = np.concatenate([np.arange(st.start[k], st.start[k + 1]) for k in keep])
-    new_start = np.concatenate([[0], np.cumsum(np.diff(st.start)[keep])])
-    sub = Strands(st.points[sel], st.times[sel], st.velocities[sel], new_start, st.slot[keep],
-                  st.thickness[sel])
+    start = np.concatenate([[0], np.cumsum(np.diff(st.start)[keep])])
+    return Strands(st.points[sel], st.times[sel], st.velocities[sel], start, st.slot[keep],
+                   st.thickness[sel])
+
+
+def _draw_strands(ax: plt.Axes, seg: np.ndarray, thick: np.ndarray, colours: np.ndarray) -> None:
+    """Strand segments in x-y with their thickness in metres turned into points on this axes."""
+    fig = ax.figure
+    ax.apply_aspect()
+    width_in = ax.get_position().width * fig.get_figwidth()
+    pt_per_m = width_in * 72 / np.ptp(ax.get_xlim())
+    ax.add_collection(LineCollection(seg[:, :, :2], linewidths=thick * pt_per_m, colors=colours,
+                                     alpha=0.6, capstyle="butt"))
+
+
+def fig_strands(path: Path, fountain: Fountain) -> str:
+    """The fountain's first particles drawn over their whole lives as strands."""
+    f, spec = fountain, fountain.spec
+    taper = 0.8
+    st = collect_strands(f.t, f.x, f.v, f.alive, root_thickness=2 * f.emitter.size, taper=taper)
+    sub = _first_lives(st, STRAND_FRAMES * spec.frame_dt - 1e-9, f.alive[-1])
     seg, thick, frac = _strand_segments(sub)
     cmap = mcolors.LinearSegmentedColormap.from_list("life", [spec.color_birth, spec.color_death])
-    fig = plt.figure(figsize=(14, 6.0))
-    grid = fig.add_gridspec(1, 2, width_ratios=[1.15, 1])
+    colours = cmap(frac)
+    zoom = ((0.6, 1.8), (-1.1, 0.1))
+    fig = plt.figure(figsize=(14, 6.4))
+    grid = fig.add_gridspec(1, 2, width_ratios=[1, 1.1])
     ax = fig.add_subplot(grid[0])
     _night(ax)
-    fig.canvas.draw()
-    bbox = ax.get_window_extent()
-    pt_per_m = bbox.width / fig.dpi * 72 / np.diff(ax.get_xlim())[0]
-    lines = LineCollection(seg[:, :, :2], linewidths=thick * pt_per_m, colors=cmap(frac),
-                           alpha=0.55, capstyle="round")
-    ax.add_collection(lines)
+    _draw_strands(ax, seg, thick, colours)
     _emitter_outline(ax, spec)
-    ax.set_title(f"Side view: {len(sub)} strands, thickness {1000 * 2 * spec.particle_size * (1 - spec.size_jitter):.0f}"
-                 f"–{1000 * 2 * spec.particle_size * (1 + spec.size_jitter):.0f} mm at the root, "
-                 "tapering to 20 %", fontsize=10)
-    ax3 = fig.add_subplot(grid[1], projection="3d")
-    ax3.set_facecolor(NIGHT)
-    seg3 = seg[:, :, [0, 2, 1]]
-    ax3.add_collection3d(Line3DCollection(seg3, linewidths=thick * pt_per_m * 0.7, colors=cmap(frac),
-                                          alpha=0.55))
-    ax3.set_xlim(-2.2, 2.2)
-    ax3.set_ylim(-2.2, 2.2)
-    ax3.set_zlim(-2.6, 1.3)
-    ax3.set_xlabel("x (m)", fontsize=8)
-    ax3.set_ylabel("z (m)", fontsize=8)
-    ax3.set_zlabel("y (m, up)", fontsize=8)
-    ax3.tick_params(labelsize=7)
-    ax3.view_init(elev=15, azim=-60)
-    ax3.set_title("The same strands in 3-D", fontsize=10)
+    (zx0, zx1), (zy0, zy1) = zoom
+    ax.plot([zx0, zx1, zx1, zx0, zx0], [zy0, zy0, zy1, zy1, zy0], color="white", linewidth=0.8,
+            linestyle="--")
+    roots = 2 * spec.particle_size * np.array([1 - spec.size_jitter, 1 + spec.size_jitter]) * 1000
+    ax.set_title(f"{len(sub)} strands: every particle born in the first {STRAND_FRAMES} frames,\n"
+                 "its whole life drawn at once", fontsize=10)
+    ax = fig.add_subplot(grid[1])
+    _night(ax, zoom)
+    margin = 0.5  # m, longer than any segment (one frame's travel), so none is cut off
+    inside = np.any((seg[:, :, 0] > zx0 - margin) & (seg[:, :, 0] < zx1 + margin)
+                    & (seg[:, :, 1] > zy0 - margin) & (seg[:, :, 1] < zy1 + margin), axis=1)
+    _draw_strands(ax, seg[inside], thick[inside], colours[inside])
+    _emitter_outline(ax, spec)
+    ax.set_title("Zoom on the dashed box, thickness to scale: each strand has its own root "
+                 f"thickness\n({roots[0]:.0f}–{roots[1]:.0f} mm) and tapers to "
+                 f"{100 * (1 - taper):.0f} % of it at the tip", fontsize=10)
+    sm = plt.cm.ScalarMappable(norm=mcolors.Normalize(0, 1), cmap=cmap)
+    fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, label="fraction of the particle's life")
     fig.tight_layout()
     _save(fig, path)
     return ('Reproduces the lecture slide "The same cube emitter rendered using static particles, '
             'or strands" (Snowflakes vs Hair): the emitter and forces of the fountain figure, but '
-            f"every particle born in its first {strand_frames} frames is drawn over its whole "
-            "life at once as a polyline through its recorded positions (reference_impl.strands). "
-            "Each strand's root thickness is its particle's size (shape parameter, "
-            f"± {100 * spec.size_jitter:g} % per particle), tapering linearly along the strand; "
-            "colour runs from birth to death as in the fountain.")
+            f"every particle born in its first {STRAND_FRAMES} frames drawn over its whole life at "
+            "once, as a polyline through its positions frame by frame (reference_impl.strands). "
+            "Each strand's thickness at the root is its particle's size (the shape parameter, "
+            f"{roots[0]:.0f} to {roots[1]:.0f} mm), tapering linearly along the strand to "
+            f"{100 * (1 - taper):.0f} %; colour runs from birth to death as in the fountain.")
 
 
 # -- 11. bouncing off the walls ---------------------------------------------------------------------
@@ -817,11 +890,12 @@ def _bounces(x: np.ndarray, v: np.ndarray, planes: list[Plane], near: float) -> 
 
 
 def fig_bounce(path: Path) -> str:
+    """A particle bouncing in a box for three restitutions; one collision taken apart."""
     lo, hi = np.array([-1.0, 0.0, -1.0]), np.array([1.0, 2.0, 1.0])
     restitutions = (1.0, 0.75, 0.5)
-    dt, t_end = 1e-3, 3.0
+    dt, t_end = 2e-3, 2.0
     x0, v0 = np.array([[-0.7, 1.6, 0.0]]), np.array([[2.6, 1.2, 0.0]])
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5.4), gridspec_kw={"width_ratios": [1, 1, 1]})
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5.6), gridspec_kw={"width_ratios": [1, 1.1, 1]})
     measured = []
     diagram = None
     for k, e in enumerate(restitutions):
@@ -830,15 +904,14 @@ def fig_bounce(path: Path) -> str:
                               gravity=np.array([0.0, -G, 0.0]), planes=planes, dimension=2)
         run = _simulate(ParticleSystem(model, passes_for(model)), "lecture", t_end, dt)
         x, v = _split(run, 1)
-        axes[0].plot(x[:, 0, 0], x[:, 0, 1], color=SCENE_COLOURS[k], linewidth=1.4, label=f"k_r = {e:g}")
+        axes[0].plot(x[:, 0, 0], x[:, 0, 1], color=SCENE_COLOURS[k], linewidth=1.5, label=f"k_r = {e:g}")
         bounces = _bounces(x[:, 0], v[:, 0], planes, near=0.05)
         for _, p, vb, va in bounces:
             n = planes[p].normal
-            measured.append((k, -(vb @ n), va @ n, np.linalg.norm(vb - (vb @ n) * n),
-                             np.linalg.norm(va - (va @ n) * n)))
-        if e == 0.75:
-            floor = [b for b in bounces if b[1] == 2]
-            diagram = (x[floor[0][0], 0], floor[0][2], floor[0][3], planes[2].normal, e)
+            measured.append((k, -(vb @ n), va @ n, np.linalg.norm((va - (va @ n) * n) - (vb - (vb @ n) * n))))
+        if diagram is None and e < 1:
+            floor = next(b for b in bounces if b[1] == 2)
+            diagram = (floor[2], floor[3], planes[2].normal, e)
     ax = axes[0]
     ax.plot(*x0[0, :2], "o", color="black", markersize=5, label="start")
     ax.plot([lo[0], hi[0], hi[0], lo[0], lo[0]], [lo[1], lo[1], hi[1], hi[1], lo[1]], color="black",
@@ -846,83 +919,87 @@ def fig_bounce(path: Path) -> str:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m, up)")
-    ax.set_title(f"A particle in a 2 m box under gravity, {t_end:g} s\n(lecture update, dt = 1 ms)",
-                 fontsize=10)
+    ax.set_title(f"A particle in a 2 m box under gravity, {t_end:g} s\n(lecture update, dt = "
+                 f"{1000 * dt:g} ms)", fontsize=10)
     _legend_below(ax, ncol=4)
 
     ax = axes[1]
-    assert diagram is not None
-    p0, vb, va, n, e = diagram
-    vn = (vb @ n) * n
-    vt = vb - vn
-    s = 0.12
-    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.008}
-    base = p0[:2] - s * vb[:2]
-    ax.quiver(*base, *(s * vb[:2]), color="black", **arrow)
-    ax.quiver(*base, *(s * vn[:2]), color=SCENE_COLOURS[2], **arrow)
-    ax.quiver(*base, *(s * vt[:2]), color=SCENE_COLOURS[3], **arrow)
-    ax.quiver(*p0[:2], *(s * va[:2]), color=SCENE_COLOURS[1], **arrow)
-    ax.quiver(*p0[:2], *(s * (-e * vn[:2])), color=SCENE_COLOURS[2], alpha=0.5, **arrow)
-    ax.axhline(lo[1], color="black", linewidth=3)
-    ax.quiver(p0[0] - 0.5, lo[1], 0, 0.25, color="black", **arrow)
-    ax.annotate("N", (p0[0] - 0.47, 0.2), fontsize=10)
-    ax.annotate("V (before)", base[:2] + 0.5 * s * vb[:2] + np.array([-0.33, 0.0]), fontsize=9)
-    ax.annotate("V_N = (N·V) N", base[:2] + np.array([-0.35, -0.25]), fontsize=9, color=SCENE_COLOURS[2])
-    ax.annotate("V_T = V − V_N", base[:2] + s * vt[:2] + np.array([-0.05, 0.04]), fontsize=9,
-                color=SCENE_COLOURS[3])
-    ax.annotate("V' = V_T − k_r V_N (after)", p0[:2] + s * va[:2] + np.array([-0.2, 0.05]),
-                fontsize=9, color=SCENE_COLOURS[1])
-    ax.annotate("−k_r V_N", p0[:2] + s * (-e * vn[:2]) + np.array([0.03, -0.03]), fontsize=9,
-                color=SCENE_COLOURS[2])
-    ax.set_xlim(p0[0] - 0.7, p0[0] + 0.7)
-    ax.set_ylim(-0.15, 0.75)
+    if diagram is None:
+        raise RuntimeError("bouncing figure: no floor collision to draw")
+    vb, va, n, e = diagram
+    t_dir = vb - (vb @ n) * n
+    t_dir /= np.linalg.norm(t_dir)
+    b_t, b_n = vb @ t_dir, vb @ n  # before: along the wall (> 0) and along N (< 0)
+    a_t, a_n = va @ t_dir, va @ n
+    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.01}
+    c_v, c_n, c_t, c_after = "black", SCENE_COLOURS[2], SCENE_COLOURS[3], SCENE_COLOURS[1]
+    ax.quiver(-b_t, -b_n, b_t, b_n, color=c_v, **arrow)
+    ax.quiver(-b_t, -b_n, b_t, 0, color=c_t, **arrow)
+    ax.quiver(0, -b_n, 0, b_n, color=c_n, **arrow)
+    ax.quiver(0, 0, a_t, a_n, color=c_after, **arrow)
+    ax.quiver(0, 0, a_t, 0, color=c_t, **arrow)
+    ax.quiver(a_t, 0, 0, a_n, color=c_n, **arrow)
+    ax.fill_between([-1.35 * b_t, 1.35 * a_t + 2.4], -0.6, -0.04, color="0.85", zorder=0)
+    ax.axhline(-0.04, color="black", linewidth=1.2, zorder=0)
+    ax.annotate("wall", (1.35 * a_t + 2.3, -0.45), fontsize=9, ha="right", color="0.3")
+    ax.quiver(-1.1 * b_t, 0, 0, 0.8, color="black", width=0.006, angles="xy", scale_units="xy", scale=1.0)
+    ax.annotate("N", (-1.1 * b_t + 0.06, 0.55), fontsize=10)
+    ax.annotate("V (before)", (-0.5 * b_t - 0.12, -0.5 * b_n), fontsize=10, ha="right")
+    ax.annotate("V_T = V − V_N", (-0.5 * b_t, -b_n + 0.15), fontsize=10, color=c_t, ha="center")
+    ax.annotate(f"V_N = (N·V) N,\n|V_N| = {-b_n:.2f} m/s", (0.1, -0.88 * b_n), fontsize=10, color=c_n)
+    ax.annotate("V' = V_T − k_r V_N (after)", (a_t + 0.1, a_n + 0.2), fontsize=10, color=c_after)
+    ax.annotate(f"−k_r V_N,\n|k_r V_N| = {a_n:.2f} m/s", (a_t + 0.1, 0.45 * a_n), fontsize=10, color=c_n)
+    ax.annotate("V_T", (0.5 * a_t, 0.12), fontsize=10, color=c_t, ha="center")
+    ax.set_xlim(-1.35 * b_t, 1.35 * a_t + 2.4)
+    ax.set_ylim(-0.6, -b_n + 0.6)
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(f"The first floor collision at k_r = {e:g}: velocities from the run\n"
-                 f"(arrows: {s:g} m per m/s)", fontsize=10)
+    ax.set_xlabel("velocity along the wall (m/s)")
+    ax.set_ylabel("velocity along N (m/s)")
+    ax.set_title(f"The first floor collision at k_r = {e:g}, velocities from the run:\n"
+                 f"{-b_n:.2f} m/s in along N, {a_n:.2f} m/s out (ratio {a_n / -b_n:.3f})", fontsize=10)
 
     ax = axes[2]
     data = np.array(measured)
     top = 1.1 * data[:, 1].max()
     for k, e in enumerate(restitutions):
         d = data[data[:, 0] == k]
-        ax.plot(d[:, 1], d[:, 2], "o", color=SCENE_COLOURS[k], markersize=5,
+        ax.plot(d[:, 1], d[:, 2], "o", color=SCENE_COLOURS[k], markersize=6,
                 label=f"measured, k_r = {e:g} ({len(d)} collisions)")
-        ax.plot([0, top], [0, e * top], color=SCENE_COLOURS[k], linewidth=0.8, linestyle=":")
-    ax.plot([], [], color="0.3", linewidth=0.8, linestyle=":", label="V'_N = k_r V_N (the lecture)")
-    worst_t = np.max(np.abs(data[:, 4] - data[:, 3]))
+        ax.plot([0, top], [0, e * top], color=SCENE_COLOURS[k], linewidth=0.9, linestyle=":")
+    ax.plot([], [], color="0.3", linewidth=0.9, linestyle=":", label="|V'_N| = k_r |V_N| (the lecture)")
+    worst_t = np.max(data[:, 3])
     ax.set_xlabel("normal speed before, −N·V (m/s)")
     ax.set_ylabel("normal speed after, N·V' (m/s)")
-    ax.set_title(f"Every collision of the three runs\n(tangential speed kept to {worst_t:.1e} m/s)",
-                 fontsize=10)
+    ax.set_title(f"Every collision of the three runs; V_T changed by at most\n{worst_t:.3f} m/s "
+                 f"(= g dt, gravity over the step between records)", fontsize=10)
     ax.set_xlim(0, top)
     ax.set_ylim(0, top)
+    ax.set_aspect("equal")
     ax.grid(True, alpha=0.3)
-    _legend_below(ax, ncol=2)
-    fig.tight_layout()
+    ax.legend(loc="upper left", fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
     _save(fig, path)
     return ('Reproduces the lecture slides "Bouncing off the Walls", "Normal and Tangential '
             'Components", "Collision Detection" and "Collision Response" (coefficient of '
             "restitution): a point particle in a 2 m box of six planes under gravity, for "
-            "k_r = 1, 0.75 and 0.5, stepped by the lecture's update at 1 ms with the reference "
-            "collision pass between steps. Middle: one collision's V, V_N, V_T and V' = V_T − "
-            "k_r V_N, taken from the run; right: the normal speed after against before for "
-            "every collision, on the lines of slope k_r (the recorded states are one step "
-            "apart, so gravity acts on the speeds for one step, 1 ms).")
+            f"k_r = 1, 0.75 and 0.5, stepped by the lecture's update at {1000 * dt:g} ms with the "
+            "reference collision pass between steps. Middle: one collision's V, V_N, V_T and "
+            "V' = V_T − k_r V_N, taken from the run (before and after are the records either "
+            "side of the collision); right: the normal speed after against before for every "
+            "collision, on the lines of slope k_r.")
 
 
 # -- 12. contact: a particle moving along the wall ------------------------------------------------
 def fig_contact(path: Path) -> str:
-    angle = np.radians(15.0)
+    """A particle dropped onto an inclined wall: bounces, then contact and sliding."""
+    angle = np.radians(20.0)
     normal = np.array([-np.sin(angle), np.cos(angle), 0.0])
-    along = np.array([np.cos(angle), np.sin(angle), 0.0])
-    down = -along
+    down = -np.array([np.cos(angle), np.sin(angle), 0.0])
     plane = Plane(np.zeros(3), normal, restitution=0.5)
-    start = 0.2 * normal + 0.0 * along
-    dt, t_end = 1e-3, 2.0
-    model = ParticleModel(np.ones(1), start[None, :], np.zeros((1, 3)), np.zeros(1), np.zeros(1, bool),
-                          gravity=np.array([0.0, -G, 0.0]), planes=[plane], dimension=2)
+    drop, dt, t_end = 0.15, 1e-3, 1.0
+    model = ParticleModel(np.ones(1), drop * normal[None, :], np.zeros((1, 3)), np.zeros(1),
+                          np.zeros(1, bool), gravity=np.array([0.0, -G, 0.0]), planes=[plane],
+                          dimension=2)
     system = ParticleSystem(model, passes_for(model))
     solver = get_solver("lecture")(system)
     n_steps = round(t_end / dt)
@@ -930,79 +1007,96 @@ def fig_contact(path: Path) -> str:
     x = np.zeros((n_steps + 1, 3))
     v = np.zeros((n_steps + 1, 3))
     contact = np.zeros(n_steps + 1, bool)
-    x[0], v[0], contact[0] = system.positions[0], system.velocities[0], system.contact[0, 0]
+    x[0], v[0] = system.positions[0], system.velocities[0]
     for i in range(1, n_steps + 1):
         solver.step(dt)
         system.between_steps(dt)
-        t[i], x[i], v[i], contact[i] = system.get_time(), system.positions[0], system.velocities[0], \
-            system.contact[0, 0]
-    d = x @ normal
-    vn = v @ normal
-    s_down = x @ down
+        t[i], contact[i] = system.get_time(), system.contact[0, 0]
+        x[i], v[i] = system.positions[0], system.velocities[0]
+    d, vn, s_down = x @ normal, v @ normal, x @ down
     g_t = G * np.sin(angle)
     exact = 0.5 * g_t * t**2
     first = int(np.argmax(contact))
+    held = bool(contact[first:].all())
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5.2), gridspec_kw={"width_ratios": [1.3, 1, 1]})
-    ax = axes[0]
-    span = np.array([-0.5, 3.8])
-    ax.plot(span * down[0], span * down[1], color="black", linewidth=2.5)
-    ax.plot(x[: first + 1, 0], x[: first + 1, 1], color=SCENE_COLOURS[0], linewidth=1.3,
-            label="bouncing (collision response, k_r = 0.5)")
-    ax.plot(x[first:, 0], x[first:, 1], color=SCENE_COLOURS[1], linewidth=3.0, alpha=0.8,
-            label="in contact: sliding along the wall")
-    p = x[first + (n_steps - first) // 3]
+    fig = plt.figure(figsize=(15, 5.6))
+    grid = fig.add_gridspec(2, 3, width_ratios=[1.5, 1, 1], hspace=0.08, wspace=0.3, left=0.05,
+                            right=0.98, bottom=0.1, top=0.88)
+    ax = fig.add_subplot(grid[:, 0])
+    span = np.array([-0.3, s_down[-1] + 0.3])
+    ax.fill([span[0] * down[0], span[1] * down[0], span[0] * down[0]],
+            [span[0] * down[1], span[1] * down[1], span[1] * down[1]], color="0.88", zorder=0)
+    ax.plot(span * down[0], span * down[1], color="black", linewidth=1.5)
+    ax.plot(x[: first + 1, 0], x[: first + 1, 1], color=SCENE_COLOURS[0], linewidth=1.4,
+            label=f"bouncing: collision response, k_r = {plane.restitution:g}")
+    ax.plot(x[first:, 0], x[first:, 1], color=SCENE_COLOURS[1], linewidth=4.0, alpha=0.8,
+            label=f"in contact from t = {t[first]:.2f} s: sliding along the wall")
     f = np.array([0.0, -G, 0.0])
     fn = (f @ normal) * normal
-    sc = 0.06
-    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.006}
-    ax.quiver(*p[:2], *(sc * f[:2]), color="black", **arrow)
-    ax.quiver(*p[:2], *(sc * fn[:2]), color=SCENE_COLOURS[2], **arrow)
-    ax.quiver(*p[:2], *(sc * (f - fn)[:2]), color=SCENE_COLOURS[3], **arrow)
-    ax.annotate("F = m g", p[:2] + sc * f[:2] + np.array([0.05, 0.0]), fontsize=9)
-    ax.annotate("F_N (cancelled\nby the wall)", p[:2] + sc * fn[:2] + np.array([-0.55, -0.25]),
-                fontsize=9, color=SCENE_COLOURS[2])
-    ax.annotate("F' = F_T", p[:2] + sc * (f - fn)[:2] + np.array([-0.45, -0.18]), fontsize=9,
-                color=SCENE_COLOURS[3])
+    sc = 0.04
+    lo_x, hi_x = span[1] * down[0] - 0.05, span[0] * down[0] + 0.05
+    q = np.array([lo_x + 0.3 * (hi_x - lo_x), 0.4, 0.0])  # free space above the wall
+    ax.plot(*np.stack([q - 0.3 * down, q + 0.3 * down])[:, :2].T, color="black", linewidth=0.8,
+            linestyle="--")
+    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.007, "zorder": 5}
+    ax.quiver(*q[:2], *(sc * f[:2]), color="black", **arrow)
+    ax.quiver(*q[:2], *(sc * fn[:2]), color=SCENE_COLOURS[2], **arrow)
+    ax.quiver(*q[:2], *(sc * (f - fn)[:2]), color=SCENE_COLOURS[3], **arrow)
+    ax.plot(*q[:2], "o", color=SCENE_COLOURS[1], markersize=7, zorder=6)
+    ax.annotate("F = m g", q[:2] + sc * f[:2] + np.array([-0.03, -0.02]), fontsize=10, ha="right")
+    ax.annotate("F_N: the wall cancels it", q[:2] + sc * fn[:2] + np.array([0.04, -0.02]),
+                fontsize=10, color=SCENE_COLOURS[2])
+    ax.annotate("F' = F_T", q[:2] + sc * (f - fn)[:2] + np.array([-0.04, 0.03]), fontsize=10,
+                color=SCENE_COLOURS[3], ha="right")
+    ax.annotate("forces on the particle in contact\n(dashed: parallel to the wall)",
+                q[:2] + np.array([0.0, 0.1]), fontsize=9, ha="center")
+    ax.set_xlim(lo_x, hi_x)
+    ax.set_ylim(span[1] * down[1] - 0.05, 0.75)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m, up)")
-    ax.set_title(f"A point dropped 0.2 m onto a {np.degrees(angle):.0f}° frictionless wall\n"
-                 "(arrows: forces, 0.06 m per N)", fontsize=10)
-    _legend_below(ax, ncol=1)
+    ax.set_title(f"A point dropped {drop:g} m onto a frictionless {np.degrees(angle):.0f}° wall\n"
+                 f"(force arrows for m = 1 kg, {sc:g} m per N)", fontsize=10)
+    ax.legend(loc="lower right", fontsize=8, frameon=False)
 
-    ax = axes[1]
-    ax.plot(t, 1000 * d, color=SCENE_COLOURS[0], linewidth=1.3, label="distance (X − P)·N (mm)")
-    ax.plot(t, 1000 * vn, color=SCENE_COLOURS[2], linewidth=1.0, label="normal velocity N·V (mm/s)")
-    ax.axvspan(t[first], t[-1], color=SCENE_COLOURS[1], alpha=0.15, label="contact: both zero")
-    ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("mm, mm/s (symmetric log scale)")
-    ax.set_title("Conditions for contact: on the wall, moving along it", fontsize=10)
-    ax.grid(True, alpha=0.3)
-    _legend_below(ax, ncol=1)
+    ax_d = fig.add_subplot(grid[0, 1])
+    ax_v = fig.add_subplot(grid[1, 1], sharex=ax_d)
+    ax_d.plot(t, 1000 * d, color=SCENE_COLOURS[0], linewidth=1.3)
+    ax_v.plot(t, vn, color=SCENE_COLOURS[2], linewidth=1.3)
+    for a_ in (ax_d, ax_v):
+        a_.axvspan(t[first], t[-1], color=SCENE_COLOURS[1], alpha=0.15)
+        a_.axhline(0.0, color="0.5", linewidth=0.6)
+        a_.grid(True, alpha=0.3)
+    ax_d.text(t[first] + 0.02, 0.85 * 1000 * d.max(), "contact:\n(X − P)·N = 0\nN·V = 0",
+              fontsize=9, va="top")
+    ax_d.set_ylabel("(X − P)·N (mm)")
+    ax_v.set_ylabel("N·V (m/s)")
+    ax_v.set_xlabel("time (s)")
+    ax_d.tick_params(labelbottom=False)
+    ax_d.set_title("On the wall, moving along the wall", fontsize=10)
 
-    ax = axes[2]
-    ax.plot(t, s_down, color=SCENE_COLOURS[1], linewidth=2.0, label="reference run")
+    ax = fig.add_subplot(grid[:, 2])
     ax.plot(t, exact, label="exact: ½ g sin θ t²", **_exact_style())
+    ax.plot(t, s_down, color=SCENE_COLOURS[1], linewidth=1.8, label="reference run")
     err = np.max(np.abs(s_down - exact))
+    ax.axvspan(t[first], t[-1], color=SCENE_COLOURS[1], alpha=0.15)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("distance down the slope (m)")
     ax.set_title(f"Along the wall: a = g sin θ = {g_t:.2f} m/s² throughout\n"
-                 f"(largest deviation {err:.1e} m)", fontsize=10)
+                 f"(largest deviation from exact {err:.0e} m)", fontsize=10)
     ax.grid(True, alpha=0.3)
-    _legend_below(ax, ncol=2)
-    fig.tight_layout()
+    ax.legend(loc="upper left", fontsize=8, frameon=False)
     _save(fig, path)
+    kept = "and stays in contact to the end" if held else "(contact is not kept to the end)"
     return ('Reproduces the lecture slides "Conditions for Contact" and "Contact Force" '
-            "(F' = F_T, the wall pushes back, cancelling the normal component of F): a point "
+            "(F' = F_T: the wall pushes back, cancelling the normal component of F): a point "
             f"mass dropped onto a frictionless plane inclined at {np.degrees(angle):.0f}° "
-            "(k_r = 0.5), stepped by the lecture's update at 1 ms. Its bounces shrink until, "
-            f"at t = {t[first]:.2f} s, it is on the wall, moving along it and pushing against "
-            "it: from then on the reference contact pass holds its normal distance and "
-            "velocity at zero and the force becomes F_T, so it slides with a = g sin θ. "
-            "Neither the collisions nor the contact touch the tangential motion, which follows "
-            "½ g sin θ t² throughout.")
+            f"(k_r = {plane.restitution:g}), stepped by the lecture's update at {1000 * dt:g} ms. "
+            f"Its bounces shrink until, at t = {t[first]:.2f} s, it is on the wall, moving along "
+            f"it and pushing against it; the reference contact pass then holds its normal "
+            f"distance and velocity at zero and the force becomes F_T, so it slides with "
+            f"a = g sin θ, {kept}. Neither the collisions nor the contact touch the tangential "
+            "motion, which follows ½ g sin θ t² throughout.")
 
 
 # -- all of them -------------------------------------------------------------------------------------

@@ -31,6 +31,8 @@ ROUNDOFF = 1e-9
 """Energy rises below this fraction of the energy scale are round-off, not growth."""
 MIN_STEPS = 5000
 """Every search run takes at least this many steps: slow growth near a limit needs them."""
+QUICK_MIN_STEPS = 2000
+"""Steps per run in ``--quick`` searches, which stop at 1% of the limit."""
 
 
 def energy_grows(t: np.ndarray, energy: np.ndarray, *, tol: float = GROWTH_TOL) -> bool:
@@ -104,17 +106,22 @@ def bisect_limit(
     return SearchResult(lo, hi, runs, note)
 
 
-def search_case(case: Case, simulate: Callable[[Case, float], Trajectory]) -> SearchResult:
+def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
+                quick: bool = False) -> SearchResult:
     """Bisect ``case.stability``'s bracket; ``simulate(case, dt)`` runs one engine and method.
 
     Each run covers the horizon, and at least :data:`MIN_STEPS` steps, recording every step.
+    ``quick`` stops at 1% instead of the case's ``rel_tol`` and runs at least
+    :data:`QUICK_MIN_STEPS` steps.
     """
     spec = case.stability
+    min_steps = QUICK_MIN_STEPS if quick else MIN_STEPS
+    rel_tol = max(spec.rel_tol, 1e-2) if quick else spec.rel_tol
 
     def stable_at(dt: float) -> bool:
-        n = max(MIN_STEPS, math.ceil(spec.horizon / dt))
+        n = max(min_steps, math.ceil(spec.horizon / dt))
         trial = dataclasses.replace(case, duration=n * dt, max_records=n)
         return is_stable(simulate(trial, dt))
 
-    return bisect_limit(stable_at, spec.dt_lo, spec.dt_hi, rel_tol=spec.rel_tol,
+    return bisect_limit(stable_at, spec.dt_lo, spec.dt_hi, rel_tol=rel_tol,
                         max_runs=spec.max_runs)

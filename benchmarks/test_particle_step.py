@@ -1,0 +1,104 @@
+"""Particle rain: gravity, drag and a floor plane, stepped by the lecture's update.
+
+Run: ``python -m pytest benchmarks/test_particle_step.py --benchmark-only -q`` (or with
+``--benchmark-enable`` where ``addopts`` does not say ``--benchmark-skip``).
+
+Each test prints particle-steps per second (from the median round) and the fraction of
+the machine's memory bandwidth the call used, measured in the same run: the bandwidth
+is that of a numpy copy of a 256 MB array (bytes moved = 2 x its size, best of 5), and a
+call of :func:`reference_impl.kernels.rain_step` moves ``n`` particles' positions,
+velocities (read and written, 96 bytes) and contact flags (2 bytes) once however many
+steps it takes. ``steps = 1`` is a single step per call (memory-bound at large n);
+``steps = 100`` keeps each block of particles in the cache for 100 steps, as the
+``particle-rain`` case will. The numpy rows step the same scene through
+:class:`~reference_impl.particles.ParticleSystem` with the lecture's solver and the
+collision pass: the reference implementation the kernel must agree with.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from reference_impl.kernels import rain_step
+from reference_impl.model import ParticleModel, Plane
+from reference_impl.particles import ParticleSystem
+from reference_impl.passes import passes_for
+from reference_impl.solvers import LectureUpdate
+
+GRAVITY = np.array([0.0, -9.81, 0.0])
+DRAG, MASS, RADIUS, RESTITUTION, DT = 0.05, 0.01, 0.005, 0.6, 1e-3
+FLOOR_POINT, FLOOR_NORMAL = np.zeros(3), np.array([0.0, 1.0, 0.0])
+BYTES_PER_PARTICLE = 2 * (6 * 8) + 2
+
+
+@pytest.fixture(scope="module")
+def bandwidth() -> float:
+    """Memory bandwidth of this machine now, bytes/s: numpy copy of 256 MB, best of 5."""
+    src = np.random.default_rng(0).random(2**25)
+    dst = np.empty_like(src)
+    best = np.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        np.copyto(dst, src)
+        best = min(best, time.perf_counter() - start)
+    return 2 * src.nbytes / best
+
+
+def rain(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions (n, 3) above the floor, velocities (n, 3), contact flags (n,)."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.0, 1.0, (n, 3))
+    x[:, 1] = rng.uniform(RADIUS, 2.0, n)
+    v = rng.normal(0.0, 1.0, (n, 3))
+    return x, v, np.zeros(n, dtype=bool)
+
+
+def report(benchmark, capsys, label: str, n: int, steps: int, bandwidth: float) -> None:
+    median = benchmark.stats.stats.median
+    rate = n * steps / median
+    used = BYTES_PER_PARTICLE * n / median
+    benchmark.extra_info.update(particle_steps_per_s=rate, bandwidth_fraction=used / bandwidth,
+                                bandwidth_bytes_per_s=bandwidth)
+    with capsys.disabled():
+        print(f"\n{label:6s} n={n:>8d} steps/call={steps:>3d}: {rate:9.3g} particle-steps/s, "
+              f"{used / 1e9:6.2f} GB/s = {used / bandwidth:6.1%} of the {bandwidth / 1e9:.1f} GB/s "
+              f"copy bandwidth")
+
+
+@pytest.mark.parametrize("steps", [1, 100])
+@pytest.mark.parametrize("n", [1_000, 100_000, 1_000_000])
+def test_rain_kernel(benchmark, capsys, bandwidth, n, steps):
+    x0, v0, c0 = rain(n)
+    rain_step(x0[:10].copy(), v0[:10].copy(), c0[:10].copy(), DT, GRAVITY, DRAG, MASS, RADIUS,
+              FLOOR_POINT, FLOOR_NORMAL, RESTITUTION, 1)  # compile (or load) outside the timing
+
+    def setup():
+        return (x0.copy(), v0.copy(), c0.copy(), DT, GRAVITY, DRAG, MASS, RADIUS, FLOOR_POINT,
+                FLOOR_NORMAL, RESTITUTION, steps), {}
+
+    benchmark.group = f"rain, n = {n}"
+    rounds = max(3, min(50, int(2e8 // (n * steps))))
+    benchmark.pedantic(rain_step, setup=setup, rounds=rounds, warmup_rounds=1)
+    report(benchmark, capsys, "numba", n, steps, bandwidth)
+
+
+@pytest.mark.parametrize("n", [1_000, 100_000])
+def test_rain_numpy_reference(benchmark, capsys, bandwidth, n):
+    x0, v0, _ = rain(n)
+    model = ParticleModel(mass=np.full(n, MASS), x0=x0, v0=v0, radius=np.full(n, RADIUS),
+                          fixed=np.zeros(n, bool), gravity=GRAVITY, drag=DRAG,
+                          planes=[Plane(FLOOR_POINT, FLOOR_NORMAL, RESTITUTION)])
+    system = ParticleSystem(model, passes_for(model))
+    solver = LectureUpdate(system)
+
+    def step() -> None:
+        solver.step(DT)
+        system.between_steps(DT)
+
+    benchmark.group = f"rain, n = {n}"
+    benchmark.pedantic(step, rounds=max(5, min(200, int(2e7 // n))), warmup_rounds=1)
+    report(benchmark, capsys, "numpy", n, 1, bandwidth)
+    assert np.all(np.isfinite(system.get_state()))

@@ -1,0 +1,171 @@
+"""The published report as a user sees it: a page that parses, embeds its figures, names
+every case, and renders in a browser."""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import io
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+from truestep.cli import main
+from truestep.figures import FIGURES
+
+CHROMIUM = Path("/usr/bin/chromium")
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source",
+        "track", "wbr"}
+"""HTML elements that never have a closing tag."""
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("report")
+    code = main(["run", "--quick", "--cases", "circle-field", "--engines", "reference,scipy",
+                 "--out", str(out)])
+    assert code == 0
+    return out
+
+
+class PageParser(HTMLParser):
+    """Collects tag-balance errors, the attributes of every <img>, and external URLs."""
+
+    def __init__(self) -> None:
+        super().__init__(convert_charrefs=True)
+        self.stack: list[tuple[str, tuple[int, int]]] = []
+        self.errors: list[str] = []
+        self.images: list[dict[str, str | None]] = []
+        self.external: list[str] = []
+        self.texts: list[str] = []
+        self.doctype = False
+
+    def handle_data(self, data: str) -> None:
+        self.texts.append(data)
+
+    def handle_decl(self, decl: str) -> None:
+        self.doctype = self.doctype or decl.lower().startswith("doctype")
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        a = dict(attrs)
+        if tag == "img":
+            self.images.append(a)
+        for key in ("src", "href"):
+            value = a.get(key) or ""
+            if value.startswith(("http:", "https:", "//")) and tag in {"img", "script", "link"}:
+                self.external.append(f"<{tag} {key}={value}>")
+        if tag not in VOID:
+            self.stack.append((tag, self.getpos()))
+
+    def handle_startendtag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        if tag not in VOID:
+            self.errors.append(f"<{tag}/> at {self.getpos()} is not a void element")
+        if tag == "img":
+            self.images.append(dict(attrs))
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in VOID:
+            self.errors.append(f"</{tag}> at {self.getpos()} closes a void element")
+            return
+        if not self.stack or self.stack[-1][0] != tag:
+            opened = self.stack[-1] if self.stack else None
+            self.errors.append(f"</{tag}> at {self.getpos()} but the open element is {opened}")
+            return
+        self.stack.pop()
+
+
+@pytest.fixture(scope="module")
+def page(report) -> tuple[str, PageParser]:
+    text = (report / "index.html").read_text(encoding="utf-8")
+    parser = PageParser()
+    parser.feed(text)
+    parser.close()
+    return text, parser
+
+
+def _decode_png(data: bytes) -> np.ndarray:
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    with Image.open(io.BytesIO(data)) as img:
+        assert img.format == "PNG"
+        return np.asarray(img.convert("RGB"))
+
+
+def _distinct_colours(pixels: np.ndarray) -> int:
+    """Number of distinct RGB colours in an image (H, W, 3) of 0..255 values."""
+    rgb = pixels.reshape(-1, 3).astype(np.uint32)
+    return len(np.unique((rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]))
+
+
+def test_the_page_parses_with_balanced_tags(page):
+    _, parser = page
+    assert parser.doctype, "no <!DOCTYPE html>"
+    assert parser.errors == []
+    assert parser.stack == [], f"elements never closed: {parser.stack}"
+
+
+def test_the_page_opens_offline(page):
+    _, parser = page
+    assert parser.external == []
+
+
+def test_every_image_is_an_embedded_png_that_decodes(page):
+    _, parser = page
+    assert parser.images, "the report embeds no figure"
+    prefix = "data:image/png;base64,"
+    for img in parser.images:
+        src = img.get("src") or ""
+        assert src.startswith(prefix), f"not an embedded PNG: {src[:60]!r}"
+        assert img.get("alt"), "an image without alt text"
+        try:
+            data = base64.b64decode(src[len(prefix):], validate=True)
+        except binascii.Error as err:
+            pytest.fail(f"bad base64 in {img.get('alt')!r}: {err}")
+        pixels = _decode_png(data)
+        assert pixels.shape[0] > 100 and pixels.shape[1] > 100, img.get("alt")
+
+
+def test_every_case_in_the_results_appears_in_the_page(report, page):
+    text, _ = page
+    results = pd.read_csv(report / "results.csv")
+    cases = sorted(set(results["case"]))
+    assert cases, "results.csv has no rows"
+    for case in cases:
+        assert case in text, case
+    for engine in sorted(set(results["engine"])):
+        assert engine in text, engine
+
+
+def test_the_lecture_figures_are_embedded_with_their_captions(page):
+    _, parser = page
+    lecture = [img for img in parser.images
+               if (img.get("alt") or "").startswith("Reproduces the lecture slide")]
+    assert len(lecture) == len(FIGURES)
+    shown = " ".join(parser.texts)
+    for img in lecture:
+        # The caption is also printed under its image, so a reader sees which slide it is.
+        assert img["alt"] in shown, img["alt"][:80]
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(),
+                    reason=f"no headless browser: {CHROMIUM} is not installed (Debian package "
+                           "'chromium'); the HTML is still parsed and its images decoded above")
+def test_the_page_renders_in_headless_chromium(report, tmp_path):
+    shot = tmp_path / "page.png"
+    cmd = [
+        str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+        "--no-first-run", "--disable-background-networking", "--disable-component-update",
+        "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
+        "--window-size=1200,2000", (report / "index.html").resolve().as_uri(),
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+    assert shot.is_file(), f"no screenshot (exit {proc.returncode}): {proc.stderr[-2000:]}"
+    pixels = _decode_png(shot.read_bytes())
+    assert pixels.shape[:2] == (2000, 1200)
+    # A rendered page has text and figures: many distinct colours, not one flat colour.
+    assert _distinct_colours(pixels) > 50
+    assert pixels.astype(float).std() > 10.0
