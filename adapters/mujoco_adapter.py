@@ -179,6 +179,9 @@ POINT_RADIUS = 1e-6
 """Sphere radius (m) for a point particle (radius 0): small enough that the contact
 surface sits where the point's plane would be, 1 um being far below any penetration."""
 
+WALL_HALF_SIZE = 1e3
+"""Half the side (m) of the box that stands for a thin wall (a plane with thickness)."""
+
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 """Constant impedance d = 0.9999 (MuJoCo's maximum): the contact follows the reference
 spring-damper and only 1e-4 of the unconstrained acceleration leaks through."""
@@ -300,6 +303,13 @@ def mjcf(
 
     world: list[str] = []
     for k, plane in enumerate(model.planes):
+        if plane.thickness > 0:  # a thin wall: a box whose face is the plane
+            half = 0.5 * plane.thickness
+            world.append(
+                f'<geom name="plane{k}" type="box" pos="{_vec(plane.point - half * plane.normal)}" '
+                f'zaxis="{_vec(plane.normal)}" size="{WALL_HALF_SIZE} {WALL_HALF_SIZE} {half!r}"/>'
+            )
+            continue
         world.append(
             f'<geom name="plane{k}" type="plane" pos="{_vec(plane.point)}" '
             f'zaxis="{_vec(plane.normal)}" size="0 0 1"/>'
@@ -501,7 +511,7 @@ class MujocoAdapter:
     capabilities = frozenset(
         {
             "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",
-            "anchored-springs", "universal-gravitation", "force-fields", "planes", "friction",
+            "anchored-springs", "universal-gravitation", "force-fields", "planes", "thin-walls", "friction",
             "pinned-particles", "impulses",
         }
     )

@@ -170,6 +170,20 @@ from reference_impl.particles import total_energy
 
 POINT_RADIUS = 0.01
 """Radius (m) of the sphere standing in for a radius-0 particle; its planes move back as much."""
+WALL_HALF_SIZE = 1e3
+"""Half the side (m) of the box that stands for a thin wall (a plane with thickness)."""
+
+
+def _z_to(normal: np.ndarray) -> list[float]:
+    """The quaternion (x, y, z, w) turning the z axis onto the unit vector ``normal``."""
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, normal)
+    s, c = float(np.linalg.norm(axis)), float(z @ normal)
+    if s < 1e-12:
+        return [0.0, 0.0, 0.0, 1.0] if c > 0 else [1.0, 0.0, 0.0, 0.0]
+    half = 0.5 * np.arctan2(s, c)
+    return [*(np.sin(half) * axis / s).tolist(), float(np.cos(half))]
+
 
 SPHERES, PLANES, POINTS, POINT_PLANES = 1, 2, 4, 8
 """Collision filter groups: spheres hit planes, points hit the shifted planes, nothing else."""
@@ -282,10 +296,19 @@ def build_scene(model: ParticleModel, h: float, *, clean: bool) -> BulletScene:
                                                 (point, -POINT_RADIUS, POINT_PLANES, POINTS)):
                 if not np.any(present):
                     continue
-                shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=plane.normal.tolist(),
-                                               physicsClientId=cid)
                 at = plane.point + shift * plane.normal
-                body = p.createMultiBody(0.0, shape, -1, at.tolist(),
+                orientation = [0.0, 0.0, 0.0, 1.0]
+                if plane.thickness > 0:  # a thin wall: a box whose face is the plane
+                    half = 0.5 * plane.thickness
+                    shape = p.createCollisionShape(
+                        p.GEOM_BOX, halfExtents=[WALL_HALF_SIZE, WALL_HALF_SIZE, half],
+                        physicsClientId=cid)
+                    at = at - half * plane.normal
+                    orientation = _z_to(plane.normal)
+                else:
+                    shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=plane.normal.tolist(),
+                                                   physicsClientId=cid)
+                body = p.createMultiBody(0.0, shape, -1, at.tolist(), orientation,
                                          useMaximalCoordinates=maximal, physicsClientId=cid)
                 p.changeDynamics(body, -1, restitution=float(plane.restitution),
                                  lateralFriction=float(plane.friction), **extra,
@@ -333,7 +356,7 @@ class PybulletAdapter:
     capabilities = frozenset(
         {
             "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",
-            "anchored-springs", "universal-gravitation", "force-fields", "planes", "friction",
+            "anchored-springs", "universal-gravitation", "force-fields", "planes", "thin-walls", "friction",
             "pinned-particles", "impulses",
         }
     )

@@ -176,7 +176,8 @@ def build_scene(model: ParticleModel, *, collision_slop: float) -> PymunkScene:
         centre = model.x0[:, :2].mean(axis=0)
         for plane in model.planes:
             space.add(_plane_segment(space, plane.point[:2], plane.normal[:2], centre,
-                                     plane.restitution, plane.friction))
+                                     plane.restitution, plane.friction,
+                                     0.5 * plane.thickness or PLANE_THICKNESS))
 
     s = model.springs
     for i, j, k, c, r in zip(s.i, s.j, s.stiffness, s.damping, s.rest, strict=True):
@@ -208,18 +209,20 @@ def _plane_segment(
     centre: np.ndarray,
     restitution: float,
     friction: float,
+    half_thickness: float,
 ) -> pymunk.Segment:
     """A thick static segment whose surface is the plane ``(X - point) . normal = 0``.
 
     ``point``, ``normal`` (unit, in the x-y plane) and ``centre`` (where the scene is) are
-    shape (2,), m.
+    shape (2,), m; its core line lies ``half_thickness`` (m) behind the plane, which is
+    also its radius: ``PLANE_THICKNESS`` for a half-space, half the wall for a thin wall.
     """
     n = normal / np.linalg.norm(normal)
     foot = centre - float((centre - point) @ n) * n
-    core = foot - PLANE_THICKNESS * n
+    core = foot - half_thickness * n
     along = np.array([-n[1], n[0]]) * PLANE_HALF_LENGTH
     seg = pymunk.Segment(space.static_body, _planar(core - along), _planar(core + along),
-                         PLANE_THICKNESS)
+                         half_thickness)
     seg.elasticity, seg.friction = float(restitution), float(friction)
     return seg
 
@@ -236,7 +239,7 @@ class PymunkAdapter:
     capabilities = frozenset(
         {
             "point-masses", "2d", "uniform-gravity", "drag", "springs", "spring-damping",
-            "anchored-springs", "planes", "friction", "pinned-particles", "impulses",
+            "anchored-springs", "planes", "thin-walls", "friction", "pinned-particles", "impulses",
             "force-fields", "universal-gravitation",
         }
     )

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-from adapters.base import Trajectory
+from adapters.base import Trajectory, finite_until
 from cases.case import Case
 from reference_impl import odes
 from reference_impl.integrate import integrate
@@ -35,6 +37,57 @@ def trajectory_from_states(case: Case, t: np.ndarray, states: np.ndarray) -> tup
     return states[:, : 3 * n].reshape(-1, n, 3), states[:, 3 * n :].reshape(-1, n, 3)
 
 
+def fused_rain_applies(case: Case, method: str) -> bool:
+    """Whether the compiled kernel of :mod:`reference_impl.kernels` can run this case.
+
+    It fuses the lecture's update with gravity, drag and one frictionless half-space for
+    particles of one mass and radius; anything more and the general path runs.
+    """
+    m = case.model
+    return (
+        method == "lecture" and m is not None and len(m.planes) == 1
+        and m.planes[0].friction == 0 and m.planes[0].thickness == 0 and not len(m.springs) and not len(m.anchors)
+        and m.gravitation is None and not m.fields and not m.emitters and not m.impulses
+        and not np.any(m.fixed) and np.ptp(m.mass) == 0 and np.ptp(m.radius) == 0
+    )
+
+
+def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
+    """The lecture's update for independent particles through the compiled kernel.
+
+    The same formulas as :class:`ParticleSystem` with :class:`LectureUpdate` and the
+    plane-collision pass (tested equal to round-off), stepping from record to record in
+    one call, on all of numba's threads (the machine's cores; the engines step on one).
+    """
+    import numba
+
+    from reference_impl.integrate import record_indices
+    from reference_impl.kernels import rain_step
+
+    m = case.model
+    system = ParticleSystem(m, passes_for(m))
+    x, v = system.positions.copy(), system.velocities.copy()
+    contact = system.contact[0].copy()
+    plane = m.planes[0]
+    n_steps, step = case.steps_for(dt)
+    marks = record_indices(n_steps, case.max_records)
+    xs, vs = np.empty((len(marks), m.n, 3)), np.empty((len(marks), m.n, 3))
+    xs[0], vs[0] = x, v
+    args = (step, m.gravity, m.drag, float(m.mass[0]), float(m.radius[0]), plane.point,
+            plane.normal, plane.restitution)
+    start = time.perf_counter()
+    for k in range(1, len(marks)):
+        rain_step(x, v, contact, *args, int(marks[k] - marks[k - 1]))
+        xs[k], vs[k] = x, v
+    wall = time.perf_counter() - start
+    t = marks * step
+    status, t_fail = finite_until(xs, t)
+    energy = np.array([total_energy(m, a, b) for a, b in zip(xs, vs, strict=True)])
+    return Trajectory(t=t, x=xs, v=vs, energy=energy, status=status, t_fail=t_fail,
+                      nfev=n_steps, steps=n_steps, wall_s=wall,
+                      message=f"fused compiled kernel, {numba.get_num_threads()} threads")
+
+
 class ReferenceAdapter:
     """Every solver of :mod:`reference_impl.solvers` on every case it can express."""
 
@@ -45,7 +98,7 @@ class ReferenceAdapter:
         {
             "ode", "second-order", "point-masses", "2d", "3d", "uniform-gravity", "drag",
             "springs", "spring-damping", "anchored-springs", "universal-gravitation",
-            "force-fields", "planes", "friction", "emitters", "pinned-particles", "impulses",
+            "force-fields", "planes", "thin-walls", "friction", "emitters", "pinned-particles", "impulses",
         }
     )
 
@@ -56,6 +109,8 @@ class ReferenceAdapter:
         return missing
 
     def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+        if fused_rain_applies(case, method):
+            return simulate_fused_rain(case, dt)
         system = build_system(case)
         cls = get_solver(method)
         if cls.needs_second_order and not isinstance(system, SecondOrderSystem):

@@ -51,7 +51,8 @@ class StabilitySpec:
 
     horizon : s;  dt_lo, dt_hi : bracket, s;  max_runs : simulations per search;
     rel_tol : relative width at which bisection stops;
-    quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses).
+    quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses);
+    min_steps : every run of the search takes at least this many steps.
     """
 
     horizon: float
@@ -60,6 +61,7 @@ class StabilitySpec:
     max_runs: int = 30
     rel_tol: float = 1e-3
     quick: bool = False
+    min_steps: int = 5000  # truestep.stability.MIN_STEPS
 
 
 @dataclass
@@ -74,6 +76,7 @@ class Case:
     error_norm : ``final`` (positions at the end) or ``max`` (worst over the run)
     properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
     skip : ``(engine, method, reason)`` pairs that are not run (rows say why)
+    in_quick : whether ``--quick`` runs this case at all (long cases say no)
     """
 
     name: str
@@ -101,6 +104,7 @@ class Case:
     hard: str | None = None
     tags: list[str] = field(default_factory=list)
     timeout_s: float = 120.0
+    in_quick: bool = True
 
     @property
     def features(self) -> set[str]:

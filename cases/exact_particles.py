@@ -235,3 +235,43 @@ def sliding_friction(case: Case, t: np.ndarray) -> Exact:
     x = (m.x0[0] + s[:, None] * along)[:, None, :]
     v = (speed[:, None] * along)[:, None, :]
     return Exact(t, x, v, _energy(m, x, v))
+
+
+@exact_solution("bouncing-rain")
+def bouncing_rain(case: Case, t: np.ndarray) -> Exact:
+    """Many independent balls above one frictionless plane, each a :func:`bouncing_ball`.
+
+    Every particle starts above plane 0 with gravity along the plane's inward normal and no
+    other force; each follows its own chain of parabolas (:func:`bounce_schedule`).
+    """
+    m = case.model
+    _require(len(m.planes) == 1 and m.drag == 0 and not len(m.springs) and not len(m.anchors)
+             and m.gravitation is None and not m.fields and not m.impulses, case,
+             "independent particles, one plane, gravity")
+    plane = m.planes[0]
+    n = plane.normal
+    g = float(-(m.gravity @ n))
+    _require(g > 0 and np.allclose(m.gravity, -g * n, rtol=0, atol=1e-12 * g),
+             case, "gravity along the plane's inward normal")
+    e = plane.restitution
+    x = np.empty((len(t), m.n, 3))
+    v = np.empty((len(t), m.n, 3))
+    t_max = float(np.max(t, initial=0.0))
+    for i in range(m.n):
+        u0 = float((m.x0[i] - plane.point) @ n - m.radius[i])
+        w0 = float(m.v0[i] @ n)
+        _require(u0 >= 0, case, "every particle to start on or above the plane")
+        times, launches = bounce_schedule(u0, w0, g, e, t_max)
+        k = np.searchsorted(times, t, side="right")
+        since = t - np.where(k > 0, times[np.maximum(k - 1, 0)], 0.0)
+        start_u = np.where(k > 0, 0.0, u0)
+        start_w = np.where(k > 0, launches[np.maximum(k - 1, 0)], w0)
+        u = start_u + start_w * since - 0.5 * g * since**2
+        w = start_w - g * since
+        if e < 1:
+            rest = t >= times[0] + 2 * e * np.sqrt(w0**2 + 2 * g * u0) / (g * (1 - e))
+            u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
+        vt = m.v0[i] - w0 * n
+        x[:, i] = m.x0[i] + vt * t[:, None] + (u - u0)[:, None] * n
+        v[:, i] = vt + w[:, None] * n
+    return Exact(t, x, v, None)

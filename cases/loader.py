@@ -59,6 +59,7 @@ def load_case(path: str | Path) -> Case:
             raise run.error(where, f"a step of {max(values):g} s exceeds the duration {duration:g} s")
     max_records = run.integer("max_records", 2000, minimum=2)
     timeout_s = run.number("timeout", 120.0, positive=True)
+    in_quick = run.boolean("quick", True)
     skip = []
     for s in run.subs("skip"):
         skip.append((s.string("engine"), s.string("method", "*"), s.string("reason")))
@@ -103,6 +104,7 @@ def load_case(path: str | Path) -> Case:
             max_runs=s.integer("max_runs", 30, minimum=3),
             rel_tol=s.number("rel_tol", 1e-3, positive=True),
             quick=s.boolean("quick", False),
+            min_steps=s.integer("min_steps", 5000, minimum=10),
         )
         if stability.dt_lo >= stability.dt_hi:
             raise s.error("dt_hi", f"must exceed dt_lo ({stability.dt_lo:g})")
@@ -134,6 +136,7 @@ def load_case(path: str | Path) -> Case:
         hard=f.string("hard", None),
         tags=f.strings("tags", []),
         timeout_s=timeout_s,
+        in_quick=in_quick,
     )
     f.done()
     return case

@@ -29,6 +29,7 @@ def read_scene(f: Fields) -> ParticleModel:
     if dimension not in (2, 3):
         raise f.error("dimension", f"must be 2 or 3, got {dimension}")
     parts = [_read_particles(p) for p in f.subs("particles")]
+    parts += [_read_block(b, dimension) for b in f.subs("blocks")]
     parts += [read_mesh(m) for m in f.subs("meshes")]
     emitters = [read_emitter(e) for e in f.subs("emitters")]
     for e in emitters:
@@ -96,6 +97,23 @@ def _read_particles(f: Fields) -> MeshPart:
     return MeshPart(mass, x0, v0, radius, fixed, Springs.empty())
 
 
+def _read_block(f: Fields, dimension: int) -> MeshPart:
+    """``count`` particles at seeded uniform random positions in the box ``[low, high]``."""
+    count = f.integer("count", minimum=1)
+    low, high = f.vec3("low"), f.vec3("high")
+    if np.any(high < low):
+        raise f.error("high", "every component must be at least the one of low")
+    if dimension == 2 and (low[2] != 0 or high[2] != 0):
+        raise f.error("low", "a 2-D scene keeps z = 0: low[2] and high[2] must be 0")
+    rng = np.random.default_rng(f.integer("seed", 0, minimum=0))
+    x0 = low + (high - low) * rng.random((count, 3))
+    v0 = np.tile(f.vec3("velocity", [0.0, 0.0, 0.0]), (count, 1))
+    mass = np.full(count, f.number("mass", positive=True))
+    radius = np.full(count, f.number("radius", 0.0, nonnegative=True))
+    f.done()
+    return MeshPart(mass, x0, v0, radius, np.zeros(count, bool), Springs.empty())
+
+
 def _per_particle(f: Fields, name: str, n: int, *, default=None, positive=False) -> np.ndarray:
     raw = f.raw(name, default) if default is not None else f.raw(name)
     if isinstance(raw, list):
@@ -161,6 +179,7 @@ def _read_plane(f: Fields) -> Plane:
         normal=normal / norm,
         restitution=f.number("restitution", 1.0, nonnegative=True, at_most=1.0),
         friction=f.number("friction", 0.0, nonnegative=True),
+        thickness=f.number("thickness", 0.0, nonnegative=True),
     )
     f.done()
     return plane

@@ -35,6 +35,10 @@ distance from the plane is ``d = (X - P) . N - r``):
    one step (``|V_T| <= eps_v + mu |F_N| dt / m``) and static friction can hold the
    particle (``|F_T| <= mu |F_N|``), the pass sets ``V_T = 0`` (it stops within the step).
 
+A plane of ``thickness`` w > 0 is a wall, not a half-space: a particle found more than
+``w + 2 r`` behind it has crossed the whole wall within one step and is left alone
+(tunnelling, as in any engine that tests for overlap between steps).
+
 A box is six planes. Planes are treated one after the other within a pass. The applied
 force is evaluated once per pass, at the end of the step, and only when some particle is
 within ``eps`` of a plane.
@@ -170,7 +174,11 @@ class PlaneCollisions:
         system.contact[:] = False
         f = None
         for k, plane in enumerate(self.planes):
-            idx = np.flatnonzero(movable & (signed_distances(x, self.radius, plane) < self.eps_distance))
+            d = signed_distances(x, self.radius, plane)
+            inside = d < self.eps_distance
+            if plane.thickness > 0:
+                inside &= d > -(plane.thickness + 2 * self.radius)
+            idx = np.flatnonzero(movable & inside)
             if not len(idx):
                 continue
             if f is None:  # the applied force at the end of the step, once per pass

@@ -172,7 +172,13 @@ class Emitter:
         self(system, 0.0)
 
     def __call__(self, system: ParticleSystem, dt: float) -> None:
-        """Run the simulation stage of every frame that began by the system's time."""
+        """Run the simulation stage of every frame that began by the system's time.
+
+        With fixed steps a frame begins at the end of the step that reaches its start time
+        (exactly, when ``frame_dt`` is a multiple of the step). A step that spans several
+        frame starts (an adaptive solver's long step) runs their stages one after another
+        at the end of the step.
+        """
         t = system.get_time()
         slack = 1e-9 * self.spec.frame_dt
         while t >= self._next_frame_t - slack:

@@ -72,12 +72,16 @@ class Plane:
     point : ndarray, shape (3,), m;  normal : ndarray, shape (3,), unit length
     restitution : float   k_r in ``V' = V_T - k_r V_N``
     friction : float      Coulomb coefficient mu (0: the lecture's frictionless wall)
+    thickness : float     m; 0: a half-space (nothing gets through); > 0: a wall of this
+                          thickness behind the plane, which a particle that crosses it
+                          within one step passes through (tunnelling)
     """
 
     point: np.ndarray
     normal: np.ndarray
     restitution: float = 1.0
     friction: float = 0.0
+    thickness: float = 0.0
 
 
 @dataclass
@@ -215,6 +219,8 @@ class ParticleModel:
             f.add("planes")
             if any(p.friction for p in self.planes):
                 f.add("friction")
+            if any(p.thickness for p in self.planes):
+                f.add("thin-walls")
         if self.emitters:
             f.add("emitters")
         if np.any(self.fixed):

@@ -51,8 +51,7 @@ class ParticleSystem(SecondOrderSystem):
     """
 
     def __init__(self, model: ParticleModel, passes: list[Pass] | None = None) -> None:
-        v0 = np.where(model.fixed[:, None], 0.0, model.v0)  # pinned particles never move
-        super().__init__(np.concatenate([model.x0.ravel(), v0.ravel()]))
+        super().__init__(np.concatenate([model.x0.ravel(), model.v0.ravel()]))
         self.model = model
         self.n = model.n
         self.passes = list(passes or [])
@@ -62,8 +61,8 @@ class ParticleSystem(SecondOrderSystem):
         self.f = np.zeros((self.n, 3))
         self._inv_mass = np.where(model.fixed, 0.0, 1.0 / model.mass)
         self._has_gravity = bool(np.any(model.gravity))
-        self._spring_scatter = forces.incidence(model.springs.i, model.springs.j, self.n)
-        self._anchor_scatter = forces.incidence(model.anchors.i, None, self.n)
+        self._spring_incidence = forces.incidence(model.springs.i, model.springs.j, self.n)
+        self._anchor_incidence = forces.incidence(model.anchors.i, None, self.n)
         for p in self.passes:
             start = getattr(p, "start", None)
             if start is not None:
@@ -93,8 +92,8 @@ class ParticleSystem(SecondOrderSystem):
             forces.add_gravity(f, m.mass, m.gravity)
         if m.drag:
             forces.add_drag(f, v, m.drag)
-        forces.add_springs(f, x, v, m.springs, self._spring_scatter)
-        forces.add_anchors(f, x, v, m.anchors, self._anchor_scatter)
+        forces.add_springs(f, x, v, m.springs, self._spring_incidence)
+        forces.add_anchors(f, x, v, m.anchors, self._anchor_incidence)
         if m.gravitation is not None:
             forces.add_gravitation(f, x, m.mass, m.gravitation)
         if m.fields:
@@ -108,7 +107,7 @@ class ParticleSystem(SecondOrderSystem):
         x = q.reshape(self.n, 3)
         vel = v.reshape(self.n, 3)
         f = self.accumulate_forces(x, vel, t)
-        if self.contact.any():
+        if self.model.planes and self.contact.any():
             collisions.add_contact_forces(f, vel, self.contact, self.model.planes)
         a = f * self._inv_mass[:, None]
         if self.model.emitters:

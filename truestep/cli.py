@@ -69,6 +69,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from truestep.runner import run_matrix
 
     cases = _load(args.cases)
+    if args.quick:
+        cases = [c for c in cases if c.in_quick] or cases
     engines = _engines(args.engines)
     out = Path(args.out)
     start = time.perf_counter()

@@ -275,3 +275,21 @@ def strand_count(case: Case, traj: Trajectory) -> float:
     if traj.alive is None:
         return float("nan")
     return float(len(collect_strands(traj.t, traj.x, traj.v, traj.alive)))
+
+
+@register
+def tunnelled(case: Case, traj: Trajectory) -> float:
+    """How many particles end the run behind a thin wall they started in front of.
+
+    A particle is behind a wall when its centre lies beyond the wall's back face,
+    ``(X - P) . N < -thickness``; only planes with a thickness count.
+    """
+    m = case.model
+    count = 0
+    for plane in m.planes:
+        if plane.thickness <= 0:
+            continue
+        start = (traj.x[0] - plane.point) @ plane.normal
+        end = (traj.x[-1] - plane.point) @ plane.normal
+        count += int(np.sum((start > 0) & (end < -plane.thickness)))
+    return float(count)

@@ -29,8 +29,9 @@ Bounded oscillations sampled over many periods repeat their peaks to far better 
 exponential growth gives a ratio of at least 2."""
 ROUNDOFF = 1e-9
 """Energy rises below this fraction of the energy scale are round-off, not growth."""
-MIN_STEPS = 5000
-"""Every search run takes at least this many steps: slow growth near a limit needs them."""
+MIN_STEPS = 5000  # the default of StabilitySpec.min_steps
+"""The default least number of steps of a search run (``[stability] min_steps``): slow
+growth near a limit needs them."""
 QUICK_MIN_STEPS = 2000
 """Steps per run in ``--quick`` searches, which stop at 1% of the limit."""
 
@@ -115,7 +116,7 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
     :data:`QUICK_MIN_STEPS` steps.
     """
     spec = case.stability
-    min_steps = QUICK_MIN_STEPS if quick else MIN_STEPS
+    min_steps = min(QUICK_MIN_STEPS, spec.min_steps) if quick else spec.min_steps
     rel_tol = max(spec.rel_tol, 1e-2) if quick else spec.rel_tol
 
     def stable_at(dt: float) -> bool:
