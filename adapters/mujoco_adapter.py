@@ -153,6 +153,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -503,7 +504,7 @@ class MujocoAdapter:
     name = "mujoco"
     methods = tuple(INTEGRATORS)
     adaptive_methods: tuple[str, ...] = ()
-    schemes = {"Euler": "symplectic-euler", "implicit": "symplectic-euler",
+    schemes: ClassVar[dict[str, str]] = {"Euler": "symplectic-euler", "implicit": "symplectic-euler",
                "implicitfast": "symplectic-euler", "RK4": "rk4"}
     """The reference scheme each integrator equals on an undamped spring scene (used for
     exact stability limits): Euler updates velocity then position; the implicit variants

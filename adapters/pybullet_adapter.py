@@ -157,6 +157,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import pybullet as p
@@ -350,7 +351,7 @@ class PybulletAdapter:
     name = "pybullet"
     methods = ("default", "clean")
     adaptive_methods = ()
-    schemes = {"default": "symplectic-euler", "clean": "symplectic-euler"}
+    schemes: ClassVar[dict[str, str]] = {"default": "symplectic-euler", "clean": "symplectic-euler"}
     """Bullet steps velocity then position (semi-implicit Euler), the reference's
     symplectic Euler, with forces held at the start of the step."""
     capabilities = frozenset(

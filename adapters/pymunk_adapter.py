@@ -95,7 +95,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pymunk
@@ -233,7 +233,7 @@ class PymunkAdapter:
     name = "pymunk"
     methods = ("default",)
     adaptive_methods = ()
-    schemes = {"default": "symplectic-euler"}
+    schemes: ClassVar[dict[str, str]] = {"default": "symplectic-euler"}
     """Position first, then velocity from forces at the new position: the adjoint of the
     reference's symplectic Euler, with the same stability region (``omega dt < 2``)."""
     capabilities = frozenset(
