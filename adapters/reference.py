@@ -46,7 +46,8 @@ def fused_rain_applies(case: Case, method: str) -> bool:
     m = case.model
     return (
         method == "lecture" and m is not None and len(m.planes) == 1
-        and m.planes[0].friction == 0 and m.planes[0].thickness == 0 and not len(m.springs) and not len(m.anchors)
+        and m.planes[0].friction == 0 and m.planes[0].thickness == 0
+        and not len(m.springs) and not len(m.anchors)
         and m.gravitation is None and not m.fields and not m.emitters and not m.impulses
         and not np.any(m.fixed) and np.ptp(m.mass) == 0 and np.ptp(m.radius) == 0
     )
