@@ -150,11 +150,11 @@ def _read_gates(f: Fields) -> list[Gate]:
         method = g.string("method")
         dt = g.number("dt", None, positive=True)
         params: dict[str, object] = {}
-        for key in list(g.table):
-            if key in GATE_NUMBERS:
-                params[key] = g.number(key)
         if kind == "status":
             params["expect"] = g.string("expect", choices={"ok", "unstable"})
+        for key in list(g.table):
+            if key in GATE_NUMBERS and key not in params:
+                params[key] = g.number(key)
         if kind == "property":
             params["name"] = g.string("name")
         if kind == "speedup":
