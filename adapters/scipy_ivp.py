@@ -41,6 +41,7 @@ class ScipyAdapter:
         jac = None
         if method == "Radau" and system.jacobian(x0, 0.0) is not None:
             jac = system.jacobian
+        options = {} if jac is None else {"jac": lambda t, y: jac(y, t)}
         start = time.perf_counter()
         sol = solve_ivp(
             lambda t, y: system.derivative(y, t),
@@ -49,7 +50,7 @@ class ScipyAdapter:
             method=method,
             rtol=dt,
             atol=dt,
-            jac=None if jac is None else (lambda t, y: jac(y, t)),
+            **options,
         )
         wall = time.perf_counter() - start
         t, states = sol.t, sol.y.T

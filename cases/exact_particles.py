@@ -185,18 +185,19 @@ def _plane_motion(case: Case) -> tuple[ParticleModel, np.ndarray, float, float, 
     return m, n, g, u0, float(m.v0[0] @ n)
 
 
-@exact_solution("bouncing-ball")
-def bouncing_ball(case: Case, t: np.ndarray) -> Exact:
-    """A ball of radius r bouncing on a frictionless plane with restitution ``e``.
+def bounce_path(
+    x0: np.ndarray, v0: np.ndarray, radius: float, plane, g: float, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities (T, 3) of one ball bouncing on a frictionless plane.
 
     The height of its contact point is a chain of parabolas between the bounce times of
     :func:`bounce_schedule`; after the last bounce (``e < 1``) the ball rests on the plane
-    (its centre at height r). Tangential motion is uniform. No energy curve is given:
-    it drops at every bounce, and a run that finds a bounce a step late would be charged
-    the whole drop at that instant.
+    (its centre at height r). Tangential motion is uniform. ``g`` (m/s^2) is gravity
+    along the plane's inward normal.
     """
-    m, n, g, u0, w0 = _plane_motion(case)
-    e = m.planes[0].restitution
+    n, e = plane.normal, plane.restitution
+    u0 = float((x0 - plane.point) @ n - radius)
+    w0 = float(v0 @ n)
     times, launches = bounce_schedule(u0, w0, g, e, float(np.max(t, initial=0.0)))
     k = np.searchsorted(times, t, side="right")  # bounces so far
     since = t - np.where(k > 0, times[np.maximum(k - 1, 0)], 0.0)
@@ -207,10 +208,19 @@ def bouncing_ball(case: Case, t: np.ndarray) -> Exact:
     if e < 1:
         rest = t >= times[0] + 2 * e * np.sqrt(w0**2 + 2 * g * u0) / (g * (1 - e))
         u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
-    vt = m.v0[0] - w0 * n
-    x = (m.x0[0] + vt * t[:, None] + (u - u0)[:, None] * n)[:, None, :]
-    v = (vt + w[:, None] * n)[:, None, :]
-    return Exact(t, x, v, None)
+    vt = v0 - w0 * n
+    return x0 + vt * t[:, None] + (u - u0)[:, None] * n, vt + w[:, None] * n
+
+
+@exact_solution("bouncing-ball")
+def bouncing_ball(case: Case, t: np.ndarray) -> Exact:
+    """A ball of radius r bouncing on a frictionless plane with restitution ``e``
+    (:func:`bounce_path`). No energy curve is given: it drops at every bounce, and a run
+    that finds a bounce a step late would be charged the whole drop at that instant.
+    """
+    m, _, g, _, _ = _plane_motion(case)
+    x, v = bounce_path(m.x0[0], m.v0[0], float(m.radius[0]), m.planes[0], g, t)
+    return Exact(t, x[:, None, :], v[:, None, :], None)
 
 
 @exact_solution("sliding-friction")
@@ -253,25 +263,10 @@ def bouncing_rain(case: Case, t: np.ndarray) -> Exact:
     g = float(-(m.gravity @ n))
     _require(g > 0 and np.allclose(m.gravity, -g * n, rtol=0, atol=1e-12 * g),
              case, "gravity along the plane's inward normal")
-    e = plane.restitution
     x = np.empty((len(t), m.n, 3))
     v = np.empty((len(t), m.n, 3))
-    t_max = float(np.max(t, initial=0.0))
     for i in range(m.n):
-        u0 = float((m.x0[i] - plane.point) @ n - m.radius[i])
-        w0 = float(m.v0[i] @ n)
-        _require(u0 >= 0, case, "every particle to start on or above the plane")
-        times, launches = bounce_schedule(u0, w0, g, e, t_max)
-        k = np.searchsorted(times, t, side="right")
-        since = t - np.where(k > 0, times[np.maximum(k - 1, 0)], 0.0)
-        start_u = np.where(k > 0, 0.0, u0)
-        start_w = np.where(k > 0, launches[np.maximum(k - 1, 0)], w0)
-        u = start_u + start_w * since - 0.5 * g * since**2
-        w = start_w - g * since
-        if e < 1:
-            rest = t >= times[0] + 2 * e * np.sqrt(w0**2 + 2 * g * u0) / (g * (1 - e))
-            u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
-        vt = m.v0[i] - w0 * n
-        x[:, i] = m.x0[i] + vt * t[:, None] + (u - u0)[:, None] * n
-        v[:, i] = vt + w[:, None] * n
+        _require(float((m.x0[i] - plane.point) @ n - m.radius[i]) >= 0, case,
+                 "every particle to start on or above the plane")
+        x[:, i], v[:, i] = bounce_path(m.x0[i], m.v0[i], float(m.radius[i]), plane, g, t)
     return Exact(t, x, v, None)
