@@ -60,16 +60,24 @@ outside the timed region.
 
 Stepping and read-back
 ----------------------
-``round(duration / dt)`` steps; between the recorded steps
-(:func:`reference_impl.integrate.record_indices`) MuJoCo steps in C with
-``mj_step(m, d, nstep=k)``, at most 64 steps per call so that a diverged state stops the
-run early (``mujoco.rollout`` was as fast for one trajectory, 0.39 s per 1e5 steps
-either way, but stores every step's state). With ``stage_forces=False`` and applied
-forces the loop is per step in Python. Positions and velocities are ``qpos``/``qvel``
-at the records; pinned particles are their sites' ``site_xpos``. ``autoreset`` is off:
-a bad-state warning (qpos, qvel or qacc NaN or beyond 1e10) ends the run as
-``unstable`` at the time of the check that saw it, as does
-:func:`adapters.base.finite_until` on the recorded positions.
+``round(duration / dt)`` steps, recorded at the steps of
+:func:`reference_impl.integrate.record_indices`. Without a Python force inside the
+step (no gravitation, fields or impulses), MuJoCo steps in C with ``mujoco.rollout``
+(one call takes up to 64 steps, from one record to a later one, and stores every
+step's state, from which the records are picked): with a record at every step it took
+0.56-0.63 (``Euler``) and 0.78-0.86 (``RK4``) of the time of a Python loop of ``mj_step``
+calls on the one-ball ``bouncing-ball``, and the time of ``mj_step(m, d, nstep=k)``
+(within 2 %) on the 1000 particles of ``particle-rain``
+(``benchmarks/test_adapter_overhead.py``). Longer gaps between records, and scenes with
+applied forces (the passive callback), step with ``mj_step(m, d, nstep=k)``, at most 64
+steps per call so that a diverged state stops the run early; with
+``stage_forces=False`` and applied forces the loop is per step in Python. Positions
+and velocities are ``qpos``/``qvel`` at the records; pinned particles are their sites'
+``site_xpos``. ``autoreset`` is off: a bad-state warning (qpos, qvel or qacc NaN or
+beyond 1e10) ends the run as ``unstable`` at the time of the check that saw it, as does
+:func:`adapters.base.finite_until` on the recorded positions. (Rollout stops at any
+warning; the stretch it was on is then replayed with ``mj_step``, so the run ends at
+the same step either way.)
 
 Integrators and damping
 -----------------------
@@ -157,6 +165,7 @@ from typing import ClassVar
 
 import mujoco
 import numpy as np
+from mujoco import rollout
 
 from adapters.base import Trajectory, finite_until
 from cases.case import Case
@@ -197,6 +206,8 @@ _BAD_STATE = (
 )
 _CHECK_EVERY = 64
 """Steps between checks for a diverged state when no record falls sooner."""
+ROLLOUT_STEPS = 64
+"""The most steps one ``mujoco.rollout`` call takes (it stores the state of every step)."""
 
 
 def restitution_of(zeta: float) -> float:
@@ -577,34 +588,80 @@ def _step(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, bool]:
     """Step to the end, reading the state back at the step indices ``marks``.
 
-    ``held``: set ``qfrc_applied`` from the state before every step (a Python loop);
-    otherwise MuJoCo takes the steps between records in one call. Stops at the first
-    check that finds MuJoCo's bad-state warning. Returns ``t`` (T,), ``x`` and ``v``
-    (T, n, 3), the steps taken, the wall time (s) and whether it stopped on a warning.
+    With no Python force inside a step (``scene.applied`` is None) the steps go to
+    :func:`mujoco.rollout.rollout` in stretches of at most :data:`ROLLOUT_STEPS` steps
+    from one record to a later one, the records picked out of its per-step states;
+    a gap between records longer than that goes to ``mj_step(m, d, nstep=k)``. Rollout
+    stops at any MuJoCo warning; then the stretch is replayed from its first record
+    (state and warm start restored, warning counters cleared: the state and counters
+    the ``mj_step`` path would have there) by ``mj_step``, which takes the rest of the
+    run, so a run that warns ends exactly as it would without rollout.
+    ``mj_step`` goes from record to record in chunks of at most ``_CHECK_EVERY`` steps,
+    one step at a time with ``held`` (``qfrc_applied`` set from the state before every
+    step, a Python loop). Stops at the first check that finds MuJoCo's bad-state
+    warning, recording the state there. The state at a record is MuJoCo's own
+    ``mjSTATE_FULLPHYSICS`` vector (time, qpos, qvel, ...), kept as is in the timed
+    region and turned into particle arrays after it.
+
+    Returns ``t`` (T,), ``x`` and ``v`` (T, n, 3), the steps taken, the wall time (s)
+    of the stepping and reading back, and whether it stopped on a warning.
     """
-    m, d, n = scene.model, scene.data, case.model.n
-    ts, xs, vs = [d.time], [scene.positions(n)], [scene.velocities(n)]
-    step = 0
-    bad = False
-    applied = scene.applied
+    m, d, lay, applied = scene.model, scene.data, scene.layout, scene.applied
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(m, spec)
+    states = np.empty((len(marks), nstate))
+    mujoco.mj_getState(m, d, states[0], spec)
+    steps_at = marks.tolist()
+    # reach[i]: the last record one rollout from record i can get to (i: the gap is too long)
+    reach = (np.searchsorted(marks, marks + ROLLOUT_STEPS, side="right") - 1).tolist()
+    warnings = d.warning.number  # a view: MuJoCo's warning counters
+    roll = applied is None and not warnings.any()
+    roller = rollout.Rollout(nthread=0)
+    out = np.empty(min(ROLLOUT_STEPS, steps_at[-1]) * nstate)
+    warmstart = np.empty((1, m.nv))
+    bad_state = np.array(_BAD_STATE, dtype=int)
+    get_state, mj_step = mujoco.mj_getState, mujoco.mj_step
+    i, last, step, bad = 0, len(marks) - 1, 0, False
     start = time.perf_counter()
-    for target in marks[1:]:
+    while i < last:
+        j = reach[i]
+        if roll and j > i:
+            span = steps_at[j] - step
+            warmstart[0] = d.qacc_warmstart
+            roller.rollout([m], [d], states[i:i + 1], nstep=span, initial_warmstart=warmstart,
+                           state=out[: span * nstate], skip_checks=True)
+            if warnings.any():
+                mujoco.mj_setState(m, d, states[i], spec)
+                d.qacc_warmstart[:] = warmstart[0]
+                warnings[:] = 0
+                roll = False
+                continue
+            states[i + 1:j + 1] = out.reshape(-1, nstate)[marks[i + 1:j + 1] - step - 1]
+            i, step = j, steps_at[j]
+            continue
+        target = steps_at[i + 1]
         while step < target:
-            chunk = int(min(target - step, _CHECK_EVERY))
+            chunk = min(target - step, _CHECK_EVERY)
             if held:
                 for _ in range(chunk):
                     d.qfrc_applied[:] = applied(d.qpos, d.qvel, d.time)
-                    mujoco.mj_step(m, d)
+                    mj_step(m, d)
             else:
-                mujoco.mj_step(m, d, nstep=chunk)
+                mj_step(m, d, chunk)
             step += chunk
-            if unstable_warnings(d):
+            if warnings[bad_state].any():
                 bad = True
                 break
-        ts.append(d.time)
-        xs.append(scene.positions(n))
-        vs.append(scene.velocities(n))
+        i += 1
+        get_state(m, d, states[i], spec)
         if bad:
             break
     wall = time.perf_counter() - start
-    return np.array(ts), np.array(xs), np.array(vs), step, wall, bad
+
+    states = states[: i + 1]
+    n, dim = case.model.n, lay.dim
+    x, v = np.zeros((len(states), n, 3)), np.zeros((len(states), n, 3))
+    x[:, lay.free, :dim] = states[:, 1:1 + m.nq].reshape(len(states), -1, dim)
+    x[:, lay.pinned] = scene.pinned_x
+    v[:, lay.free, :dim] = states[:, 1 + m.nq:1 + m.nq + m.nv].reshape(len(states), -1, dim)
+    return states[:, 0].copy(), x, v, step, wall, bad

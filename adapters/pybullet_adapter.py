@@ -381,53 +381,71 @@ class PybulletAdapter:
             p.disconnect(scene.client)
 
     def _run(self, case: Case, scene: BulletScene, n_steps: int, h: float) -> Trajectory:
-        """Step the built scene ``n_steps`` times of ``h`` seconds, recording as the case asks."""
+        """Step the built scene ``n_steps`` times of ``h`` seconds, recording as the case asks.
+
+        The timed loop keeps the recorded reads as pybullet returns them (lists of tuples)
+        and makes them arrays only where the forces or a blow-up check need them; the
+        recorded states are assembled after the loop (per-step overhead is measured in
+        ``benchmarks/test_adapter_overhead.py``).
+        """
         model, cid = case.model, scene.client
         marks = np.zeros(n_steps + 1, dtype=bool)
         marks[record_indices(n_steps, case.max_records)] = True
+        record = marks.tolist()
         get_x, get_v = p.getBasePositionAndOrientation, p.getBaseVelocity
         apply, step, world = p.applyExternalForce, p.stepSimulation, p.WORLD_FRAME
 
         x, v, f = model.x0.copy(), model.v0.copy(), np.zeros((model.n, 3))
-        drift = scene.drifting
+        drift, movable = scene.drifting, scene.movable
         x0_drift, v0_drift = model.x0[drift], model.v0[drift]
-        moving = scene.bodies[scene.movable].tolist()
+        moving = scene.bodies[movable].tolist()
         bx, bv = scene.bodies[scene.read_x].tolist(), scene.bodies[scene.read_v].tolist()
         forced, bf = scene.forced, scene.bodies[scene.forced].tolist()
-        xs, vs, ts = [x.copy()], [v.copy()], [0.0]
-        fresh, steps, checked = True, 0, 0
+        forcing, drifting = len(forced) > 0, len(drift) > 0
+        recorded, read_x, read_v = [0], [], []
+        fresh, checked, k = True, 0, 0
 
         start = time.perf_counter()
         for k in range(1, n_steps + 1):
-            if len(forced):
+            if forcing:
                 if not fresh:
                     if bx:
                         x[scene.read_x] = [get_x(b, cid)[0] for b in bx]
                     if bv:
                         v[scene.read_v] = [get_v(b, cid)[0] for b in bv]
-                if len(drift):
+                if drifting:
                     x[drift] = x0_drift + ((k - 1) * h) * v0_drift
                 external_forces(model, f, x, v, (k - 1) * h)
                 for b, fi, xi in zip(bf, f[forced].tolist(), x[forced].tolist(), strict=True):
                     apply(b, -1, fi, xi, world, cid)
             step(cid)
-            steps, fresh = k, False
-            if marks[k]:
-                x[scene.movable] = [get_x(b, cid)[0] for b in moving]
-                v[scene.movable] = [get_v(b, cid)[0] for b in moving]
-                if len(drift):
-                    x[drift] = x0_drift + (k * h) * v0_drift
-                xs.append(x.copy())
-                vs.append(v.copy())
-                ts.append(k * h)
-                fresh = True
+            fresh = False
+            if record[k]:
+                xk = [get_x(b, cid)[0] for b in moving]
+                vk = [get_v(b, cid)[0] for b in moving]
+                recorded.append(k)
+                read_x.append(xk)
+                read_v.append(vk)
+                if forcing:
+                    x[movable], v[movable] = xk, vk
+                    fresh = True
                 if k - checked >= CHECK_EVERY or k == n_steps:
                     checked = k
+                    x[movable], v[movable] = xk, vk
+                    if drifting:
+                        x[drift] = x0_drift + (k * h) * v0_drift
                     if not _sane(x, v):
                         break
         wall = time.perf_counter() - start
+        steps = k
 
-        t, xr, vr = np.array(ts), np.array(xs), np.array(vs)
+        t = np.array(recorded) * h
+        xr = np.repeat(model.x0[None], len(t), axis=0)
+        vr = np.repeat(model.v0[None], len(t), axis=0)
+        xr[1:, movable] = np.array(read_x, dtype=float).reshape(len(t) - 1, len(moving), 3)
+        vr[1:, movable] = np.array(read_v, dtype=float).reshape(len(t) - 1, len(moving), 3)
+        if drifting:
+            xr[1:, drift] = x0_drift + t[1:, None, None] * v0_drift
         status, t_fail = finite_until(np.concatenate([xr, vr], axis=1), t, limit=BLOWUP)
         with np.errstate(all="ignore"):
             energy = np.array([total_energy(model, a, b) for a, b in zip(xr, vr, strict=True)])

@@ -15,8 +15,12 @@ import pandas as pd
 import pytest
 from PIL import Image
 
+from cases import load_cases
+from truestep.analyses import run_analyses
 from truestep.cli import main
 from truestep.figures import FIGURES
+from truestep.report import write_report
+from truestep.runner import run_matrix
 
 CHROMIUM = Path("/usr/bin/chromium")
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source",
@@ -26,11 +30,24 @@ VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "met
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory) -> Path:
+    """A report as `truestep run` writes it, on short sweeps but with the lecture's figures
+    (which `--quick` leaves out): the runner, the analyses and the writer of the CLI."""
     out = tmp_path_factory.mktemp("report")
-    code = main(["run", "--quick", "--cases", "circle-field", "--engines", "reference,scipy",
-                 "--out", str(out)])
-    assert code == 0
+    cases = load_cases("circle-field")
+    engines = ["reference", "scipy"]
+    traces: dict = {}
+    results = run_matrix(cases, engines, quick=True, traces=traces, progress=lambda _: None)
+    tables = run_analyses(cases, engines, results, quick=True)
+    write_report(out, cases, results, tables, quick=True, argv=["run"], traces=traces,
+                 with_lecture_figures=True)
     return out
+
+
+def test_the_cli_writes_the_same_files(tmp_path):
+    assert main(["run", "--quick", "--cases", "circle-field", "--engines", "reference",
+                 "--out", str(tmp_path)]) == 0
+    page = (tmp_path / "index.html").read_text()
+    assert "circle-field" in page and "Not redrawn in a <code>--quick</code> run" in page
 
 
 class PageParser(HTMLParser):

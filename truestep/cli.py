@@ -78,7 +78,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     results = run_matrix(cases, engines, quick=args.quick, traces=traces)
     tables = run_analyses(cases, engines, results, quick=args.quick)
     write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
-                 traces=traces)
+                 traces=traces, with_lecture_figures=not args.quick)
     print(f"wrote {out}/ ({len(results)} result rows) in {time.perf_counter() - start:.1f} s")
     return 0
 

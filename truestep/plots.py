@@ -66,7 +66,7 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
                frameon=False)
     fig.tight_layout(rect=(0, 0, 0.86, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
 
@@ -94,7 +94,7 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     ax.invert_yaxis()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
 
@@ -120,7 +120,7 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
     axes[0][-1].legend(fontsize=7, loc="upper left", frameon=False)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
 
@@ -151,6 +151,6 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path

@@ -227,6 +227,9 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
         parts.append("Every case, engine and method that was not run, and why: `unsupported` "
                      "names the features the engine cannot model.\n")
         parts.append(md_table(absent[["case", "engine", "method", "status", "missing", "message"]]))
+    if lecture_figures is None:
+        parts.append("## The lecture's figures, reproduced\n")
+        parts.append("Not redrawn in a `--quick` run: `truestep figures` draws them.\n")
     if lecture_figures:
         parts.append("## The lecture's figures, reproduced\n")
         for path, caption in lecture_figures:

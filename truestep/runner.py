@@ -35,8 +35,8 @@ class Timing:
     time is their median, never including the warm-up or scene building.
     """
 
-    budget_s: float = 0.5
-    max_repeats: int = 5
+    budget_s: float = 0.15
+    max_repeats: int = 3
     warmup_fraction: float = 0.05
 
 
@@ -149,7 +149,7 @@ def run_matrix(
 
     Energy traces of the runs go into ``traces`` when it is given (see :func:`run_one`).
     """
-    timing = timing or Timing(budget_s=0.1 if quick else 0.5, max_repeats=3 if quick else 5)
+    timing = timing or Timing(budget_s=0.15, max_repeats=1 if quick else 3)
     say = progress or (lambda msg: print(msg, file=sys.stderr))
     rows = []
     for case in cases:
