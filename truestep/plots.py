@@ -134,7 +134,8 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     """
     wanted = {"step": dt_step, "tolerance": tol}
     chosen = {k: v for k, v in traces.items()
-              if k[0] == case and wanted[k[3]] is not None and np.isclose(k[4], wanted[k[3]])}
+              if k[0] == case and wanted[k[3]] is not None
+              and np.isclose(k[4], wanted[k[3]], rtol=1e-9, atol=0.0)}
     if not chosen:
         return None
     fig, ax = plt.subplots(figsize=(9.5, 4.4))
