@@ -89,8 +89,10 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
             ax.plot([ex, ex], [yi - 0.4, yi + 0.4], color="black", linewidth=2)
     ax.set_yticks(y, labels, fontsize=8)
     ax.set_xscale("log")
-    ax.set_xlabel("largest stable step (s); black tick: exact limit")
-    ax.set_title(f"{case}: stability limits (bars at the floor: unstable at every step tried)")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("largest stable step (s); black tick: exact limit;\n"
+                  "a stub at the left edge: unstable at every step tried")
+    ax.set_title(f"{case}: largest stable step")
     ax.invert_yaxis()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
