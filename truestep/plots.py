@@ -30,6 +30,23 @@ METHOD_STYLES = {
 (line style, marker) pair tells its methods apart."""
 
 
+def save(fig, path: Path) -> Path:
+    """Write ``fig`` as a compact PNG: 90 dpi, then reduced to a 256-colour palette.
+
+    Line plots use a handful of colours, so the palette loses nothing visible and the
+    file (inlined in the HTML report) shrinks about threefold.
+    """
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    with Image.open(path) as img:
+        small = img.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+    small.save(path, optimize=True)
+    return path
+
+
 def series_style(engine: str, method: str) -> dict:
     ls, marker = METHOD_STYLES.get(method, ("-", "o"))
     return {"color": ENGINE_COLOURS.get(engine, "black"), "linestyle": ls, "marker": marker,
@@ -45,7 +62,7 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
     ok = df[(df["status"] == "ok") & (df["error"].astype(float) > 0)]
     if ok.empty:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.4), sharey=True)
     for (engine, method), g in ok.groupby(["engine", "method"], sort=False):
         g = g.sort_values("wall_s")
         style = series_style(engine, method)
@@ -62,13 +79,10 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
         ax.grid(True, which="major", alpha=0.3)
     fig.suptitle(f"{title}: work against precision")
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.86, 0.5), fontsize=7,
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.81, 0.5), fontsize=7,
                frameon=False)
-    fig.tight_layout(rect=(0, 0, 0.86, 1))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    fig.tight_layout(rect=(0, 0, 0.81, 1))
+    return save(fig, path)
 
 
 def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
@@ -95,10 +109,7 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     ax.set_title(f"{case}: largest stable step")
     ax.invert_yaxis()
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path)
 
 
 def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
@@ -121,10 +132,7 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
         ax.grid(True, alpha=0.3)
     axes[0][-1].legend(fontsize=7, loc="upper left", frameon=False)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path)
 
 
 def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
@@ -153,7 +161,4 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path)
