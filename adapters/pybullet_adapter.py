@@ -327,19 +327,7 @@ def build_scene(model: ParticleModel, h: float, *, clean: bool) -> BulletScene:
 def external_forces(model: ParticleModel, f: np.ndarray, x: np.ndarray, v: np.ndarray,
                     t: float) -> np.ndarray:
     """Every force but gravity into ``f`` (n, 3), N, at ``x``, ``v`` (n, 3) and time ``t`` (s)."""
-    f[:] = 0.0
-    if model.drag:
-        forces.add_drag(f, v, model.drag)
-    forces.add_springs(f, x, v, model.springs)
-    forces.add_anchors(f, x, v, model.anchors)
-    if model.gravitation is not None:
-        forces.add_gravitation(f, x, model.mass, model.gravitation)
-    if model.fields:
-        forces.add_fields(f, model.fields, x, v, model.mass, t)
-    for i, force, t_on, t_off in model.impulses:
-        if t_on <= t < t_off:
-            f[i] += force
-    return f
+    return forces.add_model_forces(f, model, x, v, t, gravity=False)
 
 
 class PybulletAdapter:

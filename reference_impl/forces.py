@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from reference_impl.model import Anchors, ForceField, Gravitation, Springs
+from reference_impl.model import Anchors, ForceField, Gravitation, ParticleModel, Springs
 
 EARTH_MASS = 5.972e24
 """kg."""
@@ -247,3 +247,38 @@ def add_fields(
     """Add every force field's force."""
     for fld in fields:
         f += field_force(fld, x, v, mass, t)
+
+
+def add_model_forces(
+    f: np.ndarray,
+    model: ParticleModel,
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    *,
+    gravity: bool = True,
+    spring_incidence: Incidence | None = None,
+    anchor_incidence: Incidence | None = None,
+) -> np.ndarray:
+    """The lecture's force loop for a whole scene: clear ``f`` (n, 3), then let every force
+    object of ``model`` add in (gravity unless ``gravity=False``, drag, springs, anchors,
+    gravitation, fields, impulses active at ``t``). Returns ``f``, N.
+
+    Engines that integrate gravity themselves call it with ``gravity=False``; incidence
+    matrices built once per scene may be passed in.
+    """
+    f[:] = 0.0
+    if gravity and np.any(model.gravity):
+        add_gravity(f, model.mass, model.gravity)
+    if model.drag:
+        add_drag(f, v, model.drag)
+    add_springs(f, x, v, model.springs, spring_incidence)
+    add_anchors(f, x, v, model.anchors, anchor_incidence)
+    if model.gravitation is not None:
+        add_gravitation(f, x, model.mass, model.gravitation)
+    if model.fields:
+        add_fields(f, model.fields, x, v, model.mass, t)
+    for i, force, t_on, t_off in model.impulses:
+        if t_on <= t < t_off:
+            f[i] += force
+    return f

@@ -85,23 +85,9 @@ class ParticleSystem(SecondOrderSystem):
 
         These are the applied forces; the contact force is added by :meth:`acceleration`.
         """
-        m = self.model
-        f = self.f
-        f[:] = 0.0
-        if self._has_gravity:
-            forces.add_gravity(f, m.mass, m.gravity)
-        if m.drag:
-            forces.add_drag(f, v, m.drag)
-        forces.add_springs(f, x, v, m.springs, self._spring_incidence)
-        forces.add_anchors(f, x, v, m.anchors, self._anchor_incidence)
-        if m.gravitation is not None:
-            forces.add_gravitation(f, x, m.mass, m.gravitation)
-        if m.fields:
-            forces.add_fields(f, m.fields, x, v, m.mass, t)
-        for i, force, t_on, t_off in m.impulses:
-            if t_on <= t < t_off:
-                f[i] += force
-        return f
+        return forces.add_model_forces(
+            self.f, self.model, x, v, t, gravity=self._has_gravity,
+            spring_incidence=self._spring_incidence, anchor_incidence=self._anchor_incidence)
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         x = q.reshape(self.n, 3)
