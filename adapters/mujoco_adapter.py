@@ -570,7 +570,7 @@ class MujocoAdapter:
         status, t_fail = finite_until(x, t)
         if bad and status == "ok":
             status, t_fail = "unstable", float(t[-1])
-        energy = np.array([total_energy(case.model, xi, vi) for xi, vi in zip(x, v, strict=True)])
+        energy = total_energy(case.model, x, v)
         notes = [f"{EVALUATIONS_PER_STEP[method]} force evaluation(s) per step; nfev counts steps"]
         notes += scene.layout.notes
         if scene.applied is not None and not self.stage_forces and method == "RK4":

@@ -436,7 +436,7 @@ class PybulletAdapter:
             xr[1:, drift] = x0_drift + t[1:, None, None] * v0_drift
         status, t_fail = finite_until(np.concatenate([xr, vr], axis=1), t, limit=BLOWUP)
         with np.errstate(all="ignore"):
-            energy = np.array([total_energy(model, a, b) for a, b in zip(xr, vr, strict=True)])
+            energy = total_energy(model, xr, vr)
         return Trajectory(
             t=t, x=xr, v=vr, energy=energy, status=status, t_fail=t_fail,
             nfev=steps, steps=steps, wall_s=wall,

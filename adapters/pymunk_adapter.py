@@ -300,7 +300,7 @@ class PymunkAdapter:
         x, v = stepper.unpack(snaps)
         status, t_fail = finite_until(np.concatenate([x, v], axis=1), t, limit=BLOWUP)
         with np.errstate(all="ignore"):
-            energy = np.array([total_energy(model, xi, vi) for xi, vi in zip(x, v, strict=True)])
+            energy = total_energy(model, x, v)
         return Trajectory(
             t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail,
             nfev=steps, steps=steps, wall_s=wall,

@@ -83,7 +83,7 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     wall = time.perf_counter() - start
     t = marks * step
     status, t_fail = finite_until(xs, t)
-    energy = np.array([total_energy(m, a, b) for a, b in zip(xs, vs, strict=True)])
+    energy = total_energy(m, xs, vs)
     return Trajectory(t=t, x=xs, v=vs, energy=energy, status=status, t_fail=t_fail,
                       nfev=n_steps, steps=n_steps, wall_s=wall,
                       message=f"fused compiled kernel, {numba.get_num_threads()} threads")
@@ -129,10 +129,7 @@ class ReferenceAdapter:
             energy = np.array([system.energy(s, t) for s, t in zip(run.x, run.t, strict=True)])
             energy = None if energy.dtype == object else energy
         else:
-            energy = np.array([
-                total_energy(case.model, xi, vi, None if alive is None else alive[k])
-                for k, (xi, vi) in enumerate(zip(x, v, strict=True))
-            ])
+            energy = total_energy(case.model, x, v, alive)
         return Trajectory(
             t=run.t, x=x, v=v, energy=energy, status=run.status, t_fail=run.t_fail,
             nfev=run.nfev, steps=run.steps, wall_s=run.wall_s, alive=alive,

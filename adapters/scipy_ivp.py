@@ -62,7 +62,7 @@ class ScipyAdapter:
             e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
             energy = None if e[0] is None else np.array(e)
         else:
-            energy = np.array([total_energy(case.model, a, b) for a, b in zip(x, v, strict=True)])
+            energy = total_energy(case.model, x, v)
         status, t_fail = finite_until(states, t)
         message = ""
         if not sol.success:

@@ -61,8 +61,6 @@ class ParticleSystem(SecondOrderSystem):
         self.f = np.zeros((self.n, 3))
         self._inv_mass = np.where(model.fixed, 0.0, 1.0 / model.mass)
         self._has_gravity = bool(np.any(model.gravity))
-        self._spring_incidence = forces.incidence(model.springs.i, model.springs.j, self.n)
-        self._anchor_incidence = forces.incidence(model.anchors.i, None, self.n)
         for p in self.passes:
             start = getattr(p, "start", None)
             if start is not None:
@@ -85,9 +83,7 @@ class ParticleSystem(SecondOrderSystem):
 
         These are the applied forces; the contact force is added by :meth:`acceleration`.
         """
-        return forces.add_model_forces(
-            self.f, self.model, x, v, t, gravity=self._has_gravity,
-            spring_incidence=self._spring_incidence, anchor_incidence=self._anchor_incidence)
+        return forces.add_model_forces(self.f, self.model, x, v, t, gravity=self._has_gravity)
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         x = q.reshape(self.n, 3)
@@ -180,18 +176,19 @@ class ParticleSystem(SecondOrderSystem):
 
 def total_energy(
     model: ParticleModel, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None = None
-) -> float:
-    """Kinetic + gravitational + spring energy of particles at ``x``, ``v`` (n, 3), J.
+) -> float | np.ndarray:
+    """Kinetic + gravitational + spring energy of particles at ``x``, ``v``, J.
 
-    Potential energy of uniform gravity is ``-m g . x`` (zero at the origin).
+    ``x`` and ``v`` have shape (n, 3) for one state, or (T, n, 3) for T recorded states
+    at once (then ``alive`` is (T, n) and the result an array of shape (T,)). Potential
+    energy of uniform gravity is ``-m g . x`` (zero at the origin).
     """
     m = np.where(model.fixed, 0.0, model.mass)
     if alive is not None:
         m = np.where(alive, m, 0.0)
-    kinetic = 0.5 * float(np.sum(m * np.einsum("ij,ij->i", v, v)))
-    potential = -float(np.sum(m * (x @ model.gravity)))
-    potential += forces.spring_energy(x, model.springs) + forces.anchor_energy(x, model.anchors)
+    energy = 0.5 * np.sum(m * np.einsum("...ij,...ij->...i", v, v), axis=-1)
+    energy -= np.sum(m * (x @ model.gravity), axis=-1)
+    energy += forces.spring_energy(x, model.springs) + forces.anchor_energy(x, model.anchors)
     if model.gravitation is not None:
-        potential += forces.gravitation_energy(x, model.mass, model.gravitation)
-    return kinetic + potential
-
+        energy += forces.gravitation_energy(x, model.mass, model.gravitation)
+    return float(energy) if np.ndim(energy) == 0 else energy

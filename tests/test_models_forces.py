@@ -79,20 +79,31 @@ def test_spring_force_follows_the_lecture_formula():
     assert np.all(zero == 0.0)
 
 
-def test_incidence_scatter_equals_add_at():
+def test_compiled_spring_loop_equals_the_vectorised_formula():
+    """add_springs / add_anchors (one compiled pass) against spring_forces scattered with
+    np.add.at, on random springs sharing particles, including a zero-length one."""
     rng = np.random.default_rng(3)
     n, m = 50, 200
     i, j = rng.integers(0, n, m), rng.integers(0, n, m)
     j = np.where(i == j, (j + 1) % n, j)
-    f1 = rng.normal(size=(m, 3))
-    a = np.zeros((n, 3))
-    np.add.at(a, i, f1)
-    np.subtract.at(a, j, f1)
-    # Same sums in another order: round-off only.
-    d = forces.incidence(i, j, n)
-    assert np.allclose(d.scatter @ f1, a, rtol=0, atol=1e-13)
-    x = rng.normal(size=(n, 3))
-    assert np.array_equal(d.gather @ x, x[i] - x[j])
+    x, v = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    x[j[0]] = x[i[0]]  # a zero-length spring: no force
+    k, c, r = rng.uniform(1, 10, m), rng.uniform(0, 2, m), rng.uniform(0, 1, m)
+    f1 = forces.spring_forces(x[i] - x[j], v[i] - v[j], k, c, r)
+    expected = np.zeros((n, 3))
+    np.add.at(expected, i, f1)
+    np.subtract.at(expected, j, f1)
+    got = np.zeros((n, 3))
+    forces.add_springs(got, x, v, Springs(i, j, k, c, r))
+    assert np.allclose(got, expected, rtol=0, atol=1e-12)
+
+    point = rng.normal(size=(m, 3))
+    fa = forces.spring_forces(x[i] - point, v[i], k, c, r)
+    expected = np.zeros((n, 3))
+    np.add.at(expected, i, fa)
+    got = np.zeros((n, 3))
+    forces.add_anchors(got, x, v, Anchors(i, point, k, c, r))
+    assert np.allclose(got, expected, rtol=0, atol=1e-12)
 
 
 def test_earth_gravity_is_about_9_8():

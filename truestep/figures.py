@@ -345,7 +345,7 @@ def fig_springs(path: Path) -> str:
         system = build_system(case)
         run = _simulate(system, method, case.duration, dt)
         x, v = _split(run, case.model.n)
-        energy = np.array([total_energy(case.model, xi, vi) for xi, vi in zip(x, v, strict=True)])
+        energy = total_energy(case.model, x, v)
         exact = EXACT[case.exact](case, run.t)
         axes[0, col].plot(run.t, x[:, 0, 0], markevery=25, label=f"reference / {method}, dt = {dt:g} s",
                           **_ref(method, linewidth=1.6))
