@@ -11,7 +11,7 @@ from adapters import get_adapter
 from cases.case import Case
 from cases.exact import stability_limit
 from reference_impl.model import ParticleModel, Plane
-from truestep.isolation import run_isolated
+from truestep.isolation import run_isolated_all, untimed_workers
 from truestep.restitution import bounces, heights
 from truestep.stability import search_case
 
@@ -52,12 +52,15 @@ def _say(msg: str) -> None:
     print(msg, file=sys.stderr)
 
 
-def stability_table(cases: list[Case], engines: list[str], *, quick: bool) -> pd.DataFrame:
+def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
+                    workers: int = 1) -> pd.DataFrame:
     """Bisect the largest stable step for every case that declares a search.
 
-    ``--quick`` searches only cases whose search says ``quick = true``, to 1%.
+    ``--quick`` searches only cases whose search says ``quick = true``, to 1%. Searches
+    are not timed, so up to ``workers`` run at once, each in its own process.
     """
-    rows = []
+    rows: list[dict] = []
+    calls, slots = [], []
     for case in cases:
         if case.stability is None or (quick and not case.stability.quick):
             continue
@@ -70,22 +73,28 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool) -> pd
                 row["dt_limit_exact"] = np.nan if exact is None else exact
                 if missing:
                     rows.append({**row, "status": "unsupported", "note": ",".join(sorted(missing))})
-                    continue
-                if method in adapter.adaptive_methods:
+                elif method in adapter.adaptive_methods:
                     rows.append({**row, "status": "skipped",
                                  "note": "adaptive: chooses its own step"})
-                    continue
-                out = run_isolated(_search, (engine, case, method, quick),
-                                   timeout=case.timeout_s * case.stability.max_runs)
-                if out.status != "ok":
-                    rows.append({**row, "status": out.status, "note": out.message})
-                    _say(f"stability {case.name} {engine}/{method}: {out.status}")
-                    continue
-                r = out.value
-                _say(f"stability {case.name:20s} {engine:9s} {method:17s} dt_limit "
-                     f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs")
-                rows.append({**row, "dt_limit": r.dt_limit, "dt_unstable": r.dt_unstable,
-                             "runs": r.runs, "status": "ok", "note": r.note})
+                else:
+                    rows.append(row)
+                    slots.append(row)
+                    calls.append((_search, (engine, case, method, quick),
+                                  case.timeout_s * case.stability.max_runs))
+
+    def done(k: int, out) -> None:
+        row = slots[k]
+        if out.status != "ok":
+            row.update(status=out.status, note=out.message)
+            _say(f"stability {row['case']} {row['engine']}/{row['method']}: {out.status}")
+            return
+        r = out.value
+        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status="ok",
+                   note=r.note)
+        _say(f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
+             f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs")
+
+    run_isolated_all(calls, workers, done)
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
 
 
@@ -133,11 +142,15 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
     return rows
 
 
-def restitution_table(engines: list[str], *, quick: bool) -> pd.DataFrame:
-    """Drop a ball at every requested restitution and step, in every engine and method."""
-    rows = []
+def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> pd.DataFrame:
+    """Drop a ball at every requested restitution and step, in every engine and method.
+
+    The drops are not timed, so up to ``workers`` run at once, each in its own process.
+    """
     e_set = QUICK_RESTITUTION_SET if quick else RESTITUTION_SET
     dts = QUICK_RESTITUTION_DTS if quick else RESTITUTION_DTS
+    groups: list[list[dict]] = []  # the rows of one drop (or one unsupported method)
+    calls, slots = [], []
     for engine in engines:
         adapter = get_adapter(engine)
         probe = bounce_case(0.5, dts[0])
@@ -147,25 +160,36 @@ def restitution_table(engines: list[str], *, quick: bool) -> pd.DataFrame:
             missing = adapter.missing(probe, method)
             if missing or method in adapter.adaptive_methods:
                 why = ",".join(sorted(missing)) or "adaptive integrator: no collision events"
-                rows.append({"engine": engine, "method": method, "status": "unsupported",
-                             "note": why})
+                groups.append([{"engine": engine, "method": method, "status": "unsupported",
+                                "note": why}])
                 continue
             for dt in dts:
                 for e in e_set:
-                    out = run_isolated(_bounce_rows, (engine, method, e, dt), timeout=60.0)
-                    _say(f"restitution {engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
-                    if out.status == "ok":
-                        rows.extend(out.value)
-                    else:
-                        rows.append({"engine": engine, "method": method, "dt": dt, "e_set": e,
-                                     "bounce": 1, "status": out.status, "note": out.message})
-    return pd.DataFrame(rows, columns=RESTITUTION_COLUMNS)
+                    groups.append([])
+                    slots.append((len(groups) - 1, engine, method, e, dt))
+                    calls.append((_bounce_rows, (engine, method, e, dt), 60.0))
+
+    def done(k: int, out) -> None:
+        g, engine, method, e, dt = slots[k]
+        _say(f"restitution {engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
+        if out.status == "ok":
+            groups[g].extend(out.value)
+        else:
+            groups[g].append({"engine": engine, "method": method, "dt": dt, "e_set": e,
+                              "bounce": 1, "status": out.status, "note": out.message})
+
+    run_isolated_all(calls, workers, done)
+    return pd.DataFrame([r for g in groups for r in g], columns=RESTITUTION_COLUMNS)
 
 
 def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *,
                  quick: bool) -> dict[str, pd.DataFrame]:
-    """Every table besides ``results``: ``stability`` and ``restitution``."""
+    """Every table besides ``results``: ``stability`` and ``restitution``.
+
+    Neither is timed: their runs share the machine's cores (:func:`untimed_workers`).
+    """
+    workers = untimed_workers()
     return {
-        "stability": stability_table(cases, engines, quick=quick),
-        "restitution": restitution_table(engines, quick=quick),
+        "stability": stability_table(cases, engines, quick=quick, workers=workers),
+        "restitution": restitution_table(engines, quick=quick, workers=workers),
     }

@@ -73,13 +73,22 @@ def cmd_run(args: argparse.Namespace) -> int:
         cases = [c for c in cases if c.in_quick] or cases
     engines = _engines(args.engines)
     out = Path(args.out)
-    start = time.perf_counter()
+    clock = [time.perf_counter()]
+
+    def lap() -> float:
+        clock.append(time.perf_counter())
+        return clock[-1] - clock[-2]
+
     traces: dict = {}
     results = run_matrix(cases, engines, quick=args.quick, traces=traces)
+    t_sweep = lap()
     tables = run_analyses(cases, engines, results, quick=args.quick)
+    t_analyses = lap()
     write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
                  traces=traces, with_lecture_figures=not args.quick)
-    print(f"wrote {out}/ ({len(results)} result rows) in {time.perf_counter() - start:.1f} s")
+    t_report = lap()
+    print(f"wrote {out}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
+          f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
     return 0
 
 

@@ -1,17 +1,22 @@
-"""Run one simulation in a child process, so a crash or a hang becomes a row.
+"""Run simulations in child processes, so a crash or a hang becomes a row.
 
 Each call forks a fresh process (engine parameters cannot leak from one run into the
-next, as pybullet's would between clients of one process), waits at most ``timeout``
-seconds and reports what happened. Only one child runs at a time: timings never share
-the CPU with other runs of the harness.
+next, as pybullet's would between clients of one process), waits at most its timeout and
+reports what happened. :func:`run_isolated` runs one child at a time: timed runs never
+share the CPU with other runs of the harness. :func:`run_isolated_all` keeps up to
+``workers`` children busy at once, for work whose wall time is not measured (stability
+searches, bounce tests).
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
+import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from multiprocessing.connection import wait
 from typing import Any
 
 
@@ -22,6 +27,10 @@ class Outcome:
     status: str  # ok | crashed | timeout
     value: Any = None
     message: str = ""
+
+
+Call = tuple[Callable[..., Any], tuple, float]
+"""``(fn, args, timeout_s)``: one isolated call."""
 
 
 def _child(conn, fn: Callable[..., Any], args: tuple) -> None:
@@ -35,29 +44,80 @@ def _child(conn, fn: Callable[..., Any], args: tuple) -> None:
         conn.close()
 
 
-def run_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Outcome:
-    """Call ``fn(*args)`` in a forked child; never raises for what happens inside it."""
+@dataclass
+class _Running:
+    index: int
+    proc: Any
+    conn: Any
+    deadline: float
+    timeout: float
+
+
+def _start(index: int, call: Call) -> _Running:
+    fn, args, timeout = call
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, fn, args), daemon=True)
     proc.start()
     child.close()
+    return _Running(index, proc, parent, time.monotonic() + timeout, timeout)
+
+
+def _finish(run: _Running, *, timed_out: bool) -> Outcome:
     try:
-        if not parent.poll(timeout):
-            proc.kill()
-            proc.join()
-            return Outcome("timeout", message=f"no result within {timeout:g} s")
+        if timed_out:
+            return Outcome("timeout", message=f"no result within {run.timeout:g} s")
         try:
-            status, value = parent.recv()
+            status, value = run.conn.recv()
         except EOFError:
-            proc.join()
-            return Outcome("crashed", message=f"engine process died (exit code {proc.exitcode})")
-        proc.join()
-        if status == "ok":
-            return Outcome("ok", value)
-        return Outcome("crashed", message=value)
+            run.proc.join()
+            return Outcome("crashed",
+                           message=f"engine process died (exit code {run.proc.exitcode})")
+        return Outcome("ok", value) if status == "ok" else Outcome("crashed", message=value)
     finally:
-        parent.close()
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
+        run.conn.close()
+        if run.proc.is_alive() and timed_out:
+            run.proc.kill()
+        run.proc.join()
+
+
+def run_isolated_all(calls: Sequence[Call], workers: int = 1,
+                     done: Callable[[int, Outcome], None] | None = None) -> list[Outcome]:
+    """Run every ``fn(*args)`` in its own forked child, at most ``workers`` at a time.
+
+    Returns the outcomes in the order of ``calls``; never raises for what happens inside a
+    child. ``done(index, outcome)`` is called as each one finishes.
+    """
+    outcomes: list[Outcome | None] = [None] * len(calls)
+    pending = list(enumerate(calls))[::-1]
+    running: list[_Running] = []
+    try:
+        while pending or running:
+            while pending and len(running) < max(1, workers):
+                running.append(_start(*pending.pop()))
+            now = time.monotonic()
+            ready = wait([r.conn for r in running],
+                         timeout=max(0.0, min(r.deadline for r in running) - now))
+            for r in list(running):
+                timed_out = r.conn not in ready and time.monotonic() >= r.deadline
+                if r.conn in ready or timed_out:
+                    running.remove(r)
+                    outcomes[r.index] = _finish(r, timed_out=timed_out)
+                    if done is not None:
+                        done(r.index, outcomes[r.index])
+    finally:
+        for r in running:
+            r.proc.kill()
+            r.proc.join()
+            r.conn.close()
+    return outcomes  # type: ignore[return-value]
+
+
+def run_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Outcome:
+    """Call ``fn(*args)`` in a forked child, alone; never raises for what happens inside it."""
+    return run_isolated_all([(fn, args, timeout)])[0]
+
+
+def untimed_workers() -> int:
+    """How many children may run at once for work that is not timed: the usable cores."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1

@@ -1,0 +1,45 @@
+"""Isolated calls: a crash, a hang or a dying process becomes an outcome, in order."""
+
+from __future__ import annotations
+
+import os
+import time
+
+from truestep.isolation import run_isolated, run_isolated_all
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def _fail() -> None:
+    raise ValueError("bad scene")
+
+
+def _hang() -> None:
+    time.sleep(60)
+
+
+def _die() -> None:
+    os._exit(3)
+
+
+def test_one_call_returns_its_value_or_why_not():
+    assert run_isolated(_square, (7,), 10.0).value == 49
+    crashed = run_isolated(_fail, (), 10.0)
+    assert crashed.status == "crashed" and "ValueError: bad scene" in crashed.message
+    died = run_isolated(_die, (), 10.0)
+    assert died.status == "crashed" and "exit code 3" in died.message
+
+
+def test_many_calls_keep_their_order_and_a_hang_times_out_alone():
+    calls = [(_square, (k,), 10.0) for k in range(5)]
+    calls.insert(2, (_hang, (), 0.5))
+    calls.insert(4, (_fail, (), 10.0))
+    seen = []
+    start = time.monotonic()
+    out = run_isolated_all(calls, workers=2, done=lambda k, o: seen.append(k))
+    assert time.monotonic() - start < 20
+    assert [o.status for o in out] == ["ok", "ok", "timeout", "ok", "crashed", "ok", "ok"]
+    assert [o.value for o in out if o.status == "ok"] == [0, 1, 4, 9, 16]
+    assert sorted(seen) == list(range(len(calls)))
