@@ -88,3 +88,20 @@ def test_list_prints_cases_engines_and_methods(capsys):
     assert main(["list", "--engines", "reference,scipy"]) == 0
     out = capsys.readouterr().out
     assert "harmonic-oscillator" in out and "dopri5" in out and "Radau" in out
+
+
+def test_a_finite_run_whose_energy_explodes_is_an_unstable_row():
+    """Explicit Euler on the stiff spring (omega = 1000 rad/s) at 1 ms stays below the
+    1e12 blow-up bound over 0.05 s but multiplies its energy by (1 + 1)^50: the row must
+    say unstable, with the time. Symplectic Euler at the same step (omega dt = 1) is
+    inaccurate, its energy swinging by as much as its start, but bounded: an ok row."""
+    from truestep.runner import Timing, run_one
+
+    case = load_case(CASE_DIR / "stiff-spring.toml")
+    timing = Timing(budget_s=0.0, max_repeats=1)
+    bad = run_one(case, "reference", "euler", 1e-3, adaptive=False, timing=timing)
+    assert bad["status"] == "unstable"
+    assert 0 < bad["t_fail"] < case.duration and bad["energy_drift"] > 1
+    assert "energy grew" in bad["message"]
+    good = run_one(case, "reference", "symplectic-euler", 1e-3, adaptive=False, timing=timing)
+    assert good["status"] == "ok" and 0.5 < good["energy_drift"] <= 1.0 + 1e-9

@@ -186,3 +186,22 @@ def test_the_page_renders_in_headless_chromium(report, tmp_path):
     # A rendered page has text and figures: many distinct colours, not one flat colour.
     assert _distinct_colours(pixels) > 50
     assert pixels.astype(float).std() > 10.0
+
+
+def test_hard_case_summary_counts_tunnelling_as_failure():
+    """A run that finishes but tunnels through the wall has not survived that step."""
+    from truestep.report import hard_case_line, survival
+
+    case = load_cases("high-speed-impact")[0]
+    rows = [("reference", "lecture", 1e-3, "ok", 1.0), ("reference", "lecture", 5e-5, "ok", 0.0),
+            ("mujoco", "Euler", 1e-3, "unstable", np.nan), ("mujoco", "Euler", 5e-5, "ok", 1.0),
+            ("pymunk", "default", 1e-3, "ok", 0.0), ("pymunk", "default", 5e-5, "ok", 0.0)]
+    results = pd.DataFrame(rows, columns=["engine", "method", "dt", "status", "tunnelled"]).assign(
+        case=case.name, dt_kind="step")
+    s = survival(case, results).set_index("engine")
+    assert s.loc["reference", "dt_survived"] == 5e-5 and s.loc["reference", "failure"] == "tunnelled"
+    assert np.isnan(s.loc["mujoco", "dt_survived"]) and s.loc["mujoco", "failure"] == "unstable"
+    assert s.loc["pymunk", "dt_survived"] == 1e-3 and s.loc["pymunk", "failure"] == ""
+    line = hard_case_line(case, results)
+    assert line.index("pymunk/default") < line.index("reference/lecture")
+    assert "at no step of the sweep: mujoco/Euler (unstable)" in line

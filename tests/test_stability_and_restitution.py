@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from adapters import get_adapter
+from cases import load_cases
+from cases.exact import stability_limit
 from truestep.restitution import bounces
-from truestep.stability import bisect_limit, energy_grows
+from truestep.stability import MIN_STEPS, bisect_limit, energy_grows, is_stable
 
 T = np.linspace(0.0, 100.0, 20001)
 
@@ -19,8 +24,13 @@ T = np.linspace(0.0, 100.0, 20001)
         np.exp(-0.01 * T),  # decaying, like implicit Euler
         np.full_like(T, 2.5),  # conserved
         -0.5 + 1e-13 * np.sin(3 * T),  # round-off around a negative energy
+        # two modes beating: the band's edge drifts by 15% over the run
+        1.0 + 0.01 * (1 + 0.15 * T / T[-1]) * np.sin(30 * T) + 0.002 * np.sin(0.9 * T),
+        # an error below the start that touches it only at t = 0, like Verlet's
+        1.0 - 7e-4 * np.sin(5 * T) ** 2 + 2e-5 * np.sin(0.05 * T) ** 2,
     ],
-    ids=["oscillating", "slow-oscillating", "decaying", "constant", "roundoff"],
+    ids=["oscillating", "slow-oscillating", "decaying", "constant", "roundoff", "beating",
+         "below-start"],
 )
 def test_bounded_energy_is_stable(energy):
     assert not energy_grows(T, energy)
@@ -38,6 +48,24 @@ def test_bounded_energy_is_stable(energy):
 )
 def test_growing_energy_is_unstable(energy):
     assert energy_grows(T, energy)
+
+
+@pytest.mark.parametrize("name", ["spring-chain", "mass-ratio-chain"])
+def test_multi_mode_chains_are_stable_below_and_unstable_above_the_exact_limit(name):
+    """Symplectic Euler on a linear chain, run as a search runs it (5000 steps): bounded
+    at 2%, 10% and 99.5% of 2/omega_max, growing at 100.5%. Beats between the chain's modes moved the
+    energy band's edge by 10-15% over such runs, which a criterion comparing bare peaks
+    read as growth (it called these chains unstable at every step)."""
+    case = load_cases(name)[0]
+    limit = stability_limit(case, "symplectic-euler")
+    adapter = get_adapter("reference")
+
+    def stable(dt):
+        trial = dataclasses.replace(case, duration=MIN_STEPS * dt, max_records=MIN_STEPS)
+        return is_stable(adapter.simulate(trial, "symplectic-euler", dt))
+
+    assert stable(0.995 * limit) and stable(0.1 * limit) and stable(0.02 * limit)
+    assert not stable(1.005 * limit)
 
 
 def test_bisection_finds_a_known_boundary_within_its_budget():

@@ -71,6 +71,33 @@ def energy_drift(case: Case, traj: Trajectory, exact: Exact | None) -> tuple[flo
     return float("nan"), float("nan")
 
 
+ENERGY_SOURCES = frozenset({"force-fields", "emitters", "impulses"})
+"""Scene features that may put energy in: without them a scene's energy can only fall."""
+
+
+def energy_blowup(case: Case, traj: Trajectory) -> float | None:
+    """When a run whose energy cannot rise blew up by its energy, or ``None``.
+
+    A run that stayed finite is still unstable when the scene has no energy source
+    (:data:`ENERGY_SOURCES`), its energy grows by the stability criterion
+    (:func:`truestep.stability.energy_grows`) and it has moved by more than its start
+    (``|E - E(0)| > |E(0)|``): a stable method can be that inaccurate only at steps near
+    its limit, where its energy does not keep climbing. Returns the first time (s) the
+    energy was that far from its start.
+    """
+    from truestep.stability import energy_grows
+
+    e = traj.energy
+    if e is None or len(e) < 2 or (case.features & ENERGY_SOURCES):
+        return None
+    if not (case.conservative or case.kind == "particles"):
+        return None
+    far = np.abs(e - e[0]) > (abs(e[0]) or float(np.max(np.abs(e))) or 1.0)
+    if not far.any() or not energy_grows(traj.t, e):
+        return None
+    return float(traj.t[np.argmax(far)])
+
+
 def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0) -> float:
     """Order of convergence: the least-squares slope of log(error) against log(dt).
 

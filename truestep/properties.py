@@ -24,6 +24,11 @@ Property = Callable[[Case, Trajectory], float]
 PROPERTIES: dict[str, Property] = {}
 
 
+FAILURES = {"tunnelled": "tunnelled"}
+"""Properties whose non-zero value means the run failed at what the scene tests, even
+though it finished: property name -> the word a report uses for that failure."""
+
+
 def register(fn: Property) -> Property:
     """Add ``fn`` to :data:`PROPERTIES` under its own name."""
     PROPERTIES[fn.__name__] = fn

@@ -128,22 +128,57 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             lines.append("")
     hard = [c for c in cases if c.hard]
     if hard:
-        lines.append("Hard cases: which engine/method runs finish stable at the largest step "
-                     "of the sweep:\n")
+        lines.append("Hard cases: the largest step of the sweep at which each engine/method "
+                     "survives (finishes stable, and does not fail what the scene tests, "
+                     "such as tunnelling):\n")
         for c in hard:
-            d = results[(results["case"] == c.name) & (results["dt_kind"] == "step")]
-            if d.empty:
-                continue
-            largest = d["dt"].astype(float).max()
-            at = d[np.isclose(d["dt"].astype(float), largest)]
-            ok = [f"{e}/{m}" for e, m, st in zip(at["engine"], at["method"], at["status"], strict=True)
-                  if st == "ok"]
-            bad = [f"{e}/{m} ({st})" for e, m, st in zip(at["engine"], at["method"], at["status"],
-                                                        strict=True) if st != "ok"]
-            lines.append(f"- **{c.name}** at dt {_fmt(largest)} s: survive: {', '.join(ok) or 'none'}"
-                         f"; fail: {', '.join(bad) or 'none'}.")
+            lines.append(hard_case_line(c, results))
         lines.append("")
     return lines
+
+
+def survival(case: Case, results: pd.DataFrame) -> pd.DataFrame:
+    """Per engine/method of a case's fixed-step sweep: the largest step survived and why
+    the larger ones failed.
+
+    Columns ``engine, method, dt_survived`` (s, NaN if none) and ``failure`` (the outcome
+    at the largest step: ``unstable``, ``tunnelled``... or empty).
+    """
+    from truestep.properties import FAILURES
+
+    d = results[(results["case"] == case.name) & (results["dt_kind"] == "step")].dropna(subset=["dt"])
+    out = []
+    for (engine, method), g in d.groupby(["engine", "method"], sort=False):
+        outcome = g["status"].astype(str).where(g["status"] != "ok", "")
+        for prop, word in FAILURES.items():
+            if prop in g:
+                outcome = outcome.where((outcome != "") | ~(g[prop].astype(float) > 0), word)
+        g = g.assign(outcome=outcome)
+        survived = g[g["outcome"] == ""]["dt"].astype(float)
+        largest = g.loc[g["dt"].astype(float).idxmax()]
+        out.append({"engine": engine, "method": method,
+                    "dt_survived": survived.max() if len(survived) else np.nan,
+                    "failure": largest["outcome"]})
+    return pd.DataFrame(out, columns=["engine", "method", "dt_survived", "failure"])
+
+
+def hard_case_line(case: Case, results: pd.DataFrame) -> str:
+    """One summary bullet: engine/methods grouped by the largest step they survive."""
+    s = survival(case, results)
+    if s.empty:
+        return f"- **{case.name}**: no fixed-step runs."
+    groups = []
+    for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"),
+                        key=lambda kv: -kv[0]):
+        names = ", ".join(f"{e}/{m}" for e, m in zip(g["engine"], g["method"], strict=True))
+        groups.append(f"{_fmt(float(dt))} s: {names}")
+    never = s[s["dt_survived"].isna()]
+    if len(never):
+        names = ", ".join(f"{e}/{m} ({f or 'failed'})"
+                          for e, m, f in zip(never["engine"], never["method"], never["failure"],
+                                             strict=True))
+        groups.append(f"at no step of the sweep: {names}")
+    return f"- **{case.name}**: " + "; ".join(groups) + "."
 
 
 def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,

@@ -98,6 +98,10 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         row.update(status=outcome.status, message=outcome.message)
         return row
     traj: Trajectory = outcome.value
+    if traj.status == "ok" and (t_blow := metrics.energy_blowup(case, traj)) is not None:
+        traj.status, traj.t_fail = "unstable", t_blow
+        traj.message = (f"finite, but its energy grew from {traj.energy[0]:.4g} J to "
+                        f"{traj.energy[-1]:.4g} J and was still rising")
     row.update(
         status=traj.status,
         nfev=traj.nfev,

@@ -2,12 +2,19 @@
 
 A run is **unstable** when its state goes non-finite, or when its energy grows without
 bound. Growth is judged by comparing the late half of the run with the early half,
-not by a fixed blow-up factor: with ``D(t) = E(t) - E(0)``, the run grows when
-``max D`` over the second half exceeds ``(1 + tol)`` times ``max(max D over the first
-half, 0)`` plus a round-off floor. A bounded oscillation of energy (a symplectic method
-below its limit) reaches the same peaks in both halves; exponential growth from
-``D(0) = 0`` gives a ratio of at least 2 (``(a^2 - 1) / (a - 1) = a + 1``); a decaying
-or dissipated energy never rises above its start.
+not by a fixed blow-up factor. With ``D(t) = E(t) - E(0)`` and the early half's band
+``[lo, hi]`` of ``D`` (``D(0) = 0`` included), the run grows when the late half's peak
+exceeds ``hi + tol (hi - lo)`` plus a round-off floor: the energy climbs above everything
+it did early by more than ``tol`` of the early swing.
+
+- A bounded oscillation of energy (a symplectic method below its limit) repeats its band.
+  The band's edges may drift while modes beat against each other or a slow mode turns
+  round (a chain's light particles rattling between heavy ones), by far less than the
+  band is wide; a method whose energy error stays below ``E(0)`` (Verlet's, often) has
+  ``hi = 0`` and wobbles near it without counting as growth.
+- Growth from ``D(0) = 0`` that is exponential (or faster than linear) gives
+  ``D(T) >= 2 D(T/2)``, with ``lo = 0``: a rise of 100% of the band, whatever the rate.
+- A damped or dissipative run's energy only falls: its late peak stays below ``hi``.
 """
 
 from __future__ import annotations
@@ -22,11 +29,14 @@ import numpy as np
 from adapters.base import Trajectory
 from cases.case import Case
 
-GROWTH_TOL = 0.05
-"""Relative rise of the late-half energy peak over the early-half peak that counts as growth.
+GROWTH_TOL = 0.25
+"""Rise of the late half's energy peak above the early half's band, as a fraction of the
+band's width, that counts as growth.
 
-Bounded oscillations sampled over many periods repeat their peaks to far better than 5%;
-exponential growth gives a ratio of at least 2."""
+Exponential growth rises by at least 100%; bounded oscillations of multi-mode scenes
+drift by about 10% over a few thousand steps (spring-chain, mass-ratio-chain). Near a
+limit the growth is fast enough that the tolerance moves a bisection by far less than
+its 0.1% bracket (measured on the oscillators: the limits do not change)."""
 ROUNDOFF = 1e-9
 """Energy rises below this fraction of the energy scale are round-off, not growth."""
 MIN_STEPS = 5000  # the default of StabilitySpec.min_steps
@@ -36,20 +46,23 @@ QUICK_MIN_STEPS = 2000
 """Steps per run in ``--quick`` searches, which stop at 1% of the limit."""
 
 
-def energy_grows(t: np.ndarray, energy: np.ndarray, *, tol: float = GROWTH_TOL) -> bool:
-    """Whether ``energy`` (J, shape (T,), at times ``t``) grows without bound."""
+def energy_grows(t: np.ndarray, energy: np.ndarray, *, tol: float | None = None) -> bool:
+    """Whether ``energy`` (J, shape (T,), at times ``t``) grows without bound.
+
+    ``tol`` defaults to :data:`GROWTH_TOL`.
+    """
+    tol = GROWTH_TOL if tol is None else tol
     energy = np.asarray(energy, float)
     if not np.all(np.isfinite(energy)):
         return True
     d = energy - energy[0]
-    half = np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))
-    early, late = d[: max(half, 1)], d[max(half, 1) :]
+    half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
+    early, late = d[:half], d[half:]
     if not len(late):
         return False
     scale = max(abs(energy[0]), float(np.max(np.abs(energy))), 1e-300)
-    late_peak = float(np.max(late))
-    early_peak = max(float(np.max(early)), 0.0)
-    return late_peak > (1 + tol) * early_peak + ROUNDOFF * scale
+    hi, lo = float(np.max(early)), float(np.min(early))
+    return float(np.max(late)) > hi + tol * (hi - lo) + ROUNDOFF * scale
 
 
 def is_stable(traj: Trajectory) -> bool:
