@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from reference_impl.system import SecondOrderSystem, System
@@ -39,8 +41,8 @@ class KeplerProblem(SecondOrderSystem):
         self.mu = mu
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
-        r = np.sqrt(q @ q)
-        return -self.mu * q / r**3
+        r2 = float(q @ q)
+        return q * (-self.mu / (r2 * math.sqrt(r2)))
 
     def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
         """``d[v, a]/d[q, v]``; ``da/dq = -mu (I / r^3 - 3 q q^T / r^5)``."""

@@ -14,28 +14,42 @@ import numpy as np
 from reference_impl.solvers.base import Solver
 from reference_impl.system import System
 
+Stages = tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
+"""A tableau's stages as :func:`stages_of` gives them: ``(c_i, ((j, a_ij), ...))``."""
+
+
+def stages_of(a: np.ndarray) -> Stages:
+    """The stages of a strictly lower triangular ``a`` (s, s): each node ``c_i`` (the row
+    sum) with only the non-zero ``a_ij`` (most of a tableau is zero), as plain floats."""
+    return tuple(
+        (float(row.sum()), tuple((int(j), float(row[j])) for j in np.flatnonzero(row[:i])))
+        for i, row in enumerate(np.asarray(a, float))
+    )
+
 
 def rk_stages(
     fun: Callable[[np.ndarray, float], np.ndarray],
     x: np.ndarray,
     t: float,
     h: float,
-    a: np.ndarray,
-    c: np.ndarray,
+    stages: Stages,
     k: np.ndarray,
     k0: np.ndarray | None = None,
 ) -> np.ndarray:
     """Fill ``k`` (shape ``(s, dim)``) with the stage derivatives of an explicit RK step.
 
-    Stage ``i`` is ``f(x + h * sum_j a[i, j] k[j], t + c[i] h)``. If ``k0`` is given it is
-    used as the first stage (first-same-as-last methods) without an evaluation.
+    Stage ``i`` is ``f(x + h * sum_j a[i, j] k[j], t + c[i] h)`` with ``stages`` from
+    :func:`stages_of`. If ``k0`` is given it is used as the first stage
+    (first-same-as-last methods) without an evaluation.
     """
-    for i in range(len(c)):
+    for i, (c_i, row) in enumerate(stages):
         if i == 0 and k0 is not None:
             k[0] = k0
             continue
-        dx = a[i, :i] @ k[:i] if i else 0.0
-        k[i] = fun(x + h * dx, t + c[i] * h)
+        xi = x
+        for j, a_ij in row:
+            xi = xi + (h * a_ij) * k[j]
+        k[i] = fun(xi, t + c_i * h)
     return k
 
 
@@ -56,12 +70,12 @@ class ExplicitRungeKutta(Solver):
 
     def __init__(self, system: System) -> None:
         super().__init__(system)
-        self._c = self.nodes()
+        self._stages = stages_of(self.A)
         self._k = np.empty((len(self.B), system.dim))
 
     def step(self, dt: float) -> float:
         x, t = self.system.get_state(), self.system.get_time()
-        k = rk_stages(self.fun, x, t, dt, self.A, self._c, self._k)
+        k = rk_stages(self.fun, x, t, dt, self._stages, self._k)
         self.system.set_state(x + dt * (self.B @ k), t + dt)
         return dt
 
@@ -150,7 +164,7 @@ class DormandPrince54(Solver):
         if rtol <= 0 or atol <= 0:
             raise ValueError(f"dopri5: rtol={rtol} and atol={atol} must both be positive")
         self.rtol, self.atol = rtol, atol
-        self._c = self.A.sum(axis=1)
+        self._stages = stages_of(self.A[:6])
         self._k = np.empty((len(self.B), system.dim))
         self._f0: np.ndarray | None = None
         self._h: float | None = None
@@ -180,7 +194,7 @@ class DormandPrince54(Solver):
         h = min(self._h, dt)
         rejected = False
         while True:
-            k = rk_stages(self.fun, x, t, h, self.A[:6], self._c[:6], self._k[:6], self._f0)
+            k = rk_stages(self.fun, x, t, h, self._stages, self._k[:6], self._f0)
             x_new = x + h * (self.B[:6] @ k[:6])
             self._k[6] = self.fun(x_new, t + h)
             scale = self.atol + np.maximum(np.abs(x), np.abs(x_new)) * self.rtol
