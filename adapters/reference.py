@@ -57,13 +57,13 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     """The lecture's update for independent particles through the compiled kernel.
 
     The same formulas as :class:`ParticleSystem` with :class:`LectureUpdate` and the
-    plane-collision pass (tested equal to round-off), stepping from record to record in
-    one call, on all of numba's threads (the machine's cores; the engines step on one).
+    plane-collision pass (tested equal to round-off), every step and record in one
+    parallel call, on all of numba's threads (the machine's cores; the engines step on one).
     """
     import numba
 
     from reference_impl.integrate import record_indices
-    from reference_impl.kernels import rain_step
+    from reference_impl.kernels import rain_run
 
     m = case.model
     system = ParticleSystem(m, passes_for(m))
@@ -74,12 +74,11 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     marks = record_indices(n_steps, case.max_records)
     xs, vs = np.empty((len(marks), m.n, 3)), np.empty((len(marks), m.n, 3))
     xs[0], vs[0] = x, v
-    args = (step, m.gravity, m.drag, float(m.mass[0]), float(m.radius[0]), plane.point,
-            plane.normal, plane.restitution)
+    stretches = np.diff(marks)
     start = time.perf_counter()
-    for k in range(1, len(marks)):
-        rain_step(x, v, contact, *args, int(marks[k] - marks[k - 1]))
-        xs[k], vs[k] = x, v
+    rain_run(x, v, contact, step, m.gravity, float(m.drag), float(m.mass[0]),
+             float(m.radius[0]), plane.point, plane.normal, float(plane.restitution), stretches,
+             xs[1:], vs[1:])
     wall = time.perf_counter() - start
     t = marks * step
     status, t_fail = finite_until(xs, t)

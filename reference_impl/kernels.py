@@ -1,6 +1,6 @@
 """A compiled fast path for the simplest particle scene: independent particles in rain.
 
-:func:`rain_step` advances particles under uniform gravity and viscous drag with the
+:func:`rain_run` advances particles under uniform gravity and viscous drag with the
 lecture's update, ``v' = v + a dt`` and ``p' = p + (v + v') dt / 2``, and after every
 step applies the point-plane collision and contact pass of
 :mod:`reference_impl.collisions` against one plane (no friction). It computes the same
@@ -109,6 +109,74 @@ def step_block(
 
 
 @njit(parallel=True, cache=True)
+def rain_run(
+    x: np.ndarray,
+    v: np.ndarray,
+    contact: np.ndarray,
+    dt: float,
+    g: np.ndarray,
+    k_drag: float,
+    mass: float,
+    radius: float,
+    plane_point: np.ndarray,
+    plane_normal: np.ndarray,
+    restitution: float,
+    stretches: np.ndarray,
+    xs: np.ndarray,
+    vs: np.ndarray,
+) -> None:
+    """Take ``stretches[k]`` lecture steps of ``dt`` seconds, then record, for each ``k``.
+
+    One parallel launch for a whole run: each block of particles takes every step while
+    it sits in the cache, writing its records on the way.
+
+    Parameters
+    ----------
+    x, v : ndarray, shape (n, 3), float64
+        Positions (m) and velocities (m/s), overwritten with the final state.
+    contact : ndarray of bool, shape (n,)
+        Particles in contact with the plane (in and out), as ``ParticleSystem.contact[0]``.
+    dt : float, s;  g : ndarray, shape (3,), m/s^2;  k_drag : float, N s/m
+    mass : float, kg (every particle);  radius : float, m (every particle)
+    plane_point, plane_normal : ndarray, shape (3,)   the plane, unit normal
+    restitution : float   k_r in ``V' = V_T - k_r V_N``
+    stretches : ndarray of int, shape (K,)   steps before each record
+    xs, vs : ndarray, shape (K, n, 3)   the records (written), or shape (0, 0, 3): none
+    """
+    n = x.shape[0]
+    mg = mass * g
+    record = xs.shape[0] == stretches.shape[0]
+    n_blocks = (n + BLOCK - 1) // BLOCK
+    for b in prange(n_blocks):
+        lo = b * BLOCK
+        m = min(BLOCK, n - lo)
+        X = np.empty((3, BLOCK))
+        V = np.empty((3, BLOCK))
+        C = np.empty(BLOCK)
+        D = np.empty(BLOCK)
+        for j in range(m):
+            for c in range(3):
+                X[c, j] = x[lo + j, c]
+                V[c, j] = v[lo + j, c]
+            C[j] = 1.0 if contact[lo + j] else 0.0
+        for k in range(stretches.shape[0]):
+            step_block(X, V, C, D, m, dt, mg, k_drag, 1.0 / mass, plane_point, plane_normal,
+                       radius, restitution, stretches[k])
+            if record:
+                for j in range(m):
+                    for c in range(3):
+                        xs[k, lo + j, c] = X[c, j]
+                        vs[k, lo + j, c] = V[c, j]
+        for j in range(m):
+            for c in range(3):
+                x[lo + j, c] = X[c, j]
+                v[lo + j, c] = V[c, j]
+            contact[lo + j] = C[j] > 0.0
+
+
+_NO_RECORDS = np.zeros((0, 0, 3))
+
+
 def rain_step(
     x: np.ndarray,
     v: np.ndarray,
@@ -123,39 +191,18 @@ def rain_step(
     restitution: float,
     n_steps: int,
 ) -> None:
-    """Take ``n_steps`` lecture steps of ``dt`` seconds for every particle, in place.
+    """Take ``n_steps`` lecture steps of ``dt`` seconds for every particle, in place,
+    recording nothing: :func:`rain_run` with one stretch (same parameters)."""
+    rain_run(x, v, contact, dt, g, k_drag, mass, radius, plane_point, plane_normal,
+             restitution, np.array([n_steps]), _NO_RECORDS, _NO_RECORDS)
 
-    Parameters
-    ----------
-    x, v : ndarray, shape (n, 3), float64
-        Positions (m) and velocities (m/s), overwritten with the new state.
-    contact : ndarray of bool, shape (n,)
-        Particles in contact with the plane (in and out), as ``ParticleSystem.contact[0]``.
-    dt : float, s;  g : ndarray, shape (3,), m/s^2;  k_drag : float, N s/m
-    mass : float, kg (every particle);  radius : float, m (every particle)
-    plane_point, plane_normal : ndarray, shape (3,)   the plane, unit normal
-    restitution : float   k_r in ``V' = V_T - k_r V_N``
-    n_steps : int
-    """
-    n = x.shape[0]
-    mg = mass * g
-    n_blocks = (n + BLOCK - 1) // BLOCK
-    for b in prange(n_blocks):
-        lo = b * BLOCK
-        m = min(BLOCK, n - lo)
-        X = np.empty((3, BLOCK))
-        V = np.empty((3, BLOCK))
-        C = np.empty(BLOCK)
-        D = np.empty(BLOCK)
-        for j in range(m):
-            for c in range(3):
-                X[c, j] = x[lo + j, c]
-                V[c, j] = v[lo + j, c]
-            C[j] = 1.0 if contact[lo + j] else 0.0
-        step_block(X, V, C, D, m, dt, mg, k_drag, 1.0 / mass, plane_point, plane_normal,
-                   radius, restitution, n_steps)
-        for j in range(m):
-            for c in range(3):
-                x[lo + j, c] = X[c, j]
-                v[lo + j, c] = V[c, j]
-            contact[lo + j] = C[j] > 0.0
+
+def compile_rain() -> None:
+    """Compile :func:`rain_run` (or load it from numba's cache) before processes fork,
+    so that each inherits it instead of loading it again."""
+    x, v = np.zeros((1, 3)), np.zeros((1, 3))
+    normal = np.array([0.0, 1.0, 0.0])
+    rain_step(x, v, np.zeros(1, dtype=bool), 1e-3, -normal, 0.0, 1.0, 0.0, np.zeros(3), normal,
+              0.5, 1)
+    rain_run(x, v, np.zeros(1, dtype=bool), 1e-3, -normal, 0.0, 1.0, 0.0, np.zeros(3), normal,
+             0.5, np.array([1]), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)))

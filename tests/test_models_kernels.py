@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reference_impl.kernels import rain_step
+from reference_impl.kernels import rain_run, rain_step
 from reference_impl.model import ParticleModel, Plane
 from reference_impl.particles import ParticleSystem
 from reference_impl.passes import passes_for
@@ -56,3 +56,22 @@ def test_kernel_splits_steps_across_calls():
     for _ in range(5):
         rain_step(x2, v2, c2, *args, 100)
     assert np.array_equal(x, x2) and np.array_equal(v, v2) and np.array_equal(c, c2)
+
+
+def test_one_run_records_what_separate_calls_reach():
+    """rain_run's records after stretches of 100, 50 and 350 steps are the states that
+    rain_step reaches in three separate calls."""
+    rng = np.random.default_rng(2)
+    n = 700
+    args = (2e-3, np.array([0.0, -9.81, 0.0]), 0.2, 1.0, 0.0, np.zeros(3),
+            np.array([0.0, 1.0, 0.0]), 0.5)
+    x, v = rng.uniform(0, 2, (n, 3)), rng.normal(0, 1, (n, 3))
+    c = np.zeros(n, bool)
+    x2, v2, c2 = x.copy(), v.copy(), c.copy()
+    stretches = np.array([100, 50, 350])
+    xs, vs = np.empty((3, n, 3)), np.empty((3, n, 3))
+    rain_run(x, v, c, *args, stretches, xs, vs)
+    for k, steps in enumerate(stretches):
+        rain_step(x2, v2, c2, *args, int(steps))
+        assert np.array_equal(xs[k], x2) and np.array_equal(vs[k], v2)
+    assert np.array_equal(x, x2) and np.array_equal(c, c2)

@@ -13,6 +13,7 @@ from cases.exact import stability_limit
 from reference_impl.model import ParticleModel, Plane
 from truestep.isolation import run_isolated_all, untimed_workers
 from truestep.restitution import bounces, heights
+from truestep.runner import preload
 from truestep.stability import search_case
 
 STABILITY_COLUMNS = ["case", "engine", "method", "dt_limit", "dt_limit_exact", "dt_unstable",
@@ -188,6 +189,7 @@ def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *
 
     Neither is timed: their runs share the machine's cores (:func:`untimed_workers`).
     """
+    preload()
     workers = untimed_workers()
     return {
         "stability": stability_table(cases, engines, quick=quick, workers=workers),
