@@ -45,9 +45,9 @@ from reference_impl.passes import passes_for
 from reference_impl.solvers import get_solver
 from reference_impl.strands import Strands, collect_strands
 from reference_impl.system import System
-from truestep.plots import ENGINE_COLOURS, series_style
+from truestep.plots import ENGINE_COLOURS, save, series_style
 
-DPI = 110
+DPI = 90
 """Resolution of every figure, dots per inch (as the report's other figures)."""
 SCENE_COLOURS = ("#ff7f0e", "#17becf", "#8c564b", "#bcbd22", "#e377c2")
 """Colours for particles and scene variants; none is in :data:`ENGINE_COLOURS`."""
@@ -100,8 +100,7 @@ def _legend_below(ax: plt.Axes, ncol: int = 2, **kw: object) -> None:
 
 
 def _save(fig: plt.Figure, path: Path) -> None:
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+    save(fig, path, dpi=DPI)
 
 
 class LinearDecay(System):

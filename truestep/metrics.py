@@ -8,12 +8,28 @@ from adapters.base import Trajectory
 from cases.case import Case
 from cases.exact import EXACT, Exact
 
+_EXACT_CACHE: dict[tuple[int, bytes], tuple[Case, Exact]] = {}
+_EXACT_CACHE_SIZE = 32
+
 
 def exact_for(case: Case, t: np.ndarray) -> Exact | None:
-    """The case's exact solution at times ``t`` (s), or ``None`` if it has none."""
+    """The case's exact solution at times ``t`` (s), or ``None`` if it has none.
+
+    Rows of one case at the same step share their record times: the solution is kept for
+    the last few (case object, times) pairs asked (the entry holds the case, so its id
+    cannot be reused while cached).
+    """
     if case.exact is None:
         return None
-    return EXACT[case.exact](case, t)
+    key = (id(case), np.asarray(t, float).tobytes())
+    hit = _EXACT_CACHE.get(key)
+    if hit is not None and hit[0] is case:
+        return hit[1]
+    exact = EXACT[case.exact](case, t)
+    if len(_EXACT_CACHE) >= _EXACT_CACHE_SIZE:
+        _EXACT_CACHE.pop(next(iter(_EXACT_CACHE)))
+    _EXACT_CACHE[key] = (case, exact)
+    return exact
 
 
 def _matching(t: np.ndarray, t_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
