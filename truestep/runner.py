@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import statistics
 import sys
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -169,6 +170,7 @@ def run_matrix(
     timing = timing or Timing(max_repeats=1 if quick else 3)
     say = progress or (lambda msg: print(msg, file=sys.stderr))
     preload()
+    start = time.perf_counter()
     rows = []
     for case in cases:
         for engine in engines:
@@ -185,7 +187,8 @@ def run_matrix(
                 row = run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
                               traces=traces)
                 rows.append(row)
-                say(f"{case.name:24s} {engine:9s} {method:17s} {dt:<9.3g} {row['status']:9s}"
+                say(f"{time.perf_counter() - start:7.1f}s {case.name:24s} {engine:9s} "
+                    f"{method:17s} {dt:<9.3g} {row['status']:9s}"
                     f" err={row.get('error', np.nan):.3g} wall={row.get('wall_s', np.nan):.3g}s")
     return tidy(rows, cases)
 
