@@ -205,3 +205,21 @@ def test_hard_case_summary_counts_tunnelling_as_failure():
     line = hard_case_line(case, results)
     assert line.index("pymunk/default") < line.index("reference/lecture")
     assert "at no step of the sweep: mujoco/Euler (unstable)" in line
+
+
+def test_speed_table_gives_particle_steps_per_second_and_ratios():
+    from truestep.report import speed_section, speed_table
+
+    case = load_cases("particle-rain")[0]
+    n = case.model.n
+    rows = [("reference", "lecture", 1e-3, 0.004, 1500, 2.8e-3),
+            ("pymunk", "default", 1e-3, 0.4, 1500, 2.7e-3),
+            ("mujoco", "Euler", 1e-3, 0.6, 1500, 9.9e-2)]
+    results = pd.DataFrame(rows, columns=["engine", "method", "dt", "wall_s", "steps", "error"]
+                           ).assign(case=case.name, dt_kind="step", status="ok")
+    t = speed_table(case, results, "reference", "lecture").set_index("engine")
+    assert t.loc["reference", "particle_steps_per_s"] == pytest.approx(n * 1500 / 0.004)
+    assert t.loc["pymunk", "slower_by"] == pytest.approx(100.0)
+    assert t.loc["mujoco", "slower_by"] == pytest.approx(150.0)
+    text = "\n".join(speed_section([case], results))
+    assert "the fastest engine, pymunk / default, takes 100 times as long" in text

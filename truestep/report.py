@@ -181,6 +181,57 @@ def hard_case_line(case: Case, results: pd.DataFrame) -> str:
     return f"- **{case.name}**: " + "; ".join(groups) + "."
 
 
+def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> pd.DataFrame:
+    """Particle-steps per second of every engine/method beside ``engine/method``'s, per step.
+
+    Columns: ``dt`` (s), ``engine``, ``method``, ``wall_s`` (s), ``particle_steps_per_s``
+    (particles x steps / wall time), ``error`` and ``slower_by`` (that row's wall time over
+    ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
+    """
+    n = case.model.n if case.model is not None else 1
+    d = results[(results["case"] == case.name) & (results["dt_kind"] == "step")
+                & (results["status"] == "ok")].dropna(subset=["wall_s"])
+    rows = []
+    for dt, g in d.groupby(d["dt"].astype(float)):
+        base = g[(g["engine"] == engine) & (g["method"] == method)]
+        base_wall = float(base["wall_s"].iloc[0]) if len(base) else np.nan
+        for r in g.sort_values("wall_s").itertuples(index=False):
+            rows.append({"dt": dt, "engine": r.engine, "method": r.method, "wall_s": r.wall_s,
+                         "particle_steps_per_s": n * r.steps / r.wall_s, "error": r.error,
+                         "slower_by": r.wall_s / base_wall})
+    return pd.DataFrame(rows, columns=["dt", "engine", "method", "wall_s",
+                                       "particle_steps_per_s", "error", "slower_by"])
+
+
+def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
+    """For each case with a ``speedup`` gate: what modelling only what the scene needs is
+    worth, the gated method against every engine at the same steps."""
+    parts: list[str] = []
+    for case in cases:
+        for g in (g for g in case.gates if g.kind == "speedup"):
+            table = speed_table(case, results, g.engine, g.method)
+            if table.empty:
+                continue
+            at = table[np.isclose(table["dt"], g.dt)]
+            others = at[at["engine"] != g.engine]
+            parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
+            parts.append(
+                f"{case.title}: {g.engine} / {g.method} runs only what the scene needs (here "
+                "a compiled loop over independent particles), the engines their general "
+                "machinery (broad phase, contact solver, one body per particle). Each row: "
+                "particle-steps per second at the same step and the error against the exact "
+                "bounce solution; `slower_by` is its wall time over "
+                f"{g.engine} / {g.method}'s.\n")
+            if len(others):
+                fastest = others.sort_values("wall_s").iloc[0]
+                parts.append(
+                    f"At dt {_fmt(g.dt)} s the fastest engine, {fastest.engine} / "
+                    f"{fastest.method}, takes {fastest.slower_by:.0f} times as long as "
+                    f"{g.engine} / {g.method} (gate: at least {g.params['min']:g} times).\n")
+            parts.append(md_table(table))
+    return parts
+
+
 def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
                     tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
                     traces: dict | None = None,
@@ -205,6 +256,7 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
                  "slop; MuJoCo's joint armature, damping and friction loss) and no damping "
                  "or clamp is added anywhere.\n")
     parts += summary(cases, results, tables)
+    parts += speed_section(cases, results)
     orders = orders_table(results, cases)
     parts.append("## Measured orders of convergence\n")
     parts.append("Least-squares slope of log(error) against log(dt) over the sweep, leaving "
