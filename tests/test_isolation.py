@@ -43,3 +43,29 @@ def test_many_calls_keep_their_order_and_a_hang_times_out_alone():
     assert [o.status for o in out] == ["ok", "ok", "timeout", "ok", "crashed", "ok", "ok"]
     assert [o.value for o in out if o.status == "ok"] == [0, 1, 4, 9, 16]
     assert sorted(seen) == list(range(len(calls)))
+
+
+def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
+    """One step of a sweep kills its process: the sweep is run again a step per process,
+    and only that step's row says crashed; a step that raises is a crashed row without
+    losing the others."""
+    from cases import load_cases
+    from truestep import runner
+
+    case = load_cases("harmonic-oscillator")[0]
+    real = runner.simulate_timed
+
+    def flaky(engine, case, method, dt, timing):
+        if dt == 1e-3:
+            os._exit(7)
+        if dt == 5e-4:
+            raise ValueError("no such step")
+        return real(engine, case, method, dt, timing)
+
+    monkeypatch.setattr(runner, "simulate_timed", flaky)
+    rows = runner.run_sweep(case, "reference", "symplectic-euler", [2e-3, 1e-3, 5e-4],
+                            adaptive=False, timing=runner.Timing(max_repeats=1))
+    assert [r["status"] for r in rows] == ["ok", "crashed", "crashed"]
+    assert "exit code 7" in rows[1]["message"]
+    assert "ValueError: no such step" in rows[2]["message"]
+    assert rows[0]["error"] < 1e-3

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 import pandas as pd
@@ -46,7 +47,9 @@ def scheme_of(engine: str, method: str) -> str | None:
 
 def _search(engine: str, case: Case, method: str, quick: bool):
     adapter = get_adapter(engine)
-    return search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    start = time.perf_counter()
+    result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    return result, time.perf_counter() - start
 
 
 def _say(msg: str) -> None:
@@ -89,11 +92,12 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
             row.update(status=out.status, note=out.message)
             _say(f"stability {row['case']} {row['engine']}/{row['method']}: {out.status}")
             return
-        r = out.value
+        r, seconds = out.value
         row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status="ok",
                    note=r.note)
         _say(f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
-             f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs")
+             f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
+             f"{seconds:.1f} s")
 
     run_isolated_all(calls, workers, done)
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)

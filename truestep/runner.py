@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import statistics
 import sys
 import time
+import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -16,7 +18,7 @@ from adapters import get_adapter
 from adapters.base import Trajectory
 from cases.case import Case
 from truestep import metrics
-from truestep.isolation import run_isolated
+from truestep.isolation import Outcome, run_isolated
 
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
@@ -85,9 +87,30 @@ def energy_trace(traj: Trajectory) -> tuple[np.ndarray, np.ndarray] | None:
     return traj.t[keep], traj.energy[keep]
 
 
-def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
-            timing: Timing, traces: dict | None = None) -> dict:
-    """One row of ``results.csv``: run in isolation, then measure.
+def simulate_sweep(engine: str, case: Case, method: str, dts: list[float],
+                   timing: Timing) -> list[Trajectory | str]:
+    """:func:`simulate_timed` at every step of a sweep, in one child process.
+
+    Each entry is the step's Trajectory, or the error message of an exception it raised
+    (the other steps still run). Runs of one case, engine and method share a process:
+    the engine's first-use costs are paid once, and no engine state outlives a run
+    (every adapter builds and tears down its scene per run).
+    """
+    out: list[Trajectory | str] = []
+    for dt in dts:
+        try:
+            out.append(simulate_timed(engine, case, method, dt, timing))
+        except Exception as err:  # a row that says so; the sweep goes on
+            tb = traceback.extract_tb(err.__traceback__)
+            where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+            out.append(f"{type(err).__name__}: {err}{where}")
+    return out
+
+
+def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
+             outcome: Trajectory | Outcome | str, traces: dict | None = None) -> dict:
+    """One row of ``results.csv`` from what a run gave: a Trajectory, an exception's
+    message (``crashed``) or an isolation outcome that is not ``ok``.
 
     If ``traces`` is given, the run's thinned energy trace is stored in it under
     ``(case, engine, method, dt_kind, dt)``.
@@ -96,11 +119,13 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         "case": case.name, "engine": engine, "method": method, "dt": dt,
         "dt_kind": "tolerance" if adaptive else "step",
     }
-    outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
-    if outcome.status != "ok":
+    if isinstance(outcome, str):
+        row.update(status="crashed", message=outcome)
+        return row
+    if isinstance(outcome, Outcome):
         row.update(status=outcome.status, message=outcome.message)
         return row
-    traj: Trajectory = outcome.value
+    traj = outcome
     if traj.status == "ok" and (t_blow := metrics.energy_blowup(case, traj)) is not None:
         traj.status, traj.t_fail = "unstable", t_blow
         traj.message = (f"finite, but its energy grew from {traj.energy[0]:.4g} J to "
@@ -120,6 +145,32 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         if trace is not None:
             traces[(case.name, engine, method, row["dt_kind"], dt)] = trace
     return row
+
+
+def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
+            timing: Timing, traces: dict | None = None) -> dict:
+    """One row of ``results.csv``: run one step in its own process, then measure."""
+    outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
+    return row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
+                    outcome=outcome.value if outcome.status == "ok" else outcome)
+
+
+def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptive: bool,
+              timing: Timing, traces: dict | None = None) -> list[dict]:
+    """The rows of one case, engine and method over its sweep.
+
+    The sweep runs in one child process (see :func:`simulate_sweep`); if that process
+    dies or runs out of time (``timeout_s`` per step), every step is run again in a
+    process of its own, so that the row of the step that crashed or hung says so and the
+    others are measured.
+    """
+    outcome = run_isolated(simulate_sweep, (engine, case, method, dts, timing),
+                           case.timeout_s * len(dts))
+    if outcome.status != "ok":
+        return [run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
+                        traces=traces) for dt in dts]
+    return [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
+            for dt, o in zip(dts, outcome.value, strict=True)]
 
 
 def preload() -> None:
@@ -165,7 +216,9 @@ def run_matrix(
 ) -> pd.DataFrame:
     """Run every (case, engine, method, dt) and return the tidy results table.
 
-    Energy traces of the runs go into ``traces`` when it is given (see :func:`run_one`).
+    Each case, engine and method's sweep runs in one child process at a time
+    (:func:`run_sweep`). Energy traces of the runs go into ``traces`` when it is given
+    (see :func:`row_from`).
     """
     timing = timing or Timing(max_repeats=1 if quick else 3)
     say = progress or (lambda msg: print(msg, file=sys.stderr))
@@ -174,7 +227,10 @@ def run_matrix(
     rows = []
     for case in cases:
         for engine in engines:
-            for method, dt, adaptive, why_not in plan(case, engine, quick=quick):
+            for method, entries in itertools.groupby(plan(case, engine, quick=quick),
+                                                     key=lambda e: e[0]):
+                entries = list(entries)
+                adaptive, why_not = entries[0][2], entries[0][3]
                 if why_not:
                     status, _, detail = why_not.partition(":")
                     rows.append({
@@ -184,12 +240,14 @@ def run_matrix(
                         "message": detail if status == "skipped" else "",
                     })
                     continue
-                row = run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
-                              traces=traces)
-                rows.append(row)
-                say(f"{time.perf_counter() - start:7.1f}s {case.name:24s} {engine:9s} "
-                    f"{method:17s} {dt:<9.3g} {row['status']:9s}"
-                    f" err={row.get('error', np.nan):.3g} wall={row.get('wall_s', np.nan):.3g}s")
+                dts = [dt for _, dt, _, _ in entries]
+                for row in run_sweep(case, engine, method, dts, adaptive=adaptive,
+                                     timing=timing, traces=traces):
+                    rows.append(row)
+                    say(f"{time.perf_counter() - start:7.1f}s {case.name:24s} {engine:9s} "
+                        f"{method:17s} {row['dt']:<9.3g} {row['status']:9s}"
+                        f" err={row.get('error', np.nan):.3g} "
+                        f"wall={row.get('wall_s', np.nan):.3g}s")
     return tidy(rows, cases)
 
 
