@@ -73,11 +73,13 @@ class Arenstorf(SecondOrderSystem):
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         mu, nu = self.mu, 1.0 - self.mu
-        x, y = q
-        d1 = ((x + mu) ** 2 + y**2) ** 1.5
-        d2 = ((x - nu) ** 2 + y**2) ** 1.5
-        ax = x + 2 * v[1] - nu * (x + mu) / d1 - mu * (x - nu) / d2
-        ay = y - 2 * v[0] - nu * y / d1 - mu * y / d2
+        x, y = float(q[0]), float(q[1])
+        r1 = (x + mu) ** 2 + y * y
+        r2 = (x - nu) ** 2 + y * y
+        d1 = r1 * math.sqrt(r1)
+        d2 = r2 * math.sqrt(r2)
+        ax = x + 2 * float(v[1]) - nu * (x + mu) / d1 - mu * (x - nu) / d2
+        ay = y - 2 * float(v[0]) - nu * y / d1 - mu * y / d2
         return np.array([ax, ay])
 
     def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:

@@ -94,5 +94,8 @@ class SecondOrderSystem(System):
         """Return ``q''`` at positions ``q`` and velocities ``v``, both shape ``(dim//2,)``."""
 
     def derivative(self, x: np.ndarray, t: float) -> np.ndarray:
-        q, v = x[: self.half], x[self.half :]
-        return np.concatenate([v, self.acceleration(q, v, t)])
+        half = self.dim // 2
+        out = np.empty(self.dim)
+        out[:half] = x[half:]
+        out[half:] = self.acceleration(x[:half], x[half:], t)
+        return out

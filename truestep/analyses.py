@@ -99,8 +99,19 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
              f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
              f"{seconds:.1f} s")
 
-    run_isolated_all(calls, workers, done)
+    # Longest first, so that no long search starts last while the other cores idle.
+    order = sorted(range(len(calls)), key=lambda k: -_search_cost(calls[k][1][1], calls[k][1][2]))
+    run_isolated_all([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
+
+
+def _search_cost(case: Case, method: str) -> float:
+    """A rough relative cost of a search, for scheduling only: steps of its smallest-step
+    run times the particles, times the evaluations a step of ``method`` makes."""
+    spec = case.stability
+    steps = max(spec.min_steps, spec.horizon / spec.dt_lo)
+    per_step = {"rk4": 4.0, "implicit-euler": 8.0, "midpoint": 2.0, "heun": 2.0}.get(method, 1.0)
+    return steps * (case.model.n if case.model is not None else 1) * per_step
 
 
 def bounce_case(e: float, dt: float) -> Case:

@@ -1124,13 +1124,31 @@ FIGURES: list[tuple[str, Callable[[Path, _Shared], str]]] = [
 """File name (without ``.png``) and drawing function of every lecture figure, in slide order."""
 
 
-def write_lecture_figures(fig_dir: Path) -> list[tuple[Path, str]]:
-    """Compute and write every lecture figure into ``fig_dir``; return (path, caption) pairs."""
+def write_lecture_figures(fig_dir: Path, names: list[str] | None = None) -> list[tuple[Path, str]]:
+    """Compute and write the lecture figures (those in ``names``, default all) into
+    ``fig_dir``; return (path, caption) pairs in slide order."""
     fig_dir = Path(fig_dir)
     fig_dir.mkdir(parents=True, exist_ok=True)
     shared = _Shared()
     out = []
     for name, draw in FIGURES:
-        path = fig_dir / f"{name}.png"
-        out.append((path, draw(path, shared)))
+        if names is None or name in names:
+            path = fig_dir / f"{name}.png"
+            out.append((path, draw(path, shared)))
     return out
+
+
+def lecture_figure_shares(parts: int) -> list[list[str]]:
+    """The figure names split into ``parts`` lists of about equal work, to draw in
+    separate processes; figures that share a simulation (the fountain and its strands)
+    stay together."""
+    units: list[list[str]] = []
+    for name, _ in FIGURES:
+        if units and "fountain" in units[-1][-1] and "strands" in name:
+            units[-1].append(name)
+        else:
+            units.append([name])
+    shares: list[list[str]] = [[] for _ in range(max(1, parts))]
+    for unit in sorted(units, key=len, reverse=True):
+        min(shares, key=len).extend(unit)
+    return [s for s in shares if s]

@@ -45,7 +45,9 @@ def _child(conn, fn: Callable[..., Any], args: tuple) -> None:
 
 
 @dataclass
-class _Running:
+class Running:
+    """A call started by :func:`start_isolated`, to be collected by :func:`finish_isolated`."""
+
     index: int
     proc: Any
     conn: Any
@@ -53,17 +55,17 @@ class _Running:
     timeout: float
 
 
-def _start(index: int, call: Call) -> _Running:
+def _start(index: int, call: Call) -> Running:
     fn, args, timeout = call
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, fn, args), daemon=True)
     proc.start()
     child.close()
-    return _Running(index, proc, parent, time.monotonic() + timeout, timeout)
+    return Running(index, proc, parent, time.monotonic() + timeout, timeout)
 
 
-def _finish(run: _Running, *, timed_out: bool) -> Outcome:
+def _finish(run: Running, *, timed_out: bool) -> Outcome:
     try:
         if timed_out:
             return Outcome("timeout", message=f"no result within {run.timeout:g} s")
@@ -90,7 +92,7 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
     """
     outcomes: list[Outcome | None] = [None] * len(calls)
     pending = list(enumerate(calls))[::-1]
-    running: list[_Running] = []
+    running: list[Running] = []
     try:
         while pending or running:
             while pending and len(running) < max(1, workers):
@@ -111,6 +113,17 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
             r.proc.join()
             r.conn.close()
     return outcomes  # type: ignore[return-value]
+
+
+def start_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Running:
+    """Start ``fn(*args)`` in a forked child and return at once (untimed work only)."""
+    return _start(0, (fn, args, timeout))
+
+
+def finish_isolated(run: Running) -> Outcome:
+    """Wait for a started call until its result arrives or its time runs out."""
+    ready = wait([run.conn], timeout=max(0.0, run.deadline - time.monotonic()))
+    return _finish(run, timed_out=not ready)
 
 
 def run_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Outcome:

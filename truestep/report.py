@@ -14,6 +14,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 
@@ -22,6 +23,12 @@ import pandas as pd
 
 from cases.case import Case
 from truestep import plots
+from truestep.isolation import (
+    finish_isolated,
+    run_isolated_all,
+    start_isolated,
+    untimed_workers,
+)
 from truestep.metrics import fit_order
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "pymunk", "pybullet", "mujoco")
@@ -232,11 +239,50 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
     return parts
 
 
+def _case_figures(cases: list[Case], results: pd.DataFrame, traces: dict | None,
+                  fig_dir: Path) -> dict[str, tuple[Path | None, Path | None]]:
+    """Draw each case's work-precision figure and, for conservative cases with traces,
+    its energy figure; return their paths (``None`` where there is nothing to draw)."""
+    out = {}
+    for case in cases:
+        df = results[results["case"] == case.name]
+        fig = plots.work_precision(df, case.name, case.title,
+                                   fig_dir / f"{case.name}-work-precision.png")
+        energy_fig = None
+        if traces and case.conservative:
+            steps = df.loc[df["dt_kind"] == "step", "dt"].dropna().astype(float).unique().tolist()
+            tols = df.loc[df["dt_kind"] == "tolerance", "dt"].dropna().astype(float).unique().tolist()
+            energy_fig = plots.energy_over_time(traces, case.name, case.title, middle(steps),
+                                                middle(tols), fig_dir / f"{case.name}-energy.png")
+        out[case.name] = (fig, energy_fig)
+    return out
+
+
+def draw_case_figures(cases: list[Case], results: pd.DataFrame, traces: dict | None,
+                      fig_dir: Path) -> dict[str, tuple[Path | None, Path | None]]:
+    """:func:`_case_figures` for every case, the cases dealt out over one process per core
+    (drawing is not timed). A share whose process fails is drawn again here."""
+    workers = untimed_workers()
+    shares = [cases[k::workers] for k in range(workers) if cases[k::workers]]
+    outs = run_isolated_all([(_case_figures, (share, results, traces, fig_dir), 600.0)
+                             for share in shares], workers)
+    drawn: dict[str, tuple[Path | None, Path | None]] = {}
+    for share, out in zip(shares, outs, strict=True):
+        drawn.update(out.value if out.status == "ok"
+                     else _case_figures(share, results, traces, fig_dir))
+    return drawn
+
+
 def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
                     tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
                     traces: dict | None = None,
-                    lecture_figures: list[tuple[Path, str]] | None = None) -> str:
-    """The report as Markdown; figures are written under ``out/figures``."""
+                    lecture_figures: LectureFigures = None) -> str:
+    """The report as Markdown; figures are written under ``out/figures``.
+
+    ``lecture_figures``: the lecture's figures as (path, caption) pairs, or a function
+    that returns them once they are drawn (called after every other figure), or ``None``
+    (a ``--quick`` run: not drawn).
+    """
     fig_dir = out / "figures"
     parts = ["# truestep report\n"]
     counts = results["status"].value_counts().to_dict()
@@ -264,23 +310,18 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
                  "1e-11 of it (round-off).\n")
     parts.append(md_table(orders.dropna(subset=["order"])))
     parts.append("## Work against precision, per case\n")
+    drawn = draw_case_figures(cases, results, traces, fig_dir)
     for case in cases:
         df = results[results["case"] == case.name]
         parts.append(f"### {case.name}: {case.title}\n")
         parts.append(" ".join(case.description.split()) + "\n")
         if case.hard:
             parts.append(f"What makes it hard: {' '.join(case.hard.split())}\n")
-        fig = plots.work_precision(df, case.name, case.title,
-                                   fig_dir / f"{case.name}-work-precision.png")
+        fig, energy_fig = drawn[case.name]
         if fig is not None:
             parts.append(f"![work-precision plot of {case.name}](figures/{fig.name})\n")
-        if traces and case.conservative:
-            steps = df.loc[df["dt_kind"] == "step", "dt"].dropna().astype(float).unique().tolist()
-            tols = df.loc[df["dt_kind"] == "tolerance", "dt"].dropna().astype(float).unique().tolist()
-            fig = plots.energy_over_time(traces, case.name, case.title, middle(steps),
-                                         middle(tols), fig_dir / f"{case.name}-energy.png")
-            if fig is not None:
-                parts.append(f"![energy over time of {case.name}](figures/{fig.name})\n")
+        if energy_fig is not None:
+            parts.append(f"![energy over time of {case.name}](figures/{energy_fig.name})\n")
         shown = df[~df["status"].isin(["unsupported", "skipped"])]
         cols = ["engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev",
                 "wall_s", "t_fail", *case.properties]
@@ -314,6 +355,8 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
         parts.append("Every case, engine and method that was not run, and why: `unsupported` "
                      "names the features the engine cannot model.\n")
         parts.append(md_table(absent[["case", "engine", "method", "status", "missing", "message"]]))
+    if callable(lecture_figures):
+        lecture_figures = lecture_figures()
     if lecture_figures is None:
         parts.append("## The lecture's figures, reproduced\n")
         parts.append("Not redrawn in a `--quick` run: `truestep figures` draws them.\n")
@@ -381,6 +424,33 @@ def markdown_to_html(md: str, base: Path) -> str:
             + "\n".join(out) + "\n</body></html>\n")
 
 
+LectureFigures = list[tuple[Path, str]] | Callable[[], list[tuple[Path, str]]] | None
+
+
+def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]:
+    """Start drawing the lecture's figures in child processes (one per core, beside this
+    one drawing the report's own figures); return the function that waits for them.
+
+    A share whose process fails is drawn again here, so an error surfaces as in a
+    sequential run.
+    """
+    from truestep.figures import FIGURES, lecture_figure_shares, write_lecture_figures
+
+    shares = lecture_figure_shares(untimed_workers())
+    started = [(names, start_isolated(write_lecture_figures, (fig_dir, names), 600.0))
+               for names in shares]
+
+    def collect() -> list[tuple[Path, str]]:
+        drawn = []
+        for names, run in started:
+            out = finish_isolated(run)
+            drawn += out.value if out.status == "ok" else write_lecture_figures(fig_dir, names)
+        rank = {name: k for k, (name, _) in enumerate(FIGURES)}
+        return sorted(drawn, key=lambda pc: rank[pc[0].stem])
+
+    return collect
+
+
 def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
                  tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
                  traces: dict | None = None, with_lecture_figures: bool = True) -> None:
@@ -395,11 +465,7 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
         results.to_csv(stage / "results.csv", index=False)
         for name in ("stability", "restitution"):
             tables[name].to_csv(stage / f"{name}.csv", index=False)
-        lecture = None
-        if with_lecture_figures:
-            from truestep.figures import write_lecture_figures
-
-            lecture = write_lecture_figures(stage / "figures")
+        lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,
                              traces=traces, lecture_figures=lecture)
         (stage / "index.md").write_text(md)
