@@ -52,7 +52,9 @@ class StabilitySpec:
     horizon : s;  dt_lo, dt_hi : bracket, s;  max_runs : simulations per search;
     rel_tol : relative width at which bisection stops;
     quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses);
-    min_steps : every run of the search takes at least this many steps.
+    min_steps : every run of the search takes at least this many steps;
+    budget_s : seconds of simulation after which the bisection stops where it is (the
+    note says so), so that no search holds the whole run up.
     """
 
     horizon: float
@@ -62,6 +64,7 @@ class StabilitySpec:
     rel_tol: float = 1e-3
     quick: bool = False
     min_steps: int = 5000  # truestep.stability.MIN_STEPS
+    budget_s: float = 10.0
 
 
 @dataclass

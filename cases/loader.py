@@ -105,6 +105,7 @@ def load_case(path: str | Path) -> Case:
             rel_tol=s.number("rel_tol", 1e-3, positive=True),
             quick=s.boolean("quick", False),
             min_steps=s.integer("min_steps", 5000, minimum=10),
+            budget_s=s.number("budget_s", 10.0, positive=True),
         )
         if stability.dt_lo >= stability.dt_hi:
             raise s.error("dt_hi", f"must exceed dt_lo ({stability.dt_lo:g})")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -79,6 +80,16 @@ def test_bisection_finds_a_known_boundary_within_its_budget():
     assert r.dt_limit <= 0.2 < r.dt_unstable
     assert r.dt_unstable / r.dt_limit - 1 <= 1e-3
     assert len(calls) == r.runs <= 30
+
+
+def test_bisection_stops_at_its_time_budget_with_the_bracket_reached():
+    def slow_stable_at(dt):
+        time.sleep(0.05)
+        return dt <= 0.2
+
+    r = bisect_limit(slow_stable_at, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=0.2)
+    assert r.runs <= 7 and r.dt_limit <= 0.2 < r.dt_unstable
+    assert "budget" in r.note and f"{r.dt_limit:.4g}" in r.note
 
 
 def exact_bouncing_ball(t, h0, e, g=9.81):

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -96,12 +97,15 @@ def bisect_limit(
     *,
     rel_tol: float = 1e-3,
     max_runs: int = 30,
+    budget_s: float = math.inf,
 ) -> SearchResult:
     """Bisect (geometrically) for the boundary between stable and unstable steps.
 
     Assumes stability is monotone in dt. Stops when ``dt_unstable / dt_limit - 1`` is
-    below ``rel_tol`` or after ``max_runs`` calls of ``stable_at``.
+    below ``rel_tol``, after ``max_runs`` calls of ``stable_at``, or once the calls have
+    taken ``budget_s`` seconds (the note then gives the bracket reached).
     """
+    start = time.perf_counter()
     runs = 1
     if not stable_at(dt_lo):
         return SearchResult(0.0, dt_lo, runs, f"unstable at every step tried (even {dt_lo:g} s)")
@@ -110,6 +114,9 @@ def bisect_limit(
         return SearchResult(dt_hi, math.inf, runs, f"stable at every step tried (up to {dt_hi:g} s)")
     lo, hi = dt_lo, dt_hi
     while hi / lo - 1 > rel_tol and runs < max_runs:
+        if time.perf_counter() - start > budget_s:
+            return SearchResult(lo, hi, runs, f"stopped at its {budget_s:g} s budget after "
+                                f"{runs} runs: the limit lies between {lo:.4g} and {hi:.4g} s")
         mid = math.sqrt(lo * hi)
         runs += 1
         if stable_at(mid):
@@ -126,7 +133,7 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
 
     Each run covers the horizon, and at least :data:`MIN_STEPS` steps, recording every step.
     ``quick`` stops at 1% instead of the case's ``rel_tol`` and runs at least
-    :data:`QUICK_MIN_STEPS` steps.
+    :data:`QUICK_MIN_STEPS` steps. The search stops at ``budget_s`` seconds of runs.
     """
     spec = case.stability
     min_steps = min(QUICK_MIN_STEPS, spec.min_steps) if quick else spec.min_steps
@@ -138,4 +145,4 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
         return is_stable(simulate(trial, dt))
 
     return bisect_limit(stable_at, spec.dt_lo, spec.dt_hi, rel_tol=rel_tol,
-                        max_runs=spec.max_runs)
+                        max_runs=spec.max_runs, budget_s=spec.budget_s)
