@@ -92,6 +92,7 @@ def integrate(
         n_steps = round((t_end - t0) / dt)
         marks = np.zeros(n_steps + 1, dtype=bool)
         marks[record_indices(n_steps, max_records)] = True
+        checked = 1  # records before this index are known finite
         for i in range(1, n_steps + 1):
             try:
                 solver.step(dt)
@@ -100,16 +101,24 @@ def integrate(
                 break
             system.between_steps(dt)
             steps = i
-            if marks[i] or i % 64 == 0:
-                x = system.get_state()
-                bad = not _finite(x)
-                if marks[i] or bad:
+            if marks[i]:
+                ts.append(system.get_time())
+                xs.append(system.get_state())
+                obs.append(system.observe())
+            if i % 64 == 0 or i == n_steps:  # a blow-up is found within 64 steps
+                x = xs[-1] if marks[i] else system.get_state()
+                if _finite(x):
+                    checked = len(xs)
+                    continue
+                bad = next((k for k in range(checked, len(xs)) if not _finite(xs[k])), None)
+                if bad is None:  # first seen between records: record it
                     ts.append(system.get_time())
                     xs.append(x)
                     obs.append(system.observe())
-                if bad:
-                    status, t_fail = "unstable", system.get_time()
-                    break
+                else:
+                    del ts[bad + 1 :], xs[bad + 1 :], obs[bad + 1 :]
+                status, t_fail = "unstable", ts[-1]
+                break
     wall = time.perf_counter() - start
     extra = {k: np.array([o[k] for o in obs]) for k in obs[0]}
     return Run(np.array(ts), np.array(xs), solver.nfev, steps, wall, extra, status, t_fail)

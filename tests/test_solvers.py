@@ -11,8 +11,8 @@ from reference_impl.integrate import integrate
 from reference_impl.model import ParticleModel
 from reference_impl.odes import Arenstorf, KeplerProblem
 from reference_impl.particles import ParticleSystem
-from reference_impl.solvers import METHODS
-from reference_impl.system import SecondOrderSystem
+from reference_impl.solvers import METHODS, get_solver
+from reference_impl.system import SecondOrderSystem, System
 from truestep.stability import energy_grows
 
 
@@ -132,3 +132,24 @@ def test_derivative_does_not_change_the_state(case_named):
     before = x.copy()
     s.derivative(x, 0.0)
     assert np.array_equal(x, before) and np.array_equal(s.get_state(), before)
+
+
+class _Riccati(System):
+    """x' = x^2 from x(0) = 1: the solution 1 / (1 - t) leaves every bound at t = 1."""
+
+    def derivative(self, x, t):
+        with np.errstate(over="ignore", invalid="ignore"):
+            return x * x
+
+
+@pytest.mark.parametrize("max_records", [10, 100000])
+def test_a_blow_up_stops_the_run_and_records_where_it_happened(max_records):
+    """Explicit Euler on x' = x^2 passes 1e12 shortly after t = 1: the run stops within
+    64 steps of it, the last record is the first one beyond the bound, every earlier
+    record is finite, and t_fail is that record's time."""
+    solver = get_solver("euler")(_Riccati(np.array([1.0])))
+    run = integrate(solver, 3.0, 1e-4, max_records=max_records)
+    assert run.status == "unstable" and run.t_fail == run.t[-1]
+    assert not np.all(np.abs(run.x[-1]) < 1e12)
+    assert np.all(np.abs(run.x[:-1]) < 1e12)
+    assert 1.0 < run.t_fail < 1.0 + 65 * 1e-4 + 0.01

@@ -52,26 +52,31 @@ class VelocityVerlet(_SplitSolver):
 
     def __init__(self, system) -> None:
         super().__init__(system)
-        self._last: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._last: tuple[float, bytes, np.ndarray] | None = None
 
     def step(self, dt: float) -> float:
-        q, v, t = self._split()
-        a = self._cached_accel(q, v, t)
+        x, t = self.system.get_state(), self.system.get_time()
+        n = self.system.half  # type: ignore[attr-defined]
+        q, v = x[:n], x[n:]
+        a = self._cached_accel(x, t)
         v_half = v + 0.5 * dt * a
         q_new = q + dt * v_half
         a_new = self.accel(q_new, v_half, t + dt)
         v_new = v_half + 0.5 * dt * a_new
-        self._store(q_new, v_new, t + dt)
-        self._last = (t + dt, q_new, v_new, a_new)
+        x_new = np.concatenate([q_new, v_new])
+        self.system.set_state(x_new, t + dt)
+        self._last = (t + dt, x_new.tobytes(), a_new)
         return dt
 
-    def _cached_accel(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
-        """Reuse the last step's closing acceleration unless the state changed since."""
+    def _cached_accel(self, x: np.ndarray, t: float) -> np.ndarray:
+        """Reuse the last step's closing acceleration unless the state changed since
+        (a collision pass between steps may have moved or stopped particles)."""
         if self._last is not None:
-            t_last, q_last, v_last, a_last = self._last
-            if t_last == t and np.array_equal(q_last, q) and np.array_equal(v_last, v):
+            t_last, x_last, a_last = self._last
+            if t_last == t and x_last == x.tobytes():
                 return a_last
-        return self.accel(q, v, t)
+        n = self.system.half  # type: ignore[attr-defined]
+        return self.accel(x[:n], x[n:], t)
 
 
 class LectureUpdate(_SplitSolver):
