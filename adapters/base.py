@@ -77,7 +77,10 @@ class Adapter(Protocol):
        method), read the engine's own state back at every recorded step, and return a
        :class:`Trajectory` whose ``wall_s`` covers the stepping only;
     4. report a blow-up as status ``unstable`` with ``t_fail``, never raise for it;
-    5. import its engine only inside its own module.
+    5. import its engine only inside its own module;
+    6. optionally, ``duplicate(case, method)``: the reason a method would compute bit for
+       bit what another of its methods computes on ``case`` (the harness then skips it
+       with that reason), or ``None``.
     """
 
     name: str

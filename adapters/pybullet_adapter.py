@@ -353,6 +353,15 @@ class PybulletAdapter:
     def missing(self, case: Case, method: str) -> set[str]:
         return case.features - self.capabilities
 
+    def duplicate(self, case: Case, method: str) -> str | None:
+        """``clean`` changes only contact handling (and uses maximal coordinates, which
+        step a free body the same way): without planes its trajectory is ``default``'s,
+        bit for bit (tested)."""
+        if method == "clean" and not case.model.planes:
+            return ("no contacts: the same trajectory as pybullet/default bit for bit "
+                    "(clean changes only contact handling)")
+        return None
+
     def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
         if method not in self.methods:
             raise ValueError(

@@ -7,6 +7,8 @@ the reference's ``symplectic-euler``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -242,3 +244,14 @@ def test_blow_up_is_unstable_not_clamped(adapter, method):
     run = adapter.simulate(make_case(model, 5.0, 0.05), method, 0.05)
     assert run.status == "unstable" and run.t_fail is not None and run.t_fail <= 0.5 + 1e-12
     assert run.steps < 100
+
+
+@pytest.mark.parametrize("name", ["spring-chain", "triangle-impulse", "hanging-cloth"])
+def test_clean_is_default_bit_for_bit_without_contacts(adapter, case_named, name):
+    """The harness skips `clean` on scenes without planes as a duplicate of `default`:
+    that holds only if the two trajectories are identical, which this checks."""
+    case = dataclasses.replace(case_named(name), duration=0.3)
+    assert adapter.duplicate(case, "clean") and adapter.duplicate(case, "default") is None
+    a, b = adapter.simulate(case, "default", 2e-3), adapter.simulate(case, "clean", 2e-3)
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
+    assert adapter.duplicate(case_named("bouncing-ball"), "clean") is None

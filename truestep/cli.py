@@ -85,7 +85,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     tables = run_analyses(cases, engines, results, quick=args.quick)
     t_analyses = lap()
     write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
-                 traces=traces, with_lecture_figures=not args.quick)
+                 traces=None if args.quick else traces, with_lecture_figures=not args.quick)
     t_report = lap()
     print(f"wrote {out}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
           f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
@@ -145,7 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="run the matrix, the analyses, and write the report")
-    run.add_argument("--quick", action="store_true", help="short sweeps, for CI")
+    run.add_argument("--quick", action="store_true",
+                     help="short sweeps of the quick cases, no energy or lecture figures (CI)")
     run.add_argument("--cases", default="*", help="glob(s) of case names, comma-separated")
     run.add_argument("--engines", default=None, help="engine names, comma-separated")
     run.add_argument("--out", default="reports", help="output directory (default: reports)")

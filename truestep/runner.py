@@ -184,6 +184,12 @@ def preload() -> None:
     compile_rain()
 
 
+def duplicate_of(adapter, case: Case, method: str) -> str | None:
+    """Why ``method`` would repeat another method of the adapter bit for bit, or ``None``."""
+    duplicate = getattr(adapter, "duplicate", None)
+    return duplicate(case, method) if duplicate is not None else None
+
+
 def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float | None, bool, str]]:
     """(method, dt, adaptive, why-not) for every row this case and engine produce.
 
@@ -198,6 +204,7 @@ def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float |
             yield method, None, adaptive, "unsupported:" + ",".join(sorted(missing))
             continue
         skip = [r for e, m, r in case.skip if e == engine and m in (method, "*")]
+        skip += [r for r in [duplicate_of(adapter, case, method)] if r]
         if skip:
             yield method, None, adaptive, "skipped:" + skip[0]
             continue
