@@ -55,12 +55,12 @@ def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
     case = load_cases("harmonic-oscillator")[0]
     real = runner.simulate_timed
 
-    def flaky(engine, case, method, dt, timing):
+    def flaky(engine, case, method, dt, timing, **kw):
         if dt == 1e-3:
             os._exit(7)
         if dt == 5e-4:
             raise ValueError("no such step")
-        return real(engine, case, method, dt, timing)
+        return real(engine, case, method, dt, timing, **kw)
 
     monkeypatch.setattr(runner, "simulate_timed", flaky)
     rows = runner.run_sweep(case, "reference", "symplectic-euler", [2e-3, 1e-3, 5e-4],

@@ -45,12 +45,15 @@ class Timing:
     warmup_fraction: float = 0.05
 
 
-def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing) -> Trajectory:
-    """Warm up, time, keep the first timed trajectory; runs inside the child process."""
+def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing, *,
+                   warm_up: bool = True) -> Trajectory:
+    """Warm up (unless this process has just run the same case and method), time, keep
+    the first timed trajectory; runs inside the child process."""
     adapter = get_adapter(engine)
-    short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
-                                                   min(dt, case.duration)))
-    adapter.simulate(short, method, dt)
+    if warm_up:
+        short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
+                                                       min(dt, case.duration)))
+        adapter.simulate(short, method, dt)
     traj = adapter.simulate(case, method, dt)
     walls = [traj.wall_s]
     if traj.status == "ok":
@@ -94,12 +97,14 @@ def simulate_sweep(engine: str, case: Case, method: str, dts: list[float],
     Each entry is the step's Trajectory, or the error message of an exception it raised
     (the other steps still run). Runs of one case, engine and method share a process:
     the engine's first-use costs are paid once, and no engine state outlives a run
-    (every adapter builds and tears down its scene per run).
+    (every adapter builds and tears down its scene per run). The first step that runs
+    warms the process up for all of them.
     """
     out: list[Trajectory | str] = []
     for dt in dts:
+        warm = any(isinstance(o, Trajectory) for o in out)
         try:
-            out.append(simulate_timed(engine, case, method, dt, timing))
+            out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
         except Exception as err:  # a row that says so; the sweep goes on
             tb = traceback.extract_tb(err.__traceback__)
             where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
