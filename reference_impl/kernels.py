@@ -196,13 +196,3 @@ def rain_step(
     rain_run(x, v, contact, dt, g, k_drag, mass, radius, plane_point, plane_normal,
              restitution, np.array([n_steps]), _NO_RECORDS, _NO_RECORDS)
 
-
-def compile_rain() -> None:
-    """Compile :func:`rain_run` (or load it from numba's cache) before processes fork,
-    so that each inherits it instead of loading it again."""
-    x, v = np.zeros((1, 3)), np.zeros((1, 3))
-    normal = np.array([0.0, 1.0, 0.0])
-    rain_step(x, v, np.zeros(1, dtype=bool), 1e-3, -normal, 0.0, 1.0, 0.0, np.zeros(3), normal,
-              0.5, 1)
-    rain_run(x, v, np.zeros(1, dtype=bool), 1e-3, -normal, 0.0, 1.0, 0.0, np.zeros(3), normal,
-             0.5, np.array([1]), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)))

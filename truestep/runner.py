@@ -180,13 +180,16 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
 
 def preload() -> None:
     """Load in this process what every forked run would otherwise load again: the
-    compiled kernels of the reference implementation (the engine modules are imported
-    by :func:`plan`)."""
+    compiled spring loop of the reference implementation (the engine modules are
+    imported by :func:`plan`).
+
+    Not the parallel rain kernel: compiling it starts numba's OpenMP layer, and a
+    process that has done so must not fork (its children are killed on their first
+    parallel loop); the few runs that use it load it themselves.
+    """
     from reference_impl.forces import compile_springs
-    from reference_impl.kernels import compile_rain
 
     compile_springs()
-    compile_rain()
 
 
 def duplicate_of(adapter, case: Case, method: str) -> str | None:
