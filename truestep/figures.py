@@ -47,7 +47,7 @@ from reference_impl.strands import Strands, collect_strands
 from reference_impl.system import System
 from truestep.plots import ENGINE_COLOURS, save, series_style
 
-DPI = 90
+DPI = 80
 """Resolution of every figure, dots per inch (as the report's other figures)."""
 SCENE_COLOURS = ("#ff7f0e", "#17becf", "#8c564b", "#bcbd22", "#e377c2")
 """Colours for particles and scene variants; none is in :data:`ENGINE_COLOURS`."""
