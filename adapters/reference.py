@@ -58,7 +58,8 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
 
     The same formulas as :class:`ParticleSystem` with :class:`LectureUpdate` and the
     plane-collision pass (tested equal to round-off), every step and record in one
-    parallel call, on all of numba's threads (the machine's cores; the engines step on one).
+    call, on one thread: the engines step on one core, and so does this comparison (the
+    kernel's multi-core throughput is measured in ``benchmarks/test_particle_step.py``).
     """
     import numba
 
@@ -75,17 +76,22 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     xs, vs = np.empty((len(marks), m.n, 3)), np.empty((len(marks), m.n, 3))
     xs[0], vs[0] = x, v
     stretches = np.diff(marks)
-    start = time.perf_counter()
-    rain_run(x, v, contact, step, m.gravity, float(m.drag), float(m.mass[0]),
-             float(m.radius[0]), plane.point, plane.normal, float(plane.restitution), stretches,
-             xs[1:], vs[1:])
-    wall = time.perf_counter() - start
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        start = time.perf_counter()
+        rain_run(x, v, contact, step, m.gravity, float(m.drag), float(m.mass[0]),
+                 float(m.radius[0]), plane.point, plane.normal, float(plane.restitution),
+                 stretches, xs[1:], vs[1:])
+        wall = time.perf_counter() - start
+    finally:
+        numba.set_num_threads(threads)
     t = marks * step
     status, t_fail = finite_until(xs, t)
     energy = total_energy(m, xs, vs)
     return Trajectory(t=t, x=xs, v=vs, energy=energy, status=status, t_fail=t_fail,
                       nfev=n_steps, steps=n_steps, wall_s=wall,
-                      message=f"fused compiled kernel, {numba.get_num_threads()} threads")
+                      message="fused compiled kernel, one thread")
 
 
 class ReferenceAdapter:

@@ -224,8 +224,9 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
             parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
             parts.append(
                 f"{case.title}: {g.engine} / {g.method} runs only what the scene needs (here "
-                "a compiled loop over independent particles), the engines their general "
-                "machinery (broad phase, contact solver, one body per particle). Each row: "
+                "a compiled loop over independent particles, on one thread like the "
+                "engines), the engines their general machinery (broad phase, contact "
+                "solver, one body per particle). Each row: "
                 "particle-steps per second at the same step and the error against the exact "
                 "bounce solution; `slower_by` is its wall time over "
                 f"{g.engine} / {g.method}'s.\n")
