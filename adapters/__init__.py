@@ -5,14 +5,14 @@ from __future__ import annotations
 import importlib
 import importlib.util
 
-from adapters.base import Adapter, Trajectory
+from truestep.adapters.base import Adapter, Trajectory
 
 ADAPTERS: dict[str, str] = {
-    "reference": "adapters.reference:ReferenceAdapter",
-    "scipy": "adapters.scipy_ivp:ScipyAdapter",
-    "pymunk": "adapters.pymunk_adapter:PymunkAdapter",
-    "pybullet": "adapters.pybullet_adapter:PybulletAdapter",
-    "mujoco": "adapters.mujoco_adapter:MujocoAdapter",
+    "reference": "truestep.adapters.reference:ReferenceAdapter",
+    "scipy": "truestep.adapters.scipy_ivp:ScipyAdapter",
+    "pymunk": "truestep.adapters.pymunk_adapter:PymunkAdapter",
+    "pybullet": "truestep.adapters.pybullet_adapter:PybulletAdapter",
+    "mujoco": "truestep.adapters.mujoco_adapter:MujocoAdapter",
 }
 """Engine name -> ``module:class``; an engine's module is imported only when asked for."""
 

@@ -6,8 +6,7 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-
-from cases.case import Case
+from truestep.cases.case import Case
 
 STATUSES = ("ok", "unstable", "crashed", "timeout", "unsupported", "skipped")
 
@@ -27,7 +26,7 @@ class Trajectory:
         Velocities, m/s (``None`` for ODE scenes, whose state is in ``x``).
     energy : ndarray, shape (T,), or None
         Total energy, J, computed from the read-back state by the same function for every
-        engine (:func:`reference_impl.particles.total_energy`).
+        engine (:func:`truestep.reference_impl.particles.total_energy`).
     alive : ndarray of bool, shape (T, n), or None
         Which particles exist at each record (scenes with emitters).
     status : str

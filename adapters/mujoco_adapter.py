@@ -24,18 +24,18 @@ outside the timed region.
   ``case.steps_for(dt)[1]``; the integrator is ``<option integrator>``, one of the
   adapter's methods. ``<flag energy="enable"/>`` makes MuJoCo compute its own
   ``mjData.energy`` (potential, kinetic), which the tests compare with
-  :func:`reference_impl.particles.total_energy`; the Trajectory's energy is
+  :func:`truestep.reference_impl.particles.total_energy`; the Trajectory's energy is
   ``total_energy`` on the read-back state, as for every engine.
 * **Springs** (between particles and anchored) are two-site spatial tendons with
   ``stiffness`` = k_s, ``damping`` = k_d and ``springlength`` = r. A tendon of length L
   between sites produces the force ``k_s (L - r) + k_d dL/dt`` along it, which is the
   lecture's spring-damper (``dL/dt = dv . dx / |dx|``); anchors are sites on the world
-  body. The test checks the force against :func:`reference_impl.forces.spring_forces`.
+  body. The test checks the force against :func:`truestep.reference_impl.forces.spring_forces`.
 * **Drag** ``f = -k v`` is the slide joints' ``damping`` = k: with axis-aligned slide
   joints, joint damping is exactly a viscous force on the particle, and MuJoCo
   evaluates it at every RK4 stage.
 * **Universal gravitation, force fields, impulses** have no MJCF element. They are
-  computed with the reference force functions (:mod:`reference_impl.forces`) on the
+  computed with the reference force functions (:mod:`truestep.reference_impl.forces`) on the
   engine's own state and handed to MuJoCo in one of two ways (``stage_forces``):
 
   - ``True`` (default): a passive-force callback (``mujoco.set_mjcb_passive``), which
@@ -61,7 +61,7 @@ outside the timed region.
 Stepping and read-back
 ----------------------
 ``round(duration / dt)`` steps, recorded at the steps of
-:func:`reference_impl.integrate.record_indices`. Without a Python force inside the
+:func:`truestep.reference_impl.integrate.record_indices`. Without a Python force inside the
 step (no gravitation, fields or impulses), MuJoCo steps in C with ``mujoco.rollout``
 (one call takes up to 64 steps, from one record to a later one, and stores every
 step's state, from which the records are picked): with a record at every step it took
@@ -75,7 +75,7 @@ steps per call so that a diverged state stops the run early; with
 and velocities are ``qpos``/``qvel`` at the records; pinned particles are their sites'
 ``site_xpos``. ``autoreset`` is off: a bad-state warning (qpos, qvel or qacc NaN or
 beyond 1e10) ends the run as ``unstable`` at the time of the check that saw it, as does
-:func:`adapters.base.finite_until` on the recorded positions. (Rollout stops at any
+:func:`truestep.adapters.base.finite_until` on the recorded positions. (Rollout stops at any
 warning; the stretch it was on is then replayed with ``mj_step``, so the run ends at
 the same step either way.)
 
@@ -166,13 +166,12 @@ from typing import ClassVar
 import mujoco
 import numpy as np
 from mujoco import rollout
-
-from adapters.base import Trajectory, finite_until
-from cases.case import Case
-from reference_impl import forces
-from reference_impl.integrate import record_indices
-from reference_impl.model import ParticleModel
-from reference_impl.particles import total_energy
+from truestep.adapters.base import Trajectory, finite_until
+from truestep.cases.case import Case
+from truestep.reference_impl import forces
+from truestep.reference_impl.integrate import record_indices
+from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.particles import total_energy
 
 INTEGRATORS: dict[str, int] = {
     "Euler": int(mujoco.mjtIntegrator.mjINT_EULER),
@@ -426,7 +425,7 @@ class AppliedForces:
         Which particles have joints.
 
     Calling it with ``(qpos, qvel, t)`` returns the generalized force (shape ``(nv,)``, N)
-    of :mod:`reference_impl.forces` at that state: the same functions the reference
+    of :mod:`truestep.reference_impl.forces` at that state: the same functions the reference
     implementation accumulates, with pinned particles at their fixed positions.
     """
 

@@ -34,7 +34,7 @@ The model in pybullet
 - **Gravity**: ``p.setGravity``.
 - **Springs, anchored springs, drag, universal gravitation, force fields, impulses**:
   summed per step in numpy by the functions the reference uses
-  (:mod:`reference_impl.forces`) from the state read back at the start of the step
+  (:mod:`truestep.reference_impl.forces`) from the state read back at the start of the step
   (``x_n``, ``v_n``, ``t_n``; impulses act in the steps with ``t_on <= t_n < t_off``, as in
   the reference), and handed to each body with
   ``p.applyExternalForce(body, -1, f, x, p.WORLD_FRAME)`` at the body's own position
@@ -143,12 +143,12 @@ and on a particle sliding with friction:
 
 Reading back
 ------------
-At each recorded step (``reference_impl.integrate.record_indices``) the positions and
+At each recorded step (``truestep.reference_impl.integrate.record_indices``) the positions and
 velocities of every movable particle are read with ``getBasePositionAndOrientation`` and
 ``getBaseVelocity``; pinned particles are at ``x0 + v0 t`` with velocity ``v0``.
-Energy is :func:`reference_impl.particles.total_energy` of that state; ``nfev`` and
+Energy is :func:`truestep.reference_impl.particles.total_energy` of that state; ``nfev`` and
 ``steps`` count ``stepSimulation`` calls. A recorded state that is non-finite or beyond
-:data:`reference_impl.integrate.BLOWUP` ends the run with status ``unstable``.
+:data:`truestep.reference_impl.integrate.BLOWUP` ends the run with status ``unstable``.
 
 Not modelled: emitters, plain ODE cases.
 """
@@ -161,13 +161,12 @@ from typing import ClassVar
 
 import numpy as np
 import pybullet as p
-
-from adapters.base import Trajectory, finite_until
-from cases.case import Case
-from reference_impl import forces
-from reference_impl.integrate import BLOWUP, record_indices
-from reference_impl.model import ParticleModel
-from reference_impl.particles import total_energy
+from truestep.adapters.base import Trajectory, finite_until
+from truestep.cases.case import Case
+from truestep.reference_impl import forces
+from truestep.reference_impl.integrate import BLOWUP, record_indices
+from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.particles import total_energy
 
 POINT_RADIUS = 0.01
 """Radius (m) of the sphere standing in for a radius-0 particle; its planes move back as much."""

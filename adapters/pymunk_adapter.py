@@ -43,7 +43,7 @@ The model in pymunk
   with several springs on a particle the Gauss-Seidel sweeps couple them. A spring
   between two pinned particles moves nothing and is left out.
 - **Drag, universal gravitation, force fields, impulses**: summed per step in numpy by the
-  same functions the reference uses (:mod:`reference_impl.forces`) and handed to the
+  same functions the reference uses (:mod:`truestep.reference_impl.forces`) and handed to the
   bodies in one batched call (``pymunk.batch.set_space_bodies``, pymunk >= 6.7) as
   ``body.force`` before each ``space.step``. They are evaluated at the position the step
   is about to move to, ``x_n + h v_n``, at the velocity ``v_n`` and at the step's start
@@ -83,9 +83,9 @@ Reading back
 ------------
 Positions and velocities come back through one batched ``pymunk.batch.get_space_bodies``
 call at the recorded steps (and every 64 steps to catch a blow-up early); ``z`` is 0.
-Energy is :func:`reference_impl.particles.total_energy` of that read-back state; ``nfev``
+Energy is :func:`truestep.reference_impl.particles.total_energy` of that read-back state; ``nfev``
 and ``steps`` count ``space.step`` calls. A non-finite or runaway state (beyond
-:data:`reference_impl.integrate.BLOWUP`) ends the run with status ``unstable``.
+:data:`truestep.reference_impl.integrate.BLOWUP`) ends the run with status ``unstable``.
 
 Not modelled: 3-D scenes (``3d``, and a 2-D scene's plane whose normal leaves the x-y
 plane), emitters, plain ODE cases.
@@ -100,13 +100,12 @@ from typing import Any, ClassVar
 import numpy as np
 import pymunk
 import pymunk.batch
-
-from adapters.base import Trajectory, finite_until
-from cases.case import Case
-from reference_impl import forces
-from reference_impl.integrate import BLOWUP, record_indices
-from reference_impl.model import ParticleModel
-from reference_impl.particles import total_energy
+from truestep.adapters.base import Trajectory, finite_until
+from truestep.cases.case import Case
+from truestep.reference_impl import forces
+from truestep.reference_impl.integrate import BLOWUP, record_indices
+from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.particles import total_energy
 
 PLANE_HALF_LENGTH = 1.0e3
 """Half-length of a plane's segment, m, centred on the scene's centre projected onto it."""

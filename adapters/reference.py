@@ -5,15 +5,14 @@ from __future__ import annotations
 import time
 
 import numpy as np
-
-from adapters.base import Trajectory, finite_until
-from cases.case import Case
-from reference_impl import odes
-from reference_impl.integrate import integrate
-from reference_impl.particles import ParticleSystem, total_energy
-from reference_impl.passes import passes_for
-from reference_impl.solvers import METHODS, get_solver
-from reference_impl.system import SecondOrderSystem, System
+from truestep.adapters.base import Trajectory, finite_until
+from truestep.cases.case import Case
+from truestep.reference_impl import odes
+from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.particles import ParticleSystem, total_energy
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import METHODS, get_solver
+from truestep.reference_impl.system import SecondOrderSystem, System
 
 ODE_CLASSES: dict[str, type[System]] = {
     "circle-field": odes.CircleField,
@@ -23,7 +22,7 @@ ODE_CLASSES: dict[str, type[System]] = {
 
 
 def build_system(case: Case) -> System:
-    """The reference system for a case: an ODE of :mod:`reference_impl.odes` or particles."""
+    """The reference system for a case: an ODE of :mod:`truestep.reference_impl.odes` or particles."""
     if case.kind == "ode":
         return ODE_CLASSES[case.ode.system](case.ode.y0, **case.ode.params)
     return ParticleSystem(case.model, passes_for(case.model))
@@ -38,7 +37,7 @@ def trajectory_from_states(case: Case, t: np.ndarray, states: np.ndarray) -> tup
 
 
 def fused_rain_applies(case: Case, method: str) -> bool:
-    """Whether the compiled kernel of :mod:`reference_impl.kernels` can run this case.
+    """Whether the compiled kernel of :mod:`truestep.reference_impl.kernels` can run this case.
 
     It fuses the lecture's update with gravity, drag and one frictionless half-space for
     particles of one mass and radius; anything more and the general path runs.
@@ -62,9 +61,8 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     kernel's multi-core throughput is measured in ``benchmarks/test_particle_step.py``).
     """
     import numba
-
-    from reference_impl.integrate import record_indices
-    from reference_impl.kernels import rain_run
+    from truestep.reference_impl.integrate import record_indices
+    from truestep.reference_impl.kernels import rain_run
 
     m = case.model
     system = ParticleSystem(m, passes_for(m))
@@ -95,7 +93,7 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
 
 
 class ReferenceAdapter:
-    """Every solver of :mod:`reference_impl.solvers` on every case it can express."""
+    """Every solver of :mod:`truestep.reference_impl.solvers` on every case it can express."""
 
     name = "reference"
     methods = tuple(METHODS)

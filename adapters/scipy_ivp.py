@@ -6,11 +6,10 @@ import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
-
-from adapters.base import Trajectory, finite_until
-from adapters.reference import build_system, trajectory_from_states
-from cases.case import Case
-from reference_impl.particles import total_energy
+from truestep.adapters.base import Trajectory, finite_until
+from truestep.adapters.reference import build_system, trajectory_from_states
+from truestep.cases.case import Case
+from truestep.reference_impl.particles import total_energy
 
 
 class ScipyAdapter:

@@ -14,7 +14,7 @@ both alike),
 - **B**, a bare loop: the scene built by the adapter's own build function outside the
   timing, then only the engine's own calls, written as plainly as a user would: the
   same number of steps and the same reads (positions and velocities of every body) at
-  the same recorded steps (:func:`reference_impl.integrate.record_indices`).
+  the same recorded steps (:func:`truestep.reference_impl.integrate.record_indices`).
 
 One warm-up pair, then :data:`REPEATS` to :data:`MAX_REPEATS` pairs (short runs repeat
 more, see :data:`MIN_SECONDS`); the ratio is median(A) / median(B), the target at most
@@ -27,7 +27,7 @@ time a whole pair (scene builds included); the numbers that matter are in
 one ``mj_step`` call per step (the bare loop above), ``mj_step(m, d, nstep=k)`` from
 record to record, and one ``mujoco.rollout.rollout`` over the whole run (every step's
 state stored, the records picked out), each as a ratio to the first. (The adapter uses
-rollout in stretches of at most 64 steps; see :mod:`adapters.mujoco_adapter`.)
+rollout in stretches of at most 64 steps; see :mod:`truestep.adapters.mujoco_adapter`.)
 """
 
 from __future__ import annotations
@@ -44,16 +44,15 @@ import pybullet as p
 import pymunk.batch
 import pytest
 from mujoco import rollout
-
-from adapters.mujoco_adapter import MujocoAdapter
-from adapters.mujoco_adapter import build as mujoco_build
-from adapters.pybullet_adapter import PybulletAdapter
-from adapters.pybullet_adapter import build_scene as pybullet_build
-from adapters.pymunk_adapter import PymunkAdapter
-from adapters.pymunk_adapter import build_scene as pymunk_build
-from cases.case import Case
-from cases.loader import CASE_DIR, load_case
-from reference_impl.integrate import record_indices
+from truestep.adapters.mujoco_adapter import MujocoAdapter
+from truestep.adapters.mujoco_adapter import build as mujoco_build
+from truestep.adapters.pybullet_adapter import PybulletAdapter
+from truestep.adapters.pybullet_adapter import build_scene as pybullet_build
+from truestep.adapters.pymunk_adapter import PymunkAdapter
+from truestep.adapters.pymunk_adapter import build_scene as pymunk_build
+from truestep.cases.case import Case
+from truestep.cases.loader import CASE_DIR, load_case
+from truestep.reference_impl.integrate import record_indices
 
 SCENES: dict[str, float] = {"bouncing-ball": 1e-3, "particle-rain": 1e-3}
 """Scene name -> the step (s) it runs at: each case's finest step in its sweep."""

@@ -6,12 +6,12 @@ Run: ``python -m pytest benchmarks/test_particle_step.py --benchmark-only -q`` (
 Each test prints particle-steps per second (from the median round, and the best round)
 and the fraction of the machine's memory bandwidth the call used, measured in the same
 run: the bandwidth is that of a numpy copy of a 256 MB array (bytes moved = 2 x its size, best of 5), and a
-call of :func:`reference_impl.kernels.rain_step` moves ``n`` particles' positions,
+call of :func:`truestep.reference_impl.kernels.rain_step` moves ``n`` particles' positions,
 velocities (read and written, 96 bytes) and contact flags (2 bytes) once however many
 steps it takes. ``steps = 1`` is a single step per call (memory-bound at large n);
 ``steps = 100`` keeps each block of particles in the cache for 100 steps, as the
 ``particle-rain`` case will. The numpy rows step the same scene through
-:class:`~reference_impl.particles.ParticleSystem` with the lecture's solver and the
+:class:`~truestep.reference_impl.particles.ParticleSystem` with the lecture's solver and the
 collision pass: the reference implementation the kernel must agree with.
 """
 
@@ -21,12 +21,11 @@ import time
 
 import numpy as np
 import pytest
-
-from reference_impl.kernels import rain_step
-from reference_impl.model import ParticleModel, Plane
-from reference_impl.particles import ParticleSystem
-from reference_impl.passes import passes_for
-from reference_impl.solvers import LectureUpdate
+from truestep.reference_impl.kernels import rain_step
+from truestep.reference_impl.model import ParticleModel, Plane
+from truestep.reference_impl.particles import ParticleSystem
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import LectureUpdate
 
 GRAVITY = np.array([0.0, -9.81, 0.0])
 DRAG, MASS, RADIUS, RESTITUTION, DT = 0.05, 0.01, 0.005, 0.6, 1e-3

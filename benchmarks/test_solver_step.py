@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from reference_impl.solvers import METHODS
-from reference_impl.system import SecondOrderSystem
+from truestep.reference_impl.solvers import METHODS
+from truestep.reference_impl.system import SecondOrderSystem
 
 
 class ThreeOscillators(SecondOrderSystem):

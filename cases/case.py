@@ -6,13 +6,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
-from reference_impl.model import ParticleModel
+from truestep.reference_impl.model import ParticleModel
 
 
 @dataclass
 class OdeSpec:
-    """A plain ODE scene: a named system of :mod:`reference_impl.odes` and its start.
+    """A plain ODE scene: a named system of :mod:`truestep.reference_impl.odes` and its start.
 
     system : ``"circle-field"``, ``"kepler"`` or ``"arenstorf"``
     y0 : ndarray, shape (dim,)  initial state
@@ -75,7 +74,7 @@ class Case:
     duration : simulated time, s
     dts, quick_dts : fixed-step sweep (s) for full and ``--quick`` runs
     tolerances, quick_tolerances : rtol = atol sweep for adaptive methods
-    exact : name of the exact solution in :mod:`cases.exact` (``None``: property checks only)
+    exact : name of the exact solution in :mod:`truestep.cases.exact` (``None``: property checks only)
     error_norm : ``final`` (positions at the end) or ``max`` (worst over the run)
     properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
     skip : ``(engine, method, reason)`` pairs that are not run (rows say why)

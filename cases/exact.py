@@ -13,8 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-
-from cases.case import Case
+from truestep.cases.case import Case
 
 
 @dataclass
@@ -290,7 +289,7 @@ def linear(case: Case, t: np.ndarray) -> Exact:
         ys = _expm_flow(expm, A, y0, t)
         x[:, free, d] = ys[:, :nf]
         v[:, free, d] = ys[:, nf : 2 * nf]
-    from reference_impl.particles import total_energy
+    from truestep.reference_impl.particles import total_energy
 
     energy = total_energy(m, x, v)
     return Exact(t, x, v, energy)
@@ -336,10 +335,10 @@ times asked, and every row of a case asks again."""
 
 
 def _reference_final(case: Case) -> Exact:
-    from reference_impl.integrate import integrate
-    from reference_impl.odes import Arenstorf, CircleField, KeplerProblem
-    from reference_impl.particles import ParticleSystem
-    from reference_impl.solvers import DormandPrince54
+    from truestep.reference_impl.integrate import integrate
+    from truestep.reference_impl.odes import Arenstorf, CircleField, KeplerProblem
+    from truestep.reference_impl.particles import ParticleSystem
+    from truestep.reference_impl.solvers import DormandPrince54
 
     tol = float(case.exact_params.get("rtol", 1e-12))
     if case.kind == "ode":
@@ -356,4 +355,4 @@ def _reference_final(case: Case) -> Exact:
     return Exact(np.array([case.duration]), final[: 3 * n].reshape(1, n, 3),
                  final[3 * n :].reshape(1, n, 3))
 
-import cases.exact_particles  # noqa: F401,E402
+import truestep.cases.exact_particles  # noqa: F401,E402

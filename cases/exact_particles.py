@@ -1,18 +1,17 @@
 """Exact solutions of the particle cases: free flight, drag, two bodies, springs, bounces.
 
-Each is registered in :data:`cases.exact.EXACT` and returns positions and velocities
+Each is registered in :data:`truestep.cases.exact.EXACT` and returns positions and velocities
 ``(T, n, 3)`` and the total energy ``(T,)`` (same formula as
-:func:`reference_impl.particles.total_energy`) at the requested times. Each checks that
+:func:`truestep.reference_impl.particles.total_energy`) at the requested times. Each checks that
 the scene is one it solves and raises ``ValueError`` naming what does not fit.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-from cases.case import Case
-from cases.exact import Exact, exact_solution, kepler_state, oscillator
-from reference_impl.model import ParticleModel
+from truestep.cases.case import Case
+from truestep.cases.exact import Exact, exact_solution, kepler_state, oscillator
+from truestep.reference_impl.model import ParticleModel
 
 
 def _energy(m: ParticleModel, x: np.ndarray, v: np.ndarray, extra: np.ndarray | float = 0.0):
@@ -75,7 +74,7 @@ def two_body(case: Case, t: np.ndarray) -> Exact:
 
     The centre of mass moves uniformly; the relative coordinate ``r = x_1 - x_0`` follows
     the Kepler orbit of ``mu = G (m_0 + m_1)`` from its initial state (any bound orbit,
-    circular included), solved by :func:`cases.exact.kepler_state` in the orbit's own
+    circular included), solved by :func:`truestep.cases.exact.kepler_state` in the orbit's own
     frame. Energy ``m_0 v_0^2 / 2 + m_1 v_1^2 / 2 - G m_0 m_1 / r`` is conserved.
     """
     m = case.model

@@ -6,8 +6,7 @@ import math
 from typing import Any
 
 import numpy as np
-
-from cases.errors import CaseError
+from truestep.cases.errors import CaseError
 
 _MISSING = object()
 

@@ -1,4 +1,4 @@
-"""Load and validate case files (TOML) into :class:`~cases.case.Case` objects."""
+"""Load and validate case files (TOML) into :class:`~truestep.cases.case.Case` objects."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import fnmatch
 import tomllib
 from pathlib import Path
 
-from cases.case import Case, Gate, OdeSpec, StabilitySpec
-from cases.errors import CaseError
-from cases.fields import Fields
-from cases.scene import read_scene
+from truestep.cases.case import Case, Gate, OdeSpec, StabilitySpec
+from truestep.cases.errors import CaseError
+from truestep.cases.fields import Fields
+from truestep.cases.scene import read_scene
 
 CASE_DIR = Path(__file__).resolve().parent
 ODE_SYSTEMS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
@@ -89,7 +89,7 @@ def load_case(path: str | Path) -> Case:
     exact_params = {k: ref.raw(k) for k in ref.table if k not in {"exact", "error", "scale", "conservative"}}
     ref.done()
     if exact is not None:
-        from cases.exact import EXACT
+        from truestep.cases.exact import EXACT
 
         if exact not in EXACT:
             raise ref.error("exact", f"no exact solution named {exact!r}; known: {', '.join(sorted(EXACT))}")

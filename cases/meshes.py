@@ -1,7 +1,7 @@
 """Scene parts that expand into many particles: mass-spring meshes and emitter pools.
 
 A ``[[scene.meshes]]`` table builds one mass-spring object of
-:mod:`reference_impl.meshes`::
+:mod:`truestep.reference_impl.meshes`::
 
     [[scene.meshes]]
     kind = "cube"            # triangle, tetrahedron, cube, rope, cloth
@@ -20,10 +20,10 @@ The fields that place the mesh depend on its kind: a tetrahedron takes ``size`` 
 ``count`` (vertices), ``start`` and ``end``; a cloth ``rows``, ``cols``, ``spacing``,
 ``origin`` and optionally the unit grid directions ``u`` and ``w``, and
 ``shear_stiffness`` and ``bend_stiffness`` (default: ``stiffness``). Vertex numbers are
-those of the builders in :mod:`reference_impl.meshes`; the mesh's particles follow the
+those of the builders in :mod:`truestep.reference_impl.meshes`; the mesh's particles follow the
 ``[[scene.particles]]`` groups and earlier meshes in the global numbering.
 
-A ``[[scene.emitters]]`` table is an :class:`~reference_impl.model.EmitterSpec`, with the
+A ``[[scene.emitters]]`` table is an :class:`~truestep.reference_impl.model.EmitterSpec`, with the
 same field names (``shape``, ``center``, ``size``, ``normal`` for a plane, ``rate_n``,
 ``rate_r``, ``per_area``, ``speed``, ``speed_jitter``, ``spread``, ``lifetime``,
 ``lifetime_jitter``, ``frame_dt``, ``capacity``, ``particle_mass``, ``particle_size``,
@@ -37,11 +37,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from cases.fields import Fields
-from reference_impl import meshes
-from reference_impl.emitters import spawn_mean
-from reference_impl.model import EmitterSpec, Springs
+from truestep.cases.fields import Fields
+from truestep.reference_impl import meshes
+from truestep.reference_impl.emitters import spawn_mean
+from truestep.reference_impl.model import EmitterSpec, Springs
 
 
 @dataclass

@@ -8,10 +8,9 @@ anchors refer to those global numbers.
 from __future__ import annotations
 
 import numpy as np
-
-from cases.fields import Fields
-from cases.meshes import MeshPart, read_emitter, read_mesh
-from reference_impl.model import (
+from truestep.cases.fields import Fields
+from truestep.cases.meshes import MeshPart, read_emitter, read_mesh
+from truestep.reference_impl.model import (
     Anchors,
     ForceField,
     Gravitation,

@@ -49,11 +49,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-
-from reference_impl.model import Plane
+from truestep.reference_impl.model import Plane
 
 if TYPE_CHECKING:
-    from reference_impl.particles import ParticleSystem
+    from truestep.reference_impl.particles import ParticleSystem
 
 EPS_DISTANCE = 1e-9
 """m: "within eps of the wall" for collision and contact (theoretically zero)."""

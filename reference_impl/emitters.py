@@ -33,11 +33,10 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-
-from reference_impl.model import EmitterSpec, ParticleModel
+from truestep.reference_impl.model import EmitterSpec, ParticleModel
 
 if TYPE_CHECKING:
-    from reference_impl.particles import ParticleSystem
+    from truestep.reference_impl.particles import ParticleSystem
 
 CUBE_NORMALS = np.array(
     [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float

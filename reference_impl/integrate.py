@@ -6,8 +6,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-
-from reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.base import Solver
 
 BLOWUP = 1e12
 """A state component beyond this magnitude counts as a blow-up (SI units throughout)."""
@@ -30,7 +29,7 @@ class Run:
     wall_s : float
         Seconds spent stepping (recording included, setup excluded).
     extra : dict of str to ndarray, shape (T, ...)
-        The system's :meth:`~reference_impl.system.System.observe` at each record.
+        The system's :meth:`~truestep.reference_impl.system.System.observe` at each record.
     status : str
         ``ok``, or ``unstable`` if the state went non-finite or beyond ``BLOWUP``.
     t_fail : float or None

@@ -3,10 +3,10 @@
 :func:`rain_run` advances particles under uniform gravity and viscous drag with the
 lecture's update, ``v' = v + a dt`` and ``p' = p + (v + v') dt / 2``, and after every
 step applies the point-plane collision and contact pass of
-:mod:`reference_impl.collisions` against one plane (no friction). It computes the same
-formulas, in the same order, as :class:`~reference_impl.particles.ParticleSystem` with
-:class:`~reference_impl.solvers.LectureUpdate` and
-:class:`~reference_impl.collisions.PlaneCollisions`, fused into one loop so that each
+:mod:`truestep.reference_impl.collisions` against one plane (no friction). It computes the same
+formulas, in the same order, as :class:`~truestep.reference_impl.particles.ParticleSystem` with
+:class:`~truestep.reference_impl.solvers.LectureUpdate` and
+:class:`~truestep.reference_impl.collisions.PlaneCollisions`, fused into one loop so that each
 particle's state is read and written once per call instead of once per numpy temporary.
 The compiler may fuse a multiply and an add into one rounding (``fastmath="contract"``):
 results differ from the numpy path by round-off only.
@@ -23,8 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
-
-from reference_impl.collisions import EPS_DISTANCE, EPS_SPEED
+from truestep.reference_impl.collisions import EPS_DISTANCE, EPS_SPEED
 
 BLOCK = 256
 """Particles per block: the block's 8 arrays of BLOCK doubles stay in the L1 cache."""

@@ -14,8 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from reference_impl.model import Springs
+from truestep.reference_impl.model import Springs
 
 CUBE_BRACING = ("edges", "faces", "volume")
 """Cube spring sets: edges only; plus face diagonals; plus face and volume diagonals."""

@@ -90,7 +90,7 @@ class ForceField:
 
     kind : ``"vortex"`` (tangential swirl about an axis through ``center``) or ``"wind"``
     (a gusting uniform wind acting through drag). The evaluators live in
-    :mod:`reference_impl.forces`.
+    :mod:`truestep.reference_impl.forces`.
     """
 
     kind: str

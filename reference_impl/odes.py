@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from reference_impl.system import SecondOrderSystem, System
+from truestep.reference_impl.system import SecondOrderSystem, System
 
 
 class CircleField(System):

@@ -12,10 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
-
-from reference_impl import collisions, forces
-from reference_impl.model import ParticleModel
-from reference_impl.system import SecondOrderSystem
+from truestep.reference_impl import collisions, forces
+from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.system import SecondOrderSystem
 
 DENSE_JACOBIAN = 240
 """Up to this state dimension the Jacobian is returned as a dense array."""
@@ -44,7 +43,7 @@ class ParticleSystem(SecondOrderSystem):
         Particles taking part (all, unless an emitter manages a pool).
     contact : ndarray of bool, shape (len(model.planes), n)
         Particles in resting or sliding contact with each plane, set by the collision
-        pass (:mod:`reference_impl.collisions`); the derivative adds the contact force
+        pass (:mod:`truestep.reference_impl.collisions`); the derivative adds the contact force
         (and friction) for them.
     f : ndarray, shape (n, 3), N
         The force accumulator, reused between evaluations.

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-
-from reference_impl.collisions import PlaneCollisions
-from reference_impl.emitters import Emitter, pool_starts
-from reference_impl.model import ParticleModel
-from reference_impl.particles import Pass
+from truestep.reference_impl.collisions import PlaneCollisions
+from truestep.reference_impl.emitters import Emitter, pool_starts
+from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.particles import Pass
 
 
 def passes_for(model: ParticleModel) -> list[Pass]:

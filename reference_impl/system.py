@@ -1,7 +1,7 @@
 """The lecture's modular solver interface.
 
 "Generic operations: get dim(x); get/set x and t; deriv eval at current (x, t).
-Write solvers in terms of these." Every solver in :mod:`reference_impl.solvers`
+Write solvers in terms of these." Every solver in :mod:`truestep.reference_impl.solvers`
 talks to a system through this interface and nothing else.
 """
 

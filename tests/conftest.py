@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import pytest
-
-from cases import load_case
-from cases.loader import CASE_DIR
+from truestep.cases import load_case
+from truestep.cases.loader import CASE_DIR
 
 
 @pytest.fixture(scope="session")

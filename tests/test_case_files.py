@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import pytest
-
-from cases import CaseError, case_files, load_case
+from truestep.cases import CaseError, case_files, load_case
 
 GOOD = """
 kind = "particles"

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 from PIL import Image
+from truestep.reference_impl.solvers import get_solver
 
-from reference_impl.solvers import get_solver
 from truestep.figures import (
     FIGURES,
     LinearDecay,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from truestep.adapters.reference import ReferenceAdapter
+from truestep.cases.exact import EXACT
 
-from adapters.reference import ReferenceAdapter
-from cases.exact import EXACT
 from truestep.properties import PROPERTIES
 
 PARTICLE_CASES = [
@@ -64,12 +64,11 @@ def test_earth_orbit_closes_after_one_period(case_named):
 
 
 def test_linear_flow_stepped_record_to_record_equals_the_exponential_at_each_time():
-    """cases.exact's linear solution steps expm from record to record (one exponential
+    """truestep.cases.exact's linear solution steps expm from record to record (one exponential
     per distinct gap); it must agree with expm(A t) y0 at every time, here for a damped
     five-mass chain with forcing, 2001 records over 5000 steps of 1e-3 s."""
     from scipy.linalg import expm
-
-    from cases.exact import _expm_flow
+    from truestep.cases.exact import _expm_flow
 
     n = 5
     K = np.diag(np.full(n, 800.0)) - 400 * np.eye(n, k=1) - 400 * np.eye(n, k=-1)

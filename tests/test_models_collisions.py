@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from truestep.adapters.reference import ReferenceAdapter
+from truestep.cases.exact_particles import bounce_schedule
+from truestep.reference_impl.collisions import box_planes
+from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.model import ParticleModel, Plane
+from truestep.reference_impl.particles import ParticleSystem
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import get_solver
 
-from adapters.reference import ReferenceAdapter
-from cases.exact_particles import bounce_schedule
-from reference_impl.collisions import box_planes
-from reference_impl.integrate import integrate
-from reference_impl.model import ParticleModel, Plane
-from reference_impl.particles import ParticleSystem
-from reference_impl.passes import passes_for
-from reference_impl.solvers import get_solver
 from truestep.properties import PROPERTIES
 
 UP = np.array([0.0, 1.0, 0.0])
@@ -57,7 +57,7 @@ def test_bounce_times_converge_at_first_order():
 
 
 def _case(model: ParticleModel, duration: float):
-    from cases.case import Case
+    from truestep.cases.case import Case
 
     return Case(name="t", file="t", title="t", description="", kind="particles",
                 duration=duration, dts=[0.01], quick_dts=[0.01], tolerances=[1e-6],

@@ -6,16 +6,16 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from truestep.adapters.reference import ReferenceAdapter
+from truestep.cases import CaseError, load_case
+from truestep.reference_impl.emitters import Emitter, emitter_area, spawn_count_moments
+from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.model import EmitterSpec, ParticleModel
+from truestep.reference_impl.particles import ParticleSystem
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import get_solver
+from truestep.reference_impl.strands import ballistic_deviation, collect_strands
 
-from adapters.reference import ReferenceAdapter
-from cases import CaseError, load_case
-from reference_impl.emitters import Emitter, emitter_area, spawn_count_moments
-from reference_impl.integrate import integrate
-from reference_impl.model import EmitterSpec, ParticleModel
-from reference_impl.particles import ParticleSystem
-from reference_impl.passes import passes_for
-from reference_impl.solvers import get_solver
-from reference_impl.strands import ballistic_deviation, collect_strands
 from truestep.properties import PROPERTIES
 
 

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from cases.case import Case
-from cases.exact import EXACT
-from reference_impl import forces
-from reference_impl.integrate import integrate
-from reference_impl.model import Anchors, Gravitation, ParticleModel, Springs
-from reference_impl.particles import ParticleSystem
-from reference_impl.solvers import RK4, LectureUpdate, get_solver
+from truestep.cases.case import Case
+from truestep.cases.exact import EXACT
+from truestep.reference_impl import forces
+from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.model import Anchors, Gravitation, ParticleModel, Springs
+from truestep.reference_impl.particles import ParticleSystem
+from truestep.reference_impl.solvers import RK4, LectureUpdate, get_solver
 
 G = np.array([0.0, -9.81, 0.0])
 
@@ -157,7 +156,7 @@ def test_a_pinned_particle_feels_no_force():
 
 
 def test_impulse_on_the_triangle_gives_f_dt_with_the_lecture_update():
-    from reference_impl import meshes
+    from truestep.reference_impl import meshes
 
     mesh = meshes.triangle(1.0)
     mass, springs = meshes.mass_spring(mesh, 3.0, 100.0, 0.5)

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from reference_impl.kernels import rain_run, rain_step
-from reference_impl.model import ParticleModel, Plane
-from reference_impl.particles import ParticleSystem
-from reference_impl.passes import passes_for
-from reference_impl.solvers import LectureUpdate
+from truestep.reference_impl.kernels import rain_run, rain_step
+from truestep.reference_impl.model import ParticleModel, Plane
+from truestep.reference_impl.particles import ParticleSystem
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import LectureUpdate
 
 
 @pytest.mark.parametrize(("normal", "drag", "restitution"),

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from truestep.adapters.reference import ReferenceAdapter
+from truestep.cases import CaseError, load_case
+from truestep.reference_impl import meshes
 
-from adapters.reference import ReferenceAdapter
-from cases import CaseError, load_case
-from reference_impl import meshes
 from truestep.properties import PROPERTIES
 
 

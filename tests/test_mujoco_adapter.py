@@ -7,20 +7,19 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-
-from adapters.base import Adapter
-from adapters.mujoco_adapter import (
+from truestep.adapters.base import Adapter
+from truestep.adapters.mujoco_adapter import (
     MujocoAdapter,
     build,
     damping_ratio,
     max_damping_ratio,
     restitution_of,
 )
-from cases.case import Case, OdeSpec
-from cases.loader import load_case
-from reference_impl.forces import spring_forces
-from reference_impl.model import Anchors, ForceField, Gravitation, ParticleModel, Plane, Springs
-from reference_impl.particles import total_energy
+from truestep.cases.case import Case, OdeSpec
+from truestep.cases.loader import load_case
+from truestep.reference_impl.forces import spring_forces
+from truestep.reference_impl.model import Anchors, ForceField, Gravitation, ParticleModel, Plane, Springs
+from truestep.reference_impl.particles import total_energy
 
 pytestmark = pytest.mark.engine
 

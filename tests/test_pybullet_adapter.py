@@ -11,12 +11,11 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from adapters.base import Adapter
-from adapters.pybullet_adapter import PybulletAdapter
-from adapters.reference import ReferenceAdapter
-from cases.case import Case, OdeSpec
-from reference_impl.model import (
+from truestep.adapters.base import Adapter
+from truestep.adapters.pybullet_adapter import PybulletAdapter
+from truestep.adapters.reference import ReferenceAdapter
+from truestep.cases.case import Case, OdeSpec
+from truestep.reference_impl.model import (
     Anchors,
     EmitterSpec,
     ForceField,

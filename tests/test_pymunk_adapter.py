@@ -12,10 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from adapters.pymunk_adapter import PymunkAdapter
-from cases.loader import CASE_DIR, load_case
-from reference_impl import forces
+from truestep.adapters.pymunk_adapter import PymunkAdapter
+from truestep.cases.loader import CASE_DIR, load_case
+from truestep.reference_impl import forces
 
 pytestmark = pytest.mark.engine
 

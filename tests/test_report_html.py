@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
+from truestep.cases import load_cases
 
-from cases import load_cases
 from truestep.analyses import run_analyses
 from truestep.cli import main
 from truestep.figures import FIGURES

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from truestep.adapters.reference import build_system
+from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.odes import Arenstorf, KeplerProblem
+from truestep.reference_impl.particles import ParticleSystem
+from truestep.reference_impl.solvers import METHODS, get_solver
+from truestep.reference_impl.system import SecondOrderSystem, System
 
-from adapters.reference import build_system
-from reference_impl.integrate import integrate
-from reference_impl.model import ParticleModel
-from reference_impl.odes import Arenstorf, KeplerProblem
-from reference_impl.particles import ParticleSystem
-from reference_impl.solvers import METHODS, get_solver
-from reference_impl.system import SecondOrderSystem, System
 from truestep.stability import energy_grows
 
 

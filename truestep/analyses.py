@@ -8,11 +8,11 @@ import time
 import numpy as np
 import pandas as pd
 
-from adapters import get_adapter
-from cases.case import Case
-from cases.exact import stability_limit
-from reference_impl.model import ParticleModel, Plane
+from truestep.adapters import get_adapter
+from truestep.cases.case import Case
+from truestep.cases.exact import stability_limit
 from truestep.isolation import run_isolated_all, untimed_workers
+from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
 from truestep.stability import search_case

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from adapters import ADAPTERS, get_adapter
-from cases import CaseError, load_cases
-from cases.case import Case
+from truestep.adapters import ADAPTERS, get_adapter
+from truestep.cases import CaseError, load_cases
+from truestep.cases.case import Case
 
 
 class UsageError(Exception):

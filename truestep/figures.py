@@ -31,21 +31,21 @@ import numpy as np
 from matplotlib.collections import EllipseCollection, LineCollection
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-from adapters.reference import build_system
-from cases.exact import EXACT, oscillator
-from cases.loader import CASE_DIR, load_case
-from reference_impl import forces, meshes
-from reference_impl.collisions import box_planes
-from reference_impl.emitters import Emitter, lifetime_values, spawn_count_moments, spawn_mean
-from reference_impl.integrate import Run, integrate
-from reference_impl.model import EmitterSpec, ParticleModel, Plane, Springs
-from reference_impl.odes import CircleField
-from reference_impl.particles import ParticleSystem, total_energy
-from reference_impl.passes import passes_for
-from reference_impl.solvers import get_solver
-from reference_impl.strands import Strands, collect_strands
-from reference_impl.system import System
+from truestep.adapters.reference import build_system
+from truestep.cases.exact import EXACT, oscillator
+from truestep.cases.loader import CASE_DIR, load_case
 from truestep.plots import ENGINE_COLOURS, save, series_style
+from truestep.reference_impl import forces, meshes
+from truestep.reference_impl.collisions import box_planes
+from truestep.reference_impl.emitters import Emitter, lifetime_values, spawn_count_moments, spawn_mean
+from truestep.reference_impl.integrate import Run, integrate
+from truestep.reference_impl.model import EmitterSpec, ParticleModel, Plane, Springs
+from truestep.reference_impl.odes import CircleField
+from truestep.reference_impl.particles import ParticleSystem, total_energy
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import get_solver
+from truestep.reference_impl.strands import Strands, collect_strands
+from truestep.reference_impl.system import System
 
 DPI = 80
 """Resolution of every figure, dots per inch (as the report's other figures)."""
@@ -511,7 +511,7 @@ def fig_triangle(path: Path) -> str:
 CUBE_PUSH = np.array([20.0, -20.0, 0.0])
 """Force on each top vertex of the cube figure, N."""
 CUBE_TOP, CUBE_BOTTOM = (2, 3, 6, 7), (0, 1, 4, 5)
-"""Vertices of the top (pushed) and bottom (pinned) faces of :func:`reference_impl.meshes.cube`."""
+"""Vertices of the top (pushed) and bottom (pinned) faces of :func:`truestep.reference_impl.meshes.cube`."""
 
 
 @dataclass
@@ -866,7 +866,7 @@ def fig_strands(path: Path, fountain: Fountain) -> str:
     return ('Reproduces the lecture slide "The same cube emitter rendered using static particles, '
             'or strands" (Snowflakes vs Hair): the emitter and forces of the fountain figure, but '
             f"every particle born in its first {STRAND_FRAMES} frames drawn over its whole life at "
-            "once, as a polyline through its positions frame by frame (reference_impl.strands). "
+            "once, as a polyline through its positions frame by frame (truestep.reference_impl.strands). "
             "Each strand's thickness at the root is its particle's size (the shape parameter, "
             f"{roots[0]:.0f} to {roots[1]:.0f} mm), tapering linearly along the strand to "
             f"{100 * (1 - taper):.0f} %; colour runs from birth to death as in the fountain.")

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from cases.case import Case, Gate
+from truestep.cases.case import Case, Gate
 from truestep.metrics import fit_order
 
 

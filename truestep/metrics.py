@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.base import Trajectory
-from cases.case import Case
-from cases.exact import EXACT, Exact
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
+from truestep.cases.exact import EXACT, Exact
 
 _EXACT_CACHE: dict[tuple[int, bytes], tuple[Case, Exact]] = {}
 _EXACT_CACHE_SIZE = 32

@@ -1,7 +1,7 @@
 """Named metrics a case can ask for (``properties = [...]``) and gate on.
 
 Each property is a pure function ``(case, trajectory) -> float`` of the case and one
-run's :class:`~adapters.base.Trajectory` (positions, velocities and, for emitter scenes,
+run's :class:`~truestep.adapters.base.Trajectory` (positions, velocities and, for emitter scenes,
 the ``alive`` mask at every record), whichever engine produced it. Units are in each
 docstring; ``nan`` means the property does not apply to the run, ``inf`` that what it
 measures never happened (a bounce that was never seen).
@@ -13,12 +13,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from adapters.base import Trajectory
-from cases.case import Case
-from cases.exact_particles import bounce_schedule
-from reference_impl.emitters import lifetime_values, pool_starts, spawn_count_moments, spawn_mean
-from reference_impl.meshes import signed_volume
-from reference_impl.strands import ballistic_deviation, collect_strands
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
+from truestep.cases.exact_particles import bounce_schedule
+from truestep.reference_impl.emitters import lifetime_values, pool_starts, spawn_count_moments, spawn_mean
+from truestep.reference_impl.meshes import signed_volume
+from truestep.reference_impl.strands import ballistic_deviation, collect_strands
 
 Property = Callable[[Case, Trajectory], float]
 PROPERTIES: dict[str, Property] = {}
@@ -206,7 +206,7 @@ def spawn_rate_z(case: Case, traj: Trajectory) -> float:
 
     Spawns are slots that turn alive between records (plus those alive at the start);
     with ``F`` frames begun, ``z = (S - F mu) / sqrt(F sigma^2)`` with ``mu``, ``sigma^2``
-    of :func:`~reference_impl.emitters.spawn_count_moments`. The worst emitter's z.
+    of :func:`~truestep.reference_impl.emitters.spawn_count_moments`. The worst emitter's z.
     """
     worst = float("nan")
     for spec, alive in _emitter_pools(case, traj):
@@ -262,7 +262,7 @@ def strand_error(case: Case, traj: Trajectory) -> float:
 
     Strands (static particles) are the recorded lives of the emitter's particles; under
     uniform gravity and drag alone each lies on the curve fixed by its first point and
-    velocity (:func:`~reference_impl.strands.ballistic_deviation`).
+    velocity (:func:`~truestep.reference_impl.strands.ballistic_deviation`).
     """
     m = case.model
     if traj.alive is None or not m.emitters:

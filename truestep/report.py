@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cases.case import Case
 from truestep import plots
+from truestep.cases.case import Case
 from truestep.isolation import (
     finish_isolated,
     run_isolated_all,

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from adapters import get_adapter
-from adapters.base import Trajectory
-from cases.case import Case
 from truestep import metrics
+from truestep.adapters import get_adapter
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
 from truestep.isolation import Outcome, run_isolated
 
 RESULT_COLUMNS = [
@@ -187,7 +187,7 @@ def preload() -> None:
     process that has done so must not fork (its children are killed on their first
     parallel loop); the few runs that use it load it themselves.
     """
-    from reference_impl.forces import compile_springs
+    from truestep.reference_impl.forces import compile_springs
 
     compile_springs()
 

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adapters.base import Trajectory
-from cases.case import Case
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
 
 GROWTH_TOL = 0.25
 """Rise of the late half's energy peak above the early half's band, as a fraction of the

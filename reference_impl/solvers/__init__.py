@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from reference_impl.solvers.base import Solver
-from reference_impl.solvers.explicit_rk import (
+from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.explicit_rk import (
     RK4,
     DormandPrince54,
     Euler,
@@ -12,8 +12,8 @@ from reference_impl.solvers.explicit_rk import (
     Midpoint,
     rk_stages,
 )
-from reference_impl.solvers.implicit import ImplicitEuler
-from reference_impl.solvers.splitting import LectureUpdate, SymplecticEuler, VelocityVerlet
+from truestep.reference_impl.solvers.implicit import ImplicitEuler
+from truestep.reference_impl.solvers.splitting import LectureUpdate, SymplecticEuler, VelocityVerlet
 
 METHODS: dict[str, type[Solver]] = {
     cls.name: cls

@@ -5,12 +5,11 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 
 import numpy as np
-
-from reference_impl.system import SecondOrderSystem, System
+from truestep.reference_impl.system import SecondOrderSystem, System
 
 
 class Solver(ABC):
-    """A one-step solver written only against :class:`~reference_impl.system.System`.
+    """A one-step solver written only against :class:`~truestep.reference_impl.system.System`.
 
     A subclass must:
 

@@ -10,9 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-
-from reference_impl.solvers.base import Solver
-from reference_impl.system import System
+from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.system import System
 
 Stages = tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
 """A tableau's stages as :func:`stages_of` gives them: ``(c_i, ((j, a_ij), ...))``."""

@@ -8,9 +8,8 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-
-from reference_impl.solvers.base import Solver
-from reference_impl.system import System
+from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.system import System
 
 DENSE_UP_TO = 300
 """Systems up to this dimension factorise a dense Newton matrix even when the Jacobian

@@ -6,8 +6,7 @@ Each needs ``system.acceleration(q, v, t)`` and the state layout ``x = [q, v]``.
 from __future__ import annotations
 
 import numpy as np
-
-from reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.base import Solver
 
 
 class _SplitSolver(Solver):
