@@ -1,35 +1,170 @@
-"""Engines behind one Adapter protocol; the reference implementation is one of them."""
+"""Engines behind one Adapter protocol, found by entry point; the reference is one of them.
+
+Every engine, the built-in ones included, is registered in the entry-point group
+``truestep.adapters`` as ``name = "module:Class"`` (truestep's own in its
+``pyproject.toml``); an installed package adds its engine the same way. An adapter that
+is importable but not registered is named by its ``module:Class`` instead
+(:func:`resolve_engine`), and from then on by its ``name`` in this process and the
+processes it forks.
+
+An engine's module is imported only when the engine is asked for. An engine whose
+library is missing raises :class:`EngineNotInstalled`, naming the pip line that adds it.
+"""
 
 from __future__ import annotations
 
+import functools
 import importlib
-import importlib.util
+from importlib import metadata
 
-from truestep.adapters.base import Adapter, Trajectory
+from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
 
-ADAPTERS: dict[str, str] = {
+ENTRY_POINT_GROUP = "truestep.adapters"
+
+BUILTIN: dict[str, str] = {
     "reference": "truestep.adapters.reference:ReferenceAdapter",
     "scipy": "truestep.adapters.scipy_ivp:ScipyAdapter",
     "pymunk": "truestep.adapters.pymunk_adapter:PymunkAdapter",
     "pybullet": "truestep.adapters.pybullet_adapter:PybulletAdapter",
     "mujoco": "truestep.adapters.mujoco_adapter:MujocoAdapter",
 }
-"""Engine name -> ``module:class``; an engine's module is imported only when asked for."""
+"""The built-in engines, as ``pyproject.toml`` registers them (a test keeps the two equal).
+Read only when truestep's own distribution metadata is absent (a checkout run without
+installing it)."""
+
+EXTRAS: dict[str, str] = {"pymunk": "pymunk", "pybullet": "pybullet", "mujoco": "mujoco"}
+"""Built-in engine -> the optional extra of truestep that installs its library."""
+
+_RESOLVED: dict[str, str] = {}
+"""Engines named by ``module:Class`` in this process: adapter name -> target."""
+
+
+class UnknownEngine(KeyError):
+    """An engine name that no entry point registers; ``str()`` is one line."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class EngineNotInstalled(ImportError):
+    """A registered engine whose library cannot be imported.
+
+    ``engine`` is its name, ``missing`` the module that is absent and ``pip`` the line
+    that installs it (``pip install "truestep[pymunk]"`` for a built-in engine).
+    """
+
+    def __init__(self, engine: str, missing: str, pip: str) -> None:
+        self.engine, self.missing, self.pip = engine, missing, pip
+        super().__init__(f"engine {engine!r} is not installed ({missing} is missing): {pip}")
+
+
+@functools.cache
+def _entry_points() -> dict[str, str]:
+    found = {ep.name: ep.value for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+    try:
+        metadata.distribution("truestep")
+    except metadata.PackageNotFoundError:
+        found = {**BUILTIN, **found}
+    return found
+
+
+def registered() -> dict[str, str]:
+    """Every engine this process knows: name -> ``module:Class``, built-in ones first."""
+    found = {**_entry_points(), **_RESOLVED}
+    order = [n for n in BUILTIN if n in found] + sorted(n for n in found if n not in BUILTIN)
+    return {n: found[n] for n in order}
+
+
+def pip_line(engine: str) -> str:
+    """The command that installs what ``engine`` needs."""
+    if engine in EXTRAS:
+        return f'pip install "truestep[{EXTRAS[engine]}]"'
+    return f"pip install the package that provides engine {engine!r}"
+
+
+def _load_class(engine: str, target: str) -> type:
+    module, _, cls = target.partition(":")
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as err:
+        missing = err.name or module
+        if missing == module or module.startswith(missing + "."):
+            raise UnknownEngine(f"engine {engine!r}: module {module!r} is not importable") from None
+        raise EngineNotInstalled(engine, missing, pip_line(engine)) from None
+    try:
+        return getattr(mod, cls)
+    except AttributeError:
+        raise UnknownEngine(f"engine {engine!r}: {module} has no attribute {cls!r}") from None
+
+
+def adapter_class(name: str) -> type:
+    """The adapter class of engine ``name`` (registered, or ``module:Class``), imported."""
+    if ":" in name:
+        name = resolve_engine(name)
+    targets = registered()
+    if name not in targets:
+        raise UnknownEngine(f"unknown engine {name!r}; known: {', '.join(targets)}")
+    return _load_class(name, targets[name])
 
 
 def get_adapter(name: str) -> Adapter:
-    """Instantiate the adapter registered as ``name``."""
+    """Instantiate the adapter of engine ``name`` (a registered name or ``module:Class``).
+
+    Raises :class:`UnknownEngine` for a name nothing registers and
+    :class:`EngineNotInstalled` when the engine's library is missing.
+    """
+    return adapter_class(name)()
+
+
+def resolve_engine(spec: str) -> str:
+    """The engine name for ``spec``: a registered name, or ``module:Class`` of an adapter
+    that is importable but not registered (then registered in this process under the
+    adapter's ``name``)."""
+    if ":" not in spec:
+        if spec not in registered():
+            raise UnknownEngine(f"unknown engine {spec!r}; known: {', '.join(registered())}")
+        return spec
+    cls = _load_class(spec, spec)
+    name = getattr(cls, "name", None)
+    if not isinstance(name, str) or not name:
+        raise UnknownEngine(f"{spec}: an adapter needs a class attribute `name` (a string)")
+    known = registered().get(name)
+    if known is not None and known != spec:
+        raise UnknownEngine(f"{spec}: its name {name!r} is already the engine {known}")
+    _RESOLVED[name] = spec
+    return name
+
+
+def engine_status(name: str) -> str:
+    """``installed``, or why engine ``name`` cannot run here (one line, with the pip line)."""
     try:
-        target = ADAPTERS[name]
-    except KeyError:
-        raise KeyError(f"unknown engine {name!r}; known: {', '.join(ADAPTERS)}") from None
-    module, cls = target.split(":")
-    return getattr(importlib.import_module(module), cls)()
+        _load_class(name, registered()[name])
+    except EngineNotInstalled as err:
+        return f"not installed: {err.pip}"
+    except Exception as err:  # an adapter module that fails to import is reported, not raised
+        return f"unusable: {type(err).__name__}: {err}"
+    return "installed"
 
 
 def available_engines() -> list[str]:
-    """Engines whose adapter module exists in this checkout."""
-    return [n for n, t in ADAPTERS.items() if importlib.util.find_spec(t.split(":")[0]) is not None]
+    """Registered engines whose libraries are installed, built-in ones first."""
+    return [n for n in registered() if engine_status(n) == "installed"]
 
 
-__all__ = ["ADAPTERS", "Adapter", "Trajectory", "available_engines", "get_adapter"]
+__all__ = [
+    "BUILTIN",
+    "ENTRY_POINT_GROUP",
+    "Adapter",
+    "EngineNotInstalled",
+    "FixedStepAdapter",
+    "Recording",
+    "Trajectory",
+    "UnknownEngine",
+    "adapter_class",
+    "available_engines",
+    "engine_status",
+    "get_adapter",
+    "pip_line",
+    "registered",
+    "resolve_engine",
+]

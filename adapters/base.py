@@ -1,12 +1,25 @@
-"""The Adapter protocol and the Trajectory every adapter returns."""
+"""The Adapter protocol, the Trajectory every adapter returns, and the fixed-step loop.
+
+:class:`FixedStepAdapter` carries what every engine that advances a particle scene by
+fixed steps needs around the engine's own calls: the method and feature checks, the
+recorded steps, blow-up checks every few steps, the timed region, and the Trajectory
+with its energy, status and evaluation count. An engine supplies ``build``, ``advance``
+and ``read``.
+"""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from types import MappingProxyType
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
+
 from truestep.cases.case import Case
+from truestep.reference_impl.integrate import BLOWUP, record_indices
+from truestep.reference_impl.particles import total_energy
 
 STATUSES = ("ok", "unstable", "crashed", "timeout", "unsupported", "skipped")
 
@@ -26,7 +39,7 @@ class Trajectory:
         Velocities, m/s (``None`` for ODE scenes, whose state is in ``x``).
     energy : ndarray, shape (T,), or None
         Total energy, J, computed from the read-back state by the same function for every
-        engine (:func:`truestep.reference_impl.particles.total_energy`).
+        engine (:func:`truestep.reference_impl.particles.total_energy`), or ``None``.
     alive : ndarray of bool, shape (T, n), or None
         Which particles exist at each record (scenes with emitters).
     status : str
@@ -35,7 +48,8 @@ class Trajectory:
     t_fail : float or None
         Time at which a run became unstable, s.
     nfev : int
-        Derivative evaluations, or engine steps where the engine hides them.
+        Derivative (force) evaluations: counted where the engine exposes them, else its
+        evaluations per step times the steps taken.
     steps : int
         Steps taken.
     wall_s : float
@@ -58,6 +72,7 @@ class Trajectory:
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
 
+
 @runtime_checkable
 class Adapter(Protocol):
     """One engine behind the harness.
@@ -65,7 +80,8 @@ class Adapter(Protocol):
     An adapter must:
 
     1. have a ``name`` (the engine's name in the tables: ``reference``, ``scipy``,
-       ``pymunk``, ``pybullet``, ``mujoco``) and ``methods``, the names of the
+       ``pymunk``, ``pybullet``, ``mujoco``, or a user engine's own, registered in the
+       entry-point group ``truestep.adapters``) and ``methods``, the names of the
        integrators it offers, with ``adaptive_methods`` the subset whose ``dt`` is a
        tolerance;
     2. declare ``capabilities``, the features of :meth:`ParticleModel.features` (and
@@ -77,9 +93,14 @@ class Adapter(Protocol):
        :class:`Trajectory` whose ``wall_s`` covers the stepping only;
     4. report a blow-up as status ``unstable`` with ``t_fail``, never raise for it;
     5. import its engine only inside its own module;
-    6. optionally, ``duplicate(case, method)``: the reason a method would compute bit for
+    6. be constructible with no arguments (the harness makes one per run);
+    7. optionally, ``duplicate(case, method)``: the reason a method would compute bit for
        bit what another of its methods computes on ``case`` (the harness then skips it
-       with that reason), or ``None``.
+       with that reason), or ``None``; and ``schemes``, a mapping from a method to the
+       reference method whose stability region it shares (``"verlet"``,
+       ``"symplectic-euler"``, ``"rk4"`` ...), for exact stability limits.
+
+    :class:`FixedStepAdapter` does 2 to 4 for an engine that steps a particle scene.
     """
 
     name: str
@@ -96,11 +117,185 @@ class Adapter(Protocol):
         ...
 
 
-def finite_until(x: np.ndarray, t: np.ndarray, limit: float = 1e12) -> tuple[str, float | None]:
-    """Status of recorded positions ``x`` (T, ...): ``ok`` or ``unstable`` at the first bad time."""
+def finite_until(x: np.ndarray, t: np.ndarray, limit: float = BLOWUP) -> tuple[str, float | None]:
+    """Status of recorded states ``x`` (T, ...): ``ok`` or ``unstable`` at the first bad time."""
     flat = np.abs(x.reshape(len(x), -1))
     bad = ~np.all(np.isfinite(flat), axis=1) | (np.nanmax(np.where(np.isfinite(flat), flat, np.inf),
                                                           axis=1, initial=0.0) > limit)
     if not np.any(bad):
         return "ok", None
     return "unstable", float(t[int(np.argmax(bad))])
+
+
+def sane(x: np.ndarray, v: np.ndarray) -> bool:
+    """Whether positions and velocities (n, 3) are finite and below :data:`BLOWUP`.
+
+    The largest magnitude is NaN if any number is, and NaN compares false.
+    """
+    with np.errstate(invalid="ignore"):
+        return bool(np.abs(x).max(initial=0.0) < BLOWUP and np.abs(v).max(initial=0.0) < BLOWUP)
+
+
+@dataclass
+class Recording:
+    """The recorded states of a fixed-step run, as :meth:`FixedStepAdapter.step_and_record`
+    returns them.
+
+    t : ndarray, shape (T,), s;  x, v : ndarray, shape (T, n, 3), m and m/s
+    steps : steps taken;  wall_s : seconds spent stepping and reading back
+    stopped : why stepping stopped early (a blow-up check, an engine's warning), or ""
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    steps: int
+    wall_s: float
+    stopped: str = ""
+
+
+class FixedStepAdapter:
+    """Base class of an adapter whose engine advances a particle scene by fixed steps.
+
+    A subclass declares ``name``, ``methods`` and ``capabilities`` (see :class:`Adapter`)
+    and implements
+
+    1. :meth:`build` ``(case, method, h) -> scene``: the engine's scene for
+       ``case.model`` (a :class:`~truestep.reference_impl.model.ParticleModel`), ready to
+       take steps of ``h`` seconds; not timed;
+    2. :meth:`advance` ``(scene, k, steps, h)``: take ``steps`` steps of ``h`` seconds,
+       the first one starting at time ``k h`` (timed);
+    3. :meth:`read` ``(scene) -> (x, v)``: positions and velocities now, each shape
+       ``(n, 3)``, m and m/s, in the model's particle order (may be views: they are
+       copied when kept).
+
+    and, if it needs to, :meth:`close` (free the scene), :meth:`notes` (a message for
+    the table), :attr:`evaluations_per_step` (force evaluations per step of a method,
+    default 1) and :meth:`snapshot` / :meth:`unpack` (keep a cheap form of a state in
+    the timed loop and turn the kept states into arrays after it).
+
+    :meth:`simulate` then checks the method and the case's features, builds the scene
+    outside the timed region, steps it to ``case.duration`` reading the state back at
+    the steps :func:`~truestep.reference_impl.integrate.record_indices` picks and
+    checking for a blow-up (non-finite or beyond ``BLOWUP``) at least every
+    :attr:`check_every` steps, and returns the :class:`Trajectory`: energy by the same
+    function for every engine, ``nfev`` = steps x evaluations per step, status
+    ``unstable`` with ``t_fail`` at the first bad record.
+    """
+
+    name: ClassVar[str]
+    methods: ClassVar[tuple[str, ...]]
+    adaptive_methods: ClassVar[tuple[str, ...]] = ()
+    capabilities: ClassVar[frozenset[str]]
+    evaluations_per_step: ClassVar[Mapping[str, int]] = MappingProxyType({})
+    """Force evaluations one step of a method makes (default 1): ``nfev`` counts them."""
+    check_every: ClassVar[int] = 64
+    """Steps between blow-up checks: a blown-up run stops within this many steps."""
+
+    def missing(self, case: Case, method: str) -> set[str]:
+        """Features of ``case`` beyond :attr:`capabilities`."""
+        return set(case.features) - self.capabilities
+
+    def require(self, case: Case, method: str) -> None:
+        """Raise ``ValueError`` for a method this adapter lacks or a case it cannot model."""
+        if method not in self.methods:
+            raise ValueError(f"{self.name}: unknown method {method!r}; known: {', '.join(self.methods)}")
+        lacking = self.missing(case, method)
+        if lacking:
+            raise ValueError(f"{self.name} cannot model {case.name}: needs {', '.join(sorted(lacking))}")
+
+    def build(self, case: Case, method: str, h: float) -> Any:
+        """The engine's scene for ``case``, ready for steps of ``h`` s (not timed)."""
+        raise NotImplementedError
+
+    def advance(self, scene: Any, k: int, steps: int, h: float) -> None:
+        """Take ``steps`` steps of ``h`` s, the first from time ``k h`` s."""
+        raise NotImplementedError
+
+    def read(self, scene: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities now, (n, 3) each, m and m/s."""
+        raise NotImplementedError
+
+    def close(self, scene: Any) -> None:
+        """Release what :meth:`build` made (runs after stepping, also after an error)."""
+
+    def notes(self, case: Case, method: str, scene: Any) -> list[str]:
+        """Notes for the row's ``message`` (before :meth:`close`)."""
+        return []
+
+    def snapshot(self, scene: Any) -> Any:
+        """The state now, in any form :meth:`unpack` understands (default: copied arrays)."""
+        x, v = self.read(scene)
+        return np.array(x, dtype=float), np.array(v, dtype=float)
+
+    def unpack(self, scene: Any, snaps: list[Any]) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities (T, n, 3) from ``T`` snapshots."""
+        return np.stack([s[0] for s in snaps]), np.stack([s[1] for s in snaps])
+
+    def is_sane(self, scene: Any) -> bool:
+        """Whether the state now is finite and below ``BLOWUP`` (the blow-up check)."""
+        return sane(*self.read(scene))
+
+    def step_and_record(self, case: Case, scene: Any, n_steps: int, h: float) -> Recording:
+        """Step ``n_steps`` steps of ``h`` s, recording and checking; time the stepping.
+
+        The engine is advanced from one stop to the next, a stop being a recorded step or
+        a blow-up check (every :attr:`check_every` steps): one :meth:`advance` call per
+        stop, so an engine that can take many steps in one call pays no per-step Python.
+        A failed check records the state there and ends the run.
+        """
+        marks = record_indices(n_steps, case.max_records)
+        checks = np.arange(self.check_every, n_steps + 1, self.check_every)
+        stops = np.union1d(marks, np.append(checks, n_steps)).tolist()
+        record = np.zeros(n_steps + 1, dtype=bool)
+        record[marks] = True
+        check = np.zeros(n_steps + 1, dtype=bool)
+        check[checks] = True
+        check[n_steps] = True
+        recorded, snaps = [0], [self.snapshot(scene)]
+        record_at, check_at = record.tolist(), check.tolist()
+        advance, snapshot, is_sane = self.advance, self.snapshot, self.is_sane
+        k, stopped = 0, ""
+        start = time.perf_counter()
+        for stop in stops[1:]:
+            advance(scene, k, stop - k, h)
+            k = stop
+            if record_at[k]:
+                recorded.append(k)
+                snaps.append(snapshot(scene))
+            if check_at[k] and not is_sane(scene):
+                if not record_at[k]:
+                    recorded.append(k)
+                    snaps.append(snapshot(scene))
+                stopped = "non-finite or runaway state read back"
+                break
+        wall = time.perf_counter() - start
+        x, v = self.unpack(scene, snaps)
+        return Recording(np.array(recorded) * h, x, v, k, wall, stopped)
+
+    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+        """Run ``case`` with ``method`` at step ``dt`` (s); see the class docstring."""
+        self.require(case, method)
+        n_steps, h = case.steps_for(dt)
+        scene = self.build(case, method, h)
+        try:
+            rec = self.step_and_record(case, scene, n_steps, h)
+            notes = self.notes(case, method, scene)
+        finally:
+            self.close(scene)
+        return self.trajectory(case, method, rec, notes)
+
+    def trajectory(self, case: Case, method: str, rec: Recording, notes: list[str]) -> Trajectory:
+        """The Trajectory of a recording: status, energy, evaluations."""
+        status, t_fail = finite_until(np.concatenate([rec.x, rec.v], axis=1), rec.t)
+        if rec.stopped and status == "ok":
+            status, t_fail = "unstable", float(rec.t[-1])
+        if status != "ok" and rec.stopped:
+            notes = [rec.stopped, *notes]
+        with np.errstate(all="ignore"):
+            energy = total_energy(case.model, rec.x, rec.v)
+        return Trajectory(
+            t=rec.t, x=rec.x, v=rec.v, energy=energy, status=status, t_fail=t_fail,
+            nfev=rec.steps * int(self.evaluations_per_step.get(method, 1)), steps=rec.steps,
+            wall_s=rec.wall_s, message="; ".join(notes),
+        )

@@ -97,8 +97,8 @@ particles stays stable at h = 0.05 s under both, where ``Euler`` and ``RK4`` div
 With no velocity-dependent force (a free fall) the three are the same semi-implicit
 Euler: ``y_n = y_0 + v_0 n h + g h^2 n (n + 1) / 2``. ``RK4`` is the classical
 fourth-order Runge-Kutta method, fully explicit, four force evaluations per step at the
-stage times ``t, t + h/2, t + h/2, t + h`` (``nfev`` counts steps, the run's message
-says so); it is exact for constant gravity. Forces from the passive callback are never
+stage times ``t, t + h/2, t + h/2, t + h`` (``nfev`` counts all four); it is exact for
+constant gravity. Forces from the passive callback are never
 in ``D``: they are explicit in every integrator.
 
 Contacts and restitution
@@ -166,12 +166,12 @@ from typing import ClassVar
 import mujoco
 import numpy as np
 from mujoco import rollout
-from truestep.adapters.base import Trajectory, finite_until
+
+from truestep.adapters.base import FixedStepAdapter, Recording
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
 from truestep.reference_impl.integrate import record_indices
 from truestep.reference_impl.model import ParticleModel
-from truestep.reference_impl.particles import total_energy
 
 INTEGRATORS: dict[str, int] = {
     "Euler": int(mujoco.mjtIntegrator.mjINT_EULER),
@@ -182,7 +182,7 @@ INTEGRATORS: dict[str, int] = {
 """Method name (the MJCF ``<option integrator>`` value) -> ``mjtIntegrator``."""
 
 EVALUATIONS_PER_STEP = {"Euler": 1, "implicit": 1, "implicitfast": 1, "RK4": 4}
-"""Force evaluations MuJoCo makes per step; ``nfev`` counts steps, the message says this."""
+"""Force evaluations MuJoCo makes per step: ``nfev`` is steps times this."""
 
 POINT_RADIUS = 1e-6
 """Sphere radius (m) for a point particle (radius 0): small enough that the contact
@@ -463,6 +463,8 @@ class Scene:
     applied: AppliedForces | None
     pinned_x: np.ndarray
     """Positions of the pinned particles read from MuJoCo (site_xpos), shape (n_pin, 3), m."""
+    warnings: list[str] = field(default_factory=list)
+    """MuJoCo's warnings during the run, in order."""
 
     def positions(self, n: int) -> np.ndarray:
         """All particle positions, shape (n, 3), m, from ``qpos`` and the pinned sites."""
@@ -498,7 +500,7 @@ def unstable_warnings(d: mujoco.MjData) -> int:
     return sum(d.warning[w].number for w in _BAD_STATE)
 
 
-class MujocoAdapter:
+class MujocoAdapter(FixedStepAdapter):
     """MuJoCo's four integrators on particle scenes (see the module docstring for the model).
 
     Parameters
@@ -513,7 +515,7 @@ class MujocoAdapter:
 
     name = "mujoco"
     methods = tuple(INTEGRATORS)
-    adaptive_methods: tuple[str, ...] = ()
+    evaluations_per_step = EVALUATIONS_PER_STEP
     schemes: ClassVar[dict[str, str]] = {"Euler": "symplectic-euler", "implicit": "symplectic-euler",
                "implicitfast": "symplectic-euler", "RK4": "rk4"}
     """The reference scheme each integrator equals on an undamped spring scene (used for
@@ -533,24 +535,30 @@ class MujocoAdapter:
         self.stage_forces = stage_forces
         self.contact_steps = contact_steps
 
-    def missing(self, case: Case, method: str) -> set[str]:
-        """Features of ``case`` beyond MuJoCo's (ODE scenes and emitters)."""
-        return set(case.features) - self.capabilities
+    def build(self, case: Case, method: str, h: float) -> Scene:
+        return build(case, method, h, contact_steps=self.contact_steps)
 
-    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
-        """Run ``case`` with MuJoCo's integrator ``method`` at step ``dt`` (s)."""
-        _check_method(method)
-        lacking = self.missing(case, method)
-        if lacking:
-            needs = ", ".join(sorted(lacking))
-            raise ValueError(f"case: {case.name} needs {needs}, beyond MuJoCo's capabilities")
-        scene = build(case, method, dt, contact_steps=self.contact_steps)
-        n_steps = case.steps_for(dt)[0]
+    def advance(self, scene: Scene, k: int, steps: int, h: float) -> None:
+        """``mj_step`` ``steps`` times (one call; a Python loop when forces are held)."""
+        m, d = scene.model, scene.data
+        if scene.applied is not None and not self.stage_forces:
+            for _ in range(steps):
+                d.qfrc_applied[:] = scene.applied(d.qpos, d.qvel, d.time)
+                mujoco.mj_step(m, d)
+        else:
+            mujoco.mj_step(m, d, steps)
+
+    def read(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+        n = len(scene.layout.free) + len(scene.layout.pinned)
+        return scene.positions(n), scene.velocities(n)
+
+    def step_and_record(self, case: Case, scene: Scene, n_steps: int, h: float) -> Recording:
+        """MuJoCo's own stepping (:func:`_step`: rollout where no Python force acts), with
+        its warnings collected and the staged-force callback installed for the run."""
         marks = record_indices(n_steps, case.max_records)
-        warnings: list[str] = []
         previous_warning = mujoco.get_mju_user_warning()
         previous_passive = mujoco.get_mjcb_passive()
-        mujoco.set_mju_user_warning(warnings.append)
+        mujoco.set_mju_user_warning(scene.warnings.append)
         try:
             if scene.applied is not None and self.stage_forces:
                 applied = scene.applied
@@ -560,26 +568,19 @@ class MujocoAdapter:
 
                 mujoco.set_mjcb_passive(passive)
             held = scene.applied is not None and not self.stage_forces
-            run = _step(case, scene, marks, held=held)
+            t, x, v, steps, wall, bad = _step(case, scene, marks, held=held)
         finally:
             mujoco.set_mjcb_passive(previous_passive)
             mujoco.set_mju_user_warning(previous_warning)
+        return Recording(t, x, v, steps, wall, "MuJoCo flagged a diverged state" if bad else "")
 
-        t, x, v, steps, wall, bad = run
-        status, t_fail = finite_until(x, t)
-        if bad and status == "ok":
-            status, t_fail = "unstable", float(t[-1])
-        energy = total_energy(case.model, x, v)
-        notes = [f"{EVALUATIONS_PER_STEP[method]} force evaluation(s) per step; nfev counts steps"]
-        notes += scene.layout.notes
+    def notes(self, case: Case, method: str, scene: Scene) -> list[str]:
+        notes = [f"{EVALUATIONS_PER_STEP[method]} force evaluation(s) per step", *scene.layout.notes]
         if scene.applied is not None and not self.stage_forces and method == "RK4":
             notes.append("applied forces held constant through the RK4 stages")
-        if warnings:
-            notes.append(warnings[0].strip())
-        return Trajectory(
-            t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail, nfev=steps,
-            steps=steps, wall_s=wall, message="; ".join(notes),
-        )
+        if scene.warnings:
+            notes.append(scene.warnings[0].strip())
+        return notes
 
 
 def _step(

@@ -143,6 +143,7 @@ and on a particle sliding with friction:
 
 Reading back
 ------------
+The stepping loop, recording and blow-up checks are :class:`FixedStepAdapter`'s.
 At each recorded step (``truestep.reference_impl.integrate.record_indices``) the positions and
 velocities of every movable particle are read with ``getBasePositionAndOrientation`` and
 ``getBaseVelocity``; pinned particles are at ``x0 + v0 t`` with velocity ``v0``.
@@ -155,18 +156,16 @@ Not modelled: emitters, plain ODE cases.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 import pybullet as p
-from truestep.adapters.base import Trajectory, finite_until
+
+from truestep.adapters.base import FixedStepAdapter
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
-from truestep.reference_impl.integrate import BLOWUP, record_indices
 from truestep.reference_impl.model import ParticleModel
-from truestep.reference_impl.particles import total_energy
 
 POINT_RADIUS = 0.01
 """Radius (m) of the sphere standing in for a radius-0 particle; its planes move back as much."""
@@ -197,10 +196,6 @@ CLEAN_PARAMETERS: dict[str, float] = {
 
 CLEAN_CONTACT_PROCESSING_THRESHOLD = 0.0
 """m, per body: contacts still this far apart or farther are not handed to the solver."""
-
-CHECK_EVERY = 64
-"""Steps between blow-up checks of the recorded state; a blow-up found ends the run there."""
-
 
 @dataclass
 class BulletScene:
@@ -329,7 +324,87 @@ def external_forces(model: ParticleModel, f: np.ndarray, x: np.ndarray, v: np.nd
     return forces.add_model_forces(f, model, x, v, t, gravity=False)
 
 
-class PybulletAdapter:
+class _Run:
+    """A built scene and the work around ``stepSimulation`` for one run.
+
+    ``x``, ``v``, ``f`` (n, 3) hold the state the forces read and the forces (model order);
+    ``fresh`` says ``x`` and ``v`` of the movable particles were read after the last step
+    (at a record), so the next step's forces need not read them again. A snapshot is the
+    pair of lists pybullet returns for the movable particles, made arrays after the loop.
+    """
+
+    def __init__(self, model: ParticleModel, scene: BulletScene) -> None:
+        self.model, self.scene = model, scene
+        self.x, self.v, self.f = model.x0.copy(), model.v0.copy(), np.zeros((model.n, 3))
+        self.x0_drift, self.v0_drift = model.x0[scene.drifting], model.v0[scene.drifting]
+        self.moving = scene.bodies[scene.movable].tolist()
+        self.bx = scene.bodies[scene.read_x].tolist()
+        self.bv = scene.bodies[scene.read_v].tolist()
+        self.bf = scene.bodies[scene.forced].tolist()
+        self.forcing, self.drifting = len(scene.forced) > 0, len(scene.drifting) > 0
+        self.fresh, self.t = False, 0.0
+        self.latest: tuple[float, list, list] | None = None
+
+    def advance(self, k: int, steps: int, h: float) -> None:
+        cid, sc, x, v, f = self.scene.client, self.scene, self.x, self.v, self.f
+        step = p.stepSimulation
+        self.t = (k + steps) * h
+        if not self.forcing:
+            for _ in range(steps):
+                step(cid)
+            self.fresh = False
+            return
+        get_x, get_v, apply, world = (p.getBasePositionAndOrientation, p.getBaseVelocity,
+                                      p.applyExternalForce, p.WORLD_FRAME)
+        for j in range(k, k + steps):
+            if not self.fresh:
+                if self.bx:
+                    x[sc.read_x] = [get_x(b, cid)[0] for b in self.bx]
+                if self.bv:
+                    v[sc.read_v] = [get_v(b, cid)[0] for b in self.bv]
+            if self.drifting:
+                x[sc.drifting] = self.x0_drift + (j * h) * self.v0_drift
+            external_forces(self.model, f, x, v, j * h)
+            for b, fi, xi in zip(self.bf, f[sc.forced].tolist(), x[sc.forced].tolist(), strict=True):
+                apply(b, -1, fi, xi, world, cid)
+            step(cid)
+            self.fresh = False
+
+    def snapshot(self) -> tuple[float, list, list]:
+        """The time and the movable particles' positions and velocities as pybullet gives them."""
+        cid = self.scene.client
+        get_x, get_v = p.getBasePositionAndOrientation, p.getBaseVelocity
+        xk = [get_x(b, cid)[0] for b in self.moving]
+        vk = [get_v(b, cid)[0] for b in self.moving]
+        if self.forcing:
+            self.x[self.scene.movable], self.v[self.scene.movable] = xk, vk
+        self.fresh, self.latest = True, (self.t, xk, vk)
+        return self.latest
+
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every particle's position and velocity now, (n, 3) each."""
+        _, xk, vk = self.latest if self.fresh and self.latest is not None else self.snapshot()
+        x, v, sc = self.x, self.v, self.scene
+        x[sc.movable], v[sc.movable] = xk, vk
+        if self.drifting:
+            x[sc.drifting] = self.x0_drift + self.t * self.v0_drift
+        return x, v
+
+    def unpack(self, snaps: list[tuple[float, list, list]]) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities (T, n, 3) of ``T`` snapshots; pinned particles at
+        ``x0 + v0 t``."""
+        m, movable, n = self.model, self.scene.movable, len(snaps)
+        t = np.array([s[0] for s in snaps])
+        xr = np.repeat(m.x0[None], n, axis=0)
+        vr = np.repeat(m.v0[None], n, axis=0)
+        xr[:, movable] = np.array([s[1] for s in snaps], dtype=float).reshape(n, len(movable), 3)
+        vr[:, movable] = np.array([s[2] for s in snaps], dtype=float).reshape(n, len(movable), 3)
+        if self.drifting:
+            xr[:, self.scene.drifting] = self.x0_drift + t[:, None, None] * self.v0_drift
+        return xr, vr
+
+
+class PybulletAdapter(FixedStepAdapter):
     """pybullet's own step on particle scenes, as shipped and with clean contacts.
 
     See the module docstring for the model, the scheme and what ``clean`` changes.
@@ -337,7 +412,6 @@ class PybulletAdapter:
 
     name = "pybullet"
     methods = ("default", "clean")
-    adaptive_methods = ()
     schemes: ClassVar[dict[str, str]] = {"default": "symplectic-euler", "clean": "symplectic-euler"}
     """Bullet steps velocity then position (semi-implicit Euler), the reference's
     symplectic Euler, with forces held at the start of the step."""
@@ -349,9 +423,6 @@ class PybulletAdapter:
         }
     )
 
-    def missing(self, case: Case, method: str) -> set[str]:
-        return case.features - self.capabilities
-
     def duplicate(self, case: Case, method: str) -> str | None:
         """``clean`` changes only contact handling (and uses maximal coordinates, which
         step a free body the same way): without planes its trajectory is ``default``'s,
@@ -361,98 +432,20 @@ class PybulletAdapter:
                     "(clean changes only contact handling)")
         return None
 
-    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
-        if method not in self.methods:
-            raise ValueError(
-                f"pybullet: unknown method {method!r}; known: {', '.join(self.methods)}")
-        lacking = self.missing(case, method)
-        if lacking:
-            raise ValueError(f"pybullet cannot model {case.name}: needs {', '.join(sorted(lacking))}")
-        model = case.model
-        n_steps, h = case.steps_for(dt)
-        scene = build_scene(model, h, clean=method == "clean")
-        try:
-            return self._run(case, scene, n_steps, h)
-        finally:
-            p.disconnect(scene.client)
+    def build(self, case: Case, method: str, h: float) -> _Run:
+        return _Run(case.model, build_scene(case.model, h, clean=method == "clean"))
 
-    def _run(self, case: Case, scene: BulletScene, n_steps: int, h: float) -> Trajectory:
-        """Step the built scene ``n_steps`` times of ``h`` seconds, recording as the case asks.
+    def close(self, run: _Run) -> None:
+        p.disconnect(run.scene.client)
 
-        The timed loop keeps the recorded reads as pybullet returns them (lists of tuples)
-        and makes them arrays only where the forces or a blow-up check need them; the
-        recorded states are assembled after the loop (per-step overhead is measured in
-        ``benchmarks/test_adapter_overhead.py``).
-        """
-        model, cid = case.model, scene.client
-        marks = np.zeros(n_steps + 1, dtype=bool)
-        marks[record_indices(n_steps, case.max_records)] = True
-        record = marks.tolist()
-        get_x, get_v = p.getBasePositionAndOrientation, p.getBaseVelocity
-        apply, step, world = p.applyExternalForce, p.stepSimulation, p.WORLD_FRAME
+    def advance(self, run: _Run, k: int, steps: int, h: float) -> None:
+        run.advance(k, steps, h)
 
-        x, v, f = model.x0.copy(), model.v0.copy(), np.zeros((model.n, 3))
-        drift, movable = scene.drifting, scene.movable
-        x0_drift, v0_drift = model.x0[drift], model.v0[drift]
-        moving = scene.bodies[movable].tolist()
-        bx, bv = scene.bodies[scene.read_x].tolist(), scene.bodies[scene.read_v].tolist()
-        forced, bf = scene.forced, scene.bodies[scene.forced].tolist()
-        forcing, drifting = len(forced) > 0, len(drift) > 0
-        recorded, read_x, read_v = [0], [], []
-        fresh, checked, k = True, 0, 0
+    def snapshot(self, run: _Run) -> tuple[float, list, list]:
+        return run.snapshot()
 
-        start = time.perf_counter()
-        for k in range(1, n_steps + 1):
-            if forcing:
-                if not fresh:
-                    if bx:
-                        x[scene.read_x] = [get_x(b, cid)[0] for b in bx]
-                    if bv:
-                        v[scene.read_v] = [get_v(b, cid)[0] for b in bv]
-                if drifting:
-                    x[drift] = x0_drift + ((k - 1) * h) * v0_drift
-                external_forces(model, f, x, v, (k - 1) * h)
-                for b, fi, xi in zip(bf, f[forced].tolist(), x[forced].tolist(), strict=True):
-                    apply(b, -1, fi, xi, world, cid)
-            step(cid)
-            fresh = False
-            if record[k]:
-                xk = [get_x(b, cid)[0] for b in moving]
-                vk = [get_v(b, cid)[0] for b in moving]
-                recorded.append(k)
-                read_x.append(xk)
-                read_v.append(vk)
-                if forcing:
-                    x[movable], v[movable] = xk, vk
-                    fresh = True
-                if k - checked >= CHECK_EVERY or k == n_steps:
-                    checked = k
-                    x[movable], v[movable] = xk, vk
-                    if drifting:
-                        x[drift] = x0_drift + (k * h) * v0_drift
-                    if not _sane(x, v):
-                        break
-        wall = time.perf_counter() - start
-        steps = k
+    def read(self, run: _Run) -> tuple[np.ndarray, np.ndarray]:
+        return run.read()
 
-        t = np.array(recorded) * h
-        xr = np.repeat(model.x0[None], len(t), axis=0)
-        vr = np.repeat(model.v0[None], len(t), axis=0)
-        xr[1:, movable] = np.array(read_x, dtype=float).reshape(len(t) - 1, len(moving), 3)
-        vr[1:, movable] = np.array(read_v, dtype=float).reshape(len(t) - 1, len(moving), 3)
-        if drifting:
-            xr[1:, drift] = x0_drift + t[1:, None, None] * v0_drift
-        status, t_fail = finite_until(np.concatenate([xr, vr], axis=1), t, limit=BLOWUP)
-        with np.errstate(all="ignore"):
-            energy = total_energy(model, xr, vr)
-        return Trajectory(
-            t=t, x=xr, v=vr, energy=energy, status=status, t_fail=t_fail,
-            nfev=steps, steps=steps, wall_s=wall,
-            message="" if status == "ok" else "non-finite or runaway state read back",
-        )
-
-
-def _sane(x: np.ndarray, v: np.ndarray) -> bool:
-    """Whether positions and velocities (n, 3) are finite and below :data:`BLOWUP` in size."""
-    with np.errstate(invalid="ignore"):
-        return bool(np.abs(x).max(initial=0.0) < BLOWUP and np.abs(v).max(initial=0.0) < BLOWUP)
+    def unpack(self, run: _Run, snaps: list) -> tuple[np.ndarray, np.ndarray]:
+        return run.unpack(snaps)

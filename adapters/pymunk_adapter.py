@@ -81,6 +81,7 @@ The model in pymunk
 
 Reading back
 ------------
+The stepping loop, recording and blow-up checks are :class:`FixedStepAdapter`'s.
 Positions and velocities come back through one batched ``pymunk.batch.get_space_bodies``
 call at the recorded steps (and every 64 steps to catch a blow-up early); ``z`` is 0.
 Energy is :func:`truestep.reference_impl.particles.total_energy` of that read-back state; ``nfev``
@@ -93,26 +94,23 @@ plane), emitters, plain ODE cases.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 import pymunk
 import pymunk.batch
-from truestep.adapters.base import Trajectory, finite_until
+
+from truestep.adapters.base import FixedStepAdapter
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
-from truestep.reference_impl.integrate import BLOWUP, record_indices
+from truestep.reference_impl.integrate import BLOWUP
 from truestep.reference_impl.model import ParticleModel
-from truestep.reference_impl.particles import total_energy
 
 PLANE_HALF_LENGTH = 1.0e3
 """Half-length of a plane's segment, m, centred on the scene's centre projected onto it."""
 PLANE_THICKNESS = 10.0
 """Radius of a plane's segment, m; its core line lies this far behind the plane."""
-CHECK_EVERY = 64
-"""Steps between blow-up checks; a blow-up found ends the run there."""
 _STATE = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY
 _PARTICLES = pymunk.ShapeFilter(group=1)
 
@@ -226,7 +224,7 @@ def _plane_segment(
     return seg
 
 
-class PymunkAdapter:
+class PymunkAdapter(FixedStepAdapter):
     """pymunk's own integrator on 2-D particle scenes (see the module docstring)."""
 
     name = "pymunk"
@@ -252,58 +250,33 @@ class PymunkAdapter:
             missing.add("3d")
         return missing
 
-    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
-        if method not in self.methods:
-            raise ValueError(f"pymunk: unknown method {method!r}; known: {', '.join(self.methods)}")
-        lacking = self.missing(case, method)
-        if lacking:
-            raise ValueError(f"pymunk cannot model {case.name}: needs {', '.join(sorted(lacking))}")
-        model = case.model
-        scene = build_scene(model, collision_slop=self.collision_slop)
-        n_steps, h = case.steps_for(dt)
-        marks = np.zeros(n_steps + 1, dtype=bool)
-        marks[record_indices(n_steps, case.max_records)] = True
-        checks = np.zeros(n_steps + 1, dtype=bool)
-        checks[CHECK_EVERY::CHECK_EVERY] = True
-        stepper = _Stepper(model, scene, h)
+    def build(self, case: Case, method: str, h: float) -> _Stepper:
+        return _Stepper(case.model, build_scene(case.model, collision_slop=self.collision_slop), h)
 
-        # The timed loop keeps to local names and Python lists (per-step overhead is
-        # measured in benchmarks/test_adapter_overhead.py); times are k * h, formed after it.
-        recorded, snaps = [0], [stepper.snapshot()]
-        record, check = marks.tolist(), checks.tolist()
-        visit = (marks | checks).tolist()
-        forced, apply_forces, step = scene.forced, stepper.apply_forces, scene.space.step
-        space, buffer, get, fields = scene.space, stepper.get, pymunk.batch.get_space_bodies, _STATE
-        k = 0
-        start = time.perf_counter()
-        for k in range(1, n_steps + 1):
-            if forced:
-                apply_forces((k - 1) * h)
-            step(h)
-            if visit[k]:
-                buffer.clear()
-                get(space, fields, buffer)
-                snap = bytes(buffer.float_buf())
-                if record[k]:
-                    recorded.append(k)
-                    snaps.append(snap)
-                if check[k] and not _sane(snap):
-                    if not record[k]:
-                        recorded.append(k)
-                        snaps.append(snap)
-                    break
-        wall = time.perf_counter() - start
-        steps = k
+    def advance(self, scene: _Stepper, k: int, steps: int, h: float) -> None:
+        """``steps`` calls of ``space.step(h)``, each after the numpy forces of its start."""
+        step = scene.scene.space.step
+        if scene.scene.forced:
+            apply_forces = scene.apply_forces
+            for j in range(k, k + steps):
+                apply_forces(j * h)
+                step(h)
+        else:
+            for _ in range(steps):
+                step(h)
 
-        t = np.array(recorded) * h
-        x, v = stepper.unpack(snaps)
-        status, t_fail = finite_until(np.concatenate([x, v], axis=1), t, limit=BLOWUP)
-        with np.errstate(all="ignore"):
-            energy = total_energy(model, x, v)
-        return Trajectory(
-            t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail,
-            nfev=steps, steps=steps, wall_s=wall,
-        )
+    def read(self, scene: _Stepper) -> tuple[np.ndarray, np.ndarray]:
+        return scene.read()
+
+    def snapshot(self, scene: _Stepper) -> bytes:
+        return scene.snapshot()
+
+    def unpack(self, scene: _Stepper, snaps: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+        return scene.unpack(snaps)
+
+    def is_sane(self, scene: _Stepper) -> bool:
+        """One reduction over the batched read (see :func:`_sane`)."""
+        return _sane(scene.snapshot())
 
 
 class _Stepper:

@@ -5,26 +5,22 @@ from __future__ import annotations
 import time
 
 import numpy as np
+
 from truestep.adapters.base import Trajectory, finite_until
 from truestep.cases.case import Case
-from truestep.reference_impl import odes
+from truestep.cases.plugins import ode_system
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.particles import ParticleSystem, total_energy
 from truestep.reference_impl.passes import passes_for
 from truestep.reference_impl.solvers import METHODS, get_solver
 from truestep.reference_impl.system import SecondOrderSystem, System
 
-ODE_CLASSES: dict[str, type[System]] = {
-    "circle-field": odes.CircleField,
-    "kepler": odes.KeplerProblem,
-    "arenstorf": odes.Arenstorf,
-}
-
 
 def build_system(case: Case) -> System:
-    """The reference system for a case: an ODE of :mod:`truestep.reference_impl.odes` or particles."""
+    """The reference system for a case: its ODE system (the lecture's or an installed
+    one, :func:`truestep.cases.plugins.ode_system`) or its particles."""
     if case.kind == "ode":
-        return ODE_CLASSES[case.ode.system](case.ode.y0, **case.ode.params)
+        return ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
     return ParticleSystem(case.model, passes_for(case.model))
 
 
@@ -61,6 +57,7 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     kernel's multi-core throughput is measured in ``benchmarks/test_particle_step.py``).
     """
     import numba
+
     from truestep.reference_impl.integrate import record_indices
     from truestep.reference_impl.kernels import rain_run
 

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
+
 from truestep.adapters.base import Trajectory, finite_until
 from truestep.adapters.reference import build_system, trajectory_from_states
 from truestep.cases.case import Case

@@ -44,6 +44,7 @@ import pybullet as p
 import pymunk.batch
 import pytest
 from mujoco import rollout
+
 from truestep.adapters.mujoco_adapter import MujocoAdapter
 from truestep.adapters.mujoco_adapter import build as mujoco_build
 from truestep.adapters.pybullet_adapter import PybulletAdapter

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 import pytest
+
 from truestep.reference_impl.kernels import rain_step
 from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.reference_impl.particles import ParticleSystem

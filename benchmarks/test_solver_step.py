@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.reference_impl.solvers import METHODS
 from truestep.reference_impl.system import SecondOrderSystem
 

@@ -1,8 +1,8 @@
 """The scene library: case files, their loader and validation, and exact solutions."""
 
 from truestep.cases.case import Case, Gate, OdeSpec, StabilitySpec
-from truestep.cases.errors import CaseError
-from truestep.cases.loader import CASE_DIR, case_files, load_case, load_cases
+from truestep.cases.errors import CaseError, SelectionError
+from truestep.cases.loader import CASE_DIR, case_files, library, load_case, load_cases
 
 __all__ = [
     "CASE_DIR",
@@ -10,8 +10,10 @@ __all__ = [
     "CaseError",
     "Gate",
     "OdeSpec",
+    "SelectionError",
     "StabilitySpec",
     "case_files",
+    "library",
     "load_case",
     "load_cases",
 ]

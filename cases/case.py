@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from truestep.reference_impl.model import ParticleModel
 
 
@@ -13,14 +14,28 @@ from truestep.reference_impl.model import ParticleModel
 class OdeSpec:
     """A plain ODE scene: a named system of :mod:`truestep.reference_impl.odes` and its start.
 
-    system : ``"circle-field"``, ``"kepler"`` or ``"arenstorf"``
+    system : ``"circle-field"``, ``"kepler"``, ``"arenstorf"`` or an installed system's
+    name (entry-point group ``truestep.systems``)
     y0 : ndarray, shape (dim,)  initial state
     params : keyword parameters of the system (``mu`` ...)
+    second_order : whether the system splits its state into positions and velocities
+    (``None``: as its class says)
     """
 
     system: str
     y0: np.ndarray
     params: dict[str, float] = field(default_factory=dict)
+    second_order: bool | None = None
+
+    @property
+    def is_second_order(self) -> bool:
+        if self.second_order is None:
+            from truestep.cases.plugins import ode_system
+            from truestep.reference_impl.system import SecondOrderSystem
+
+            cls = ode_system(self.system)
+            return cls is not None and issubclass(cls, SecondOrderSystem)
+        return self.second_order
 
 
 @dataclass
@@ -30,10 +45,13 @@ class Gate:
     kind : ``order`` (fitted convergence order within ``tol`` of ``expect``), ``error``,
     ``energy_drift`` (at most ``max``), ``status`` (equals ``expect``), ``property``
     (a named metric between ``min`` and ``max``), ``stability-limit`` (measured within
-    ``rel_tol`` of the exact limit) or ``speedup``.
-    engine, method : the rows the gate reads; dt : the step (or tolerance) it reads, if one
+    ``rel_tol`` of the exact limit, or at least ``min``), ``restitution`` (within
+    ``tol`` of the set value), ``no-worse-than`` (at most ``factor`` times another run's
+    quantity) or ``speedup`` (see :func:`truestep.cases.loader.read_gate`).
+    engine, method : the rows the gate reads (``*``: every engine that ran, every method);
+    dt : the step (or tolerance) it reads, if one
     params : the kind's numbers (``expect``, ``tol``, ``max``, ``min``, ``name`` ...)
-    where : ``gates[i]`` in the case file, for messages
+    where : ``gates[i]``, for messages;  file : the case file or gates file it is in
     """
 
     kind: str
@@ -42,6 +60,7 @@ class Gate:
     dt: float | None
     params: dict[str, Any]
     where: str
+    file: str = ""
 
 
 @dataclass
@@ -113,7 +132,7 @@ class Case:
         """Modelling features the scene needs (an ODE needs ``ode``)."""
         if self.model is not None:
             return self.model.features()
-        return {"ode"} | ({"second-order"} if self.ode and self.ode.system != "circle-field" else set())
+        return {"ode"} | ({"second-order"} if self.ode and self.ode.is_second_order else set())
 
     def sweep(self, *, adaptive: bool, quick: bool) -> list[float]:
         """Steps (s) for fixed-step methods, or tolerances for adaptive ones."""

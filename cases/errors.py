@@ -13,3 +13,10 @@ class CaseError(ValueError):
     def __init__(self, file: str, field: str, reason: str) -> None:
         self.file, self.field, self.reason = file, field, reason
         super().__init__(f"{file}: {field}: {reason}")
+
+
+class SelectionError(ValueError):
+    """A case selection (``--cases``) that names nothing, or names two cases alike.
+
+    ``str(err)`` is one line for the CLI (exit code 2).
+    """

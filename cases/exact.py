@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
 from truestep.cases.case import Case
 
 
@@ -30,10 +31,19 @@ ExactFn = Callable[[Case, np.ndarray], Exact]
 EXACT: dict[str, ExactFn] = {}
 
 
-def exact_solution(name: str) -> Callable[[ExactFn], ExactFn]:
-    """Register an exact solution under ``name``."""
+def exact_solution(name: str, *, check: Callable[[Case], None] | None = None
+                   ) -> Callable[[ExactFn], ExactFn]:
+    """Register an exact solution under ``name``.
+
+    When a case names it, the loader checks that it fits the scene: by ``check(case)``
+    (which raises ``ValueError`` saying what does not fit) when given, else by
+    evaluating the solution at ``t = 0``, which must raise the same way or return the
+    case's start.
+    """
 
     def register(fn: ExactFn) -> ExactFn:
+        if check is not None:
+            fn.check = check  # type: ignore[attr-defined]
         EXACT[name] = fn
         return fn
 
@@ -136,7 +146,15 @@ def kepler(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, state[:, None, :], None, np.full(t.shape, energy))
 
 
-@exact_solution("periodic")
+def _check_period(case: Case) -> None:
+    if case.kind != "ode":
+        raise ValueError("'periodic' is for ODE cases")
+    period = case.exact_params.get("period")
+    if isinstance(period, bool) or not isinstance(period, int | float) or not 0 < period < np.inf:
+        raise ValueError(f"needs [reference] period, a positive number of seconds, got {period!r}")
+
+
+@exact_solution("periodic", check=_check_period)
 def periodic(case: Case, t: np.ndarray) -> Exact:
     """A periodic orbit known only at its start and after whole periods (``period``, s)."""
     period = float(case.exact_params["period"])
@@ -315,7 +333,16 @@ def _expm_flow(expm, A: np.ndarray, y0: np.ndarray, t: np.ndarray) -> np.ndarray
     return ys
 
 
-@exact_solution("reference-run")
+def _check_reference_run(case: Case) -> None:
+    m = case.model
+    if m is not None and (m.planes or m.emitters):
+        raise ValueError("'reference-run' needs a smooth scene (no planes, no emitters)")
+    rtol = case.exact_params.get("rtol", 1e-12)
+    if isinstance(rtol, bool) or not isinstance(rtol, int | float) or not 1e-14 <= rtol <= 1e-6:
+        raise ValueError(f"[reference] rtol must be a number from 1e-14 to 1e-6, got {rtol!r}")
+
+
+@exact_solution("reference-run", check=_check_reference_run)
 def reference_run(case: Case, t: np.ndarray) -> Exact:
     """No closed form: the reference's Dormand-Prince at a tight tolerance (``rtol``,
     default 1e-12), known at the end of the run only. Valid for smooth scenes (no
@@ -335,15 +362,14 @@ times asked, and every row of a case asks again."""
 
 
 def _reference_final(case: Case) -> Exact:
+    from truestep.cases.plugins import ode_system
     from truestep.reference_impl.integrate import integrate
-    from truestep.reference_impl.odes import Arenstorf, CircleField, KeplerProblem
     from truestep.reference_impl.particles import ParticleSystem
     from truestep.reference_impl.solvers import DormandPrince54
 
     tol = float(case.exact_params.get("rtol", 1e-12))
     if case.kind == "ode":
-        cls = {"circle-field": CircleField, "kepler": KeplerProblem, "arenstorf": Arenstorf}
-        system = cls[case.ode.system](case.ode.y0, **case.ode.params)
+        system = ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
     else:
         system = ParticleSystem(case.model)
     run = integrate(DormandPrince54(system, rtol=tol, atol=tol), case.duration, case.duration,

@@ -9,6 +9,7 @@ the scene is one it solves and raises ``ValueError`` naming what does not fit.
 from __future__ import annotations
 
 import numpy as np
+
 from truestep.cases.case import Case
 from truestep.cases.exact import Exact, exact_solution, kepler_state, oscillator
 from truestep.reference_impl.model import ParticleModel

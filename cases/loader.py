@@ -1,48 +1,102 @@
-"""Load and validate case files (TOML) into :class:`~truestep.cases.case.Case` objects."""
+"""Load and validate case files (TOML) into :class:`~truestep.cases.case.Case` objects.
+
+Cases are found by name in the case library (truestep's ``cases/`` and the directories
+installed packages register, :func:`~truestep.cases.plugins.case_directories`), or by
+path: :func:`case_files` takes names, globs, files and directories.
+"""
 
 from __future__ import annotations
 
 import fnmatch
 import tomllib
+from collections.abc import Iterable
 from pathlib import Path
 
+import numpy as np
+
+from truestep.cases import plugins
 from truestep.cases.case import Case, Gate, OdeSpec, StabilitySpec
-from truestep.cases.errors import CaseError
+from truestep.cases.errors import CaseError, SelectionError
 from truestep.cases.fields import Fields
 from truestep.cases.scene import read_scene
+from truestep.reference_impl.system import SecondOrderSystem
 
 CASE_DIR = Path(__file__).resolve().parent
-ODE_SYSTEMS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
-GATE_KINDS = {"order", "error", "energy_drift", "status", "property", "stability-limit", "speedup"}
-GATE_NUMBERS = {"expect", "tol", "max", "min", "rel_tol"}
+ODE_DIMENSIONS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
+"""State dimension of the lecture's ODE systems (installed systems are checked by
+constructing them)."""
+GATE_KINDS = {"order", "error", "energy_drift", "status", "property", "stability-limit", "speedup",
+              "restitution", "no-worse-than"}
+GATE_NUMBERS = {"expect", "tol", "max", "min", "rel_tol", "factor", "bounce", "e_set"}
 
 
-def case_files(pattern: str = "*") -> list[Path]:
-    """Case files under ``cases/`` whose name (without ``.toml``) matches ``pattern``.
+def library() -> dict[str, Path]:
+    """Every case of the library by name: truestep's, then installed packages' (a name
+    that two libraries both define raises :class:`SelectionError`)."""
+    found: dict[str, Path] = {}
+    for source, directory in plugins.case_directories():
+        for path in sorted(directory.glob("*.toml")):
+            if path.stem in found:
+                raise SelectionError(f"case {path.stem!r} is defined twice: {found[path.stem]} "
+                                     f"and {path} (entry point {source!r})")
+            found[path.stem] = path
+    return found
 
-    ``pattern`` is a shell glob, or several separated by commas.
+
+def _items(selection: str | Iterable[str]) -> list[str]:
+    items = selection.split(",") if isinstance(selection, str) else list(selection)
+    return [str(i).strip() for i in items if str(i).strip()] or ["*"]
+
+
+def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
+    """The case files a selection names, in the order named, each once.
+
+    ``selection`` is a comma-separated string (or a list) of items, each a case name or
+    shell glob matched against the library (:func:`library`), a case file, or a
+    directory (its ``*.toml`` files). Every item must match at least one case, or
+    :class:`SelectionError` names it.
     """
-    globs = [p.strip() for p in pattern.split(",") if p.strip()] or ["*"]
-    files = sorted(CASE_DIR.glob("*.toml"))
-    return [p for p in files if any(fnmatch.fnmatch(p.stem, g) for g in globs)]
+    lib: dict[str, Path] | None = None
+    out: dict[Path, Path] = {}
+    for item in _items(selection):
+        path = Path(item).expanduser()
+        if path.is_dir():
+            files = sorted(path.glob("*.toml"))
+            if not files:
+                raise SelectionError(f"--cases: {item!r} is a directory with no *.toml case file")
+        elif path.is_file() or item.endswith(".toml"):
+            if not path.is_file():
+                raise SelectionError(f"--cases: {item!r}: no such case file")
+            files = [path]
+        else:
+            lib = library() if lib is None else lib
+            files = [p for name, p in lib.items() if fnmatch.fnmatchcase(name, item)]
+            if not files:
+                raise SelectionError(f"--cases: no case matches {item!r} (known: "
+                                     f"{', '.join(lib) or 'none'}; a file or directory also works)")
+        for f in files:
+            out.setdefault(f.resolve(), f)
+    return list(out.values())
 
 
-def load_cases(pattern: str = "*") -> list[Case]:
-    """Load every case matching ``pattern``; raises :class:`CaseError` on the first bad one."""
-    return [load_case(p) for p in case_files(pattern)]
+def load_cases(selection: str | Iterable[str] = "*") -> list[Case]:
+    """Load every case a selection names (:func:`case_files`); raises :class:`CaseError`
+    on the first bad file and :class:`SelectionError` when an item matches nothing or
+    two cases share a name."""
+    cases = [load_case(p) for p in case_files(selection)]
+    seen: dict[str, str] = {}
+    for c in cases:
+        if c.name in seen:
+            raise SelectionError(f"two cases are named {c.name!r}: {seen[c.name]} and {c.file}")
+        seen[c.name] = c.file
+    return cases
 
 
 def load_case(path: str | Path) -> Case:
     """Load one case file, validating every field."""
     path = Path(path)
     file = str(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise CaseError(file, "<file>", "no such file") from None
-    except tomllib.TOMLDecodeError as err:
-        raise CaseError(file, "<toml>", str(err)) from None
-    f = Fields(file, data)
+    f = _read_toml(path)
     name = path.stem
     if name != name.lower() or not all(c.isalnum() or c == "-" for c in name):
         raise CaseError(file, "<name>", "case names are lower-case words joined by dashes")
@@ -68,12 +122,7 @@ def load_case(path: str | Path) -> Case:
 
     ode = model = None
     if kind == "ode":
-        o = f.sub("ode")
-        system = o.string("system", choices=set(ODE_SYSTEMS))
-        y0 = o.array("y0", shape=(ODE_SYSTEMS[system],))
-        params = {k: o.number(k) for k in o.table if k not in ("system", "y0")}
-        o.done()
-        ode = OdeSpec(system, y0, params)
+        ode = _read_ode(f.sub("ode"))
         if f.has("scene"):
             raise f.error("scene", "an ode case has no scene (kind = \"ode\")")
     else:
@@ -88,11 +137,9 @@ def load_case(path: str | Path) -> Case:
     conservative = ref.boolean("conservative", False)
     exact_params = {k: ref.raw(k) for k in ref.table if k not in {"exact", "error", "scale", "conservative"}}
     ref.done()
-    if exact is not None:
-        from truestep.cases.exact import EXACT
-
-        if exact not in EXACT:
-            raise ref.error("exact", f"no exact solution named {exact!r}; known: {', '.join(sorted(EXACT))}")
+    if exact is not None and _exact_fn(ref, exact) is None:
+        raise ref.error("exact", f"no exact solution named {exact!r}; known: "
+                        f"{', '.join(plugins.exact_names())}")
 
     stability = None
     if f.has("stability"):
@@ -140,30 +187,126 @@ def load_case(path: str | Path) -> Case:
         in_quick=in_quick,
     )
     f.done()
+    if exact is not None:
+        _check_exact(case)
     return case
 
 
+def _exact_fn(ref: Fields, name: str):
+    try:
+        return plugins.exact_solution(name)
+    except plugins.PluginError as err:
+        raise ref.error("exact", str(err)) from None
+
+
+def _read_ode(o: Fields) -> OdeSpec:
+    """``[ode]``: a registered system, its start ``y0`` and its keyword parameters,
+    checked by building the system and evaluating its derivative at the start."""
+    name = o.string("system")
+    try:
+        cls = plugins.ode_system(name)
+    except plugins.PluginError as err:
+        raise o.error("system", str(err)) from None
+    if cls is None:
+        raise o.error("system", f"no ODE system named {name!r}; known: {', '.join(plugins.system_names())}")
+    y0 = o.array("y0", shape=(ODE_DIMENSIONS[name],) if name in ODE_DIMENSIONS else (None,))
+    params = {k: o.number(k) for k in o.table if k not in ("system", "y0")}
+    o.done()
+    try:
+        system = cls(y0, **params)
+        dy = np.asarray(system.derivative(y0.copy(), 0.0), float)
+    except Exception as err:  # the parameters or the start do not fit the system
+        raise o.error("system", f"{name!r} cannot be built from y0 and "
+                      f"{sorted(params) or 'no parameters'}: {type(err).__name__}: {err}") from None
+    if dy.shape != y0.shape:
+        raise o.error("y0", f"{name!r} returns a derivative of shape {dy.shape} for a start of "
+                      f"shape {y0.shape}")
+    return OdeSpec(name, y0, params, second_order=isinstance(system, SecondOrderSystem))
+
+
+def _check_exact(case: Case) -> None:
+    """The named exact solution must fit the scene: its own check if it has one, else it
+    is evaluated at ``t = 0`` and must return the scene's start in the trajectory layout."""
+    fn = plugins.exact_solution(case.exact)
+    where = "reference.exact"
+    try:
+        check = getattr(fn, "check", None)
+        if check is not None:
+            check(case)
+            return
+        start = fn(case, np.array([0.0]))
+    except Exception as err:  # an exact solution says why it does not fit by raising
+        raise CaseError(case.file, where, f"{case.exact!r} does not fit this case: {err}") from None
+    if case.kind == "ode":
+        x0, shape = case.ode.y0[None, None, :], (1, 1, len(case.ode.y0))
+    else:
+        x0, shape = case.model.x0[None], (1, case.model.n, 3)
+    x = np.asarray(getattr(start, "x", None))
+    if len(getattr(start, "t", [])) == 0:
+        return  # known at some times only, not at the start
+    if x.shape != shape:
+        raise CaseError(case.file, where, f"{case.exact!r} gives positions of shape {x.shape}; "
+                        f"this case's are {shape}")
+    if not np.allclose(x, x0, rtol=1e-9, atol=1e-12):
+        raise CaseError(case.file, where, f"{case.exact!r} does not start where the case starts "
+                        f"(largest difference {np.max(np.abs(x - x0)):.3g})")
+
+
 def _read_gates(f: Fields) -> list[Gate]:
-    gates = []
-    for i, g in enumerate(f.subs("gates")):
-        kind = g.string("kind", choices=GATE_KINDS)
-        engine = g.string("engine", "reference")
-        method = g.string("method")
-        dt = g.number("dt", None, positive=True)
-        params: dict[str, object] = {}
-        if kind == "status":
-            params["expect"] = g.string("expect", choices={"ok", "unstable"})
-        for key in list(g.table):
-            if key in GATE_NUMBERS and key not in params:
-                params[key] = g.number(key)
-        if kind == "property":
-            params["name"] = g.string("name")
-        if kind == "speedup":
-            params["over"] = g.strings("over")
-        _require(g, kind, params, dt)
-        g.done()
-        gates.append(Gate(kind, engine, method, dt, params, f"gates[{i}]"))
-    return gates
+    return [read_gate(g, f"gates[{i}]") for i, g in enumerate(f.subs("gates"))]
+
+
+STATUS_VALUES = {"ok", "unstable"}
+QUANTITIES = {"error", "energy_drift", "energy_drift_final", "nfev"}
+RESTITUTION_QUANTITIES = {"e_measured", "e_apex"}
+
+
+def read_gate(g: Fields, where: str) -> Gate:
+    """One ``[[gates]]`` table (of a case file or a gates file), checked field by field.
+
+    ``engine`` (default ``reference``) and ``method`` may be ``*``: every engine that
+    ran, every method of it. Kinds and their numbers:
+
+    - ``order``: ``expect``, ``tol`` (fitted order within ``tol`` of ``expect``);
+    - ``error``, ``energy_drift``: ``dt``, ``max``;
+    - ``status``: ``dt``, ``expect`` (``ok`` or ``unstable``);
+    - ``property``: ``name``, ``dt``, ``min`` and/or ``max``;
+    - ``stability-limit``: ``rel_tol`` (within it of the exact limit) and/or ``min``
+      (s, the least acceptable limit, for scenes without an exact one);
+    - ``restitution``: ``tol`` (``|e_measured - e_set| <= tol`` on every bounce), with
+      optional ``dt``, ``e_set``, ``bounce`` filters and ``quantity`` (``e_measured``,
+      from velocities, or ``e_apex``, from apex heights);
+    - ``no-worse-than``: ``than`` (``engine/method``), ``factor`` (default 1) and
+      ``quantity`` (default ``error``), on every ``dt`` both ran (or only ``dt``);
+    - ``speedup``: ``dt``, ``over`` (engines), ``min`` (times faster).
+    """
+    kind = g.string("kind", choices=GATE_KINDS)
+    engine = g.string("engine", "reference")
+    method = g.string("method")
+    dt = g.number("dt", None, positive=True)
+    params: dict[str, object] = {}
+    if kind == "status":
+        params["expect"] = g.string("expect", choices=STATUS_VALUES)
+    for key in list(g.table):
+        if key in GATE_NUMBERS and key not in params:
+            params[key] = g.number(key)
+    if kind == "property":
+        params["name"] = g.string("name")
+    if kind == "speedup":
+        params["over"] = g.strings("over")
+    if kind == "no-worse-than":
+        than = g.string("than")
+        other_engine, sep, other_method = than.partition("/")
+        if not sep or not other_engine or not other_method or "*" in than:
+            raise g.error("than", f"expected 'engine/method' of one run, got {than!r}")
+        params["than"] = (other_engine, other_method)
+        params["quantity"] = g.string("quantity", "error", choices=QUANTITIES)
+        params.setdefault("factor", 1.0)
+    if kind == "restitution":
+        params["quantity"] = g.string("quantity", "e_measured", choices=RESTITUTION_QUANTITIES)
+    _require(g, kind, params, dt)
+    g.done()
+    return Gate(kind, engine, method, dt, params, where, file=g.file)
 
 
 def _require(g: Fields, kind: str, params: dict, dt: float | None) -> None:
@@ -171,8 +314,8 @@ def _require(g: Fields, kind: str, params: dict, dt: float | None) -> None:
         "order": ("expect", "tol"),
         "error": ("max",),
         "energy_drift": ("max",),
-        "stability-limit": ("rel_tol",),
         "speedup": ("min",),
+        "restitution": ("tol",),
     }.get(kind, ())
     for key in need:
         if key not in params:
@@ -181,4 +324,51 @@ def _require(g: Fields, kind: str, params: dict, dt: float | None) -> None:
         raise g.error("dt", f"a {kind} gate needs the dt (or tolerance) of the row it reads")
     if kind == "property" and "min" not in params and "max" not in params:
         raise g.error("max", "a property gate needs min, max or both")
+    if kind == "stability-limit" and "rel_tol" not in params and "min" not in params:
+        raise g.error("rel_tol", "a stability-limit gate needs rel_tol (against the exact limit), "
+                      "min (s), or both")
+    if kind == "no-worse-than" and not params["factor"] > 0:
+        raise g.error("factor", f"must be positive, got {params['factor']:g}")
 
+
+def load_gates_file(path: str | Path) -> list[tuple[list[str], Gate]]:
+    """The gates of a user's gates file: ``(case patterns, gate)`` pairs.
+
+    A gates file is TOML with ``[[gates]]`` tables like a case file's, each naming the
+    cases it applies to by ``cases`` (a name, a shell glob, or a list of them; default
+    every case), and optionally a ``[baseline]`` table of tolerances (see
+    :func:`load_baseline_tolerances`).
+    """
+    f = _read_toml(Path(path))
+    out = []
+    for i, g in enumerate(f.subs("gates")):
+        raw = g.raw("cases", "*")
+        patterns = [raw] if isinstance(raw, str) else raw
+        if not isinstance(patterns, list) or not patterns or not all(
+                isinstance(p, str) and p.strip() for p in patterns):
+            raise g.error("cases", f"expected a case name, glob, or a list of them, got {raw!r}")
+        out.append(([p.strip() for p in patterns], read_gate(g, f"gates[{i}]")))
+    f.raw("baseline", None)
+    f.done()
+    return out
+
+
+def load_baseline_tolerances(path: str | Path) -> dict[str, float]:
+    """The ``[baseline]`` table of a gates file: quantity -> tolerance (see
+    :mod:`truestep.baseline`); empty when the file has none."""
+    f = _read_toml(Path(path))
+    if not f.has("baseline"):
+        return {}
+    b = f.sub("baseline")
+    return {k: b.number(k, nonnegative=True) for k in list(b.table)}
+
+
+def _read_toml(path: Path) -> Fields:
+    file = str(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise CaseError(file, "<file>", "no such file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise CaseError(file, "<toml>", str(err)) from None
+    return Fields(file, data)

@@ -37,6 +37,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from truestep.cases.fields import Fields
 from truestep.reference_impl import meshes
 from truestep.reference_impl.emitters import spawn_mean

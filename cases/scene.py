@@ -8,6 +8,7 @@ anchors refer to those global numbers.
 from __future__ import annotations
 
 import numpy as np
+
 from truestep.cases.fields import Fields
 from truestep.cases.meshes import MeshPart, read_emitter, read_mesh
 from truestep.reference_impl.model import (

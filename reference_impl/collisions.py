@@ -49,6 +49,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+
 from truestep.reference_impl.model import Plane
 
 if TYPE_CHECKING:

@@ -33,6 +33,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+
 from truestep.reference_impl.model import EmitterSpec, ParticleModel
 
 if TYPE_CHECKING:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
 from truestep.reference_impl.model import Anchors, ForceField, Gravitation, ParticleModel, Springs
 
 EARTH_MASS = 5.972e24

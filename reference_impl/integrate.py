@@ -6,6 +6,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
 from truestep.reference_impl.solvers.base import Solver
 
 BLOWUP = 1e12

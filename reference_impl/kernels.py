@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
+
 from truestep.reference_impl.collisions import EPS_DISTANCE, EPS_SPEED
 
 BLOCK = 256

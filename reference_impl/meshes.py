@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from truestep.reference_impl.model import Springs
 
 CUBE_BRACING = ("edges", "faces", "volume")

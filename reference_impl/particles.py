@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
+
 from truestep.reference_impl import collisions, forces
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.system import SecondOrderSystem

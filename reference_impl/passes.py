@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from truestep.reference_impl.collisions import PlaneCollisions
 from truestep.reference_impl.emitters import Emitter, pool_starts
 from truestep.reference_impl.model import ParticleModel

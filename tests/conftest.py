@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from truestep.cases import load_case
 from truestep.cases.loader import CASE_DIR
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from truestep.cases import CaseError, case_files, load_case
 
 GOOD = """

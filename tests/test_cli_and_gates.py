@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+
 from truestep.cases import load_case
 from truestep.cases.loader import CASE_DIR
-from truestep.reference_impl.solvers import RK4
-
 from truestep.cli import main
 from truestep.gates import check_gates
+from truestep.reference_impl.solvers import RK4
 from truestep.runner import run_matrix
 
 

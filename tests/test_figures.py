@@ -8,7 +8,6 @@ import time
 import numpy as np
 import pytest
 from PIL import Image
-from truestep.reference_impl.solvers import get_solver
 
 from truestep.figures import (
     FIGURES,
@@ -17,6 +16,7 @@ from truestep.figures import (
     simulate_fountain,
     write_lecture_figures,
 )
+from truestep.reference_impl.solvers import get_solver
 
 SLIDES = {
     "lecture-01-vector-field": ("Vector Field", "Integral Curves"),

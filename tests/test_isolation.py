@@ -49,9 +49,8 @@ def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
     """One step of a sweep kills its process: the sweep is run again a step per process,
     and only that step's row says crashed; a step that raises is a crashed row without
     losing the others."""
-    from truestep.cases import load_cases
-
     from truestep import runner
+    from truestep.cases import load_cases
 
     case = load_cases("harmonic-oscillator")[0]
     real = runner.simulate_timed
@@ -75,9 +74,8 @@ def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
 def test_compiled_kernels_loaded_before_forking_still_run_in_the_children():
     """preload() compiles the parallel rain kernel in the parent; a forked run of the
     fused path (bouncing-ball, lecture: one plane) must then still run, not be killed."""
-    from truestep.cases import load_cases
-
     from truestep import runner
+    from truestep.cases import load_cases
 
     runner.preload()
     case = load_cases("bouncing-ball")[0]

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases.exact import EXACT
-
 from truestep.properties import PROPERTIES
 
 PARTICLE_CASES = [
@@ -68,6 +68,7 @@ def test_linear_flow_stepped_record_to_record_equals_the_exponential_at_each_tim
     per distinct gap); it must agree with expm(A t) y0 at every time, here for a damped
     five-mass chain with forcing, 2001 records over 5000 steps of 1e-3 s."""
     from scipy.linalg import expm
+
     from truestep.cases.exact import _expm_flow
 
     n = 5

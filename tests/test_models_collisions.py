@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases.exact_particles import bounce_schedule
+from truestep.properties import PROPERTIES
 from truestep.reference_impl.collisions import box_planes
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.reference_impl.particles import ParticleSystem
 from truestep.reference_impl.passes import passes_for
 from truestep.reference_impl.solvers import get_solver
-
-from truestep.properties import PROPERTIES
 
 UP = np.array([0.0, 1.0, 0.0])
 G = 9.81

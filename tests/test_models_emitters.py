@@ -6,8 +6,10 @@ import tracemalloc
 
 import numpy as np
 import pytest
+
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import CaseError, load_case
+from truestep.properties import PROPERTIES
 from truestep.reference_impl.emitters import Emitter, emitter_area, spawn_count_moments
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import EmitterSpec, ParticleModel
@@ -15,8 +17,6 @@ from truestep.reference_impl.particles import ParticleSystem
 from truestep.reference_impl.passes import passes_for
 from truestep.reference_impl.solvers import get_solver
 from truestep.reference_impl.strands import ballistic_deviation, collect_strands
-
-from truestep.properties import PROPERTIES
 
 
 def pool_system(spec: EmitterSpec, gravity=(0.0, 0.0, 0.0)) -> tuple[ParticleSystem, Emitter]:

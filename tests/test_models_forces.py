@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.cases.case import Case
 from truestep.cases.exact import EXACT
 from truestep.reference_impl import forces

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.reference_impl.kernels import rain_run, rain_step
 from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.reference_impl.particles import ParticleSystem

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import CaseError, load_case
-from truestep.reference_impl import meshes
-
 from truestep.properties import PROPERTIES
+from truestep.reference_impl import meshes
 
 
 def test_builders_count_vertices_edges_and_faces():

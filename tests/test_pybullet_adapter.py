@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from truestep.adapters.base import Adapter
 from truestep.adapters.pybullet_adapter import PybulletAdapter
 from truestep.adapters.reference import ReferenceAdapter

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from truestep.adapters.pymunk_adapter import PymunkAdapter
 from truestep.cases.loader import CASE_DIR, load_case
 from truestep.reference_impl import forces

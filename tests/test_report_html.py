@@ -14,9 +14,9 @@ import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
-from truestep.cases import load_cases
 
 from truestep.analyses import run_analyses
+from truestep.cases import load_cases
 from truestep.cli import main
 from truestep.figures import FIGURES
 from truestep.report import write_report

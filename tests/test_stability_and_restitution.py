@@ -7,10 +7,10 @@ import time
 
 import numpy as np
 import pytest
+
 from truestep.adapters import get_adapter
 from truestep.cases import load_cases
 from truestep.cases.exact import stability_limit
-
 from truestep.restitution import bounces
 from truestep.stability import MIN_STEPS, bisect_limit, energy_grows, is_stable
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from truestep.reference_impl.solvers import RK4, DormandPrince54, Euler, Heun, Midpoint
 
 TABLEAUX = [Euler, Midpoint, Heun, RK4]

@@ -1,1 +1,99 @@
-"""truestep: the harness (CLI, runner, metrics, stability search, gates, reports)."""
+"""truestep: a verification and benchmark harness for physically based animation.
+
+The public API (everything else is internal and may change)::
+
+    import truestep
+
+    truestep.__version__
+    truestep.load_case(path), truestep.load_cases("names,globs,files,dirs")
+    truestep.run(cases, engines, quick=...)        # -> truestep.Tables of pandas tables
+    truestep.run_matrix(cases, engines)            # -> the results table only
+    truestep.check(tables, gates="gates.toml")     # -> one row per gate verdict
+    truestep.compare("baseline-dir", tables)       # -> what got worse or better
+
+    class MyEngine(truestep.FixedStepAdapter): ...   # see README, "Writing an adapter"
+
+Names are imported on first use, so ``import truestep`` (and importing
+``truestep.reference_impl`` on its own) stays light.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.2.0"
+
+_EXPORTS: dict[str, str] = {
+    "Adapter": "truestep.adapters.base",
+    "FixedStepAdapter": "truestep.adapters.base",
+    "Recording": "truestep.adapters.base",
+    "Trajectory": "truestep.adapters.base",
+    "get_adapter": "truestep.adapters",
+    "Case": "truestep.cases.case",
+    "CaseError": "truestep.cases.errors",
+    "Gate": "truestep.cases.case",
+    "load_case": "truestep.cases.loader",
+    "load_cases": "truestep.cases.loader",
+    "Exact": "truestep.cases.exact",
+    "exact_solution": "truestep.cases.exact",
+    "ParticleModel": "truestep.reference_impl.model",
+    "System": "truestep.reference_impl.system",
+    "SecondOrderSystem": "truestep.reference_impl.system",
+    "Tables": "truestep.api",
+    "run": "truestep.api",
+    "check": "truestep.api",
+    "compare": "truestep.api",
+    "select_engines": "truestep.api",
+    "run_matrix": "truestep.runner",
+}
+
+__all__ = [
+    "Adapter",
+    "Case",
+    "CaseError",
+    "Exact",
+    "FixedStepAdapter",
+    "Gate",
+    "ParticleModel",
+    "Recording",
+    "SecondOrderSystem",
+    "System",
+    "Tables",
+    "Trajectory",
+    "__version__",
+    "check",
+    "compare",
+    "exact_solution",
+    "get_adapter",
+    "load_case",
+    "load_cases",
+    "run",
+    "run_matrix",
+    "select_engines",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'truestep' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
+
+if TYPE_CHECKING:
+    from truestep.adapters import get_adapter
+    from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
+    from truestep.api import Tables, check, compare, run, select_engines
+    from truestep.cases.case import Case, Gate
+    from truestep.cases.errors import CaseError
+    from truestep.cases.exact import Exact, exact_solution
+    from truestep.cases.loader import load_case, load_cases
+    from truestep.reference_impl.model import ParticleModel
+    from truestep.reference_impl.system import SecondOrderSystem, System
+    from truestep.runner import run_matrix

@@ -1,33 +1,49 @@
 """The ``truestep`` command: run, gate, list, figures.
 
-Exit codes: 0 success; 1 a gate failed; 2 bad input (one line naming the file, the
-field and the reason, no traceback; nothing already written is touched).
+Exit codes: 0 success; 1 a gate failed, something got worse than the baseline, or
+nothing was checked; 2 bad input (one line naming the file, the field and the reason,
+no traceback; nothing already written is touched).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
 
 import pandas as pd
 
-from truestep.adapters import ADAPTERS, get_adapter
-from truestep.cases import CaseError, load_cases
+from truestep import __version__
+from truestep.adapters import (
+    EngineNotInstalled,
+    UnknownEngine,
+    engine_status,
+    get_adapter,
+    registered,
+)
+from truestep.cases import CaseError, SelectionError, load_case, load_cases
 from truestep.cases.case import Case
+from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
+from truestep.cases.plugins import PluginError
+
+RESULTS_NEEDS = {"case", "engine", "method", "dt", "dt_kind", "status", "error"}
+"""Columns ``truestep gate`` needs in a results table."""
 
 
 class UsageError(Exception):
     """Bad command-line input: printed as one line, exit code 2."""
 
 
-def _load(pattern: str) -> list[Case]:
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr)
+
+
+def _check_case_gates(cases: list[Case], engines: set[str]) -> None:
+    """Case-file gates must name known properties and engines (or ``*``)."""
     from truestep.properties import PROPERTIES
 
-    cases = load_cases(pattern)
-    if not cases:
-        raise UsageError(f"--cases: no case matches {pattern!r}")
     for c in cases:
         for p in c.properties:
             if p not in PROPERTIES:
@@ -36,19 +52,14 @@ def _load(pattern: str) -> list[Case]:
             if g.kind == "property" and g.params["name"] not in c.properties:
                 raise CaseError(c.file, f"{g.where}.name",
                                 f"{g.params['name']!r} is not in this case's properties")
-            if g.engine not in ADAPTERS:
+            if g.engine != "*" and g.engine not in engines:
                 raise CaseError(c.file, f"{g.where}.engine", f"unknown engine {g.engine!r}")
+
+
+def _load(selection: str) -> list[Case]:
+    cases = load_cases(selection)
+    _check_case_gates(cases, set(registered()))
     return cases
-
-
-def _engines(text: str | None) -> list[str]:
-    if not text:
-        return list(ADAPTERS)
-    names = [e.strip() for e in text.split(",") if e.strip()]
-    for e in names:
-        if e not in ADAPTERS:
-            raise UsageError(f"--engines: unknown engine {e!r}; known: {', '.join(ADAPTERS)}")
-    return names
 
 
 def _reproduce(args: argparse.Namespace) -> list[str]:
@@ -65,13 +76,16 @@ def _reproduce(args: argparse.Namespace) -> list[str]:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from truestep.analyses import run_analyses
+    from truestep.api import select_engines
     from truestep.report import write_report
     from truestep.runner import run_matrix
 
     cases = _load(args.cases)
     if args.quick:
         cases = [c for c in cases if c.in_quick] or cases
-    engines = _engines(args.engines)
+    engines = select_engines(args.engines, say=_say)
+    if not engines:
+        raise UsageError("--engines: no engine is installed")
     out = Path(args.out)
     clock = [time.perf_counter()]
 
@@ -92,31 +106,140 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_gate(args: argparse.Namespace) -> int:
-    from truestep.gates import check_gates
+def _read_csv(path: Path, needs: set[str]) -> pd.DataFrame:
+    try:
+        table = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as err:
+        raise UsageError(f"{path}: cannot read as CSV: {str(err).splitlines()[0][:200]}") from None
+    missing = needs - set(table.columns)
+    if missing:
+        raise UsageError(f"{path}: missing columns {', '.join(sorted(missing))}")
+    return table
 
-    cases = _load(args.cases)
-    results_path = Path(args.results)
+
+def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
+    """``results`` and, beside it, ``stability`` and ``restitution`` (``None`` if absent)."""
     if not results_path.is_file():
         raise UsageError(f"{results_path}: no such file (run `truestep run` first)")
-    try:
-        results = pd.read_csv(results_path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
-        raise UsageError(f"{results_path}: cannot read as CSV: {err}") from None
-    missing = {"case", "engine", "method", "dt", "status", "error"} - set(results.columns)
-    if missing:
-        raise UsageError(f"{results_path}: missing columns {', '.join(sorted(missing))}")
-    stab_path = results_path.parent / "stability.csv"
-    stability = pd.read_csv(stab_path) if stab_path.is_file() else None
-    verdicts = check_gates(cases, results, stability)
-    failed = [v for v in verdicts if v.evaluated and not v.passed]
+    tables = {"results": _read_csv(results_path, RESULTS_NEEDS)}
+    for name, needs in (("stability", {"case", "engine", "method", "dt_limit", "dt_limit_exact"}),
+                        ("restitution", {"engine", "method", "dt", "e_set", "bounce", "e_measured"})):
+        path = results_path.parent / f"{name}.csv"
+        tables[name] = _read_csv(path, needs) if path.is_file() else None
+    return tables
+
+
+def _cases_of(results: pd.DataFrame, where: Path) -> list[Case]:
+    """The cases a results table covers: by the file it names (``case_source``), else by
+    name in the case library."""
+    lib = library()
+    sources = {}
+    if "case_source" in results:
+        sources = dict(results[["case", "case_source"]].dropna().drop_duplicates("case").values)
+    cases = []
+    for name in dict.fromkeys(results["case"].astype(str)):
+        src = str(sources.get(name, name))
+        if src != name and Path(src).is_file():
+            cases.append(load_case(src))
+        elif name in lib:
+            cases.append(load_case(lib[name]))
+        else:
+            raise UsageError(f"{where}: case {name!r} is not in the case library and its file "
+                             f"{src!r} is not here; name its file or directory with --cases")
+    return cases
+
+
+def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
+    from truestep.baseline import TOLERANCES
+
+    tol: dict[str, float] = {}
+    for f in files:
+        tol.update(load_baseline_tolerances(f))
+    for item in items:
+        key, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = float("nan")
+        if not sep or key not in TOLERANCES or not number >= 0:
+            raise UsageError(f"--tolerance: expected QUANTITY=NUMBER >= 0 with QUANTITY one of "
+                             f"{', '.join(TOLERANCES)}, got {item!r}")
+        tol[key] = number
+    unknown = set(tol) - set(TOLERANCES)
+    if unknown:
+        raise UsageError(f"[baseline]: unknown quantity {sorted(unknown)[0]!r}; "
+                         f"known: {', '.join(TOLERANCES)}")
+    return tol
+
+
+def cmd_gate(args: argparse.Namespace) -> int:
+    from truestep import ci_outputs
+    from truestep.baseline import compare
+    from truestep.gates import check_gates
+
+    results_path = Path(args.results)
+    tables = _run_tables(results_path)
+    results = tables["results"]
+    cases = load_cases(args.cases) if args.cases else _cases_of(results, results_path)
+    engines = set(registered()) | set(results["engine"].astype(str))
+    _check_case_gates(cases, engines)
+    extra = [item for f in args.gates for item in load_gates_file(f)]
+    for _, g in extra:
+        if g.engine != "*" and g.engine not in engines:
+            raise CaseError(g.file, f"{g.where}.engine",
+                            f"unknown engine {g.engine!r} (not registered, not in {results_path})")
+    verdicts = check_gates(cases, results, tables["stability"], tables["restitution"], extra=extra)
+
+    comparison = None
+    if args.baseline:
+        base_dir = Path(args.baseline)
+        if not (base_dir / "results.csv").is_file():
+            raise UsageError(f"--baseline: {base_dir}/results.csv: no such file")
+        baseline = _run_tables(base_dir / "results.csv")
+        if args.time_against and "/" not in args.time_against:
+            raise UsageError(f"--time-against: expected ENGINE/METHOD, got {args.time_against!r}")
+        comparison = compare(baseline, tables, tolerances=_tolerances(args.tolerance, args.gates),
+                             time_against=args.time_against,
+                             scales={c.name: c.error_scale for c in cases})
+    elif args.tolerance or args.time_against:
+        raise UsageError("--tolerance and --time-against compare against a baseline: add --baseline DIR")
+
+    failed = [v for v in verdicts if v.verdict == "fail"]
+    held = [v for v in verdicts if v.verdict == "pass"]
+    skipped = [v for v in verdicts if v.verdict == "skip"]
+    reasons = []
+    if not held and not failed and (comparison is None or not comparison.compared):
+        reasons.append("nothing was checked: no gate was evaluated"
+                       + ("" if comparison is None else " and no baseline row matched")
+                       + f" ({len(skipped)} gates name cases or engines this run left out)")
     for v in verdicts:
-        if args.verbose or not v.passed or not v.evaluated:
+        if args.verbose or v.verdict == "fail" or (v.verdict == "skip" and not args.quiet):
             print(v.line())
-    held = sum(v.evaluated and v.passed for v in verdicts)
-    skipped = sum(not v.evaluated for v in verdicts)
-    print(f"{held} gates held, {len(failed)} failed, {skipped} not evaluated")
-    return 1 if failed else 0
+    worse = comparison.worse() if comparison is not None else []
+    if comparison is not None:
+        for f in comparison.findings:
+            if args.verbose or f.change in ("worse", "vanished"):
+                print(f.line())
+    passed = not failed and not reasons and not worse
+    summary = f"{len(held)} gates held, {len(failed)} failed, {len(skipped)} not evaluated"
+    if comparison is not None:
+        n = {k: sum(f.change == k for f in comparison.findings)
+             for k in ("worse", "better", "appeared", "vanished")}
+        summary += (f"; baseline: {comparison.compared} rows compared, {n['worse']} worse, "
+                    f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished")
+    for r in reasons:
+        print(f"FAIL {r}")
+    print(summary)
+    if args.junit:
+        ci_outputs.write(args.junit, ci_outputs.junit(verdicts, comparison, reasons))
+    md = ci_outputs.markdown(verdicts, comparison, reasons, passed=passed)
+    if args.markdown:
+        ci_outputs.write(args.markdown, md)
+    if os.environ.get("GITHUB_STEP_SUMMARY"):
+        ci_outputs.write(os.environ["GITHUB_STEP_SUMMARY"], md, append=True)
+    if args.json:
+        ci_outputs.write(args.json, ci_outputs.as_json(verdicts, comparison, reasons, passed=passed))
+    return 0 if passed else 1
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -125,7 +248,12 @@ def cmd_list(args: argparse.Namespace) -> int:
     for c in cases:
         print(f"  {c.name:24s} {c.kind:9s} features: {', '.join(sorted(c.features))}")
     print("engines:")
-    for name in _engines(args.engines):
+    names = list(registered()) if not args.engines else [e.strip() for e in args.engines.split(",")]
+    for name in names:
+        status = engine_status(name) if name in registered() else "unknown engine"
+        if status != "installed":
+            print(f"  {name:10s} {status}")
+            continue
         a = get_adapter(name)
         print(f"  {name:10s} methods: {', '.join(a.methods)}")
         print(f"  {'':10s} capabilities: {', '.join(sorted(a.capabilities))}")
@@ -140,31 +268,73 @@ def cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="truestep", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+CASES_HELP = ("cases: names or shell globs of the case library, case files and directories, "
+              "comma-separated (default: every case of the library); each item must match")
+ENGINES_HELP = ("engines: registered names or module:Class of an adapter, comma-separated "
+                "(default: every installed engine)")
 
-    run = sub.add_parser("run", help="run the matrix, the analyses, and write the report")
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="truestep", description="truestep: a verification and benchmark harness for "
+        "physically based animation. Exit codes: 0 success, 1 a gate failed or nothing was "
+        "checked, 2 bad input.")
+    parser.add_argument("--version", action="version", version=f"truestep {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser("run", help="run the matrix and the analyses, write the tables and the report",
+                         description="Run every case with every engine and method that can model "
+                         "it, the stability searches and the restitution sweep; write results.csv, "
+                         "stability.csv, restitution.csv, index.md, index.html and figures/.")
     run.add_argument("--quick", action="store_true",
-                     help="short sweeps of the quick cases, no energy or lecture figures (CI)")
-    run.add_argument("--cases", default="*", help="glob(s) of case names, comma-separated")
-    run.add_argument("--engines", default=None, help="engine names, comma-separated")
-    run.add_argument("--out", default="reports", help="output directory (default: reports)")
+                     help="short sweeps of the quick cases, no energy or lecture figures (CI smoke run)")
+    run.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)
+    run.add_argument("--engines", default=None, metavar="NAMES", help=ENGINES_HELP)
+    run.add_argument("--out", default="reports", metavar="DIR",
+                     help="output directory (default: reports)")
     run.set_defaults(func=cmd_run)
 
-    gate = sub.add_parser("gate", help="check every case's gates against results.csv")
-    gate.add_argument("--results", default="reports/results.csv")
-    gate.add_argument("--cases", default="*")
-    gate.add_argument("-v", "--verbose", action="store_true", help="print gates that held too")
+    gate = sub.add_parser("gate", help="check gates (and a baseline) against a run's tables",
+                          description="Check the gates of the case files, and of --gates files, "
+                          "against a run's tables; with --baseline, compare the run with an earlier "
+                          "one row by row. Exit 0 when everything checked holds and something was "
+                          "checked, 1 otherwise, 2 on bad input.")
+    gate.add_argument("--results", default="reports/results.csv", metavar="FILE",
+                      help="the run's results.csv; stability.csv and restitution.csv are read from "
+                      "beside it (default: reports/results.csv)")
+    gate.add_argument("--cases", default=None, metavar="ITEMS",
+                      help=CASES_HELP.replace("every case of the library", "the cases of the results"))
+    gate.add_argument("--gates", action="append", default=[], metavar="FILE",
+                      help="a gates file ([[gates]] tables with a `cases` pattern; optional "
+                      "[baseline] tolerances); repeatable")
+    gate.add_argument("--baseline", default=None, metavar="DIR",
+                      help="an earlier run's output directory to compare with, row by row")
+    gate.add_argument("--tolerance", action="append", default=[], metavar="QUANTITY=X",
+                      help="override a baseline tolerance (error, energy_drift, nfev, order, "
+                      "dt_limit, e_measured, wall_ratio); repeatable")
+    gate.add_argument("--time-against", default=None, metavar="ENGINE/METHOD",
+                      help="compare wall time with the baseline as a ratio to this engine/method's "
+                      "rows of the same case and step (off by default)")
+    gate.add_argument("--junit", default=None, metavar="FILE", help="write a JUnit XML report")
+    gate.add_argument("--markdown", default=None, metavar="FILE",
+                      help="write a markdown summary (also appended to $GITHUB_STEP_SUMMARY when set)")
+    gate.add_argument("--json", default=None, metavar="FILE", help="write every verdict as JSON")
+    gate.add_argument("-v", "--verbose", action="store_true",
+                      help="print gates that held and baseline rows that got better or appeared")
+    gate.add_argument("-q", "--quiet", action="store_true", help="do not print gates not evaluated")
     gate.set_defaults(func=cmd_gate)
 
-    lst = sub.add_parser("list", help="print cases, engines, capabilities and methods")
-    lst.add_argument("--cases", default="*")
-    lst.add_argument("--engines", default=None)
+    lst = sub.add_parser("list", help="print cases, engines (installed or not), capabilities and methods",
+                         description="Print the cases with their features and the engines with "
+                         "their methods and capabilities; an engine that is not installed is listed "
+                         "with the pip line that adds it.")
+    lst.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)
+    lst.add_argument("--engines", default=None, metavar="NAMES", help="engine names, comma-separated")
     lst.set_defaults(func=cmd_list)
 
-    fig = sub.add_parser("figures", help="reproduce the lecture's figures")
-    fig.add_argument("--out", default="reports")
+    fig = sub.add_parser("figures", help="reproduce the lecture's figures",
+                         description="Draw the lecture's figures into DIR/figures.")
+    fig.add_argument("--out", default="reports", metavar="DIR", help="output directory (default: reports)")
     fig.set_defaults(func=cmd_figures)
     return parser
 
@@ -173,7 +343,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (CaseError, UsageError) as err:
+    except (CaseError, UsageError, SelectionError, UnknownEngine, EngineNotInstalled,
+            PluginError) as err:
         print(f"truestep: error: {err}", file=sys.stderr)
         return 2
 

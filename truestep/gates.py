@@ -1,7 +1,16 @@
-"""Check each case's gates against the tables ``truestep run`` wrote."""
+"""Check gates (from case files and gates files) against the tables ``truestep run`` wrote.
+
+A gate names the rows it reads by case, engine, method and step; ``*`` for the engine or
+the method stands for every engine (every method) that ran the case, and the gate is
+checked once for each. Each check is a :class:`GateResult`: held, failed, or not
+evaluated (the run left that case or engine out). A row the gate reads that ``crashed``
+or timed out fails the gate: a gate that checked nothing has not passed.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import fnmatch
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,10 +19,19 @@ import pandas as pd
 from truestep.cases.case import Case, Gate
 from truestep.metrics import fit_order
 
+NOT_RUN = frozenset({"unsupported", "skipped"})
+"""Row statuses of pairs the run did not simulate."""
+BROKEN = frozenset({"crashed", "timeout"})
+"""Row statuses of runs that produced nothing to measure."""
+GATE_COLUMNS = ["case", "source", "gate", "kind", "engine", "method", "dt", "verdict",
+                "measured", "required"]
+"""The columns of :func:`verdict_table` (and of ``truestep gate --json``'s gates)."""
+
 
 @dataclass
 class GateResult:
-    """One gate's verdict: what it read, what it needed, and whether it held."""
+    """One gate's verdict on one engine and method: what it read, what it needed, and
+    whether it held (``evaluated`` is false when the run has no rows for it)."""
 
     case: str
     gate: Gate
@@ -22,70 +40,106 @@ class GateResult:
     required: str
     evaluated: bool = True
 
-    def line(self) -> str:
+    @property
+    def verdict(self) -> str:
+        """``pass``, ``fail`` or ``skip``."""
+        return "skip" if not self.evaluated else "pass" if self.passed else "fail"
+
+    @property
+    def label(self) -> str:
+        """``case gates[i] kind engine/method [dt=...]``: the gate's id in every output."""
         g = self.gate
         dt = f" dt={g.dt:g}" if g.dt is not None else ""
-        verdict = "SKIP" if not self.evaluated else "ok  " if self.passed else "FAIL"
-        return (f"{verdict} {self.case} {g.where} {g.kind} {g.engine}/{g.method}{dt}: "
-                f"measured {self.measured}, required {self.required}")
+        return f"{self.case} {g.where} {g.kind} {g.engine}/{g.method}{dt}"
+
+    def line(self) -> str:
+        verdict = {"skip": "SKIP", "pass": "ok  ", "fail": "FAIL"}[self.verdict]
+        return f"{verdict} {self.label}: measured {self.measured}, required {self.required}"
 
 
-def _rows(results: pd.DataFrame, case: str, g: Gate) -> pd.DataFrame:
-    r = results[(results["case"] == case) & (results["engine"] == g.engine)
-                & (results["method"] == g.method)]
-    if g.dt is not None:
-        r = r[np.isclose(r["dt"].astype(float), g.dt, rtol=1e-9, atol=0)]
-    return r
+def _num(series: pd.Series) -> np.ndarray:
+    return pd.to_numeric(series, errors="coerce").to_numpy(float)
+
+
+def _at_dt(rows: pd.DataFrame, dt: float | None) -> pd.DataFrame:
+    if dt is None or not len(rows):
+        return rows
+    return rows[np.isclose(_num(rows["dt"]), dt, rtol=1e-9, atol=0)]
 
 
 def _within(value: float, lo: float | None, hi: float | None) -> bool:
     return bool(np.isfinite(value) and (lo is None or value >= lo) and (hi is None or value <= hi))
 
 
-def check_gate(case: Case, g: Gate, results: pd.DataFrame,
-               stability: pd.DataFrame | None = None) -> GateResult:
-    """Evaluate one gate; a gate with no row to read fails, saying so.
+def _pairs(results: pd.DataFrame, case: str, g: Gate) -> list[tuple[str, str]]:
+    """The (engine, method) pairs a gate stands for: itself, or what ``*`` expands to
+    among the pairs the run simulated for ``case``."""
+    if g.engine != "*" and g.method != "*":
+        return [(g.engine, g.method)]
+    ran = results[(results["case"] == case) & ~results["status"].isin(NOT_RUN)]
+    pairs = ran[["engine", "method"]].drop_duplicates().itertuples(index=False)
+    return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
 
-    A gate whose case or engine the run left out altogether (``--cases``, ``--engines``)
-    is not evaluated and says so.
-    """
+
+def _broken(rows: pd.DataFrame) -> str | None:
+    bad = rows[rows["status"].isin(BROKEN)]
+    if not len(bad):
+        return None
+    r = bad.iloc[0]
+    message = str(r.get("message", "") or "")
+    return f"row dt={r['dt']} {r['status']}" + (f" ({message[:120]})" if message else "")
+
+
+def check_gate(case: Case, g: Gate, results: pd.DataFrame,
+               stability: pd.DataFrame | None = None,
+               restitution: pd.DataFrame | None = None) -> GateResult:
+    """Evaluate one gate for one engine and method (no ``*``); a gate with no row to read
+    fails, saying so, and a gate whose case or engine the run left out altogether
+    (``--cases``, ``--engines``) is not evaluated and says so."""
     p = g.params
     ran = results[(results["case"] == case.name) & (results["engine"] == g.engine)]
+    if g.kind == "restitution":
+        return _restitution(case, g, restitution)
     if not len(ran):
         return GateResult(case.name, g, True, "not run", "a run of this case and engine",
                           evaluated=False)
-    rows = _rows(results, case.name, g)
+    rows = ran[ran["method"] == g.method]
     if g.kind == "stability-limit":
-        s = pd.DataFrame() if stability is None else stability
-        s = s[(s["case"] == case.name) & (s["engine"] == g.engine) & (s["method"] == g.method)] \
-            if len(s) else s
-        if not len(s):
-            return GateResult(case.name, g, False, "no stability row", f"within {p['rel_tol']:g} of exact")
-        limit, exact = float(s["dt_limit"].iloc[0]), float(s["dt_limit_exact"].iloc[0])
-        rel = abs(limit - exact) / exact if np.isfinite(exact) and exact > 0 else np.nan
-        return GateResult(case.name, g, _within(rel, None, p["rel_tol"]),
-                          f"dt_limit {limit:.6g} (exact {exact:.6g}, off by {rel:.3%})",
-                          f"within {p['rel_tol']:.3%}")
+        return _stability(case, g, stability)
     if not len(rows):
         return GateResult(case.name, g, False, "no result row", "a row to read")
+    if rows["status"].isin(NOT_RUN).all():
+        r = rows.iloc[0]
+        why = r.get("missing") if r["status"] == "unsupported" else r.get("message")
+        return GateResult(case.name, g, False, f"{r['status']} ({why})", "a run to read")
     if g.kind == "order":
+        broken = _broken(rows)
+        if broken:
+            return GateResult(case.name, g, False, broken, "every row of the sweep measured")
         ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
-        order = fit_order(ok["dt"].astype(float), ok["error"].astype(float), scale=case.error_scale)
+        order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale)
         return GateResult(case.name, g, _within(abs(order - p["expect"]), None, p["tol"]),
                           f"order {order:.3f}", f"{p['expect']:g} +- {p['tol']:g}")
+    if g.kind == "no-worse-than":
+        return _no_worse(case, g, results, rows)
+    rows = _at_dt(rows, g.dt)
+    if not len(rows):
+        return GateResult(case.name, g, False, "no result row at this dt", "a row to read")
     row = rows.iloc[0]
+    if row["status"] in BROKEN:
+        return GateResult(case.name, g, False, _broken(rows), "a measured row")
     if g.kind == "status":
         return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]),
                           str(p["expect"]))
     if row["status"] != "ok":
         return GateResult(case.name, g, False, f"status {row['status']}", "status ok")
     if g.kind in ("error", "energy_drift"):
-        value = float(row[g.kind])
+        value = float(_num(rows[g.kind])[0])
         return GateResult(case.name, g, _within(value, None, p["max"]), f"{g.kind} {value:.3g}",
                           f"<= {p['max']:g}")
     if g.kind == "property":
         name = p["name"]
-        value = float(row[name]) if name in row else np.nan
+        value = float(_num(rows[name])[0]) if name in rows else np.nan
         lo, hi = p.get("min"), p.get("max")
         bounds = " and ".join(s for s in (f">= {lo:g}" if lo is not None else "",
                                           f"<= {hi:g}" if hi is not None else "") if s)
@@ -93,18 +147,143 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
     if g.kind == "speedup":
         ratios = []
         for other in p["over"]:
-            o = results[(results["case"] == case.name) & (results["engine"] == other)
-                        & (results["status"] == "ok")
-                        & np.isclose(results["dt"].astype(float), g.dt, rtol=1e-9, atol=0)]
+            o = _at_dt(results[(results["case"] == case.name) & (results["engine"] == other)
+                               & (results["status"] == "ok")], g.dt)
             if len(o):
-                ratios.append(float(o["wall_s"].min()) / float(row["wall_s"]))
+                ratios.append(float(np.nanmin(_num(o["wall_s"]))) / float(row["wall_s"]))
         value = min(ratios) if ratios else np.nan
         return GateResult(case.name, g, _within(value, p["min"], None),
                           f"speed-up {value:.3g}x over {', '.join(p['over'])}", f">= {p['min']:g}x")
-    raise ValueError(f"{case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
+    raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
+
+
+def _stability(case: Case, g: Gate, stability: pd.DataFrame | None) -> GateResult:
+    p = g.params
+    need = " and ".join(s for s in (
+        f"within {p['rel_tol']:.3%} of exact" if "rel_tol" in p else "",
+        f">= {p['min']:g} s" if "min" in p else "") if s)
+    s = pd.DataFrame() if stability is None else stability
+    if len(s):
+        s = s[(s["case"] == case.name) & (s["engine"] == g.engine) & (s["method"] == g.method)]
+    if not len(s):
+        return GateResult(case.name, g, False, "no stability row", need)
+    r = s.iloc[0]
+    if r.get("status", "ok") != "ok":
+        return GateResult(case.name, g, False, f"search {r['status']}: {r.get('note', '')}", need)
+    limit, exact = float(r["dt_limit"]), float(r["dt_limit_exact"])
+    ok, text = np.isfinite(limit), f"dt_limit {limit:.6g}"
+    if "rel_tol" in p:
+        rel = abs(limit - exact) / exact if np.isfinite(exact) and exact > 0 else np.nan
+        ok = ok and _within(rel, None, p["rel_tol"])
+        text += f" (exact {exact:.6g}, off by {rel:.3%})"
+    if "min" in p:
+        ok = ok and limit >= p["min"]
+    return GateResult(case.name, g, bool(ok), text, need)
+
+
+def _restitution(case: Case, g: Gate, table: pd.DataFrame | None) -> GateResult:
+    p = g.params
+    need = f"|{p['quantity']} - e_set| <= {p['tol']:g} on every bounce"
+    t = pd.DataFrame() if table is None else table
+    if len(t):
+        t = t[(t["engine"] == g.engine) & (t["method"] == g.method)]
+    if not len(t):
+        return GateResult(case.name, g, True, "no restitution rows for this engine",
+                          "a restitution sweep of it", evaluated=False)
+    t = _at_dt(t, g.dt)
+    for key in ("e_set", "bounce"):
+        if key in p:
+            t = t[np.isclose(_num(t[key]), p[key], rtol=0, atol=1e-12)]
+    broken = t[t["status"] != "ok"]
+    if len(broken):
+        r = broken.iloc[0]
+        return GateResult(case.name, g, False, f"drop e={r['e_set']} dt={r['dt']:.4g} {r['status']}", need)
+    values = _num(t[p["quantity"]])
+    dev = np.abs(values - _num(t["e_set"]))
+    measured = dev[np.isfinite(dev)]
+    if not len(measured):
+        return GateResult(case.name, g, False, "no bounce measured", need)
+    worst = int(np.nanargmax(np.where(np.isfinite(dev), dev, -1)))
+    r = t.iloc[worst]
+    return GateResult(case.name, g, bool(np.max(measured) <= p["tol"]),
+                      f"worst {p['quantity']} {values[worst]:.4g} at e={r['e_set']:g} "
+                      f"dt={float(r['dt']):.4g} bounce {int(r['bounce'])} ({len(measured)} bounces)",
+                      need)
+
+
+def _no_worse(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) -> GateResult:
+    p = g.params
+    other_engine, other_method = p["than"]
+    q, factor = p["quantity"], p["factor"]
+    need = f"{q} <= {factor:g} x {other_engine}/{other_method}'s at every dt both ran"
+    other = results[(results["case"] == case.name) & (results["engine"] == other_engine)
+                    & (results["method"] == other_method)]
+    rows, other = _at_dt(rows, g.dt), _at_dt(other, g.dt)
+    if not len(other) or other["status"].isin(NOT_RUN).all():
+        return GateResult(case.name, g, True, f"{other_engine}/{other_method} not run",
+                          need, evaluated=False)
+    broken = _broken(rows)
+    if broken:
+        return GateResult(case.name, g, False, broken, need)
+    pairs = 0
+    for _, r in rows.iterrows():
+        o = other[(other["dt_kind"] == r["dt_kind"])
+                  & np.isclose(_num(other["dt"]), float(r["dt"]), rtol=1e-9, atol=0)]
+        if not len(o) or o.iloc[0]["status"] != "ok":
+            continue
+        pairs += 1
+        mine, theirs = float(pd.to_numeric(r[q], errors="coerce")), float(_num(o[q])[0])
+        if r["status"] != "ok" or not mine <= factor * theirs:
+            shown = f"status {r['status']}" if r["status"] != "ok" else f"{q} {mine:.3g}"
+            return GateResult(case.name, g, False,
+                              f"dt={float(r['dt']):g}: {shown} against {theirs:.3g}", need)
+    if not pairs:
+        return GateResult(case.name, g, False, f"no dt that both this run and "
+                          f"{other_engine}/{other_method} measured", need)
+    return GateResult(case.name, g, True, f"no worse at {pairs} dt", need)
 
 
 def check_gates(cases: list[Case], results: pd.DataFrame,
-                stability: pd.DataFrame | None = None) -> list[GateResult]:
-    """Every gate of every case, in case order."""
-    return [check_gate(c, g, results, stability) for c in cases for g in c.gates]
+                stability: pd.DataFrame | None = None,
+                restitution: pd.DataFrame | None = None,
+                extra: list[tuple[list[str], Gate]] | None = None) -> list[GateResult]:
+    """Every gate of every case, in case order, then every gate of ``extra`` (the gates
+    of a gates file, :func:`truestep.cases.loader.load_gates_file`) on every case whose
+    name matches one of its patterns. ``*`` engines and methods are expanded to the pairs
+    the run simulated; such a gate with nothing to expand to is not evaluated."""
+    todo = [(c, g) for c in cases for g in c.gates]
+    for patterns, g in extra or []:
+        todo += [(c, g) for c in cases if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
+    out = []
+    for c, g in todo:
+        if g.kind in ("stability-limit", "restitution") and "*" in (g.engine, g.method):
+            pairs = _table_pairs(c, g, stability if g.kind == "stability-limit" else restitution)
+        else:
+            pairs = _pairs(results, c.name, g)
+        if not pairs:
+            out.append(GateResult(c.name, g, True, "nothing ran that it names",
+                                  "a run of a matching engine and method", evaluated=False))
+        for e, m in pairs:
+            out.append(check_gate(c, dataclasses.replace(g, engine=e, method=m), results,
+                                  stability, restitution))
+    return out
+
+
+def _table_pairs(case: Case, g: Gate, table: pd.DataFrame | None) -> list[tuple[str, str]]:
+    if table is None or not len(table):
+        return []
+    t = table
+    if "case" in t:
+        t = t[t["case"] == case.name]
+    t = t[~t["status"].isin(NOT_RUN)]
+    pairs = t[["engine", "method"]].drop_duplicates().itertuples(index=False)
+    return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
+
+
+def verdict_table(verdicts: list[GateResult]) -> pd.DataFrame:
+    """The verdicts as a table (:data:`GATE_COLUMNS`)."""
+    return pd.DataFrame([{
+        "case": v.case, "source": v.gate.file, "gate": v.gate.where, "kind": v.gate.kind,
+        "engine": v.gate.engine, "method": v.gate.method, "dt": v.gate.dt,
+        "verdict": v.verdict, "measured": v.measured, "required": v.required,
+    } for v in verdicts], columns=GATE_COLUMNS)

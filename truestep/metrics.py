@@ -6,7 +6,8 @@ import numpy as np
 
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
-from truestep.cases.exact import EXACT, Exact
+from truestep.cases.exact import Exact
+from truestep.cases.plugins import exact_solution
 
 _EXACT_CACHE: dict[tuple[int, bytes], tuple[Case, Exact]] = {}
 _EXACT_CACHE_SIZE = 32
@@ -25,7 +26,7 @@ def exact_for(case: Case, t: np.ndarray) -> Exact | None:
     hit = _EXACT_CACHE.get(key)
     if hit is not None and hit[0] is case:
         return hit[1]
-    exact = EXACT[case.exact](case, t)
+    exact = exact_solution(case.exact)(case, t)
     if len(_EXACT_CACHE) >= _EXACT_CACHE_SIZE:
         _EXACT_CACHE.pop(next(iter(_EXACT_CACHE)))
     _EXACT_CACHE[key] = (case, exact)

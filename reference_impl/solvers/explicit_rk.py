@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
 from truestep.reference_impl.solvers.base import Solver
 from truestep.reference_impl.system import System
 

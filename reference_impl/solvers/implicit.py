@@ -8,6 +8,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
 from truestep.reference_impl.solvers.base import Solver
 from truestep.reference_impl.system import System
 

@@ -6,6 +6,7 @@ Each needs ``system.acceleration(q, v, t)`` and the state layout ``x = [q, v]``.
 from __future__ import annotations
 
 import numpy as np
+
 from truestep.reference_impl.solvers.base import Solver
 
 

@@ -1,0 +1,115 @@
+"""What installed packages add to the scene library, found by entry point.
+
+Three groups; code comes only from installed packages, never from a case file:
+
+- ``truestep.cases``: ``name = "package"`` or ``"module:attr"``, a directory of case files
+  (a package's own directory, or an attribute that is a path, or a callable returning
+  one); truestep registers its own ``cases/`` this way;
+- ``truestep.exact``: ``name = "module:function"``, an exact solution
+  ``fn(case, t) -> Exact`` that ``[reference] exact = "name"`` selects
+  (:mod:`truestep.cases.exact` says what it returns);
+- ``truestep.systems``: ``name = "module:Class"``, a
+  :class:`~truestep.reference_impl.system.System` subclass constructed as
+  ``Class(y0, **params)`` that ``[ode] system = "name"`` selects.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+from collections.abc import Callable
+from importlib import metadata
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from truestep.reference_impl import odes
+from truestep.reference_impl.system import System
+
+CASES_GROUP, EXACT_GROUP, SYSTEMS_GROUP = "truestep.cases", "truestep.exact", "truestep.systems"
+
+BUILTIN_SYSTEMS: dict[str, type[System]] = {
+    "circle-field": odes.CircleField,
+    "kepler": odes.KeplerProblem,
+    "arenstorf": odes.Arenstorf,
+}
+"""The lecture's ODE systems: ``[ode] system`` name -> class."""
+
+
+class PluginError(ValueError):
+    """An entry point that cannot be used; ``str()`` names the group, the entry and why."""
+
+
+@functools.cache
+def _group(group: str) -> dict[str, str]:
+    return {ep.name: ep.value for ep in metadata.entry_points(group=group)}
+
+
+def _load(group: str, name: str, value: str) -> Any:
+    module, _, attr = value.partition(":")
+    try:
+        obj: Any = importlib.import_module(module)
+        for part in filter(None, attr.split(".")):
+            obj = getattr(obj, part)
+    except Exception as err:  # a broken plugin is a clear error, not a traceback
+        raise PluginError(f"entry point {group} {name} = {value!r}: {type(err).__name__}: {err}") from None
+    return obj
+
+
+def case_directories() -> list[tuple[str, Path]]:
+    """(entry-point name, directory) of every installed case library, truestep's first."""
+    from truestep.cases.loader import CASE_DIR
+
+    dirs = [("truestep", CASE_DIR)]
+    for name, value in sorted(_group(CASES_GROUP).items()):
+        obj = _load(CASES_GROUP, name, value)
+        if isinstance(obj, ModuleType):
+            where = Path(obj.__file__).parent if obj.__file__ else None
+        else:
+            where = obj() if callable(obj) else obj
+        if not isinstance(where, str | Path) or not Path(where).is_dir():
+            raise PluginError(f"entry point {CASES_GROUP} {name} = {value!r}: "
+                              f"{where!r} is not a directory")
+        if Path(where).resolve() != CASE_DIR:
+            dirs.append((name, Path(where)))
+    return dirs
+
+
+def ode_system(name: str) -> type[System] | None:
+    """The ODE system class registered as ``name``, or ``None``."""
+    if name in BUILTIN_SYSTEMS:
+        return BUILTIN_SYSTEMS[name]
+    value = _group(SYSTEMS_GROUP).get(name)
+    if value is None:
+        return None
+    cls = _load(SYSTEMS_GROUP, name, value)
+    if not (isinstance(cls, type) and issubclass(cls, System)):
+        raise PluginError(f"entry point {SYSTEMS_GROUP} {name} = {value!r}: not a System subclass")
+    return cls
+
+
+def system_names() -> list[str]:
+    """Every ODE system name: the lecture's, then installed ones."""
+    return [*BUILTIN_SYSTEMS, *sorted(set(_group(SYSTEMS_GROUP)) - set(BUILTIN_SYSTEMS))]
+
+
+def exact_solution(name: str) -> Callable | None:
+    """The exact solution registered as ``name`` (built in or installed), or ``None``."""
+    from truestep.cases.exact import EXACT
+
+    if name in EXACT:
+        return EXACT[name]
+    value = _group(EXACT_GROUP).get(name)
+    if value is None:
+        return None
+    fn = _load(EXACT_GROUP, name, value)
+    if not callable(fn):
+        raise PluginError(f"entry point {EXACT_GROUP} {name} = {value!r}: not callable")
+    return fn
+
+
+def exact_names() -> list[str]:
+    """Every exact solution's name: built-in ones, then installed ones."""
+    from truestep.cases.exact import EXACT
+
+    return [*sorted(EXACT), *sorted(set(_group(EXACT_GROUP)) - set(EXACT))]

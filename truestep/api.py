@@ -1,0 +1,152 @@
+"""The functions behind ``truestep run`` and ``truestep gate``, for use from Python.
+
+Everything here takes and returns plain values and pandas tables::
+
+    import truestep
+
+    cases = truestep.load_cases("harmonic-oscillator,./my-cases")
+    tables = truestep.run(cases, engines=["reference", "mine"], quick=True)
+    verdicts = truestep.check(tables, gates="my-gates.toml")
+    assert (verdicts["verdict"] != "fail").all()
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from truestep.adapters import adapter_class, engine_status, registered, resolve_engine
+from truestep.cases import Case, load_cases
+from truestep.cases.loader import load_gates_file, read_gate
+from truestep.gates import GateResult, check_gates, verdict_table
+
+
+@dataclass
+class Tables:
+    """The tables of one run (as ``truestep run`` writes them) and the cases they cover.
+
+    results : one row per (case, engine, method, dt) (``results.csv``)
+    stability : largest stable steps (``stability.csv``), empty if not searched
+    restitution : bounces per engine, method, step and set restitution (``restitution.csv``)
+    """
+
+    results: pd.DataFrame
+    stability: pd.DataFrame = field(default_factory=pd.DataFrame)
+    restitution: pd.DataFrame = field(default_factory=pd.DataFrame)
+    cases: list[Case] = field(default_factory=list)
+
+
+def select_engines(engines: str | Iterable[str] | None = None, *,
+                   say: Callable[[str], None] | None = None) -> list[str]:
+    """Engine names to run: each item of ``engines`` (a registered name or
+    ``module:Class``), or by default every registered engine that is installed; an
+    engine left out because its library is missing is named through ``say``.
+
+    Raises :class:`~truestep.adapters.UnknownEngine` for a name nothing registers and
+    :class:`~truestep.adapters.EngineNotInstalled` for a named engine whose library is
+    missing.
+    """
+    if engines is None or (isinstance(engines, str) and not engines.strip()):
+        chosen = []
+        for name in registered():
+            status = engine_status(name)
+            if status == "installed":
+                chosen.append(name)
+            elif say is not None:
+                say(f"engine {name} left out: {status}")
+        return chosen
+    items = engines.split(",") if isinstance(engines, str) else list(engines)
+    names = []
+    for item in (i.strip() for i in items if i.strip()):
+        name = resolve_engine(item)
+        adapter_class(name)  # raises EngineNotInstalled when its library is missing
+        if name not in names:
+            names.append(name)
+    return names
+
+
+def _cases(cases: str | Iterable[str] | Iterable[Case]) -> list[Case]:
+    items = [cases] if isinstance(cases, str) else list(cases)
+    if items and all(isinstance(c, Case) for c in items):
+        return items
+    return load_cases([str(c) for c in items])
+
+
+def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterable[str] | None = None,
+        *, quick: bool = False, analyses: bool = True, out: str | Path | None = None,
+        progress: Callable[[str], None] | None = None) -> Tables:
+    """Run the matrix (and, with ``analyses``, the stability searches and the restitution
+    sweep) and return the tables; with ``out``, also write the report there as
+    ``truestep run --out`` does.
+
+    ``cases``: a selection as ``--cases`` takes it (names, globs, files, directories) or
+    loaded :class:`Case` objects; ``engines``: as :func:`select_engines`.
+    """
+    from truestep.analyses import run_analyses
+    from truestep.runner import run_matrix
+
+    say = progress or (lambda msg: print(msg, file=sys.stderr))
+    chosen = _cases(cases)
+    names = select_engines(engines, say=say)
+    traces: dict = {}
+    results = run_matrix(chosen, names, quick=quick, progress=say, traces=traces)
+    tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame()}
+    if analyses:
+        tables = run_analyses(chosen, names, results, quick=quick)
+    if out is not None:
+        from truestep.report import write_report
+
+        write_report(Path(out), chosen, results, tables, quick=quick, argv=["run"],
+                     traces=None if quick else traces, with_lecture_figures=False)
+    return Tables(results, tables["stability"], tables["restitution"], chosen)
+
+
+def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
+                 case_gates: bool = True) -> list[GateResult]:
+    """Every gate's verdict (:class:`~truestep.gates.GateResult`) on ``tables``.
+
+    ``gates``: a gates file, several, or gate dictionaries (the keys of a ``[[gates]]``
+    table, with ``cases``); ``case_gates``: also check the gates in the case files.
+    """
+    extra = []
+    for g in ([] if gates is None else [gates] if isinstance(gates, str | Path | dict) else gates):
+        if isinstance(g, dict):
+            from truestep.cases.fields import Fields
+
+            table = dict(g)
+            patterns = table.pop("cases", "*")
+            extra.append(([patterns] if isinstance(patterns, str) else list(patterns),
+                          read_gate(Fields("<gate>", table), f"gates[{len(extra)}]")))
+        else:
+            extra += load_gates_file(g)
+    cases = tables.cases if case_gates else [dataclasses.replace(c, gates=[]) for c in tables.cases]
+    return check_gates(cases, tables.results, tables.stability, tables.restitution, extra=extra)
+
+
+def check(tables: Tables, *, gates: str | Path | Iterable | None = None,
+          case_gates: bool = True) -> pd.DataFrame:
+    """The gate verdicts as a table: one row per gate and engine/method
+    (:data:`~truestep.gates.GATE_COLUMNS`; ``verdict`` is ``pass``, ``fail`` or ``skip``)."""
+    return verdict_table(gate_results(tables, gates=gates, case_gates=case_gates))
+
+
+def compare(baseline: str | Path | Tables, current: str | Path | Tables, *,
+            tolerances: dict[str, float] | None = None, time_against: str | None = None
+            ) -> pd.DataFrame:
+    """What got worse or better from ``baseline`` to ``current`` (output directories or
+    :class:`Tables`), one row per finding (see :mod:`truestep.baseline`)."""
+    from truestep.baseline import compare as _compare
+    from truestep.baseline import read_tables
+
+    def tables_of(x: str | Path | Tables) -> dict:
+        if isinstance(x, Tables):
+            return {"results": x.results, "stability": x.stability, "restitution": x.restitution}
+        return read_tables(Path(x))
+
+    return _compare(tables_of(baseline), tables_of(current), tolerances=tolerances,
+                    time_against=time_against).table()

@@ -1,0 +1,256 @@
+"""Compare a run's tables with a previous run's, row by row: what got worse, what got better.
+
+Rows are matched on their keys (``results``: case, engine, method, dt_kind, dt;
+``stability``: case, engine, method; ``restitution``: engine, method, dt, e_set, bounce;
+fitted orders: case, engine, method). A quantity got **worse** when it moved the wrong
+way by more than its tolerance, **better** when it moved the right way by as much.
+Rows present on one side only are listed as **appeared** or **vanished**.
+
+The accuracy quantities are deterministic: the same code, case and step give the same
+numbers on any machine up to floating-point round-off, so their default tolerances are
+tight. Wall time is never compared across runs directly: only its ratio to one named
+engine and method of the same case and step measured in the same run, with a wide band.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from truestep.metrics import fit_order
+
+TOLERANCES: dict[str, float] = {
+    "error": 1e-3,
+    "energy_drift": 1e-3,
+    "nfev": 0.02,
+    "order": 0.05,
+    "dt_limit": 0.01,
+    "e_measured": 0.005,
+    "wall_ratio": 1.0,
+}
+"""Default tolerances, with why:
+
+- ``error``, ``energy_drift``: relative, 1e-3 (plus an absolute floor of 1e-12 of the
+  quantity's scale, :data:`FLOORS`). Round-off between machines and library versions
+  moves these by parts in 1e9 on smooth scenes and by far less than 1e-3 on the chaotic
+  ones at the steps swept; a wrong term in a method changes them by factors.
+- ``nfev``: relative, 0.02. A fixed-step method's count is exact; an adaptive method's
+  accept/reject decisions can flip on round-off near a tolerance boundary, by a step or
+  two in a hundred.
+- ``order``: absolute, 0.05. Fitted from errors that each hold to 1e-3, so the fit
+  holds to about 1e-3 / log(dt ratio); a lost order moves it by 1.
+- ``dt_limit``: relative, 0.01: the bisection stops at 0.1% (1% where no exact limit
+  exists, and a search stopped by its budget reports the bracket it reached).
+- ``e_measured``: absolute, 0.005 in the restitution measured from velocities.
+- ``wall_ratio``: relative, 1.0 (a run may take up to twice its former share of the
+  named engine's time): a shared machine moves single timings by tens of percent.
+"""
+FLOORS: dict[str, float] = {"error": 1e-12, "energy_drift": 1e-12}
+"""Absolute floors under the relative tolerances: differences below these are round-off."""
+RESULT_KEYS = ["case", "engine", "method", "dt_kind", "dt"]
+STABILITY_KEYS = ["case", "engine", "method"]
+RESTITUTION_KEYS = ["engine", "method", "dt", "e_set", "bounce"]
+ORDER_KEYS = ["case", "engine", "method"]
+STATUS_RANK = {"ok": 0, "unstable": 1, "timeout": 2, "crashed": 2}
+"""Higher is worse: ok -> unstable is a regression, as is anything -> crashed."""
+FINDING_COLUMNS = ["change", "table", "key", "quantity", "baseline", "current", "note"]
+
+
+@dataclass
+class Finding:
+    """One difference: ``change`` is ``worse``, ``better``, ``appeared`` or ``vanished``."""
+
+    change: str
+    table: str
+    key: str
+    quantity: str
+    baseline: object
+    current: object
+    note: str = ""
+
+    def line(self) -> str:
+        head = {"worse": "WORSE", "better": "better", "appeared": "new", "vanished": "GONE"}[self.change]
+        if self.change in ("appeared", "vanished"):
+            return f"{head:6s} {self.table} {self.key}"
+        return (f"{head:6s} {self.table} {self.key} {self.quantity}: {_show(self.baseline)} -> "
+                f"{_show(self.current)}" + (f" ({self.note})" if self.note else ""))
+
+
+def _show(x: object) -> str:
+    return f"{x:.6g}" if isinstance(x, float | np.floating) else str(x)
+
+
+@dataclass
+class Comparison:
+    """Everything :func:`compare` found, and how many rows it compared."""
+
+    findings: list[Finding]
+    compared: int
+    tolerances: dict[str, float]
+    time_against: str | None = None
+
+    def worse(self) -> list[Finding]:
+        return [f for f in self.findings if f.change in ("worse", "vanished")]
+
+    def table(self) -> pd.DataFrame:
+        return pd.DataFrame([f.__dict__ for f in self.findings], columns=FINDING_COLUMNS)
+
+
+def _key(row: Mapping, keys: list[str]) -> str:
+    """A row's key as a short label: ``harmonic-oscillator reference rk4 dt=0.001``."""
+    out = []
+    for k in keys:
+        v = row[k]
+        if k == "dt":
+            out.append(f"{'tol' if row.get('dt_kind') == 'tolerance' else 'dt'}={float(v):g}")
+        elif k == "e_set":
+            out.append(f"e={float(v):g}")
+        elif k == "bounce":
+            out.append(f"bounce={int(v)}")
+        elif k != "dt_kind":
+            out.append(str(v))
+    return " ".join(out)
+
+
+def _index(df: pd.DataFrame, keys: list[str]) -> dict[tuple, dict]:
+    out = {}
+    for row in df.to_dict("records"):
+        k = tuple(round(float(row[c]), 12) if c in ("dt", "e_set") else row[c] for c in keys)
+        out[k] = row
+    return out
+
+
+def _as_float(x: object) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _moved(quantity: str, old: float, new: float, tol: float, *, higher_is_worse: bool = True,
+           relative: bool = True) -> str | None:
+    """``worse``, ``better`` or ``None`` for a quantity that went from ``old`` to ``new``."""
+    if not (np.isfinite(old) and np.isfinite(new)):
+        if np.isfinite(old) != np.isfinite(new):
+            return "worse" if np.isfinite(old) else "better"
+        return None
+    band = tol * abs(old) if relative else tol
+    band = max(band, FLOORS.get(quantity, 0.0))
+    delta = new - old if higher_is_worse else old - new
+    if delta > band:
+        return "worse"
+    if delta < -band:
+        return "better"
+    return None
+
+
+def _compare_rows(table: str, old: pd.DataFrame, new: pd.DataFrame, keys: list[str],
+                  quantities: list[tuple[str, bool, bool]], tol: Mapping[str, float],
+                  findings: list[Finding]) -> int:
+    """Match rows on ``keys``; compare status and each (quantity, higher_is_worse, relative)."""
+    if old is None or new is None:
+        return 0
+    a, b = _index(old, keys), _index(new, keys)
+    for k in a.keys() - b.keys():
+        findings.append(Finding("vanished", table, _key(a[k], keys), "", "", ""))
+    for k in b.keys() - a.keys():
+        findings.append(Finding("appeared", table, _key(b[k], keys), "", "", ""))
+    for k in sorted(a.keys() & b.keys(), key=str):
+        ra, rb = a[k], b[k]
+        label = _key(ra, keys)
+        sa, sb = str(ra.get("status", "ok")), str(rb.get("status", "ok"))
+        if sa != sb and sa in STATUS_RANK and sb in STATUS_RANK:
+            change = "worse" if STATUS_RANK[sb] > STATUS_RANK[sa] else "better" \
+                if STATUS_RANK[sb] < STATUS_RANK[sa] else None
+            if change:
+                findings.append(Finding(change, table, label, "status", sa, sb))
+            continue
+        if sb != "ok":
+            continue
+        for q, higher_is_worse, relative in quantities:
+            if q not in ra or q not in rb or q not in tol:
+                continue
+            old, new = _as_float(ra[q]), _as_float(rb[q])
+            change = _moved(q, old, new, tol[q], higher_is_worse=higher_is_worse, relative=relative)
+            if change:
+                findings.append(Finding(change, table, label, q, old, new))
+    return len(a.keys() & b.keys())
+
+
+def orders(results: pd.DataFrame, scales: Mapping[str, float] | None = None) -> pd.DataFrame:
+    """Fitted order per case, engine and fixed-step method (as the report fits them)."""
+    rows = []
+    steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
+    for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
+        order = fit_order(pd.to_numeric(g["dt"], errors="coerce"),
+                          pd.to_numeric(g["error"], errors="coerce"),
+                          scale=(scales or {}).get(case, 1.0))
+        rows.append({"case": case, "engine": engine, "method": method, "order": order})
+    return pd.DataFrame(rows, columns=[*ORDER_KEYS, "order"])
+
+
+def _wall_ratios(results: pd.DataFrame, against: tuple[str, str]) -> pd.DataFrame:
+    """Each ok row's wall time over the named engine/method's at the same case and dt."""
+    e, m = against
+    ref = results[(results["engine"] == e) & (results["method"] == m) & (results["status"] == "ok")]
+    ref = {(r["case"], r["dt_kind"], round(float(r["dt"]), 12)): float(r["wall_s"])
+           for r in ref.to_dict("records")}
+    out = results[results["status"] == "ok"].copy()
+    out["wall_ratio"] = [
+        float(r["wall_s"]) / ref[k] if (k := (r["case"], r["dt_kind"], round(float(r["dt"]), 12))) in ref
+        and ref[k] > 0 else np.nan for r in out.to_dict("records")]
+    return out[np.isfinite(out["wall_ratio"].to_numpy(float))]
+
+
+def compare(baseline: Mapping[str, pd.DataFrame | None], current: Mapping[str, pd.DataFrame | None],
+            *, tolerances: Mapping[str, float] | None = None, time_against: str | None = None,
+            scales: Mapping[str, float] | None = None) -> Comparison:
+    """Compare ``current`` tables (``results``, ``stability``, ``restitution``; any may be
+    ``None``) with ``baseline``'s. ``tolerances`` override :data:`TOLERANCES`;
+    ``time_against`` (``engine/method``) turns on the wall-time comparison."""
+    tol = {**TOLERANCES, **(tolerances or {})}
+    findings: list[Finding] = []
+    old_r, new_r = baseline.get("results"), current.get("results")
+    compared = _compare_rows("results", old_r, new_r, RESULT_KEYS,
+                             [("error", True, True), ("energy_drift", True, True),
+                              ("nfev", True, True)], tol, findings)
+    if old_r is not None and new_r is not None:
+        compared += _compare_rows("orders", orders(old_r, scales), orders(new_r, scales),
+                                  ORDER_KEYS, [("order", False, False)], tol, findings)
+        if time_against:
+            e, _, m = time_against.partition("/")
+            compared += _compare_rows("timing", _wall_ratios(old_r, (e, m)),
+                                      _wall_ratios(new_r, (e, m)), RESULT_KEYS,
+                                      [("wall_ratio", True, True)], tol, findings)
+    compared += _compare_rows("stability", baseline.get("stability"), current.get("stability"),
+                              STABILITY_KEYS, [("dt_limit", False, True)], tol, findings)
+    old_e, new_e = (_restitution_error(baseline.get("restitution")),
+                    _restitution_error(current.get("restitution")))
+    compared += _compare_rows("restitution", old_e, new_e, RESTITUTION_KEYS,
+                              [("e_measured", True, False)], tol, findings)
+    return Comparison(findings, compared, tol, time_against)
+
+
+def _restitution_error(table: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The restitution table with ``e_measured`` replaced by ``|e_measured - e_set|``
+    (what can get worse), rows without a bounce left out."""
+    if table is None:
+        return None
+    t = table.copy()
+    t["e_measured"] = (pd.to_numeric(t["e_measured"], errors="coerce")
+                       - pd.to_numeric(t["e_set"], errors="coerce")).abs()
+    return t.dropna(subset=["dt", "e_set", "bounce"])
+
+
+def read_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
+    """``results``, ``stability``, ``restitution`` of a run's output directory (``None``
+    for a table the directory lacks)."""
+    out: dict[str, pd.DataFrame | None] = {}
+    for name in ("results", "stability", "restitution"):
+        path = Path(directory) / f"{name}.csv"
+        out[name] = pd.read_csv(path) if path.is_file() else None
+    return out

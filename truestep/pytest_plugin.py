@@ -1,0 +1,208 @@
+"""The pytest plugin (entry point ``pytest11``): truestep's gates as tests of your suite.
+
+Mark a test and take the ``truestep_gate`` fixture; the test is repeated once per gate
+(and per engine and method a ``*`` stands for), with the gate as its id, and fails with
+the gate's measured and required values::
+
+    import pytest
+
+    @pytest.mark.truestep(engines="mine", cases="harmonic-oscillator,cases",
+                          gates="truestep-gates.toml")
+    def test_physics(truestep_gate):
+        truestep_gate.check()
+
+Marker arguments: ``engines`` and ``cases`` as ``truestep run`` takes them (relative
+paths are read from the test file's directory first), ``gates`` (a gates file or a
+list of them, same), ``quick`` (default false) and ``case_gates`` (also check the gates
+written in the case files; default true). The cases run once per session for each
+distinct marker; a gate the run cannot evaluate (its engine did not run the case) is a
+skipped test, and a marker whose gates name nothing fails.
+
+The ``truestep_run`` fixture runs a selection directly: ``truestep_run(cases, engines,
+quick=True)`` returns :class:`truestep.api.Tables`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fnmatch
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+MARKER = "truestep"
+_RUNS: dict[tuple, Any] = {}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True): "
+        "run truestep cases on these engines; the test takes `truestep_gate`, once per gate")
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What one marker asks for: the run (engines, cases, quick) and the gates files."""
+
+    engines: tuple[str, ...]
+    cases: tuple[str, ...]
+    gates: tuple[str, ...]
+    quick: bool
+    case_gates: bool
+
+
+def _paths(value: Any, base: Path) -> tuple[str, ...]:
+    items = [] if value is None else value.split(",") if isinstance(value, str) else list(value)
+    out = []
+    for item in (str(i).strip() for i in items if str(i).strip()):
+        near = base / item
+        out.append(str(near) if ("/" in item or item.endswith(".toml") or near.exists())
+                   and near.exists() else item)
+    return tuple(out)
+
+
+def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
+    kw = dict(mark.kwargs)
+    unknown = set(kw) - {"engines", "cases", "gates", "quick", "case_gates"}
+    if unknown:
+        raise pytest.UsageError(f"@pytest.mark.{MARKER}: unknown argument {sorted(unknown)[0]!r}")
+    if "engines" not in kw or "cases" not in kw:
+        raise pytest.UsageError(f"@pytest.mark.{MARKER} needs engines= and cases=")
+    base = test_file.parent
+    return Selection(
+        engines=tuple(e.strip() for e in (kw["engines"].split(",") if isinstance(kw["engines"], str)
+                                          else kw["engines"]) if e.strip()),
+        cases=_paths(kw["cases"], base),
+        gates=_paths(kw.get("gates"), base),
+        quick=bool(kw.get("quick", False)),
+        case_gates=bool(kw.get("case_gates", True)),
+    )
+
+
+@dataclass
+class GateCheck:
+    """One gate on one engine and method, checked against the marker's (cached) run."""
+
+    selection: Selection
+    case: Any
+    gate: Any
+
+    @property
+    def id(self) -> str:
+        g = self.gate
+        dt = f"-dt={g.dt:g}" if g.dt is not None else ""
+        return f"{self.case.name}:{g.where}:{g.kind}:{g.engine}/{g.method}{dt}"
+
+    def result(self):
+        """The :class:`~truestep.gates.GateResult` (runs the selection on first use)."""
+        from truestep.gates import check_gate
+
+        tables = _tables(self.selection)
+        return check_gate(self.case, self.gate, tables.results, tables.stability, tables.restitution)
+
+    def check(self) -> None:
+        """Fail the test (with the gate's measured and required values) unless it holds;
+        skip it when the run could not evaluate it."""
+        r = self.result()
+        if not r.evaluated:
+            pytest.skip(f"not evaluated: {r.line()}")
+        if not r.passed:
+            pytest.fail(r.line(), pytrace=False)
+
+
+@functools.cache
+def _gates(sel: Selection) -> tuple[list, list]:
+    """The selection's cases and its (case, gate) pairs: the cases' own gates (unless
+    ``case_gates`` is false), then the gates files' on every case they name."""
+    from truestep.cases.loader import load_cases, load_gates_file
+
+    cases = load_cases(list(sel.cases))
+    todo = [(c, g) for c in cases for g in (c.gates if sel.case_gates else [])]
+    for f in sel.gates:
+        todo += [(c, g) for patterns, g in load_gates_file(f) for c in cases
+                 if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
+    return cases, todo
+
+
+def _plan(sel: Selection) -> list[GateCheck]:
+    """Every gate of the selection, ``*`` expanded to the engine/method pairs that can
+    model the case (what the run will simulate)."""
+    from truestep.adapters import get_adapter
+    from truestep.api import select_engines
+
+    engines = select_engines(list(sel.engines))
+    checks = []
+    for case, g in _gates(sel)[1]:
+        for engine in engines if g.engine == "*" else [g.engine]:
+            if engine not in engines:
+                checks.append(GateCheck(sel, case, g))  # not run: the check says so (skip)
+                continue
+            adapter = get_adapter(engine)
+            methods = [m for m in adapter.methods if not adapter.missing(case, m)] \
+                if g.method == "*" else [g.method]
+            checks += [GateCheck(sel, case, dataclasses.replace(g, engine=engine, method=m))
+                       for m in methods]
+    return checks
+
+
+def _tables(sel: Selection):
+    """The selection's run, made once per session; the stability searches and the
+    restitution sweep only when a gate reads them."""
+    from truestep.api import run
+
+    key = dataclasses.astuple(sel)
+    if key not in _RUNS:
+        cases, todo = _gates(sel)
+        analyses = any(g.kind in ("stability-limit", "restitution") for _, g in todo)
+        _RUNS[key] = run(cases, list(sel.engines), quick=sel.quick, analyses=analyses,
+                         progress=lambda _: None)
+    return _RUNS[key]
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    if "truestep_gate" not in metafunc.fixturenames:
+        return
+    mark = metafunc.definition.get_closest_marker(MARKER)
+    if mark is None:
+        raise pytest.UsageError(f"{metafunc.definition.nodeid}: `truestep_gate` needs "
+                                f"@pytest.mark.{MARKER}(engines=..., cases=..., gates=...)")
+    from truestep.adapters import EngineNotInstalled, UnknownEngine
+    from truestep.cases import CaseError, SelectionError
+
+    try:
+        sel = _selection(mark, Path(str(metafunc.definition.fspath)))
+        checks = _plan(sel)
+    except (CaseError, SelectionError, UnknownEngine, EngineNotInstalled) as err:
+        raise pytest.UsageError(f"{metafunc.definition.nodeid}: truestep: {err}") from None
+    if not checks:
+        metafunc.parametrize("truestep_gate", [None], ids=["no-gate"], indirect=True)
+        return
+    metafunc.parametrize("truestep_gate", checks, ids=[c.id for c in checks], indirect=True)
+
+
+@pytest.fixture
+def truestep_gate(request: pytest.FixtureRequest) -> GateCheck:
+    """One gate of the test's ``@pytest.mark.truestep`` selection (call ``.check()``)."""
+    check = getattr(request, "param", None)
+    if check is None:
+        pytest.fail("truestep: the marker's cases and gates name no gate to check: "
+                    "a gate that checked nothing has not passed", pytrace=False)
+    return check
+
+
+@pytest.fixture(scope="session")
+def truestep_run():
+    """``truestep_run(cases, engines, quick=False, analyses=True)`` -> Tables (cached)."""
+
+    def run_selection(cases, engines, *, quick: bool = False, analyses: bool = True):
+        from truestep.api import run
+
+        key = (str(cases), str(engines), quick, analyses)
+        if key not in _RUNS:
+            _RUNS[key] = run(cases, engines, quick=quick, analyses=analyses, progress=lambda _: None)
+        return _RUNS[key]
+
+    return run_selection
