@@ -246,32 +246,32 @@ class FixedStepAdapter:
         """
         marks = record_indices(n_steps, case.max_records)
         checks = np.arange(self.check_every, n_steps + 1, self.check_every)
-        stops = np.union1d(marks, np.append(checks, n_steps)).tolist()
-        record = np.zeros(n_steps + 1, dtype=bool)
-        record[marks] = True
-        check = np.zeros(n_steps + 1, dtype=bool)
-        check[checks] = True
-        check[n_steps] = True
-        recorded, snaps = [0], [self.snapshot(scene)]
-        record_at, check_at = record.tolist(), check.tolist()
-        advance, snapshot, is_sane = self.advance, self.snapshot, self.is_sane
-        k, stopped = 0, ""
+        stops = np.union1d(marks, np.append(checks, n_steps))[1:].tolist()
+        record_at = np.zeros(n_steps + 1, dtype=bool)
+        record_at[marks] = True
+        check_at = np.zeros(n_steps + 1, dtype=bool)
+        check_at[checks] = True
+        check_at[n_steps] = True
+        record_at, check_at = record_at.tolist(), check_at.tolist()
+        snaps = [self.snapshot(scene)]
+        advance, snapshot, is_sane, keep = self.advance, self.snapshot, self.is_sane, snaps.append
+        k, stopped, extra = 0, "", []
         start = time.perf_counter()
-        for stop in stops[1:]:
+        for stop in stops:
             advance(scene, k, stop - k, h)
             k = stop
             if record_at[k]:
-                recorded.append(k)
-                snaps.append(snapshot(scene))
+                keep(snapshot(scene))
             if check_at[k] and not is_sane(scene):
                 if not record_at[k]:
-                    recorded.append(k)
-                    snaps.append(snapshot(scene))
+                    keep(snapshot(scene))
+                    extra.append(k)
                 stopped = "non-finite or runaway state read back"
                 break
         wall = time.perf_counter() - start
+        recorded = np.concatenate([marks[: len(snaps) - len(extra)], extra]).astype(int)
         x, v = self.unpack(scene, snaps)
-        return Recording(np.array(recorded) * h, x, v, k, wall, stopped)
+        return Recording(recorded * h, x, v, k, wall, stopped)
 
     def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
         """Run ``case`` with ``method`` at step ``dt`` (s); see the class docstring."""

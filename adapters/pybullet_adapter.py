@@ -324,6 +324,12 @@ def external_forces(model: ParticleModel, f: np.ndarray, x: np.ndarray, v: np.nd
     return forces.add_model_forces(f, model, x, v, t, gravity=False)
 
 
+def _read_moving(cid: int, bodies: list[int]) -> tuple[list, list]:
+    """Positions and velocities of ``bodies`` as pybullet returns them (lists of tuples)."""
+    get_x, get_v = p.getBasePositionAndOrientation, p.getBaseVelocity
+    return [get_x(b, cid)[0] for b in bodies], [get_v(b, cid)[0] for b in bodies]
+
+
 class _Run:
     """A built scene and the work around ``stepSimulation`` for one run.
 
@@ -345,45 +351,12 @@ class _Run:
         self.fresh, self.t = False, 0.0
         self.latest: tuple[float, list, list] | None = None
 
-    def advance(self, k: int, steps: int, h: float) -> None:
-        cid, sc, x, v, f = self.scene.client, self.scene, self.x, self.v, self.f
-        step = p.stepSimulation
-        self.t = (k + steps) * h
-        if not self.forcing:
-            for _ in range(steps):
-                step(cid)
-            self.fresh = False
-            return
-        get_x, get_v, apply, world = (p.getBasePositionAndOrientation, p.getBaseVelocity,
-                                      p.applyExternalForce, p.WORLD_FRAME)
-        for j in range(k, k + steps):
-            if not self.fresh:
-                if self.bx:
-                    x[sc.read_x] = [get_x(b, cid)[0] for b in self.bx]
-                if self.bv:
-                    v[sc.read_v] = [get_v(b, cid)[0] for b in self.bv]
-            if self.drifting:
-                x[sc.drifting] = self.x0_drift + (j * h) * self.v0_drift
-            external_forces(self.model, f, x, v, j * h)
-            for b, fi, xi in zip(self.bf, f[sc.forced].tolist(), x[sc.forced].tolist(), strict=True):
-                apply(b, -1, fi, xi, world, cid)
-            step(cid)
-            self.fresh = False
-
-    def snapshot(self) -> tuple[float, list, list]:
-        """The time and the movable particles' positions and velocities as pybullet gives them."""
-        cid = self.scene.client
-        get_x, get_v = p.getBasePositionAndOrientation, p.getBaseVelocity
-        xk = [get_x(b, cid)[0] for b in self.moving]
-        vk = [get_v(b, cid)[0] for b in self.moving]
-        if self.forcing:
-            self.x[self.scene.movable], self.v[self.scene.movable] = xk, vk
-        self.fresh, self.latest = True, (self.t, xk, vk)
-        return self.latest
-
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """Every particle's position and velocity now, (n, 3) each."""
-        _, xk, vk = self.latest if self.fresh and self.latest is not None else self.snapshot()
+        if self.fresh and self.latest is not None:
+            _, xk, vk = self.latest
+        else:
+            xk, vk = _read_moving(self.scene.client, self.moving)
         x, v, sc = self.x, self.v, self.scene
         x[sc.movable], v[sc.movable] = xk, vk
         if self.drifting:
@@ -439,10 +412,43 @@ class PybulletAdapter(FixedStepAdapter):
         p.disconnect(run.scene.client)
 
     def advance(self, run: _Run, k: int, steps: int, h: float) -> None:
-        run.advance(k, steps, h)
+        """``stepSimulation`` ``steps`` times; before each, with per-step forces, read
+        what they need (unless just read at a record) and apply them at the step's start."""
+        cid, sc = run.scene.client, run.scene
+        run.t = (k + steps) * h
+        step = p.stepSimulation
+        if not run.forcing:
+            for _ in range(steps):
+                step(cid)
+            run.fresh = False
+            return
+        x, v, f = run.x, run.v, run.f
+        get_x, get_v, apply, world = (p.getBasePositionAndOrientation, p.getBaseVelocity,
+                                      p.applyExternalForce, p.WORLD_FRAME)
+        for j in range(k, k + steps):
+            if not run.fresh:
+                if run.bx:
+                    x[sc.read_x] = [get_x(b, cid)[0] for b in run.bx]
+                if run.bv:
+                    v[sc.read_v] = [get_v(b, cid)[0] for b in run.bv]
+            if run.drifting:
+                x[sc.drifting] = run.x0_drift + (j * h) * run.v0_drift
+            external_forces(run.model, f, x, v, j * h)
+            for b, fi, xi in zip(run.bf, f[sc.forced].tolist(), x[sc.forced].tolist(), strict=True):
+                apply(b, -1, fi, xi, world, cid)
+            step(cid)
+            run.fresh = False
 
     def snapshot(self, run: _Run) -> tuple[float, list, list]:
-        return run.snapshot()
+        """The time and the movable particles' positions and velocities as pybullet gives
+        them (kept as lists in the timed loop); the forces of the next step reuse them."""
+        cid, get_x, get_v = run.scene.client, p.getBasePositionAndOrientation, p.getBaseVelocity
+        xk = [get_x(b, cid)[0] for b in run.moving]
+        vk = [get_v(b, cid)[0] for b in run.moving]
+        if run.forcing:
+            run.x[run.scene.movable], run.v[run.scene.movable] = xk, vk
+        run.fresh, run.latest = True, (run.t, xk, vk)
+        return run.latest
 
     def read(self, run: _Run) -> tuple[np.ndarray, np.ndarray]:
         return run.read()

@@ -255,12 +255,14 @@ class PymunkAdapter(FixedStepAdapter):
 
     def advance(self, scene: _Stepper, k: int, steps: int, h: float) -> None:
         """``steps`` calls of ``space.step(h)``, each after the numpy forces of its start."""
-        step = scene.scene.space.step
-        if scene.scene.forced:
+        step = scene.step
+        if scene.forced:
             apply_forces = scene.apply_forces
             for j in range(k, k + steps):
                 apply_forces(j * h)
                 step(h)
+        elif steps == 1:
+            step(h)
         else:
             for _ in range(steps):
                 step(h)
@@ -269,7 +271,11 @@ class PymunkAdapter(FixedStepAdapter):
         return scene.read()
 
     def snapshot(self, scene: _Stepper) -> bytes:
-        return scene.snapshot()
+        """One batched read as raw bytes (called at every record: kept to one frame)."""
+        buffer = scene.get
+        buffer.clear()
+        pymunk.batch.get_space_bodies(scene.space, _STATE, buffer)
+        return bytes(buffer.float_buf())
 
     def unpack(self, scene: _Stepper, snaps: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
         return scene.unpack(snaps)
@@ -293,6 +299,7 @@ class _Stepper:
 
     def __init__(self, model: ParticleModel, scene: PymunkScene, h: float) -> None:
         self.model, self.scene, self.h = model, scene, h
+        self.space, self.step, self.forced = scene.space, scene.space.step, scene.forced
         n = model.n
         self.x, self.v = np.zeros((n, 3)), np.zeros((n, 3))
         self.f, self.x_next = np.zeros((n, 3)), np.zeros((n, 3))

@@ -81,7 +81,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from truestep.runner import run_matrix
 
     cases = _load(args.cases)
-    if args.quick:
+    if args.quick and args.cases == "*":
         cases = [c for c in cases if c.in_quick] or cases
     engines = select_engines(args.engines, say=_say)
     if not engines:

@@ -99,7 +99,7 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
     p = g.params
     ran = results[(results["case"] == case.name) & (results["engine"] == g.engine)]
     if g.kind == "restitution":
-        return _restitution(case, g, restitution)
+        return _restitution(case.name, g, restitution)
     if not len(ran):
         return GateResult(case.name, g, True, "not run", "a run of this case and engine",
                           evaluated=False)
@@ -181,14 +181,14 @@ def _stability(case: Case, g: Gate, stability: pd.DataFrame | None) -> GateResul
     return GateResult(case.name, g, bool(ok), text, need)
 
 
-def _restitution(case: Case, g: Gate, table: pd.DataFrame | None) -> GateResult:
+def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
     p = g.params
     need = f"|{p['quantity']} - e_set| <= {p['tol']:g} on every bounce"
     t = pd.DataFrame() if table is None else table
     if len(t):
         t = t[(t["engine"] == g.engine) & (t["method"] == g.method)]
     if not len(t):
-        return GateResult(case.name, g, True, "no restitution rows for this engine",
+        return GateResult(case, g, True, "no restitution rows for this engine",
                           "a restitution sweep of it", evaluated=False)
     t = _at_dt(t, g.dt)
     for key in ("e_set", "bounce"):
@@ -197,15 +197,15 @@ def _restitution(case: Case, g: Gate, table: pd.DataFrame | None) -> GateResult:
     broken = t[t["status"] != "ok"]
     if len(broken):
         r = broken.iloc[0]
-        return GateResult(case.name, g, False, f"drop e={r['e_set']} dt={r['dt']:.4g} {r['status']}", need)
+        return GateResult(case, g, False, f"drop e={r['e_set']} dt={r['dt']:.4g} {r['status']}", need)
     values = _num(t[p["quantity"]])
     dev = np.abs(values - _num(t["e_set"]))
     measured = dev[np.isfinite(dev)]
     if not len(measured):
-        return GateResult(case.name, g, False, "no bounce measured", need)
+        return GateResult(case, g, False, "no bounce measured", need)
     worst = int(np.nanargmax(np.where(np.isfinite(dev), dev, -1)))
     r = t.iloc[worst]
-    return GateResult(case.name, g, bool(np.max(measured) <= p["tol"]),
+    return GateResult(case, g, bool(np.max(measured) <= p["tol"]),
                       f"worst {p['quantity']} {values[worst]:.4g} at e={r['e_set']:g} "
                       f"dt={float(r['dt']):.4g} bounce {int(r['bounce'])} ({len(measured)} bounces)",
                       need)
@@ -249,13 +249,12 @@ def check_gates(cases: list[Case], results: pd.DataFrame,
                 extra: list[tuple[list[str], Gate]] | None = None) -> list[GateResult]:
     """Every gate of every case, in case order, then every gate of ``extra`` (the gates
     of a gates file, :func:`truestep.cases.loader.load_gates_file`) on every case whose
-    name matches one of its patterns. ``*`` engines and methods are expanded to the pairs
-    the run simulated; such a gate with nothing to expand to is not evaluated."""
-    todo = [(c, g) for c in cases for g in c.gates]
-    for patterns, g in extra or []:
-        todo += [(c, g) for c in cases if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
+    name matches one of its patterns (a ``restitution`` gate of a gates file reads the
+    restitution sweep, which belongs to no case: it is checked once, as case
+    :data:`SWEEP`). ``*`` engines and methods are expanded to the pairs the run
+    simulated; such a gate with nothing to expand to is not evaluated."""
     out = []
-    for c, g in todo:
+    for c, g in gates_to_check(cases, extra):
         if g.kind in ("stability-limit", "restitution") and "*" in (g.engine, g.method):
             pairs = _table_pairs(c, g, stability if g.kind == "stability-limit" else restitution)
         else:
@@ -267,6 +266,32 @@ def check_gates(cases: list[Case], results: pd.DataFrame,
             out.append(check_gate(c, dataclasses.replace(g, engine=e, method=m), results,
                                   stability, restitution))
     return out
+
+
+def gates_to_check(cases: list[Case], extra: list[tuple[list[str], Gate]] | None = None
+                   ) -> list[tuple[Case, Gate]]:
+    """(case, gate) pairs: the cases' own gates, then each gates-file gate on every case
+    its patterns match (a restitution gate once, as case :data:`SWEEP`)."""
+    todo = [(c, g) for c in cases for g in c.gates]
+    for patterns, g in extra or []:
+        if g.kind == "restitution":
+            todo.append((_SWEEP_CASE, g))
+            continue
+        todo += [(c, g) for c in cases if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
+    return todo
+
+
+SWEEP = "restitution-sweep"
+"""The case name under which gates on the restitution sweep are reported."""
+
+
+@dataclass
+class _Sweep:
+    name: str = SWEEP
+    file: str = ""
+
+
+_SWEEP_CASE: Case = _Sweep()  # type: ignore[assignment]
 
 
 def _table_pairs(case: Case, g: Gate, table: pd.DataFrame | None) -> list[tuple[str, str]]:

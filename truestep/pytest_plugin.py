@@ -25,7 +25,6 @@ quick=True)`` returns :class:`truestep.api.Tables`.
 from __future__ import annotations
 
 import dataclasses
-import fnmatch
 import functools
 from dataclasses import dataclass
 from pathlib import Path
@@ -118,13 +117,11 @@ def _gates(sel: Selection) -> tuple[list, list]:
     """The selection's cases and its (case, gate) pairs: the cases' own gates (unless
     ``case_gates`` is false), then the gates files' on every case they name."""
     from truestep.cases.loader import load_cases, load_gates_file
+    from truestep.gates import gates_to_check
 
     cases = load_cases(list(sel.cases))
-    todo = [(c, g) for c in cases for g in (c.gates if sel.case_gates else [])]
-    for f in sel.gates:
-        todo += [(c, g) for patterns, g in load_gates_file(f) for c in cases
-                 if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
-    return cases, todo
+    own = cases if sel.case_gates else [dataclasses.replace(c, gates=[]) for c in cases]
+    return cases, gates_to_check(own, [item for f in sel.gates for item in load_gates_file(f)])
 
 
 def _plan(sel: Selection) -> list[GateCheck]:
@@ -141,8 +138,8 @@ def _plan(sel: Selection) -> list[GateCheck]:
                 checks.append(GateCheck(sel, case, g))  # not run: the check says so (skip)
                 continue
             adapter = get_adapter(engine)
-            methods = [m for m in adapter.methods if not adapter.missing(case, m)] \
-                if g.method == "*" else [g.method]
+            methods = [m for m in adapter.methods if not hasattr(case, "model")
+                       or not adapter.missing(case, m)] if g.method == "*" else [g.method]
             checks += [GateCheck(sel, case, dataclasses.replace(g, engine=engine, method=m))
                        for m in methods]
     return checks
