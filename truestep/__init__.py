@@ -32,6 +32,7 @@ _EXPORTS: dict[str, str] = {
     "get_adapter": "truestep.adapters",
     "Case": "truestep.cases.case",
     "CaseError": "truestep.cases.errors",
+    "SelectionError": "truestep.cases.errors",
     "Gate": "truestep.cases.case",
     "load_case": "truestep.cases.loader",
     "load_cases": "truestep.cases.loader",
@@ -58,6 +59,7 @@ __all__ = [
     "ParticleModel",
     "Recording",
     "SecondOrderSystem",
+    "SelectionError",
     "System",
     "Tables",
     "Trajectory",
@@ -91,7 +93,7 @@ if TYPE_CHECKING:
     from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
     from truestep.api import Tables, check, compare, run, select_engines
     from truestep.cases.case import Case, Gate
-    from truestep.cases.errors import CaseError
+    from truestep.cases.errors import CaseError, SelectionError
     from truestep.cases.exact import Exact, exact_solution
     from truestep.cases.loader import load_case, load_cases
     from truestep.reference_impl.model import ParticleModel

@@ -145,7 +145,8 @@ def compare(baseline: str | Path | Tables, current: str | Path | Tables, *,
 
     def tables_of(x: str | Path | Tables) -> dict:
         if isinstance(x, Tables):
-            return {"results": x.results, "stability": x.stability, "restitution": x.restitution}
+            return {name: table if len(table.columns) else None for name, table in (
+                ("results", x.results), ("stability", x.stability), ("restitution", x.restitution))}
         return read_tables(Path(x))
 
     return _compare(tables_of(baseline), tables_of(current), tolerances=tolerances,

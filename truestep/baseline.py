@@ -105,7 +105,9 @@ def _key(row: Mapping, keys: list[str]) -> str:
     out = []
     for k in keys:
         v = row[k]
-        if k == "dt":
+        if k == "dt" and not np.isfinite(_as_float(v)):
+            out.append(f"({row.get('status', '')})")
+        elif k == "dt":
             out.append(f"{'tol' if row.get('dt_kind') == 'tolerance' else 'dt'}={float(v):g}")
         elif k == "e_set":
             out.append(f"e={float(v):g}")
@@ -116,12 +118,16 @@ def _key(row: Mapping, keys: list[str]) -> str:
     return " ".join(out)
 
 
+def _key_value(column: str, value: object) -> object:
+    """A key part that compares equal across tables: numbers rounded, NaN as ``None``."""
+    if column in ("dt", "e_set", "bounce"):
+        number = _as_float(value)
+        return None if not np.isfinite(number) else round(number, 12)
+    return value
+
+
 def _index(df: pd.DataFrame, keys: list[str]) -> dict[tuple, dict]:
-    out = {}
-    for row in df.to_dict("records"):
-        k = tuple(round(float(row[c]), 12) if c in ("dt", "e_set") else row[c] for c in keys)
-        out[k] = row
-    return out
+    return {tuple(_key_value(c, row[c]) for c in keys): row for row in df.to_dict("records")}
 
 
 def _as_float(x: object) -> float:
@@ -197,11 +203,11 @@ def _wall_ratios(results: pd.DataFrame, against: tuple[str, str]) -> pd.DataFram
     """Each ok row's wall time over the named engine/method's at the same case and dt."""
     e, m = against
     ref = results[(results["engine"] == e) & (results["method"] == m) & (results["status"] == "ok")]
-    ref = {(r["case"], r["dt_kind"], round(float(r["dt"]), 12)): float(r["wall_s"])
+    ref = {(r["case"], r["dt_kind"], _key_value("dt", r["dt"])): float(r["wall_s"])
            for r in ref.to_dict("records")}
     out = results[results["status"] == "ok"].copy()
     out["wall_ratio"] = [
-        float(r["wall_s"]) / ref[k] if (k := (r["case"], r["dt_kind"], round(float(r["dt"]), 12))) in ref
+        float(r["wall_s"]) / ref[k] if (k := (r["case"], r["dt_kind"], _key_value("dt", r["dt"]))) in ref
         and ref[k] > 0 else np.nan for r in out.to_dict("records")]
     return out[np.isfinite(out["wall_ratio"].to_numpy(float))]
 

@@ -73,10 +73,15 @@ def _within(value: float, lo: float | None, hi: float | None) -> bool:
 
 def _pairs(results: pd.DataFrame, case: str, g: Gate) -> list[tuple[str, str]]:
     """The (engine, method) pairs a gate stands for: itself, or what ``*`` expands to
-    among the pairs the run simulated for ``case``."""
+    among the pairs the run simulated for ``case`` (at the gate's ``dt``, if it names one;
+    with fixed steps, for an order gate)."""
     if g.engine != "*" and g.method != "*":
         return [(g.engine, g.method)]
     ran = results[(results["case"] == case) & ~results["status"].isin(NOT_RUN)]
+    if g.dt is not None:
+        ran = _at_dt(ran, g.dt)
+    elif g.kind == "order":
+        ran = ran[ran["dt_kind"] == "step"]
     pairs = ran[["engine", "method"]].drop_duplicates().itertuples(index=False)
     return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
 

@@ -10,6 +10,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -23,8 +24,11 @@ from truestep.isolation import Outcome, run_isolated
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
     "energy_drift_final", "nfev", "steps", "wall_s", "repeats", "t_fail", "missing", "message",
+    "case_source",
 ]
-"""The columns of ``results.csv`` (property columns follow, one per named property)."""
+"""The columns of ``results.csv`` (property columns follow, one per named property).
+``case_source`` is the case's name when the case library holds it, else its file, so
+that ``truestep gate`` finds the case again."""
 
 
 @dataclass
@@ -266,10 +270,26 @@ def run_matrix(
     return tidy(rows, cases)
 
 
+def case_source(case: Case, lib: dict | None = None) -> str:
+    """The case's name if the case library holds this very file, else its file path."""
+    from truestep.cases.loader import library
+
+    lib = library() if lib is None else lib
+    known = lib.get(case.name)
+    same = known is not None and Path(known).resolve() == Path(case.file).resolve()
+    return case.name if same else case.file
+
+
 def tidy(rows: list[dict], cases: list[Case]) -> pd.DataFrame:
     """Rows as a DataFrame with the contract's columns first, then property columns."""
+    from truestep.cases.loader import library
+
     props = sorted({p for c in cases for p in c.properties})
+    lib = library()
+    sources = {c.name: case_source(c, lib) for c in cases}
     df = pd.DataFrame(rows)
+    if len(df):
+        df["case_source"] = df["case"].map(sources)
     for col in RESULT_COLUMNS + props:
         if col not in df:
             df[col] = np.nan

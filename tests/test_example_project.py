@@ -1,0 +1,124 @@
+"""The worked example (examples/leapfrog-lab) as a user runs it, and three mutants of it.
+
+The example's engine holds its own drift-kick-drift leapfrog. It must pass its gates on
+the lecture's cases and on its own, through ``truestep gate --gates`` and through the
+pytest plugin; each mutant of its physics (one wrong term) must fail both and be listed
+as worse by ``truestep gate --baseline`` against the correct version. The example is
+run from a copy on ``PYTHONPATH`` (installed or not), by its ``module:Class``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "leapfrog-lab"
+ENGINE = "leapfrog_lab.adapter:LeapfrogAdapter"
+CASES = ("free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball,"
+         f"{EXAMPLE / 'leapfrog_lab' / 'cases'}")
+GATES = EXAMPLE / "truestep-gates.toml"
+MUTANTS = {
+    # the 1/2 dropped in the first drift of the position update
+    "half-dropped": ("x_half = self.x + 0.5 * h * self.v", "x_half = self.x + h * self.v"),
+    # the damper's sign flipped: it pumps energy in
+    "damping-flipped": ("-(k * (length - rest) + c * along)", "-(k * (length - rest) - c * along)"),
+    # the restitution rule applied to the tangential velocity instead of the normal one
+    "restitution-tangential": ("v_t - e * vn[:, None] * normal", "vn[:, None] * normal - e * v_t"),
+}
+
+
+def _copy(dest: Path, mutant: str | None) -> Path:
+    shutil.copytree(EXAMPLE / "leapfrog_lab", dest / "leapfrog_lab")
+    if mutant is not None:
+        world = dest / "leapfrog_lab" / "world.py"
+        old, new = MUTANTS[mutant]
+        text = world.read_text()
+        assert text.count(old) == 1, f"mutant {mutant}: {old!r} is not once in world.py"
+        world.write_text(text.replace(old, new))
+    return dest
+
+
+def _env(path: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": f"{path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+
+
+def _truestep(*args: str, path: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "truestep", *args], env=_env(path),
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    """Output directories of ``truestep run --quick`` for the example and each mutant,
+    run side by side (nothing here reads wall times)."""
+    root = tmp_path_factory.mktemp("example")
+    procs = {}
+    for name in [None, *MUTANTS]:
+        label = name or "good"
+        src = _copy(root / label / "src", name)
+        out = root / label / "out"
+        procs[label] = (subprocess.Popen(
+            [sys.executable, "-m", "truestep", "run", "--quick", "--cases", CASES,
+             "--engines", f"{ENGINE},reference", "--out", str(out)], env=_env(src),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True), out, src)
+    dirs = {}
+    for label, (proc, out, src) in procs.items():
+        _, err = proc.communicate(timeout=600)
+        assert proc.returncode == 0, f"{label}: {err[-2000:]}"
+        dirs[label] = out
+        dirs[f"{label}-src"] = src
+    return dirs
+
+
+def test_the_example_passes_its_gates_on_lecture_and_own_cases(runs):
+    good = runs["good"]
+    results = pd.read_csv(good / "results.csv")
+    mine = results[results["engine"] == "leapfrog"]
+    assert {"three-mass-chain", "lossless-bounce", "free-fall"} <= set(mine["case"])
+    assert (mine["status"] == "ok").all()
+    done = _truestep("gate", "--results", str(good / "results.csv"), "--gates", str(GATES),
+                     "--junit", str(good / "junit.xml"), path=runs["good-src"])
+    assert done.returncode == 0, done.stdout + done.stderr
+    held = int(done.stdout.strip().splitlines()[-1].split()[0])
+    assert held >= 14, done.stdout
+
+
+@pytest.mark.parametrize("mutant", list(MUTANTS))
+def test_each_mutant_fails_its_gates_and_is_worse_than_the_baseline(runs, mutant):
+    out = runs[mutant]
+    done = _truestep("gate", "--results", str(out / "results.csv"), "--gates", str(GATES),
+                     path=runs[f"{mutant}-src"])
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "FAIL" in done.stdout and "leapfrog/leapfrog" in done.stdout
+    base = _truestep("gate", "--results", str(out / "results.csv"), "--baseline",
+                     str(runs["good"]), path=runs[f"{mutant}-src"])
+    assert base.returncode == 1, base.stdout + base.stderr
+    worse = [line for line in base.stdout.splitlines() if line.startswith("WORSE")]
+    assert worse and all(" leapfrog leapfrog " in line for line in worse), base.stdout
+
+
+def _pytest_example(src: Path) -> subprocess.Popen:
+    tests = src / "tests"
+    shutil.copytree(EXAMPLE / "tests", tests, dirs_exist_ok=True)
+    shutil.copy(GATES, src / "truestep-gates.toml")
+    return subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                             str(tests)], cwd=src, env=_env(src), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def test_the_plugin_passes_the_example_and_fails_every_mutant(runs):
+    """The example's own pytest test, run on the example and on each mutant (side by side)."""
+    procs = {label: _pytest_example(runs[f"{label}-src"]) for label in ["good", *MUTANTS]}
+    outcomes = {label: (p.communicate(timeout=600)[0], p.returncode) for label, p in procs.items()}
+    good, code = outcomes.pop("good")
+    assert code == 0, good[-3000:]
+    for mutant, (out, code) in outcomes.items():
+        assert code == 1, f"{mutant}: {out[-3000:]}"
+        failed = [line for line in out.splitlines() if line.startswith("FAILED")]
+        assert failed and all("leapfrog/leapfrog" in line for line in failed), out[-3000:]

@@ -1,0 +1,249 @@
+"""`truestep gate` as CI calls it: gates for any engine, gates files, strictness, baseline
+comparison and the CI outputs, on a real quick run whose tables are then altered."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import truestep
+from truestep.cli import main
+
+GATES = """
+[[gates]]
+cases = "harmonic-*"
+kind = "order"
+engine = "*"
+method = "rk4"
+expect = 4.0
+tol = 0.15
+
+[[gates]]
+cases = ["harmonic-oscillator"]
+kind = "error"
+engine = "reference"
+method = "*"
+dt = 1e-3
+max = 0.5
+
+[[gates]]
+cases = "harmonic-oscillator"
+kind = "no-worse-than"
+engine = "reference"
+method = "verlet"
+than = "reference/symplectic-euler"
+factor = 1.0
+
+[[gates]]
+cases = "harmonic-oscillator"
+kind = "stability-limit"
+engine = "reference"
+method = "verlet"
+rel_tol = 0.01
+min = 0.19
+
+[[gates]]
+kind = "restitution"
+engine = "reference"
+method = "rk4"
+quantity = "e_apex"
+tol = 1e-6
+"""
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("run")
+    assert main(["run", "--quick", "--cases", "harmonic-oscillator", "--engines", "reference",
+                 "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture
+def copy(run_dir, tmp_path):
+    """A copy of the run's tables, to alter: returns (dir, results)."""
+    dest = tmp_path / "copy"
+    shutil.copytree(run_dir, dest, ignore=shutil.ignore_patterns("figures", "index.*"))
+    return dest, pd.read_csv(dest / "results.csv")
+
+
+def _gates_file(tmp_path: Path, text: str = GATES) -> str:
+    path = tmp_path / "gates.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_gates_file_for_any_engine_with_wildcards(run_dir, tmp_path, capsys):
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates",
+                 _gates_file(tmp_path), "-v"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "ok   harmonic-oscillator gates[0] order reference/rk4" in out
+    # `method = "*"` with a dt: every method that ran that step (adaptive ones did not)
+    expanded = [line for line in out.splitlines() if " gates[1] error reference/" in line]
+    assert len(expanded) == 8 and not any("dopri5" in line for line in expanded)
+    assert "FAIL" not in out
+    assert "gates[2] no-worse-than reference/verlet" in out
+    assert "restitution-sweep gates[4] restitution reference/rk4" in out
+
+
+def test_strict_nothing_evaluated_fails(copy, capsys):
+    d, results = copy
+    results[results["engine"] == "reference"].assign(engine="someone-else").to_csv(
+        d / "results.csv", index=False)
+    code = main(["gate", "--results", str(d / "results.csv")])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "FAIL nothing was checked: no gate was evaluated" in out
+
+
+def test_a_gated_row_that_crashed_fails_the_gate(copy, capsys):
+    d, results = copy
+    hit = (results["method"] == "verlet") & (results["dt"] == 1e-3)
+    results["message"] = results["message"].astype(object)
+    results.loc[hit, "status"] = "crashed"
+    results.loc[hit, "message"] = "engine process died (exit code -11)"
+    results.to_csv(d / "results.csv", index=False)
+    code = main(["gate", "--results", str(d / "results.csv")])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "FAIL harmonic-oscillator gates[5] order reference/verlet: measured row dt=0.001 crashed" in out
+    assert "FAIL harmonic-oscillator gates[8] energy_drift reference/verlet dt=0.001" in out
+
+
+def test_a_cases_item_that_matches_nothing_exits_2(run_dir, capsys):
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--cases",
+                 "harmonic-oscillator,harmonic-oscilator"])
+    err = capsys.readouterr().err
+    assert code == 2 and "no case matches 'harmonic-oscilator'" in err
+    assert main(["run", "--cases", "free-fall,nosuch-*", "--out", "/nonexistent"]) == 2
+    assert "no case matches 'nosuch-*'" in capsys.readouterr().err
+
+
+def test_junit_markdown_and_json_outputs(run_dir, tmp_path, monkeypatch, capsys):
+    summary = tmp_path / "step-summary.md"
+    summary.write_text("earlier step\n")
+    monkeypatch.setenv("GITHUB_STEP_SUMMARY", str(summary))
+    junit, md, js = tmp_path / "j.xml", tmp_path / "s.md", tmp_path / "g.json"
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates",
+                 _gates_file(tmp_path), "--junit", str(junit), "--markdown", str(md),
+                 "--json", str(js), "--baseline", str(run_dir)])
+    capsys.readouterr()
+    assert code == 0
+    doc = json.loads(js.read_text())
+    root = ET.parse(junit).getroot()
+    assert root.tag == "testsuites"
+    suites = {s.get("name"): s for s in root.iter("testsuite")}
+    cases = suites["truestep.gates"].findall("testcase")
+    assert len(cases) == int(suites["truestep.gates"].get("tests")) == len(doc["gates"])
+    assert {c.get("classname") for c in cases} >= {"harmonic-oscillator", "restitution-sweep"}
+    assert suites["truestep.baseline"].get("failures") == "0"
+    assert doc["passed"] is True and doc["counts"]["fail"] == 0
+    assert doc["baseline"]["compared"] > 0 and doc["baseline"]["findings"] == []
+    assert md.read_text().startswith("### truestep gate: passed")
+    assert summary.read_text().startswith("earlier step\n### truestep gate: passed")
+
+
+def test_baseline_lists_worse_better_appeared_and_vanished(run_dir, copy, capsys):
+    d, results = copy
+    rk4 = (results["method"] == "rk4") & (results["dt"] == 1e-3)
+    results.loc[rk4, "error"] *= 2.0  # worse
+    heun = (results["method"] == "heun") & (results["dt"] == 1e-3)
+    results.loc[heun, "error"] *= 0.5  # better
+    euler = (results["method"] == "euler") & (results["dt"] == 2e-3)
+    results.loc[euler, "status"] = "unstable"  # ok -> unstable: a regression
+    results = results[~((results["method"] == "lecture") & (results["dt"] == 2e-3))]  # vanished
+    results.to_csv(d / "results.csv", index=False)
+    code = main(["gate", "--results", str(d / "results.csv"), "--baseline", str(run_dir), "-v"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "WORSE  results harmonic-oscillator reference rk4 dt=0.001 error:" in out
+    assert "better results harmonic-oscillator reference heun dt=0.001 error:" in out
+    assert "WORSE  results harmonic-oscillator reference euler dt=0.002 status: ok -> unstable" in out
+    assert "GONE   results harmonic-oscillator reference lecture dt=0.002" in out
+    assert "WORSE  orders harmonic-oscillator reference rk4 order:" in out
+    # a tolerance wide enough for a doubled error lets that row pass
+    code = main(["gate", "--results", str(d / "results.csv"), "--baseline", str(run_dir),
+                 "--tolerance", "error=1.5", "-q"])
+    out = capsys.readouterr().out
+    assert "reference rk4 dt=0.001 error" not in out
+
+
+def test_baseline_wall_time_only_as_a_ratio_in_the_same_run(run_dir, copy, capsys):
+    d, results = copy
+    results["wall_s"] *= 10.0  # a slower machine: every ratio is unchanged
+    results.to_csv(d / "results.csv", index=False)
+    args = ["gate", "--results", str(d / "results.csv"), "--baseline", str(run_dir), "-q"]
+    assert main([*args, "--time-against", "reference/rk4"]) == 0
+    capsys.readouterr()
+    euler = results["method"] == "euler"
+    results.loc[euler, "wall_s"] *= 3.0  # euler three times slower relative to rk4
+    results.to_csv(d / "results.csv", index=False)
+    assert main([*args, "--time-against", "reference/rk4"]) == 1
+    assert "WORSE  timing harmonic-oscillator reference euler" in capsys.readouterr().out
+    assert main(args) == 0  # without --time-against wall time is not compared
+    capsys.readouterr()
+
+
+def test_bad_gate_inputs_exit_2(run_dir, tmp_path, capsys):
+    bad = _gates_file(tmp_path, '[[gates]]\nkind = "order"\nengine = "nosuch"\nmethod = "x"\n'
+                      'expect = 1.0\ntol = 0.1\n')
+    assert main(["gate", "--results", str(run_dir / "results.csv"), "--gates", bad]) == 2
+    assert "gates[0].engine: unknown engine 'nosuch'" in capsys.readouterr().err
+    bad = _gates_file(tmp_path, '[[gates]]\nkind = "no-worse-than"\nmethod = "x"\nthan = "rk4"\n')
+    assert main(["gate", "--results", str(run_dir / "results.csv"), "--gates", bad]) == 2
+    assert "gates[0].than: expected 'engine/method'" in capsys.readouterr().err
+    assert main(["gate", "--results", str(run_dir / "results.csv"), "--baseline",
+                 str(run_dir), "--tolerance", "speed=2"]) == 2
+    assert "--tolerance: expected QUANTITY=NUMBER" in capsys.readouterr().err
+
+
+def test_an_exact_solution_that_does_not_fit_fails_at_load(tmp_path, capsys):
+    case = tmp_path / "bent-spring.toml"
+    case.write_text("""
+kind = "particles"
+[scene]
+[[scene.particles]]
+position = [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+mass = 1.0
+[[scene.springs]]
+pairs = [[0, 1]]
+stiffness = 10.0
+rest = 0.5
+[run]
+duration = 1.0
+dt = [0.01]
+[reference]
+exact = "linear"
+""")
+    assert main(["run", "--cases", str(case), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"{case}: reference.exact: 'linear' does not fit this case" in err
+    assert "zero-rest-length springs" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_cases_by_file_and_directory_and_the_python_api(tmp_path):
+    from truestep.cases.loader import CASE_DIR
+
+    mine = tmp_path / "my-cases"
+    mine.mkdir()
+    shutil.copy(CASE_DIR / "circle-field.toml", mine / "my-circle.toml")
+    shutil.copy(CASE_DIR / "free-fall.toml", tmp_path / "my-fall.toml")
+    cases = truestep.load_cases(f"{mine},{tmp_path / 'my-fall.toml'},harmonic-*")
+    assert [c.name for c in cases] == ["my-circle", "my-fall", "harmonic-oscillator"]
+    tables = truestep.run(cases[:2], ["reference"], quick=True, analyses=False,
+                          progress=lambda _: None)
+    assert set(tables.results["case_source"]) == {str(mine / "my-circle.toml"),
+                                                  str(tmp_path / "my-fall.toml")}
+    verdicts = truestep.check(tables)
+    assert set(verdicts["verdict"]) == {"pass"} and len(verdicts) > 5
+    same = truestep.compare(tables, tables)
+    assert same.empty
+    with pytest.raises(truestep.SelectionError, match="no such case file"):
+        truestep.load_cases(str(tmp_path / "missing.toml"))
