@@ -160,12 +160,14 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-import pybullet as p
 
 from truestep.adapters.base import FixedStepAdapter
+from truestep.adapters.quiet import import_quietly
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
 from truestep.reference_impl.model import ParticleModel
+
+p = import_quietly("pybullet")  # it prints its build time on stdout when imported
 
 POINT_RADIUS = 0.01
 """Radius (m) of the sphere standing in for a radius-0 particle; its planes move back as much."""
