@@ -29,7 +29,7 @@ TOLERANCES: dict[str, float] = {
     "nfev": 0.02,
     "order": 0.05,
     "dt_limit": 0.01,
-    "e_measured": 0.005,
+    "e_error": 0.005,
     "wall_ratio": 1.0,
 }
 """Default tolerances, with why:
@@ -45,7 +45,8 @@ TOLERANCES: dict[str, float] = {
   holds to about 1e-3 / log(dt ratio); a lost order moves it by 1.
 - ``dt_limit``: relative, 0.01: the bisection stops at 0.1% (1% where no exact limit
   exists, and a search stopped by its budget reports the bracket it reached).
-- ``e_measured``: absolute, 0.005 in the restitution measured from velocities.
+- ``e_error``: absolute, 0.005 in ``|e_measured - e_set|``, the restitution measured from
+  velocities against the one set.
 - ``wall_ratio``: relative, 1.0 (a run may take up to twice its former share of the
   named engine's time): a shared machine moves single timings by tens of percent.
 """
@@ -237,17 +238,17 @@ def compare(baseline: Mapping[str, pd.DataFrame | None], current: Mapping[str, p
     old_e, new_e = (_restitution_error(baseline.get("restitution")),
                     _restitution_error(current.get("restitution")))
     compared += _compare_rows("restitution", old_e, new_e, RESTITUTION_KEYS,
-                              [("e_measured", True, False)], tol, findings)
+                              [("e_error", True, False)], tol, findings)
     return Comparison(findings, compared, tol, time_against)
 
 
 def _restitution_error(table: pd.DataFrame | None) -> pd.DataFrame | None:
-    """The restitution table with ``e_measured`` replaced by ``|e_measured - e_set|``
-    (what can get worse), rows without a bounce left out."""
+    """The restitution table with ``e_error = |e_measured - e_set|`` (what can get
+    worse), rows without a bounce left out."""
     if table is None:
         return None
     t = table.copy()
-    t["e_measured"] = (pd.to_numeric(t["e_measured"], errors="coerce")
+    t["e_error"] = (pd.to_numeric(t["e_measured"], errors="coerce")
                        - pd.to_numeric(t["e_set"], errors="coerce")).abs()
     return t.dropna(subset=["dt", "e_set", "bounce"])
 

@@ -311,7 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="an earlier run's output directory to compare with, row by row")
     gate.add_argument("--tolerance", action="append", default=[], metavar="QUANTITY=X",
                       help="override a baseline tolerance (error, energy_drift, nfev, order, "
-                      "dt_limit, e_measured, wall_ratio); repeatable")
+                      "dt_limit, e_error, wall_ratio); repeatable")
     gate.add_argument("--time-against", default=None, metavar="ENGINE/METHOD",
                       help="compare wall time with the baseline as a ratio to this engine/method's "
                       "rows of the same case and step (off by default)")

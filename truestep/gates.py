@@ -86,6 +86,12 @@ def _pairs(results: pd.DataFrame, case: str, g: Gate) -> list[tuple[str, str]]:
     return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
 
 
+def _status(row: pd.Series) -> str:
+    """``status unstable at t=0.31 s`` (the time when the row has one)."""
+    t = pd.to_numeric(pd.Series([row.get("t_fail")]), errors="coerce").iloc[0]
+    return f"status {row['status']}" + (f" at t={t:.4g} s" if np.isfinite(t) else "")
+
+
 def _broken(rows: pd.DataFrame) -> str | None:
     bad = rows[rows["status"].isin(BROKEN)]
     if not len(bad):
@@ -137,7 +143,7 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
         return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]),
                           str(p["expect"]))
     if row["status"] != "ok":
-        return GateResult(case.name, g, False, f"status {row['status']}", "status ok")
+        return GateResult(case.name, g, False, _status(row), "status ok")
     if g.kind in ("error", "energy_drift"):
         value = float(_num(rows[g.kind])[0])
         return GateResult(case.name, g, _within(value, None, p["max"]), f"{g.kind} {value:.3g}",
@@ -239,7 +245,7 @@ def _no_worse(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) ->
         pairs += 1
         mine, theirs = float(pd.to_numeric(r[q], errors="coerce")), float(_num(o[q])[0])
         if r["status"] != "ok" or not mine <= factor * theirs:
-            shown = f"status {r['status']}" if r["status"] != "ok" else f"{q} {mine:.3g}"
+            shown = _status(r) if r["status"] != "ok" else f"{q} {mine:.3g}"
             return GateResult(case.name, g, False,
                               f"dt={float(r['dt']):g}: {shown} against {theirs:.3g}", need)
     if not pairs:
