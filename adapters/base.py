@@ -9,6 +9,7 @@ and ``read``.
 
 from __future__ import annotations
 
+import abc
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -154,7 +155,7 @@ class Recording:
     stopped: str = ""
 
 
-class FixedStepAdapter:
+class FixedStepAdapter(abc.ABC):
     """Base class of an adapter whose engine advances a particle scene by fixed steps.
 
     A subclass declares ``name``, ``methods`` and ``capabilities`` (see :class:`Adapter`)
@@ -204,19 +205,19 @@ class FixedStepAdapter:
         if lacking:
             raise ValueError(f"{self.name} cannot model {case.name}: needs {', '.join(sorted(lacking))}")
 
+    @abc.abstractmethod
     def build(self, case: Case, method: str, h: float) -> Any:
         """The engine's scene for ``case``, ready for steps of ``h`` s (not timed)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def advance(self, scene: Any, k: int, steps: int, h: float) -> None:
         """Take ``steps`` steps of ``h`` s, the first from time ``k h`` s."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def read(self, scene: Any) -> tuple[np.ndarray, np.ndarray]:
         """Positions and velocities now, (n, 3) each, m and m/s."""
-        raise NotImplementedError
 
-    def close(self, scene: Any) -> None:
+    def close(self, scene: Any) -> None:  # noqa: B027 (optional hook: nothing to free by default)
         """Release what :meth:`build` made (runs after stepping, also after an error)."""
 
     def notes(self, case: Case, method: str, scene: Any) -> list[str]:

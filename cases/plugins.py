@@ -75,41 +75,44 @@ def case_directories() -> list[tuple[str, Path]]:
     return dirs
 
 
-def ode_system(name: str) -> type[System] | None:
-    """The ODE system class registered as ``name``, or ``None``."""
-    if name in BUILTIN_SYSTEMS:
-        return BUILTIN_SYSTEMS[name]
-    value = _group(SYSTEMS_GROUP).get(name)
+def _find(group: str, name: str, builtin: dict, fits: Callable[[Any], bool], kind: str) -> Any:
+    """``builtin[name]``, else the object the entry point ``name`` of ``group`` names
+    (checked by ``fits``), else ``None``."""
+    if name in builtin:
+        return builtin[name]
+    value = _group(group).get(name)
     if value is None:
         return None
-    cls = _load(SYSTEMS_GROUP, name, value)
-    if not (isinstance(cls, type) and issubclass(cls, System)):
-        raise PluginError(f"entry point {SYSTEMS_GROUP} {name} = {value!r}: not a System subclass")
-    return cls
+    obj = _load(group, name, value)
+    if not fits(obj):
+        raise PluginError(f"entry point {group} {name} = {value!r}: not {kind}")
+    return obj
+
+
+def _names(group: str, builtin: dict) -> list[str]:
+    return [*builtin, *sorted(set(_group(group)) - set(builtin))]
+
+
+def ode_system(name: str) -> type[System] | None:
+    """The ODE system class registered as ``name`` (the lecture's or installed), or ``None``."""
+    return _find(SYSTEMS_GROUP, name, BUILTIN_SYSTEMS,
+                 lambda c: isinstance(c, type) and issubclass(c, System), "a System subclass")
 
 
 def system_names() -> list[str]:
     """Every ODE system name: the lecture's, then installed ones."""
-    return [*BUILTIN_SYSTEMS, *sorted(set(_group(SYSTEMS_GROUP)) - set(BUILTIN_SYSTEMS))]
+    return _names(SYSTEMS_GROUP, BUILTIN_SYSTEMS)
 
 
 def exact_solution(name: str) -> Callable | None:
     """The exact solution registered as ``name`` (built in or installed), or ``None``."""
     from truestep.cases.exact import EXACT
 
-    if name in EXACT:
-        return EXACT[name]
-    value = _group(EXACT_GROUP).get(name)
-    if value is None:
-        return None
-    fn = _load(EXACT_GROUP, name, value)
-    if not callable(fn):
-        raise PluginError(f"entry point {EXACT_GROUP} {name} = {value!r}: not callable")
-    return fn
+    return _find(EXACT_GROUP, name, EXACT, callable, "callable")
 
 
 def exact_names() -> list[str]:
     """Every exact solution's name: built-in ones, then installed ones."""
     from truestep.cases.exact import EXACT
 
-    return [*sorted(EXACT), *sorted(set(_group(EXACT_GROUP)) - set(EXACT))]
+    return _names(EXACT_GROUP, dict(sorted(EXACT.items())))
