@@ -92,25 +92,45 @@ ENERGY_SOURCES = frozenset({"force-fields", "emitters", "impulses"})
 """Scene features that may put energy in: without them a scene's energy can only fall."""
 
 
-def energy_blowup(case: Case, traj: Trajectory) -> float | None:
-    """When a run whose energy cannot rise blew up by its energy, or ``None``.
+def energy_behaviour(case: Case) -> str:
+    """What the exact energy of a case does: ``source`` (it may rise: force fields,
+    emitters, impulses), ``dissipative`` (it only falls: damping, drag, inelastic or
+    frictional contact) or ``conservative`` (it stays)."""
+    if case.features & ENERGY_SOURCES:
+        return "source"
+    m = case.model
+    if m is None:
+        return "conservative"
+    damped = (m.drag > 0 or np.any(m.springs.damping > 0) or np.any(m.anchors.damping > 0)
+              or any(p.restitution < 1 or p.friction > 0 for p in m.planes))
+    return "dissipative" if damped else "conservative"
 
-    A run that stayed finite is still unstable when the scene has no energy source
-    (:data:`ENERGY_SOURCES`), its energy grows by the stability criterion
-    (:func:`truestep.stability.energy_grows`) and it has moved by more than its start
-    (``|E - E(0)| > |E(0)|``): a stable method can be that inaccurate only at steps near
-    its limit, where its energy does not keep climbing. Returns the first time (s) the
-    energy was that far from its start.
+
+def energy_blowup(case: Case, traj: Trajectory) -> float | None:
+    """When a finite run blew up by its energy, or ``None``.
+
+    Only in a scene without energy sources (:func:`energy_behaviour`), whose exact energy
+    cannot rise, and with the run's energy moved by more than its start
+    (``|E - E(0)| > |E(0)|``: a stable method can be that inaccurate only at steps near
+    its limit): unstable when the energy keeps growing through every quarter of the run
+    (:func:`truestep.stability.energy_keeps_growing`), or, in a dissipative scene, when it
+    stays above its start (:func:`truestep.stability.energy_stays_up`), wherever in the
+    run the rise happened. Returns the first time (s) the energy was that far from its
+    start.
     """
-    from truestep.stability import energy_grows
+    from truestep.stability import energy_keeps_growing, energy_stays_up
 
     e = traj.energy
-    if e is None or len(e) < 2 or (case.features & ENERGY_SOURCES):
+    behaviour = energy_behaviour(case)
+    if e is None or len(e) < 2 or behaviour == "source":
         return None
     if not (case.conservative or case.kind == "particles"):
         return None
     far = np.abs(e - e[0]) > (abs(e[0]) or float(np.max(np.abs(e))) or 1.0)
-    if not far.any() or not energy_grows(traj.t, e):
+    if not far.any():
+        return None
+    if not energy_keeps_growing(traj.t, e) and not (
+            behaviour == "dissipative" and energy_stays_up(traj.t, e)):
         return None
     return float(traj.t[np.argmax(far)])
 
