@@ -19,6 +19,7 @@ from truestep.cases.exact_particles import bounce_schedule
 from truestep.reference_impl.emitters import lifetime_values, pool_starts, spawn_count_moments, spawn_mean
 from truestep.reference_impl.meshes import signed_volume
 from truestep.reference_impl.strands import ballistic_deviation, collect_strands
+from truestep.restitution import bounces, heights
 
 Property = Callable[[Case, Trajectory], float]
 PROPERTIES: dict[str, Property] = {}
@@ -130,22 +131,20 @@ def stopping_distance_error(case: Case, traj: Trajectory) -> float:
 
 
 def _arcs(case: Case, traj: Trajectory) -> tuple[np.ndarray, np.ndarray, float]:
-    """Apex heights (m) and launch times (s) of the recorded flights of particle 0, and g.
+    """Apex heights (m) and launch times (s) of the recorded flights of particle 0 off
+    plane 0, and the normal gravity g (m/s^2).
 
-    A bounce turns the normal velocity from down to up; the first record after it fixes
-    the ballistic arc (height ``u``, normal speed ``w``): apex ``u + w^2 / (2 g)``, launch
-    from the plane at ``t - (sqrt(w^2 + 2 g u) - w) / g``.
+    The bounces are the contacts that :func:`truestep.restitution.bounces` finds (for
+    every engine the same detector as the restitution table's): each flight is read from
+    its first sample after the contact, apex ``u + w^2 / (2 g)`` and launch from the plane
+    at ``t - (sqrt(w^2 + 2 g u) - w) / g``.
     """
     m = case.model
     plane = m.planes[0]
     g = float(-(m.gravity @ plane.normal))
-    u = (traj.x[:, 0] - plane.point) @ plane.normal - m.radius[0]
-    w = traj.v[:, 0] @ plane.normal
-    up = np.flatnonzero((w[1:] > 0) & (w[:-1] <= 0)) + 1
-    u_k, w_k = np.maximum(u[up], 0.0), w[up]
-    apex = u_k + w_k**2 / (2 * g)
-    launch = traj.t[up] - (np.sqrt(w_k**2 + 2 * g * u_k) - w_k) / g
-    return apex, launch, g
+    h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, float(m.radius[0]))
+    flights = [b for b in bounces(traj.t, h, vn, g) if b.v_out > 0]
+    return (np.array([b.apex for b in flights]), np.array([b.launch for b in flights]), g)
 
 
 def _bounces(case: Case) -> int:

@@ -31,9 +31,15 @@ scenes. Bounces whose flight never leaves the band are not detected."""
 
 @dataclass
 class Bounce:
-    """One impact: number (from 1), time (s), speeds in and out (m/s), restitution
-    from velocities, apex height after it (m, above contact), restitution from apex
-    heights, and the deepest penetration during the contact (m, >= 0)."""
+    """One impact: number (from 1), time of the last sample before it (s), speeds in and
+    out (m/s), restitution from velocities, apex height after it (m, above contact),
+    restitution from apex heights, the deepest penetration during the contact (m, >= 0),
+    and the launch: when the flight after the contact left the plane (s), its first
+    sample's ballistic arc followed back to height 0 (NaN when the ball came to rest).
+
+    Every flight quantity is read from the first sample *after* the contact, never from
+    one inside it: a soft contact (an engine's spring-damper, lasting several steps and
+    penetrating) is one contact, however its velocity turns while it lasts."""
 
     bounce: int
     t: float
@@ -43,6 +49,7 @@ class Bounce:
     apex: float
     e_apex: float
     penetration: float
+    launch: float = float("nan")
 
 
 def contact_intervals(
@@ -89,10 +96,13 @@ def bounces(
         penetration = max(0.0, float(-np.min(h[a : b + 1])))
         resting = b >= len(t) - 1 or vn[b] <= 0
         v_out = 0.0 if resting else float(vn[b])
-        apex = 0.0 if resting else float(max(h[b], 0.0) + vn[b] ** 2 / (2 * g_n))
+        u = max(float(h[b]), 0.0)
+        apex = 0.0 if resting else u + v_out**2 / (2 * g_n)
+        launch = np.nan if resting else float(t[b]) - (np.sqrt(v_out**2 + 2 * g_n * u) - v_out) / g_n
         out.append(Bounce(
             len(out) + 1, float(t[a]), v_in, v_out, v_out / v_in if v_in > 0 else np.nan,
             apex, float(np.sqrt(apex / apex_prev)) if apex_prev > 0 else np.nan, penetration,
+            launch,
         ))
         if resting:
             break
