@@ -446,9 +446,7 @@ class AppliedForces:
             forces.add_gravitation(f, self.x, m.mass, m.gravitation)
         if m.fields:
             forces.add_fields(f, m.fields, self.x, self.v, m.mass, t)
-        for i, force, t_on, t_off in m.impulses:
-            if t_on <= t < t_off:
-                f[i] += force
+        forces.add_impulses(f, m.impulses, t)
         return f[lay.free, : lay.dim].ravel()
 
 

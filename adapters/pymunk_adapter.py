@@ -349,9 +349,7 @@ class _Stepper:
             forces.add_gravitation(f, self.x_next, m.mass, m.gravitation)
         if m.fields:
             forces.add_fields(f, m.fields, self.x_next, v, m.mass, t)
-        for i, force, t_on, t_off in m.impulses:
-            if t_on <= t < t_off:
-                f[i] += force
+        forces.add_impulses(f, m.impulses, t)
         self.force[self.scene.rows] = f[self.scene.slot, :2] * self.movable[:, None]
         pymunk.batch.set_space_bodies(self.scene.space, pymunk.batch.BodyFields.FORCE, self.put)
 

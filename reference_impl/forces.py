@@ -300,7 +300,25 @@ def add_model_forces(
         add_gravitation(f, x, model.mass, model.gravitation)
     if model.fields:
         add_fields(f, model.fields, x, v, model.mass, t)
-    for i, force, t_on, t_off in model.impulses:
-        if t_on <= t < t_off:
+    add_impulses(f, model.impulses, t)
+    return f
+
+
+TIME_ROUNDOFF = 1e-9
+"""Relative margin on the ends of an impulse's window: a step time made by repeated
+addition (``4 x 0.0025 = 0.009999999999999998``) counts as the time it stands for."""
+
+
+def impulse_active(t_on: float, t_off: float, t: float) -> bool:
+    """Whether a force acting over ``[t_on, t_off)`` (s) acts at time ``t`` (s), the ends
+    compared with a margin of :data:`TIME_ROUNDOFF` (relative, at least 1e-9 s)."""
+    eps = TIME_ROUNDOFF * max(1.0, abs(t))
+    return t_on - eps <= t < t_off - eps
+
+
+def add_impulses(f: np.ndarray, impulses: list, t: float) -> np.ndarray:
+    """Add every impulse force (particle, force (3,) N, t_on, t_off) active at ``t`` into ``f``."""
+    for i, force, t_on, t_off in impulses:
+        if impulse_active(t_on, t_off, t):
             f[i] += force
     return f

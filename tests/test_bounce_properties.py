@@ -84,3 +84,17 @@ def test_reading_inside_the_contact_gives_the_old_hundred_percent(case_named):
     exact = H0 * E ** (2 * np.arange(1, 4))
     assert np.max(np.abs(apex[:3] / exact - 1)) > 0.9
     assert PROPERTIES["apex_height_error"](case_named("bouncing-ball"), traj) < 1e-9
+
+
+def test_momentum_drift_counts_an_impulse_that_was_never_delivered(case_named):
+    """triangle-impulse applies 20 N for 0.01 s: P must become and stay 0.2 N s. A run
+    that keeps P = 0 conserves momentum perfectly and must still score 1 (it delivered
+    nothing); one that delivers 0.1 N s scores 0.5."""
+    case = case_named("triangle-impulse")
+    t = np.linspace(0.0, 1.0, 101)
+    n = case.model.n
+    for delivered, drift in ((0.0, 1.0), (0.1, 0.5), (0.2, 0.0)):
+        v = np.zeros((len(t), n, 3))
+        v[:, :, 0] = delivered / case.model.mass.sum()  # spread evenly: P = delivered
+        traj = Trajectory(t=t, x=np.zeros((len(t), n, 3)), v=v, energy=None)
+        assert PROPERTIES["momentum_drift"](case, traj) == pytest.approx(drift, abs=1e-12)
