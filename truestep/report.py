@@ -30,6 +30,13 @@ from truestep.isolation import (
     untimed_workers,
 )
 from truestep.metrics import fit_order
+from truestep.picks import (
+    ACCURACY_TARGETS,
+    SURVIVAL_ENERGY,
+    SURVIVAL_ERROR,
+    cheapest,
+    survival,
+)
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "pymunk", "pybullet", "mujoco")
 
@@ -65,16 +72,6 @@ def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "points"])
 
 
-def best_per_case(results: pd.DataFrame) -> pd.DataFrame:
-    """For each case, the run with the least error per second spent (error x wall time)."""
-    ok = results[(results["status"] == "ok") & (results["error"].astype(float) > 0)].copy()
-    if ok.empty:
-        return pd.DataFrame(columns=["case", "engine", "method", "dt", "error", "wall_s"])
-    ok["cost"] = ok["error"].astype(float) * ok["wall_s"].astype(float)
-    best = ok.loc[ok.groupby("case")["cost"].idxmin()]
-    return best[["case", "engine", "method", "dt", "error", "wall_s"]]
-
-
 def footer(argv: list[str]) -> str:
     """Machine, package versions, git revision and the command that reproduces the page."""
     versions = []
@@ -103,25 +100,46 @@ def middle(values: list[float]) -> float | None:
     return sorted(values)[len(values) // 2] if values else None
 
 
-def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> list[str]:
-    """The summary bullets, every one generated from the tables."""
-    lines = ["## Summary\n"]
-    best = best_per_case(results)
-    kinds: dict[str, list[str]] = {}
-    for c in cases:
-        kinds.setdefault(c.tags[0] if c.tags else "other", []).append(c.name)
-    lines.append("Least error for the time spent (smallest error x wall time over the sweep), "
-                 "by kind of scene:\n")
-    for kind, names in kinds.items():
-        rows = best[best["case"].isin(names)]
-        if rows.empty:
+def _run_label(r: pd.Series) -> str:
+    """``engine / method (dt ...)`` (a tolerance for adaptive rows)."""
+    kind = "tol" if r["dt_kind"] == "tolerance" else "dt"
+    return f"{r['engine']} / {r['method']} ({kind} {_fmt(float(r['dt']))})"
+
+
+def cheapest_table(cases: list[Case], results: pd.DataFrame) -> pd.DataFrame:
+    """Per case, the cheapest run by wall time that reaches each accuracy target, with
+    its time, and the cheapest by evaluations where it is another run."""
+    picks = cheapest(results, cases)
+    rows = []
+    for case in cases:
+        mine = picks[picks["case"] == case.name]
+        if mine.empty:
             continue
-        picks = "; ".join(
-            f"{r.case}: {r.engine} / {r.method} at {_fmt(float(r.dt))} "
-            f"(error {_fmt(float(r.error))} in {_fmt(float(r.wall_s))} s)"
-            for r in rows.itertuples(index=False))
-        lines.append(f"- **{kind}**: {picks}.")
-    lines.append("")
+        row = {"case": case.name}
+        for target in ACCURACY_TARGETS:
+            wall = mine[(mine["target"] == target) & (mine["by"] == "wall_s")].iloc[0]
+            evals = mine[(mine["target"] == target) & (mine["by"] == "nfev")].iloc[0]
+            if not wall["engine"]:
+                row[f"error <= {target:g} scale"] = "none of the runs"
+                continue
+            cell = f"{_run_label(wall)}, {_fmt(float(wall['wall_s']))} s"
+            key = ("engine", "method", "dt")
+            if [wall[k] for k in key] != [evals[k] for k in key]:
+                cell += f"; fewest evaluations: {_run_label(evals)}, {int(evals['nfev'])}"
+            row[f"error <= {target:g} scale"] = cell
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> list[str]:
+    """The summary, every sentence generated from the tables."""
+    lines = ["## Summary\n"]
+    table = cheapest_table(cases, results)
+    if len(table):
+        lines.append("The cheapest run that reaches each accuracy (error at most 1e-2, 1e-4 "
+                     "and 1e-6 of the case's scale), by wall time; where another run needs "
+                     "fewer derivative evaluations it is named too:\n")
+        lines.append(md_table(table))
     rest = tables.get("restitution")
     if rest is not None and len(rest):
         r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
@@ -135,38 +153,14 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             lines.append("")
     hard = [c for c in cases if c.hard]
     if hard:
-        lines.append("Hard cases: the largest step of the sweep at which each engine/method "
-                     "survives (finishes stable, and does not fail what the scene tests, "
-                     "such as tunnelling):\n")
+        lines.append(f"Hard cases: the largest step of the sweep at which each engine/method "
+                     f"survives: it finishes stable, does not fail what the scene tests (such "
+                     f"as tunnelling), its error is at most {SURVIVAL_ERROR:g} of the case's "
+                     f"scale and its energy error at most {SURVIVAL_ENERGY:g} of its energy:\n")
         for c in hard:
             lines.append(hard_case_line(c, results))
         lines.append("")
     return lines
-
-
-def survival(case: Case, results: pd.DataFrame) -> pd.DataFrame:
-    """Per engine/method of a case's fixed-step sweep: the largest step survived and why
-    the larger ones failed.
-
-    Columns ``engine, method, dt_survived`` (s, NaN if none) and ``failure`` (the outcome
-    at the largest step: ``unstable``, ``tunnelled``... or empty).
-    """
-    from truestep.properties import FAILURES
-
-    d = results[(results["case"] == case.name) & (results["dt_kind"] == "step")].dropna(subset=["dt"])
-    out = []
-    for (engine, method), g in d.groupby(["engine", "method"], sort=False):
-        outcome = g["status"].astype(str).where(g["status"] != "ok", "")
-        for prop, word in FAILURES.items():
-            if prop in g:
-                outcome = outcome.where((outcome != "") | ~(g[prop].astype(float) > 0), word)
-        g = g.assign(outcome=outcome)
-        survived = g[g["outcome"] == ""]["dt"].astype(float)
-        largest = g.loc[g["dt"].astype(float).idxmax()]
-        out.append({"engine": engine, "method": method,
-                    "dt_survived": survived.max() if len(survived) else np.nan,
-                    "failure": largest["outcome"]})
-    return pd.DataFrame(out, columns=["engine", "method", "dt_survived", "failure"])
 
 
 def hard_case_line(case: Case, results: pd.DataFrame) -> str:

@@ -1,0 +1,47 @@
+"""The report's picks on tables whose answer is known: the cheapest run per accuracy, and
+survival that needs accuracy as well as stability."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from truestep.picks import cheapest, survival
+
+COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
+           "nfev", "wall_s"]
+
+
+def test_the_cheapest_run_per_target_is_not_the_most_accurate(case_named):
+    """Radau reaches 1e-9 in 0.6 s, DOP853 1e-5 in 0.03 s: for 1e-2 and 1e-4 of the scale the
+    pick is DOP853 (error x time would pick Radau: 6e-10 against 3e-7); only Radau reaches
+    1e-6 (and 1e-10 nobody). By evaluations a fixed-step run can win instead."""
+    case = case_named("earth-orbit")  # scale 7e6 m
+    s = case.error_scale
+    rows = [(case.name, "scipy", "Radau", 1e-10, "tolerance", "ok", 1e-9 * s, 0, 9000, 0.6),
+            (case.name, "scipy", "DOP853", 1e-6, "tolerance", "ok", 1e-5 * s, 0, 700, 0.03),
+            (case.name, "reference", "rk4", 30.0, "step", "ok", 5e-3 * s, 0, 400, 0.05),
+            (case.name, "reference", "euler", 30.0, "step", "unstable", np.nan, np.nan, 100, 0.01)]
+    picks = cheapest(pd.DataFrame(rows, columns=COLUMNS), [case], targets=(1e-2, 1e-4, 1e-6, 1e-10))
+    pick = picks.set_index(["target", "by"])
+    assert pick.loc[(1e-2, "wall_s"), "method"] == "DOP853"
+    assert pick.loc[(1e-2, "nfev"), "method"] == "rk4"
+    assert pick.loc[(1e-4, "wall_s"), "method"] == "DOP853"
+    assert pick.loc[(1e-6, "wall_s"), "method"] == "Radau"
+    assert pick.loc[(1e-10, "wall_s"), "engine"] == "" and pick.loc[(1e-10, "wall_s"), "runs_reaching"] == 0
+
+
+def test_survival_needs_accuracy_and_a_physical_energy(case_named):
+    """close-encounter at 1 ms: finishing ok with an error of 43 scales, or with the
+    energy of a bound system gone positive (drift 222), is not surviving."""
+    case = case_named("close-encounter")
+    s = case.error_scale
+    rows = [(case.name, "reference", "euler", 1e-3, "step", "ok", 43 * s, 222.0, 0, 0),
+            (case.name, "reference", "euler", 5e-4, "step", "ok", 0.05 * s, 0.2, 0, 0),
+            (case.name, "reference", "rk4", 1e-3, "step", "ok", 0.01 * s, 5.0, 0, 0),
+            (case.name, "reference", "rk4", 5e-4, "step", "ok", 0.001 * s, 0.01, 0, 0),
+            (case.name, "reference", "verlet", 1e-3, "step", "unstable", np.nan, np.nan, 0, 0)]
+    table = survival(case, pd.DataFrame(rows, columns=COLUMNS)).set_index("method")
+    assert table.loc["euler", "dt_survived"] == 5e-4 and table.loc["euler", "failure"] == "inaccurate"
+    assert table.loc["rk4", "dt_survived"] == 5e-4 and table.loc["rk4", "failure"] == "energy"
+    assert np.isnan(table.loc["verlet", "dt_survived"]) and table.loc["verlet", "failure"] == "unstable"
