@@ -334,19 +334,42 @@ def _expm_flow(expm, A: np.ndarray, y0: np.ndarray, t: np.ndarray) -> np.ndarray
 
 
 def _check_reference_run(case: Case) -> None:
+    from truestep.reference_impl.solvers import METHODS
+
+    method = case.exact_params.get("method", "dopri5")
+    if method not in METHODS:
+        raise ValueError(f"[reference] method must be a reference method ({', '.join(METHODS)}), "
+                         f"got {method!r}")
+    if case.error_norm != "final":
+        raise ValueError("a reference run is kept at the end of the run only: "
+                         "[reference] error must be \"final\"")
     m = case.model
-    if m is not None and (m.planes or m.emitters):
-        raise ValueError("'reference-run' needs a smooth scene (no planes, no emitters)")
-    rtol = case.exact_params.get("rtol", 1e-12)
-    if isinstance(rtol, bool) or not isinstance(rtol, int | float) or not 1e-14 <= rtol <= 1e-6:
-        raise ValueError(f"[reference] rtol must be a number from 1e-14 to 1e-6, got {rtol!r}")
+    if METHODS[method].adaptive:
+        if m is not None and (m.planes or m.emitters):
+            raise ValueError("an adaptive reference run needs a smooth scene (no planes, no "
+                             "emitters): name a fixed-step [reference] method and dt")
+        rtol = case.exact_params.get("rtol", 1e-12)
+        if isinstance(rtol, bool) or not isinstance(rtol, int | float) or not 1e-14 <= rtol <= 1e-6:
+            raise ValueError(f"[reference] rtol must be a number from 1e-14 to 1e-6, got {rtol!r}")
+        return
+    dt = case.exact_params.get("dt")
+    finest = min(case.dts + case.quick_dts)
+    if isinstance(dt, bool) or not isinstance(dt, int | float) or not 0 < dt <= finest / 4:
+        raise ValueError(f"[reference] dt of a fixed-step reference run must be a number of "
+                         f"seconds at most a quarter of the finest step swept ({finest:g}), "
+                         f"got {dt!r}")
+    if case.duration / dt > 1e7:
+        raise ValueError(f"[reference] dt {dt:g} s makes {case.duration / dt:.3g} steps (at most 1e7)")
 
 
 @exact_solution("reference-run", check=_check_reference_run)
 def reference_run(case: Case, t: np.ndarray) -> Exact:
-    """No closed form: the reference's Dormand-Prince at a tight tolerance (``rtol``,
-    default 1e-12), known at the end of the run only. Valid for smooth scenes (no
-    collisions, no emitters). Made once per case and kept."""
+    """No closed form: a run of the reference implementation far finer than the sweep,
+    known at the end of the run only. ``[reference] method`` names it: ``dopri5`` (the
+    default) at ``rtol`` (default 1e-12), for smooth scenes; or a fixed-step method at
+    ``dt`` (at most a quarter of the finest swept step), for scenes with contacts or
+    emitters. Particles that are not alive at the end have NaN positions (not compared).
+    Made once per case and kept."""
     key = (case.file, case.name, case.duration, repr(case.exact_params), repr(case.ode),
            id(case.model))
     hit = _REFERENCE_RUNS.get(key)
@@ -365,20 +388,34 @@ def _reference_final(case: Case) -> Exact:
     from truestep.cases.plugins import ode_system
     from truestep.reference_impl.integrate import integrate
     from truestep.reference_impl.particles import ParticleSystem
-    from truestep.reference_impl.solvers import DormandPrince54
+    from truestep.reference_impl.passes import passes_for
+    from truestep.reference_impl.solvers import get_solver
 
-    tol = float(case.exact_params.get("rtol", 1e-12))
+    cls = get_solver(case.exact_params.get("method", "dopri5"))
     if case.kind == "ode":
         system = ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
     else:
-        system = ParticleSystem(case.model)
-    run = integrate(DormandPrince54(system, rtol=tol, atol=tol), case.duration, case.duration,
-                    max_records=1)
+        system = ParticleSystem(case.model, passes_for(case.model))
+    if cls.adaptive:
+        tol = float(case.exact_params.get("rtol", 1e-12))
+        run = integrate(cls(system, rtol=tol, atol=tol), case.duration, case.duration,
+                        max_records=1)
+    else:
+        n = max(1, round(case.duration / float(case.exact_params["dt"])))
+        run = integrate(cls(system), case.duration, case.duration / n, max_records=1)
+    if run.status != "ok":
+        raise ValueError(f"{case.file}: the reference run went {run.status} at t = {run.t_fail}")
     final = run.x[-1]
     if case.kind == "ode":
         return Exact(np.array([case.duration]), final[None, None, :])
     n = case.model.n
-    return Exact(np.array([case.duration]), final[: 3 * n].reshape(1, n, 3),
-                 final[3 * n :].reshape(1, n, 3))
+    x, v = final[: 3 * n].reshape(1, n, 3), final[3 * n :].reshape(1, n, 3)
+    alive = run.extra.get("alive")
+    if alive is not None:
+        x, v = x.copy(), v.copy()
+        x[:, ~alive[-1]] = np.nan
+        v[:, ~alive[-1]] = np.nan
+    return Exact(np.array([case.duration]), x, v)
+
 
 import truestep.cases.exact_particles  # noqa: F401,E402

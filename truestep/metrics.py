@@ -49,12 +49,17 @@ def position_error(case: Case, traj: Trajectory, exact: Exact) -> float:
 
     ``final``: at the last time both share (which must be the end of the run);
     ``max``: the largest over every shared time. Per record, the largest distance over
-    particles (Euclidean; for an ODE state, the largest component).
+    particles (Euclidean; for an ODE state, the largest component). Particles that are
+    not alive in the run, or whose exact position is not known (NaN: not alive in a
+    reference run), are not compared.
     """
     k, j = _matching(traj.t, exact.t)
     if len(k) == 0:
         return float("nan")
     d = traj.x[k] - exact.x[j]
+    if traj.alive is not None and case.kind != "ode":
+        d = np.where(traj.alive[k][..., None], d, np.nan)
+    d = np.where(np.isnan(exact.x[j]), 0.0, np.nan_to_num(d, nan=0.0)) if np.isnan(d).any() else d
     per_record = np.max(np.abs(d), axis=(1, 2)) if case.kind == "ode" else np.max(
         np.linalg.norm(d, axis=2), axis=1
     )
