@@ -5,8 +5,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import statistics
-import sys
-import time
 import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -20,6 +18,7 @@ from truestep.adapters import get_adapter
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.isolation import Outcome, run_isolated
+from truestep.progress import Progress
 
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
@@ -237,36 +236,35 @@ def run_matrix(
 
     Each case, engine and method's sweep runs in one child process at a time
     (:func:`run_sweep`). Energy traces of the runs go into ``traces`` when it is given
-    (see :func:`row_from`).
+    (see :func:`row_from`). Progress goes to standard error (:class:`Progress`), or each
+    row's line to ``progress`` when it is given.
     """
     timing = timing or Timing(max_repeats=1 if quick else 3)
-    say = progress or (lambda msg: print(msg, file=sys.stderr))
     preload()
-    start = time.perf_counter()
+    planned = [(case, engine, method, list(entries)) for case in cases for engine in engines
+               for method, entries in itertools.groupby(plan(case, engine, quick=quick),
+                                                        key=lambda e: e[0])]
+    total = sum(len(entries) for *_, entries in planned if not entries[0][3])
     rows = []
-    for case in cases:
-        for engine in engines:
-            for method, entries in itertools.groupby(plan(case, engine, quick=quick),
-                                                     key=lambda e: e[0]):
-                entries = list(entries)
-                adaptive, why_not = entries[0][2], entries[0][3]
-                if why_not:
-                    status, _, detail = why_not.partition(":")
-                    rows.append({
-                        "case": case.name, "engine": engine, "method": method,
-                        "dt_kind": "tolerance" if adaptive else "step", "status": status,
-                        "missing": detail if status == "unsupported" else "",
-                        "message": detail if status == "skipped" else "",
-                    })
-                    continue
-                dts = [dt for _, dt, _, _ in entries]
-                for row in run_sweep(case, engine, method, dts, adaptive=adaptive,
-                                     timing=timing, traces=traces):
-                    rows.append(row)
-                    say(f"{time.perf_counter() - start:7.1f}s {case.name:24s} {engine:9s} "
-                        f"{method:17s} {row['dt']:<9.3g} {row['status']:9s}"
-                        f" err={row.get('error', np.nan):.3g} "
-                        f"wall={row.get('wall_s', np.nan):.3g}s")
+    with Progress(total, "sweep", say=progress) as bar:
+        for case, engine, method, entries in planned:
+            adaptive, why_not = entries[0][2], entries[0][3]
+            if why_not:
+                status, _, detail = why_not.partition(":")
+                rows.append({
+                    "case": case.name, "engine": engine, "method": method,
+                    "dt_kind": "tolerance" if adaptive else "step", "status": status,
+                    "missing": detail if status == "unsupported" else "",
+                    "message": detail if status == "skipped" else "",
+                })
+                continue
+            dts = [dt for _, dt, _, _ in entries]
+            for row in run_sweep(case, engine, method, dts, adaptive=adaptive,
+                                 timing=timing, traces=traces):
+                rows.append(row)
+                bar.done(f"{case.name:24s} {engine:9s} {method:17s} {row['dt']:<9.3g} "
+                         f"{row['status']:9s} err={row.get('error', np.nan):.3g} "
+                         f"wall={row.get('wall_s', np.nan):.3g}s")
     return tidy(rows, cases)
 
 
