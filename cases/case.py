@@ -10,6 +10,17 @@ import numpy as np
 from truestep.reference_impl.model import ParticleModel
 
 
+FAMILIES: dict[str, str] = {
+    "orbit": "orbits and plain ODEs",
+    "oscillator": "oscillators",
+    "chain": "chains and ropes",
+    "cloth": "cloth and meshes",
+    "contact": "contact",
+    "particles": "particles",
+}
+"""The kinds of scene the report compares engines on: ``family`` -> what it covers."""
+
+
 @dataclass
 class OdeSpec:
     """A plain ODE scene: a named system of :mod:`truestep.reference_impl.odes` and its start.
@@ -98,6 +109,7 @@ class Case:
     properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
     skip : ``(engine, method, reason)`` pairs that are not run (rows say why)
     in_quick : whether ``--quick`` runs this case at all (long cases say no)
+    family : the kind of scene the report groups it under (:data:`FAMILIES`, or ``other``)
     """
 
     name: str
@@ -124,6 +136,7 @@ class Case:
     skip: list[tuple[str, str, str]] = field(default_factory=list)
     hard: str | None = None
     tags: list[str] = field(default_factory=list)
+    family: str = "other"
     timeout_s: float = 120.0
     in_quick: bool = True
 

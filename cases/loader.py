@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from truestep.cases import plugins
-from truestep.cases.case import Case, Gate, OdeSpec, StabilitySpec
+from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, StabilitySpec
 from truestep.cases.errors import CaseError, SelectionError
 from truestep.cases.fields import Fields
 from truestep.cases.scene import read_scene
@@ -183,6 +183,7 @@ def load_case(path: str | Path) -> Case:
         skip=skip,
         hard=f.string("hard", None),
         tags=f.strings("tags", []),
+        family=f.string("family", "other", choices={*FAMILIES, "other"}),
         timeout_s=timeout_s,
         in_quick=in_quick,
     )

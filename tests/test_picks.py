@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from truestep.picks import cheapest, survival
 
@@ -45,3 +46,31 @@ def test_survival_needs_accuracy_and_a_physical_energy(case_named):
     assert table.loc["euler", "dt_survived"] == 5e-4 and table.loc["euler", "failure"] == "inaccurate"
     assert table.loc["rk4", "dt_survived"] == 5e-4 and table.loc["rk4", "failure"] == "energy"
     assert np.isnan(table.loc["verlet", "dt_survived"]) and table.loc["verlet", "failure"] == "unstable"
+
+
+def test_scorecard_cost_and_stability_ratios(case_named):
+    """Two orbit cases, target 1e-4 of the scale: A reaches it in 1 s and 2 s (the fastest
+    on both), B only on earth-orbit, in 3 s: A's cost ratio is 1 on 2 cases, B's 3 on 1.
+    Stability: A's limit 0.19 s against an exact 0.2 s reads 0.95; C, no exact limit,
+    0.1 s against the best 0.4 s reads 0.25."""
+    from truestep.picks import restitution_fidelity, scorecard
+
+    kepler, earth = case_named("kepler-orbit"), case_named("earth-orbit")
+    rows = [(kepler.name, "e", "A", 0.1, "step", "ok", 1e-5 * kepler.error_scale, 0, 10, 1.0),
+            (earth.name, "e", "A", 0.1, "step", "ok", 1e-5 * earth.error_scale, 0, 10, 2.0),
+            (earth.name, "e", "B", 0.1, "step", "ok", 1e-5 * earth.error_scale, 0, 10, 6.0),
+            (kepler.name, "e", "B", 0.1, "step", "ok", 1e-2 * kepler.error_scale, 0, 10, 0.1),
+            (kepler.name, "e", "C", 0.1, "step", "ok", 1.0, 0, 10, 0.1)]
+    stab = pd.DataFrame([(earth.name, "e", "A", 0.19, 0.2, "ok"), (kepler.name, "e", "C", 0.1, np.nan, "ok"),
+                         (kepler.name, "e", "D", 0.4, np.nan, "ok")],
+                        columns=["case", "engine", "method", "dt_limit", "dt_limit_exact", "status"])
+    card = scorecard(pd.DataFrame(rows, columns=COLUMNS), [kepler, earth], stab).set_index("method")
+    assert card.loc["A", "cost_ratio"] == 1.0 and card.loc["A", "cases_reached"] == 2
+    assert card.loc["B", "cost_ratio"] == 3.0 and card.loc["B", "cases_reached"] == 1
+    assert card.loc["A", "stability_ratio"] == pytest.approx(0.95)
+    assert card.loc["C", "stability_ratio"] == pytest.approx(0.25)
+    assert np.isnan(card.loc["C", "cost_ratio"]) and card.loc["C", "cases_run"] == 1
+    rest = pd.DataFrame([("e", "A", 0.5, 0.48, "ok"), ("e", "A", 0.8, 0.86, "ok")],
+                        columns=["engine", "method", "e_set", "e_measured", "status"])
+    fid = restitution_fidelity(rest).iloc[0]
+    assert fid["median"] == pytest.approx(0.04) and fid["worst"] == pytest.approx(0.06)

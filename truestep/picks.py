@@ -98,3 +98,83 @@ def survival(case: Case, results: pd.DataFrame) -> pd.DataFrame:
                     "dt_survived": max(survived) if survived else np.nan,
                     "failure": outcomes[int(np.argmax(dts))]})
     return pd.DataFrame(out, columns=["engine", "method", "dt_survived", "failure"])
+
+
+SCORECARD_TARGET = 1e-4
+"""The accuracy the scorecard's cost column asks for, as a fraction of each case's scale."""
+SCORECARD_COLUMNS = ["engine", "method", "family", "cases_run", "cases_reached", "cost_ratio",
+                     "stability_cases", "stability_ratio"]
+
+
+def _limit_reference(stability: pd.DataFrame) -> pd.Series:
+    """Per stability row: the exact limit where one exists (finite, positive), else the
+    best limit any engine/method reached on that case."""
+    limit = pd.to_numeric(stability["dt_limit"], errors="coerce")
+    exact = pd.to_numeric(stability["dt_limit_exact"], errors="coerce")
+    best = limit.groupby(stability["case"]).transform("max")
+    return exact.where(np.isfinite(exact) & (exact > 0), best)
+
+
+def scorecard(results: pd.DataFrame, cases: list[Case], stability: pd.DataFrame | None = None,
+              *, target: float = SCORECARD_TARGET) -> pd.DataFrame:
+    """One row per engine, method and family of scenes (:data:`SCORECARD_COLUMNS`).
+
+    ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
+    on, the median of its cheapest wall time there over the cheapest of all runs (1: the
+    fastest); NaN if it reached none. ``cases_run`` / ``cases_reached``: the family's cases
+    it ran / reached the target on. ``stability_ratio``: over the family's cases with a
+    stability search, the median of its largest stable step over the exact limit (or, with
+    no exact one, the best any method reached); NaN without searches.
+    """
+    picks = cheapest(results, cases, targets=(target,))
+    best = picks[picks["by"] == "wall_s"].set_index("case")["wall_s"]
+    family = {c.name: c.family for c in cases}
+    scale = {c.name: c.error_scale for c in cases}
+    ran = results[~results["status"].isin(["unsupported", "skipped"])
+                  & results["case"].isin(list(family))]
+    ok = ran[ran["status"] == "ok"].copy()
+    ok["reaches"] = _num(ok, "error") <= target * ok["case"].map(scale).to_numpy(float)
+    stab = None
+    if stability is not None and len(stability):
+        stab = stability[stability["status"] == "ok"].copy()
+        stab["ratio"] = pd.to_numeric(stab["dt_limit"], errors="coerce") / _limit_reference(stab)
+    rows = []
+    for (engine, method), mine in ran.groupby(["engine", "method"], sort=False):
+        mine_ok = ok[(ok["engine"] == engine) & (ok["method"] == method)]
+        for fam in dict.fromkeys(family[c] for c in mine["case"]):
+            names = [c for c in dict.fromkeys(mine["case"]) if family[c] == fam]
+            ratios = []
+            for case in names:
+                hit = mine_ok[(mine_ok["case"] == case) & mine_ok["reaches"]]
+                if len(hit) and np.isfinite(best.get(case, np.nan)):
+                    ratios.append(float(np.nanmin(_num(hit, "wall_s"))) / float(best[case]))
+            s = stab[(stab["engine"] == engine) & (stab["method"] == method)
+                     & stab["case"].isin(names)] if stab is not None else pd.DataFrame()
+            s_ratio = _num(s, "ratio") if len(s) else np.array([])
+            s_ratio = s_ratio[np.isfinite(s_ratio)]
+            rows.append({"engine": engine, "method": method, "family": fam,
+                         "cases_run": len(names), "cases_reached": len(ratios),
+                         "cost_ratio": float(np.median(ratios)) if ratios else np.nan,
+                         "stability_cases": len(s_ratio),
+                         "stability_ratio": float(np.median(s_ratio)) if len(s_ratio) else np.nan})
+    order = {pair: k for k, pair in enumerate(dict.fromkeys(
+        zip(results["engine"], results["method"], strict=True)))}
+    card = pd.DataFrame(rows, columns=SCORECARD_COLUMNS)
+    return card.iloc[sorted(range(len(card)), key=lambda k: order[(card["engine"].iloc[k],
+                                                                     card["method"].iloc[k])])
+                     ].reset_index(drop=True)
+
+
+def restitution_fidelity(restitution: pd.DataFrame | None) -> pd.DataFrame:
+    """Per engine and method: the median and the largest ``|e_measured - e_set|`` over every
+    bounce of the restitution sweep (columns ``engine, method, bounces, median, worst``)."""
+    cols = ["engine", "method", "bounces", "median", "worst"]
+    if restitution is None or not len(restitution):
+        return pd.DataFrame(columns=cols)
+    r = restitution[restitution["status"] == "ok"].copy()
+    r["gap"] = (pd.to_numeric(r["e_measured"], errors="coerce")
+                - pd.to_numeric(r["e_set"], errors="coerce")).abs()
+    r = r.dropna(subset=["gap"])
+    out = [{"engine": e, "method": m, "bounces": len(g), "median": float(g["gap"].median()),
+            "worst": float(g["gap"].max())} for (e, m), g in r.groupby(["engine", "method"], sort=False)]
+    return pd.DataFrame(out, columns=cols)

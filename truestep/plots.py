@@ -166,3 +166,63 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()
     return save(fig, path)
+
+
+def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], target: float,
+              path: Path) -> Path | None:
+    """The report's overview: a row per engine/method, three panels.
+
+    Left: the wall time to reach ``target`` of each case's scale, as a multiple of the
+    fastest run's, per family of scenes (median over the family's cases reached; ``-``:
+    ran, never reached it; blank: did not run). Middle: the largest stable step over the
+    exact limit (or the best any method reached), per family. Right: the restitution
+    error ``|e_measured - e_set|`` (median over every bounce of the sweep).
+    ``card`` is :func:`truestep.picks.scorecard`, ``fidelity``
+    :func:`truestep.picks.restitution_fidelity`.
+    """
+    if card.empty:
+        return None
+    rows = list(dict.fromkeys(zip(card["engine"], card["method"], strict=True)))
+    index = {r: k for k, r in enumerate(rows)}
+    col = {f: k for k, f in enumerate(families)}
+    cost = np.full((len(rows), len(families)), np.nan)
+    ran = np.zeros_like(cost, dtype=bool)
+    limit = np.full_like(cost, np.nan)
+    for r in card.itertuples(index=False):
+        if r.family not in col:
+            continue
+        i, j = index[(r.engine, r.method)], col[r.family]
+        cost[i, j], ran[i, j], limit[i, j] = r.cost_ratio, r.cases_run > 0, r.stability_ratio
+    rest = np.full((len(rows), 1), np.nan)
+    for r in fidelity.itertuples(index=False):
+        if (r.engine, r.method) in index:
+            rest[index[(r.engine, r.method)], 0] = r.median
+    fig, axes = plt.subplots(1, 3, figsize=(12.5, 0.3 * len(rows) + 2.2),
+                             gridspec_kw={"width_ratios": [len(families), len(families), 1.3]})
+    panels = [
+        (axes[0], np.log10(np.maximum(cost, 1.0)), cost, "RdYlGn_r", (0, 3),
+         f"time to reach {target:g} of the scale,\n x the fastest run", lambda v: f"{v:.3g}x"),
+        (axes[1], np.clip(limit, 0, 1), limit, "RdYlGn", (0, 1),
+         "largest stable step,\n x the exact (or best) limit", lambda v: f"{v:.2f}"),
+        (axes[2], np.log10(np.maximum(rest, 1e-4)), rest, "RdYlGn_r", (-4, -0.5),
+         "restitution\nerror |de|", lambda v: f"{v:.3f}"),
+    ]
+    for ax, shade, values, cmap, (lo, hi), title, text in panels:
+        ax.imshow(np.ma.masked_invalid(shade), cmap=cmap, vmin=lo, vmax=hi, aspect="auto")
+        for (i, j), v in np.ndenumerate(values):
+            if np.isfinite(v):
+                ax.text(j, i, text(v), ha="center", va="center", fontsize=7)
+            elif values is cost and ran[i, j]:
+                ax.text(j, i, "-", ha="center", va="center", fontsize=8, color="#777777")
+        ax.set_title(title, fontsize=9)
+        ax.set_xticks(range(values.shape[1]),
+                      families if values.shape[1] == len(families) else ["sweep"], fontsize=8,
+                      rotation=30, ha="right")
+        ax.set_yticks(range(len(rows)), [f"{e} / {m}" for e, m in rows] if ax is axes[0] else [],
+                      fontsize=8)
+        ax.set_xticks(np.arange(values.shape[1] + 1) - 0.5, minor=True)
+        ax.set_yticks(np.arange(len(rows) + 1) - 0.5, minor=True)
+        ax.grid(which="minor", color="white", linewidth=1.5)
+        ax.tick_params(which="minor", length=0)
+    fig.tight_layout()
+    return save(fig, path)

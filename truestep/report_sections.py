@@ -1,0 +1,295 @@
+"""The report's sections, each a list of markdown lines generated from the tables.
+
+No sentence here states a number it did not read from a table or from the constant that
+made it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from truestep.cases.case import Case
+from truestep.metrics import fit_order
+from truestep.picks import (
+    ACCURACY_TARGETS,
+    SURVIVAL_ENERGY,
+    SURVIVAL_ERROR,
+    cheapest,
+    survival,
+)
+from truestep.report_markdown import fmt, md_table, with_units
+
+_fmt = fmt
+
+
+def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
+    """Fitted order of convergence per case, engine and fixed-step method."""
+    rows = []
+    scales = {c.name: c.error_scale for c in cases}
+    steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
+    for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
+        order = fit_order(g["dt"].astype(float), g["error"].astype(float),
+                          scale=scales.get(case, 1.0))
+        rows.append({"case": case, "engine": engine, "method": method, "order": order,
+                     "points": int(g["error"].notna().sum())})
+    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "points"])
+
+
+def _run_label(r: pd.Series) -> str:
+    """``engine / method (dt ...)`` (a tolerance for adaptive rows)."""
+    kind = "tol" if r["dt_kind"] == "tolerance" else "dt"
+    return f"{r['engine']} / {r['method']} ({kind} {_fmt(float(r['dt']))})"
+
+
+def cheapest_table(cases: list[Case], results: pd.DataFrame) -> pd.DataFrame:
+    """Per case, the cheapest run by wall time that reaches each accuracy target, with
+    its time, and the cheapest by evaluations where it is another run."""
+    picks = cheapest(results, cases)
+    rows = []
+    for case in cases:
+        mine = picks[picks["case"] == case.name]
+        if mine.empty:
+            continue
+        row = {"case": case.name}
+        for target in ACCURACY_TARGETS:
+            wall = mine[(mine["target"] == target) & (mine["by"] == "wall_s")].iloc[0]
+            evals = mine[(mine["target"] == target) & (mine["by"] == "nfev")].iloc[0]
+            if not wall["engine"]:
+                row[f"error <= {target:g} scale"] = "none of the runs"
+                continue
+            cell = f"{_run_label(wall)}, {_fmt(float(wall['wall_s']))} s"
+            key = ("engine", "method", "dt")
+            if [wall[k] for k in key] != [evals[k] for k in key]:
+                cell += f"; fewest evaluations: {_run_label(evals)}, {int(evals['nfev'])}"
+            row[f"error <= {target:g} scale"] = cell
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> list[str]:
+    """The summary, every sentence generated from the tables."""
+    lines = ["## Summary\n"]
+    table = cheapest_table(cases, results)
+    if len(table):
+        lines.append("The cheapest run that reaches each accuracy (error at most 1e-2, 1e-4 "
+                     "and 1e-6 of the case's scale), by wall time; where another run needs "
+                     "fewer derivative evaluations it is named too:\n")
+        lines.append(md_table(table))
+    rest = tables.get("restitution")
+    if rest is not None and len(rest):
+        r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
+        if len(r):
+            r = r.assign(gap=(r["e_measured"] - r["e_set"]).abs())
+            worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
+            lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
+            for w in worst.itertuples(index=False):
+                lines.append(f"- {w.engine} / {w.method}: requested {w.e_set:g}, measured "
+                             f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s.")
+            lines.append("")
+    hard = [c for c in cases if c.hard]
+    if hard:
+        lines.append(f"Hard cases: the largest step of the sweep at which each engine/method "
+                     f"survives: it finishes stable, does not fail what the scene tests (such "
+                     f"as tunnelling), its error is at most {SURVIVAL_ERROR:g} of the case's "
+                     f"scale and its energy error at most {SURVIVAL_ENERGY:g} of its energy:\n")
+        for c in hard:
+            lines.append(hard_case_line(c, results))
+        lines.append("")
+    return lines
+
+
+def hard_case_line(case: Case, results: pd.DataFrame) -> str:
+    """One summary bullet: engine/methods grouped by the largest step they survive."""
+    s = survival(case, results)
+    if s.empty:
+        return f"- **{case.name}**: no fixed-step runs."
+    groups = []
+    for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"),
+                        key=lambda kv: -kv[0]):
+        names = ", ".join(f"{e}/{m}" for e, m in zip(g["engine"], g["method"], strict=True))
+        groups.append(f"{_fmt(float(dt))} s: {names}")
+    never = s[s["dt_survived"].isna()]
+    if len(never):
+        names = ", ".join(f"{e}/{m} ({f or 'failed'})"
+                          for e, m, f in zip(never["engine"], never["method"], never["failure"],
+                                             strict=True))
+        groups.append(f"at no step of the sweep: {names}")
+    return f"- **{case.name}**: " + "; ".join(groups) + "."
+
+
+def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> pd.DataFrame:
+    """Particle-steps per second of every engine/method beside ``engine/method``'s, per step.
+
+    Columns: ``dt`` (s), ``engine``, ``method``, ``wall_s`` (s), ``particle_steps_per_s``
+    (particles x steps / wall time), ``error`` and ``slower_by`` (that row's wall time over
+    ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
+    """
+    n = case.model.n if case.model is not None else 1
+    d = results[(results["case"] == case.name) & (results["dt_kind"] == "step")
+                & (results["status"] == "ok")].dropna(subset=["wall_s"])
+    rows = []
+    for dt, g in d.groupby(d["dt"].astype(float)):
+        base = g[(g["engine"] == engine) & (g["method"] == method)]
+        base_wall = float(base["wall_s"].iloc[0]) if len(base) else np.nan
+        for r in g.sort_values("wall_s").itertuples(index=False):
+            rows.append({"dt": dt, "engine": r.engine, "method": r.method, "wall_s": r.wall_s,
+                         "particle_steps_per_s": n * r.steps / r.wall_s, "error": r.error,
+                         "slower_by": r.wall_s / base_wall})
+    return pd.DataFrame(rows, columns=["dt", "engine", "method", "wall_s",
+                                       "particle_steps_per_s", "error", "slower_by"])
+
+
+def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
+    """For each case with a ``speedup`` gate: what modelling only what the scene needs is
+    worth, the gated method against every engine at the same steps."""
+    parts: list[str] = []
+    for case in cases:
+        for g in (g for g in case.gates if g.kind == "speedup"):
+            table = speed_table(case, results, g.engine, g.method)
+            if table.empty:
+                continue
+            at = table[np.isclose(table["dt"], g.dt)]
+            others = at[at["engine"] != g.engine]
+            parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
+            parts.append(
+                f"{case.title}: {g.engine} / {g.method} runs only what the scene needs (here "
+                "a compiled loop over independent particles, on one thread like the "
+                "engines), the engines their general machinery (broad phase, contact "
+                "solver, one body per particle). Each row: "
+                "particle-steps per second at the same step and the error against the exact "
+                "bounce solution; `slower_by` is its wall time over "
+                f"{g.engine} / {g.method}'s.\n")
+            if len(others):
+                fastest = others.sort_values("wall_s").iloc[0]
+                parts.append(
+                    f"At dt {_fmt(g.dt)} s the fastest engine, {fastest.engine} / "
+                    f"{fastest.method}, takes {fastest.slower_by:.0f} times as long as "
+                    f"{g.engine} / {g.method} (gate: at least {g.params['min']:g} times).\n")
+            parts.append(md_table(with_units(table)))
+    return parts
+
+
+
+
+def _pair(r) -> str:
+    return f"{r.engine} / {r.method}"
+
+
+def family_sentence(family: str, names: list[str], card: pd.DataFrame,
+                    fidelity: pd.DataFrame, picks: pd.DataFrame) -> str:
+    """One bullet for a family of scenes: the pick for accuracy per second, the pick for
+    large steps and, where the scenes bounce, the truest restitution, with the numbers.
+    ``picks``: :func:`truestep.picks.cheapest` at the loosest target, named when no run
+    reaches the scorecard's."""
+    from truestep.cases.case import FAMILIES
+    from truestep.picks import SCORECARD_TARGET
+
+    mine = card[card["family"] == family]
+    parts = []
+    fast = mine[np.isfinite(mine["cost_ratio"].to_numpy(float))].sort_values(
+        ["cases_reached", "cost_ratio"], ascending=[False, True])
+    if len(fast):
+        top = fast.iloc[0]
+        text = (f"for accuracy per second, **{_pair(top)}**: it reaches {SCORECARD_TARGET:g} of "
+                f"the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
+                f"{float(top.cost_ratio):.2f}x the fastest run's time (median)")
+        if len(fast) > 1:
+            nxt = fast.iloc[1]
+            text += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
+                     f"{float(nxt.cost_ratio):.2f}x)")
+        parts.append(text)
+    else:
+        loose = picks[(picks["case"].isin(names)) & (picks["by"] == "wall_s")
+                      & (picks["engine"] != "")].sort_values("wall_s")
+        text = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
+        if len(loose):
+            r = loose.iloc[0]
+            text += (f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
+                     f"({fmt(float(r.wall_s))} s)")
+        parts.append(text)
+    steady = mine[np.isfinite(mine["stability_ratio"].to_numpy(float))]
+    if len(steady):
+        best = float(steady["stability_ratio"].max())
+        tops = steady[np.isclose(steady["stability_ratio"], best, rtol=5e-3)]
+        named = ", ".join(_pair(r) for r in tops.head(3).itertuples(index=False))
+        more = f" and {len(tops) - 3} more" if len(tops) > 3 else ""
+        parts.append(f"for the largest stable step, {named}{more} "
+                     f"({best:.2f} of the exact or best limit)")
+    if family in ("contact", "particles") and len(fidelity):
+        true = fidelity.sort_values("median").iloc[0]
+        parts.append(f"the truest restitution, {_pair(true)} (median |e_measured - e_set| "
+                     f"{fmt(float(true['median']))} over {int(true.bounces)} bounces)")
+    return f"- **{FAMILIES.get(family, family)}** ({', '.join(names)}): " + "; ".join(parts) + "."
+
+
+def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict,
+                      fig_dir) -> list[str]:
+    """The overview at the top of the report: the scorecard figure and a sentence per
+    family of scenes naming the picks."""
+    from truestep import plots
+    from truestep.cases.case import FAMILIES
+    from truestep.picks import SCORECARD_TARGET, restitution_fidelity, scorecard
+
+    card = scorecard(results, cases, tables.get("stability"))
+    fidelity = restitution_fidelity(tables.get("restitution"))
+    families = [f for f in FAMILIES if any(c.family == f for c in cases)]
+    lines = ["## Which engine, which method\n",
+             f"Each row is an engine and method; each column of the left panel a family of "
+             f"scenes. Left: the wall time it takes to reach an error of {SCORECARD_TARGET:g} "
+             f"of each case's scale, as a multiple of the fastest run that does (median over "
+             f"the family's cases it reaches; `-`: it ran but never got there). Middle: its "
+             f"largest stable step over the exact limit, or over the best any method reached "
+             f"where none is known. Right: how far the restitution it gives is from the one "
+             f"asked (median over the bounces of the restitution sweep).\n"]
+    fig = plots.scorecard(card, fidelity, families, SCORECARD_TARGET, fig_dir / "scorecard.png")
+    if fig is not None:
+        lines.append(f"![scorecard: cost to reach the accuracy, stability, restitution]"
+                     f"(figures/{fig.name})\n")
+    loose = cheapest(results, cases, targets=(ACCURACY_TARGETS[0],))
+    for family in families:
+        names = [c.name for c in cases if c.family == family]
+        lines.append(family_sentence(family, names, card, fidelity, loose))
+    lines.append("")
+    return lines
+
+
+def methods_section(cases: list[Case]) -> list[str]:
+    """How the numbers are made, with every number read from the constant that sets it."""
+    from truestep.analyses import BALL_RADIUS, DROP_HEIGHT, RESTITUTION_DTS, RESTITUTION_SET
+    from truestep.runner import Timing
+    from truestep.stability import GROWTH_TOL, SETTLE_TOL
+
+    timing = Timing()
+    steps = sorted({c.stability.min_steps for c in cases if c.stability})
+    lines = ["## How the numbers are made\n",
+             f"- **Timing**: scenes are built outside the timed region; each case, engine and "
+             f"method runs in a process of its own, one at a time, warmed up for "
+             f"{timing.warmup_fraction:.0%} of the run first; runs shorter than "
+             f"{1000 * timing.budget_s / timing.max_repeats:.0f} ms are timed "
+             f"{timing.max_repeats} times (the median), longer ones once.",
+             "- **Engines as configured**: engine defaults that would distort a comparison "
+             "are switched off (pybullet's linear and angular damping; pymunk's pixel-scale "
+             "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "
+             "or clamp is added anywhere.",
+             f"- **Errors** are distances from the exact solution (or, where none exists, "
+             f"from a fine run of the reference that the case names) in the case's units; "
+             f"the targets {', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of "
+             f"each case's scale.",
+             f"- **Unstable**: the state goes non-finite, or the energy of a scene without "
+             f"energy sources keeps growing through every quarter of the run; in a search, "
+             f"its late half's peak rises above the early half's band by more than "
+             f"{GROWTH_TOL:g} of the band's width, or, in a dissipative scene, its late "
+             f"half's median stays above the start by more than {SETTLE_TOL:g} of the energy "
+             f"it gave off. Searches bisect the step over each case's horizon, with at least "
+             f"{', '.join(str(s) for s in steps)} steps per run.",
+             f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
+             f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
+             f"{SURVIVAL_ENERGY:g} of the energy.",
+             f"- **Restitution**: a ball of radius {BALL_RADIUS:g} m dropped from "
+             f"{DROP_HEIGHT:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
+             f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s; per bounce "
+             f"from the rebound and impact speeds and from apex heights, each read from the "
+             f"first sample outside the contact.",
+             ""]
+    return lines
