@@ -74,20 +74,21 @@ def bounces(
 ) -> list[Bounce]:
     """Bounces of a trajectory given height above contact ``h`` (m) and normal velocity
     ``vn`` (m/s, positive away from the plane), both shape (T,), with gravity ``g_n``
-    (m/s^2, > 0) pulling toward the plane.
+    (m/s^2, >= 0) pulling toward the plane; on a wall along gravity (``g_n = 0``) the
+    flights are straight and have no apex (NaN).
 
     A contact is a run of contact intervals (:func:`contact_intervals`); it is measured
     from the sample before the run (``v_in``, the speed toward the plane) and the sample
     after it (``v_out``). A contact that lasts to the end of the run (the ball came to
     rest) has ``v_out = 0``.
     """
-    if g_n <= 0:
-        raise ValueError(f"g_n must be positive (gravity toward the plane), got {g_n}")
+    if g_n < 0:
+        raise ValueError(f"g_n must not be negative (gravity toward the plane or along it), got {g_n}")
     touching = contact_intervals(t, h, vn, g_n, band=band)
     edges = np.diff(np.concatenate([[0], touching.astype(np.int8), [0]]))
     starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
     out: list[Bounce] = []
-    apex_prev = float(h[0] + max(vn[0], 0.0) ** 2 / (2 * g_n))
+    apex_prev = float(h[0] + max(vn[0], 0.0) ** 2 / (2 * g_n)) if g_n > 0 else np.nan
     for a, b in zip(starts, ends, strict=True):
         # intervals a..b-1 touch: samples a (before) .. b (after)
         if a == 0:
@@ -97,8 +98,13 @@ def bounces(
         resting = b >= len(t) - 1 or vn[b] <= 0
         v_out = 0.0 if resting else float(vn[b])
         u = max(float(h[b]), 0.0)
-        apex = 0.0 if resting else u + v_out**2 / (2 * g_n)
-        launch = np.nan if resting else float(t[b]) - (np.sqrt(v_out**2 + 2 * g_n * u) - v_out) / g_n
+        if resting:
+            apex, launch = 0.0, np.nan
+        elif g_n > 0:
+            apex = u + v_out**2 / (2 * g_n)
+            launch = float(t[b]) - (np.sqrt(v_out**2 + 2 * g_n * u) - v_out) / g_n
+        else:  # a wall along gravity: straight flight off it, no apex
+            apex, launch = np.nan, float(t[b]) - u / v_out
         out.append(Bounce(
             len(out) + 1, float(t[a]), v_in, v_out, v_out / v_in if v_in > 0 else np.nan,
             apex, float(np.sqrt(apex / apex_prev)) if apex_prev > 0 else np.nan, penetration,
