@@ -111,10 +111,13 @@ def energy_keeps_growing(t: np.ndarray, energy: np.ndarray, *, tol: float | None
     quarters = [q for q in np.split(energy - energy[0], edges) if len(q)]
     if len(quarters) < 4:
         return energy_grows(t, energy, tol=tol)
-    scale = max(abs(float(energy[0])), float(np.max(np.abs(energy))), 1e-300)
+    start = abs(float(energy[0]))
     for before, now in itertools.pairwise(quarters):
         hi, lo = max(float(np.max(before)), 0.0), min(float(np.min(before)), 0.0)
-        if not float(np.max(now)) > hi + tol * (hi - lo) + ROUNDOFF * scale:
+        # Round-off is judged against the energy so far, not the run's largest: a run that
+        # explodes would otherwise hide its early quarters' growth under its final size.
+        floor = ROUNDOFF * max(start, float(np.max(np.abs(before + energy[0]))), 1e-300)
+        if not float(np.max(now)) > hi + tol * (hi - lo) + floor:
             return False
     return True
 

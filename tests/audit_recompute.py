@@ -1,0 +1,446 @@
+"""Independent routes to truestep's published numbers, for tests/test_property_audit.py.
+
+Everything here is written from the physics and from the documented definitions of the
+quantities, not from the code that computes them: nothing of ``truestep.metrics``,
+``truestep.properties``, ``truestep.restitution``, ``truestep.stability``,
+``truestep.cases.exact*`` or ``truestep.reference_impl`` is imported. The inputs are a
+case's scene parameters (masses, springs, planes ...) and a run's raw arrays
+(``t`` (T,), ``x`` and ``v`` (T, n, 3), ``alive`` (T, n)), in SI units.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+# -- energy ---------------------------------------------------------------------------------
+
+
+def energy(model, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None = None) -> np.ndarray:
+    """Kinetic + potential energy (J) of states ``x``, ``v`` (T, n, 3), shape (T,).
+
+    The convention the tables document (README, ``total_energy``): gravity's potential is
+    ``-m g . x`` (zero at the origin); pinned and dead particles carry no kinetic or
+    gravitational energy; springs (pairs and anchors) store ``k (L - r)^2 / 2``;
+    gravitation ``-G m_i m_j / sqrt(r^2 + eps^2)`` per pair. A relative drift
+    ``|E - E(0)| / |E(0)|`` depends on these zeros, so the same ones are used.
+    """
+    x, v = np.asarray(x, float), np.asarray(v, float)
+    weight = np.where(model.fixed, 0.0, model.mass)[None, :] * np.ones(x.shape[:2])
+    if alive is not None:
+        weight = weight * alive
+    total = np.zeros(len(x))
+    for k in range(x.shape[1]):
+        total += weight[:, k] * (0.5 * np.sum(v[:, k] ** 2, axis=1) - x[:, k] @ model.gravity)
+    s = model.springs
+    for i, j, ks, rest in zip(s.i, s.j, s.stiffness, s.rest, strict=True):
+        length = np.sqrt(np.sum((x[:, i] - x[:, j]) ** 2, axis=1))
+        total += 0.5 * ks * (length - rest) ** 2
+    a = model.anchors
+    for i, point, ks, rest in zip(a.i, a.point, a.stiffness, a.rest, strict=True):
+        length = np.sqrt(np.sum((x[:, i] - point) ** 2, axis=1))
+        total += 0.5 * ks * (length - rest) ** 2
+    if model.gravitation is not None:
+        G, eps = model.gravitation.G, model.gravitation.softening
+        for i in range(x.shape[1]):
+            for j in range(i + 1, x.shape[1]):
+                r2 = np.sum((x[:, i] - x[:, j]) ** 2, axis=1)
+                total -= G * model.mass[i] * model.mass[j] / np.sqrt(r2 + eps**2)
+    return total
+
+
+def relative_drift(e: np.ndarray) -> tuple[float, float]:
+    """``max |E - E(0)| / |E(0)|`` and its last value."""
+    dev = np.abs(e - e[0]) / abs(e[0])
+    return float(dev.max()), float(dev[-1])
+
+
+# -- closed forms ---------------------------------------------------------------------------
+
+
+def free_flight(x0, v0, g, t):
+    """``x0 + v0 t + g t^2 / 2`` and its velocity, (T, n, 3) each."""
+    tt = np.asarray(t, float)[:, None, None]
+    return x0 + v0 * tt + 0.5 * g * tt**2, v0 + g * tt + 0.0 * tt
+
+
+def drag_flight(x0, v0, g, k, m, t):
+    """``m x'' = m g - k x'`` from ``x0``, ``v0`` (n, 3): terminal velocity ``m g / k``."""
+    tt = np.asarray(t, float)[:, None, None]
+    tau = (np.asarray(m, float) / k)[None, :, None]
+    v_inf = tau * g
+    decay = np.exp(-tt / tau)
+    return x0 + v_inf * tt + (v0 - v_inf) * tau * (1.0 - decay), v_inf + (v0 - v_inf) * decay
+
+
+def oscillator(m: float, k: float, c: float, u0: float, w0: float, t):
+    """``m u'' + c u' + k u = 0`` from ``u0``, ``w0``: ``u = A e^(l1 t) + B e^(l2 t)``.
+
+    The roots ``l`` of ``m l^2 + c l + k`` in complex arithmetic (one formula for every
+    damping ratio but the critical one, which gets ``(u0 + (w0 - l u0) t) e^(l t)``).
+    Returns ``u``, ``u'`` (T,).
+    """
+    t = np.asarray(t, float)
+    disc = complex(c * c - 4.0 * m * k)
+    l1, l2 = (-c + np.sqrt(disc)) / (2 * m), (-c - np.sqrt(disc)) / (2 * m)
+    if abs(l1 - l2) < 1e-12 * max(abs(l1), 1.0):
+        lam = l1.real
+        u = (u0 + (w0 - lam * u0) * t) * np.exp(lam * t)
+        du = (w0 - lam * u0) * np.exp(lam * t) + lam * u
+        return u, du
+    b = (w0 - l1 * u0) / (l2 - l1)
+    a = u0 - b
+    e1, e2 = np.exp(l1 * t), np.exp(l2 * t)
+    return (a * e1 + b * e2).real, (a * l1 * e1 + b * l2 * e2).real
+
+
+def kepler_orbit(mu: float, r0: np.ndarray, w0: np.ndarray, t):
+    """Relative position and velocity (T, 2) of a bound two-body orbit in its plane.
+
+    Orbital elements from the start (``r0``, ``w0`` (2,)); Kepler's equation
+    ``E - e sin E = M`` solved by bisection on ``[M - e, M + e]`` (where its root lies),
+    70 halvings: to the last bit.
+    """
+    t = np.asarray(t, float)
+    r, speed2 = float(np.hypot(*r0)), float(w0 @ w0)
+    a = 1.0 / (2.0 / r - speed2 / mu)
+    h = float(r0[0] * w0[1] - r0[1] * w0[0])
+    rv = float(r0 @ w0)
+    e_vec = ((speed2 - mu / r) * r0 - rv * w0) / mu
+    e = float(np.hypot(*e_vec))
+    p = e_vec / e if e > 1e-10 else r0 / r
+    q = np.sign(h) * np.array([-p[1], p[0]])
+    n = math.sqrt(mu / a**3)
+    # start: eccentric anomaly of r0
+    cos_nu, sin_nu = float(r0 @ p) / r, float(r0 @ q) / r
+    e0 = math.atan2(math.sqrt(1 - e * e) * sin_nu, e + cos_nu)
+    m_anom = e0 - e * math.sin(e0) + n * t
+    lo, hi = m_anom - e - 1e-12, m_anom + e + 1e-12
+    for _ in range(70):
+        mid = 0.5 * (lo + hi)
+        above = mid - e * np.sin(mid) - m_anom > 0
+        hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
+    big_e = 0.5 * (lo + hi)
+    b = a * math.sqrt(1 - e * e)
+    denom = 1 - e * np.cos(big_e)
+    pos = (a * (np.cos(big_e) - e))[:, None] * p + (b * np.sin(big_e))[:, None] * q
+    vel = (-a * n * np.sin(big_e) / denom)[:, None] * p + (b * n * np.cos(big_e) / denom)[:, None] * q
+    return pos, vel
+
+
+def linear_springs(model, t):
+    """Zero-rest-length springs and anchors, no damping or gravity: a sum of normal modes.
+
+    ``M x'' = -K x + b`` per axis; ``x_eq = K^-1 b``; the modes of ``M^(-1/2) K M^(-1/2)``
+    (an eigendecomposition, not a matrix exponential). Returns x, v (T, n, 3).
+    """
+    n = len(model.mass)
+    K = np.zeros((n, n))
+    b = np.zeros((n, 3))
+    s, a = model.springs, model.anchors
+    for i, j, k in zip(s.i, s.j, s.stiffness, strict=True):
+        K[i, i] += k
+        K[j, j] += k
+        K[i, j] -= k
+        K[j, i] -= k
+    for i, point, k in zip(a.i, a.point, a.stiffness, strict=True):
+        K[i, i] += k
+        b[i] += k * point
+    inv_sqrt_m = 1.0 / np.sqrt(model.mass)
+    omega2, modes = np.linalg.eigh(K * inv_sqrt_m[:, None] * inv_sqrt_m[None, :])
+    omega = np.sqrt(omega2)
+    x_eq = np.linalg.solve(K, b)
+    t = np.asarray(t, float)
+    x = np.empty((len(t), n, 3))
+    v = np.empty((len(t), n, 3))
+    for d in range(3):
+        q0 = modes.T @ ((model.x0[:, d] - x_eq[:, d]) / inv_sqrt_m)
+        p0 = modes.T @ (model.v0[:, d] / inv_sqrt_m)
+        q = q0 * np.cos(np.outer(t, omega)) + p0 / omega * np.sin(np.outer(t, omega))
+        p = -q0 * omega * np.sin(np.outer(t, omega)) + p0 * np.cos(np.outer(t, omega))
+        x[:, :, d] = x_eq[:, d] + (q @ modes.T) * inv_sqrt_m
+        v[:, :, d] = (p @ modes.T) * inv_sqrt_m
+    return x, v
+
+
+def gravitation_reference(model, t_end: float):
+    """Final positions and velocities (n, 3) of point masses under gravitation alone:
+    ``solve_ivp`` (DOP853, rtol = atol = 1e-12) on a right-hand side written here."""
+    n = len(model.mass)
+    G, eps = model.gravitation.G, model.gravitation.softening
+    mass = np.asarray(model.mass, float)
+
+    def rhs(_t, y):
+        x = y[: 3 * n].reshape(n, 3)
+        d = x[None, :, :] - x[:, None, :]
+        r2 = np.sum(d * d, axis=2) + eps**2
+        np.fill_diagonal(r2, np.inf)
+        acc = G * np.sum(mass[None, :, None] * d / r2[:, :, None] ** 1.5, axis=1)
+        return np.concatenate([y[3 * n :], acc.ravel()])
+
+    y0 = np.concatenate([model.x0.ravel(), model.v0.ravel()])
+    sol = solve_ivp(rhs, (0.0, t_end), y0, method="DOP853", rtol=1e-12, atol=1e-12)
+    return sol.y[: 3 * n, -1].reshape(n, 3), sol.y[3 * n :, -1].reshape(n, 3)
+
+
+def bounce_times(h0: float, g: float, e: float, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """A point dropped from rest ``h0`` above a rigid floor: the first ``count`` bounce
+    times (s) and launch speeds (m/s): ``T_1 = sqrt(2 h0 / g)``, flights of ``2 e^k V / g``."""
+    speed = math.sqrt(2 * g * h0)
+    times, launches = [math.sqrt(2 * h0 / g)], [e * speed]
+    for _ in range(count - 1):
+        times.append(times[-1] + 2 * launches[-1] / g)
+        launches.append(e * launches[-1])
+    return np.array(times), np.array(launches)
+
+
+def bounce_height(h0: float, g: float, e: float, t):
+    """Height above the floor and normal velocity of that point, (T,) each: a chain of
+    parabolas, at rest after the last bounce (``e < 1``) at ``T_1 (1 + 2 e / (1 - e))``."""
+    t = np.asarray(t, float)
+    times, launches = bounce_times(h0, g, e, 400)
+    u = np.where(t < times[0], h0 - 0.5 * g * t**2, 0.0)
+    w = np.where(t < times[0], -g * t, 0.0)
+    for k in range(len(times) - 1):
+        s = t - times[k]
+        inside = (s >= 0) & (t < times[k + 1])
+        u = np.where(inside, launches[k] * s - 0.5 * g * s**2, u)
+        w = np.where(inside, launches[k] - g * s, w)
+    if e < 1:
+        rest = t >= times[0] * (1 + 2 * e / (1 - e))
+        u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
+    return u, w
+
+
+# -- flights and contacts, detected from samples ----------------------------------------------
+
+
+def flights(t, u, w, g: float) -> list[np.ndarray]:
+    """Runs of consecutive samples in free flight: both ends above the plane (``u > 0``)
+    and the normal velocity changed by exactly gravity's ``-g dt`` between them (to 1e-6
+    of a step's kick: nothing else pushed). Returns the sample indices of each run."""
+    t, u, w = map(np.asarray, (t, u, w))
+    dt = np.diff(t)
+    kick = np.abs(np.diff(w) + g * dt) <= 1e-6 * g * dt + 1e-12
+    free = kick & (u[:-1] > 0) & (u[1:] > 0)
+    runs, k = [], 0
+    while k < len(free):
+        if not free[k]:
+            k += 1
+            continue
+        j = k
+        while j < len(free) and free[j]:
+            j += 1
+        runs.append(np.arange(k, j + 1))
+        k = j
+    return runs
+
+
+def ballistic_fit(t, u, idx, g: float) -> dict[str, float]:
+    """The parabola of curvature ``-g`` through a flight's heights (least squares on
+    ``u + g s^2 / 2 = a + b s``, ``s`` the time from its first sample).
+
+    Every engine here moves a free body on such a parabola (exact schemes, and the
+    first-order ones too: their positions lie on it with a slope offset by ``+- g h / 2``
+    from their sampled velocities). Returns its vertex ``apex`` (m), the time it left
+    the plane (its earlier root, ``launch``, s), its slope at the first sample ``slope``
+    (m/s) and the largest residual (m), which says whether the flight is that parabola.
+    """
+    idx = np.asarray(idx)
+    s = t[idx] - t[idx[0]]
+    design = np.stack([np.ones_like(s), s], axis=1)
+    (a, b), *_ = np.linalg.lstsq(design, u[idx] + 0.5 * g * s**2, rcond=None)
+    residual = float(np.max(np.abs(design @ np.array([a, b]) - 0.5 * g * s**2 - u[idx])))
+    apex = a + b * b / (2 * g)
+    launch = float(t[idx[0]]) + (b - math.sqrt(max(b * b + 2 * g * a, 0.0))) / g
+    return {"apex": float(apex), "launch": launch, "slope": float(b), "residual": residual}
+
+
+# -- meshes -----------------------------------------------------------------------------------
+
+
+def closed_and_outward(faces: np.ndarray) -> bool:
+    """Every directed edge of the triangles appears once and its reverse once: a closed,
+    consistently oriented surface."""
+    directed = [(int(f[a]), int(f[(a + 1) % 3])) for f in faces for a in range(3)]
+    return len(set(directed)) == len(directed) and all((b, a) in set(directed)
+                                                        for a, b in directed)
+
+
+def enclosed_volume(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Volume (m^3) enclosed by triangles ``faces`` at positions ``x`` (T, n, 3): the cones
+    from the surface's own centroid, ``sum (a - c) . ((b - c) x (d - c)) / 6``."""
+    c = x.mean(axis=1, keepdims=True)
+    a, b, d = (x[:, faces[:, k]] - c for k in range(3))
+    return np.einsum("tki,tki->t", a, np.cross(b, d)) / 6.0
+
+
+# -- stability of one oscillator --------------------------------------------------------------
+
+
+def _one_step(scheme: str, m: float, k: float, c: float, h: float, y: np.ndarray) -> np.ndarray:
+    """One step of ``scheme`` on ``m x'' = -k x - c v`` from the state ``y``.
+
+    ``y = [x, v]``, or ``[x, v, a]`` for ``verlet``, whose step starts from the
+    acceleration its previous step ended with (``a`` at the new position and the
+    half-step velocity: the reuse its docstring describes).
+    """
+
+    def acc(x, v):
+        return (-k * x - c * v) / m
+
+    x, v = y[0], y[1]
+    if scheme in ("euler", "midpoint", "heun", "rk4"):
+        # on a linear system an explicit RK method of s = p <= 4 stages is the Taylor
+        # polynomial of order p of the exact flow exp(h A)
+        order = {"euler": 1, "midpoint": 2, "heun": 2, "rk4": 4}[scheme]
+        out, term = np.array([x, v]), np.array([x, v])
+        for j in range(1, order + 1):
+            term = h * np.array([term[1], acc(term[0], term[1])]) / j
+            out = out + term
+        return out
+    if scheme == "implicit-euler":  # [x', v'] = [x, v] + h f(x', v')
+        lhs = np.array([[1.0, -h], [h * k / m, 1.0 + h * c / m]])
+        return np.linalg.solve(lhs, np.array([x, v]))
+    if scheme == "symplectic-euler":  # velocity first; pybullet, MuJoCo Euler
+        v1 = v + h * acc(x, v)
+        return np.array([x + h * v1, v1])
+    if scheme == "lecture":
+        v1 = v + h * acc(x, v)
+        return np.array([x + 0.5 * h * (v + v1), v1])
+    if scheme == "verlet":
+        v_half = v + 0.5 * h * y[2]
+        x1 = x + h * v_half
+        a1 = acc(x1, v_half)
+        return np.array([x1, v_half + 0.5 * h * a1, a1])
+    if scheme == "pymunk":  # position first, spring kick, then the damper exactly
+        x1 = x + h * v
+        return np.array([x1, math.exp(-c * h / m) * (v - h * k * x1 / m)])
+    if scheme == "mujoco-implicit":  # (m + h c) (v' - v) = h (-k x - c v); x' = x + h v'
+        v1 = v + h * (-k * x - c * v) / (m + h * c)
+        return np.array([x + h * v1, v1])
+    raise KeyError(scheme)
+
+
+def step_matrix(scheme: str, m: float, k: float, c: float, h: float) -> np.ndarray:
+    """The linear map of one step of ``scheme`` (see :func:`_one_step`), column by column:
+    each engine's documented update applied to the unit states."""
+    n = 3 if scheme == "verlet" else 2
+    return np.stack([_one_step(scheme, m, k, c, h, e) for e in np.eye(n)], axis=1)
+
+
+def stable_limit(scheme: str, m: float, k: float, c: float) -> float:
+    """The largest step (s) at which ``scheme`` does not grow on ``m x'' = -k x - c v``:
+    spectral radius of :func:`step_matrix` at most 1 (to 1e-14).
+
+    Steps are searched in ``omega h`` from 1e-3 to 1e3 (``omega = sqrt(k / m)``): a log
+    grid of 400 finds the first growing step, bisection (60 halvings) its edge. Returns 0
+    when even ``omega h = 1e-3`` grows (explicit Euler, midpoint and the lecture's update
+    on an undamped oscillator grow by ``1 + O((omega h)^2)`` or ``1 + O((omega h)^4)``
+    at every step: at 1e-3 that is 1e-7 or 1e-13, above the round-off of a 2 x 2
+    eigenvalue), ``inf`` when none grows.
+    """
+    omega = math.sqrt(k / m)
+
+    def grows(h: float) -> bool:
+        return float(np.max(np.abs(np.linalg.eigvals(step_matrix(scheme, m, k, c, h))))) > 1 + 1e-14
+
+    grid = np.geomspace(1e-3, 1e3, 400) / omega
+    first = next((i for i, h in enumerate(grid) if grows(h)), None)
+    if first is None:
+        return math.inf
+    if first == 0:
+        return 0.0
+    a, b = grid[first - 1], grid[first]
+    for _ in range(60):
+        mid = 0.5 * (a + b)
+        a, b = (a, mid) if grows(mid) else (mid, b)
+    return float(a)
+
+
+def highest_frequency(model) -> float:
+    """``omega_max`` (rad/s) of springs and anchors of zero rest length, or of rest length
+    met at the start along their line (stiffness ``k u u^T``): the largest eigenvalue of
+    ``M^(-1/2) K M^(-1/2)`` over the free particles' coordinates."""
+    n = len(model.mass)
+    K = np.zeros((3 * n, 3 * n))
+
+    def add(i, j, k, d, rest):
+        u = d / np.linalg.norm(d)
+        block = k * (np.eye(3) if rest == 0 else np.outer(u, u))
+        K[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += block
+        if j is not None:
+            K[3 * j : 3 * j + 3, 3 * j : 3 * j + 3] += block
+            K[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] -= block
+            K[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] -= block
+
+    s, a = model.springs, model.anchors
+    for i, j, k, r in zip(s.i, s.j, s.stiffness, s.rest, strict=True):
+        add(i, j, k, model.x0[i] - model.x0[j], r)
+    for i, p, k, r in zip(a.i, a.point, a.stiffness, a.rest, strict=True):
+        add(i, None, k, model.x0[i] - p, r)
+    free = np.repeat(~np.asarray(model.fixed), 3)
+    if model.dimension == 2:
+        free &= np.tile([True, True, False], n)
+    w = 1.0 / np.sqrt(np.repeat(model.mass, 3)[free])
+    Kf = K[np.ix_(free, free)] * w[:, None] * w[None, :]
+    return float(np.sqrt(np.max(np.linalg.eigvalsh(Kf))))
+
+
+# -- emitters ---------------------------------------------------------------------------------
+
+
+def lives(alive: np.ndarray) -> list[tuple[int, int, int]]:
+    """Every particle life as (slot, first record, last record): a maximal run of records
+    in which one slot is alive."""
+    out = []
+    for slot in range(alive.shape[1]):
+        col = alive[:, slot]
+        k = 0
+        while k < len(col):
+            if col[k]:
+                j = k
+                while j + 1 < len(col) and col[j + 1]:
+                    j += 1
+                out.append((slot, k, j))
+                k = j + 1
+            else:
+                k += 1
+    return out
+
+
+def spawn_moments(n: float, r: float, samples: int = 400_000) -> tuple[float, float]:
+    """Mean and variance of ``floor(X + U')`` with ``X = n + U r`` (``U``, ``U'`` uniform on
+    [0, 1)): given ``X`` the count is ``floor(X)`` plus a coin of probability ``frac(X)``,
+    so ``E = E[X]`` and ``Var = Var X + E[frac (1 - frac)]``, integrated here by the
+    midpoint rule over ``U`` (``samples`` points)."""
+    u = (np.arange(samples) + 0.5) / samples
+    xs = n + u * r
+    frac = xs - np.floor(xs)
+    return float(xs.mean()), float(xs.var() + np.mean(frac * (1 - frac)))
+
+
+def population_null(sampled_frames: np.ndarray, n: float, r: float, lifetimes: np.ndarray,
+                    reps: int, seed: int) -> np.ndarray:
+    """Monte Carlo of the summed live population at ``sampled_frames``: every frame ``i``
+    spawns ``floor(n + U r + U')`` particles, each living ``L`` frames (uniform over
+    ``lifetimes``) and counted at the sampled frames in ``i .. i + L - 1``. Returns the
+    ``reps`` sums."""
+    rng = np.random.default_rng(seed)
+    last = int(sampled_frames.max())
+    frames = np.arange(last + 1)
+    counts = np.floor(n + rng.random((reps, len(frames))) * r + rng.random((reps, len(frames))))
+    counts = counts.astype(int)
+    sampled = np.zeros(last + 1 + int(lifetimes.max()) + 1, int)
+    sampled[sampled_frames] = 1
+    cum = np.concatenate([[0], np.cumsum(sampled)])
+    totals = np.zeros(reps)
+    for i in frames:
+        k = counts[:, i]
+        draws = rng.choice(lifetimes, size=(reps, int(k.max()) if k.max() > 0 else 0))
+        mask = np.arange(draws.shape[1])[None, :] < k[:, None]
+        seen = cum[np.minimum(i + draws, len(cum) - 1)] - cum[i]  # frames i .. i + L - 1
+        totals += np.sum(np.where(mask, seen, 0), axis=1)
+    return totals
