@@ -21,6 +21,7 @@ import numpy as np
 from truestep.cases.case import Case
 from truestep.reference_impl.integrate import BLOWUP, record_indices
 from truestep.reference_impl.particles import total_energy
+from truestep.reference_impl.solvers import MethodFacts, get_solver
 
 STATUSES = ("ok", "unstable", "crashed", "timeout", "unsupported", "skipped")
 
@@ -97,9 +98,14 @@ class Adapter(Protocol):
     6. be constructible with no arguments (the harness makes one per run);
     7. optionally, ``duplicate(case, method)``: the reason a method would compute bit for
        bit what another of its methods computes on ``case`` (the harness then skips it
-       with that reason), or ``None``; and ``schemes``, a mapping from a method to the
-       reference method whose stability region it shares (``"verlet"``,
-       ``"symplectic-euler"``, ``"rk4"`` ...), for exact stability limits.
+       with that reason), or ``None``;
+    8. optionally, declare the facts of its methods (order, evaluations per step,
+       symplectic, stability data: :class:`~truestep.reference_impl.solvers.MethodFacts`),
+       which the harness uses for declared-order gates, exact stability limits and
+       ``nfev``: ``method_facts``, a mapping from a method to its ``MethodFacts`` or to
+       the name of the reference method whose facts it shares (``"verlet"``,
+       ``"symplectic-euler"``, ``"rk4"`` ...); ``schemes``, a mapping to such names only,
+       is read too (:func:`facts_of`).
 
     :class:`FixedStepAdapter` does 2 to 4 for an engine that steps a particle scene.
     """
@@ -116,6 +122,37 @@ class Adapter(Protocol):
     def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
         """Run ``case`` with ``method`` at step (or tolerance) ``dt``."""
         ...
+
+
+FactsSpec = MethodFacts | str
+"""A method's facts as an adapter declares them: a record, or the name of the reference
+method whose facts it shares."""
+
+
+def resolve_facts(spec: FactsSpec | None) -> MethodFacts | None:
+    """A declared :data:`FactsSpec` as a record (a name is a reference method's)."""
+    if spec is None or isinstance(spec, MethodFacts):
+        return spec
+    return get_solver(spec).facts
+
+
+def facts_of(adapter: Any, method: str) -> MethodFacts | None:
+    """The declared facts of an adapter's method, or ``None`` if it declares none.
+
+    Read from the adapter's ``method_facts`` (a record or a reference method's name),
+    else from its ``schemes`` (a reference method's name, the spelling that declares the
+    facts a method shares with one). A name that is no reference method raises
+    ``KeyError`` naming the adapter, the attribute and the method.
+    """
+    for attribute in ("method_facts", "schemes"):
+        declared = getattr(adapter, attribute, None) or {}
+        if method in declared:
+            try:
+                return resolve_facts(declared[method])
+            except KeyError as err:
+                name = getattr(adapter, "name", type(adapter).__name__)
+                raise KeyError(f"{name}: {attribute}[{method!r}]: {err.args[0]}") from None
+    return None
 
 
 def finite_until(x: np.ndarray, t: np.ndarray, limit: float = BLOWUP) -> tuple[str, float | None]:
@@ -171,9 +208,11 @@ class FixedStepAdapter(abc.ABC):
        copied when kept).
 
     and, if it needs to, :meth:`close` (free the scene), :meth:`notes` (a message for
-    the table), :attr:`evaluations_per_step` (force evaluations per step of a method,
-    default 1) and :meth:`snapshot` / :meth:`unpack` (keep a cheap form of a state in
-    the timed loop and turn the kept states into arrays after it).
+    the table), :attr:`method_facts` (each method's facts, see :class:`Adapter`; its
+    evaluations per step make ``nfev``), :attr:`evaluations_per_step` (force
+    evaluations per step where the facts do not say) and :meth:`snapshot` /
+    :meth:`unpack` (keep a cheap form of a state in the timed loop and turn the kept
+    states into arrays after it).
 
     :meth:`simulate` then checks the method and the case's features, builds the scene
     outside the timed region, steps it to ``case.duration`` reading the state back at
@@ -188,14 +227,27 @@ class FixedStepAdapter(abc.ABC):
     methods: ClassVar[tuple[str, ...]]
     adaptive_methods: ClassVar[tuple[str, ...]] = ()
     capabilities: ClassVar[frozenset[str]]
+    method_facts: ClassVar[Mapping[str, FactsSpec]] = MappingProxyType({})
+    """Each method's :class:`MethodFacts`, or the reference method whose facts it shares."""
     evaluations_per_step: ClassVar[Mapping[str, int]] = MappingProxyType({})
-    """Force evaluations one step of a method makes (default 1): ``nfev`` counts them."""
+    """Force evaluations one step of a method makes, for a method whose facts do not
+    say (:meth:`evaluations`)."""
     check_every: ClassVar[int] = 64
     """Steps between blow-up checks: a blown-up run stops within this many steps."""
 
     def missing(self, case: Case, method: str) -> set[str]:
         """Features of ``case`` beyond :attr:`capabilities`."""
         return set(case.features) - self.capabilities
+
+    def evaluations(self, method: str) -> int:
+        """Force evaluations per step of ``method``: :attr:`evaluations_per_step` where it
+        names the method, else the method's declared facts (:func:`facts_of`), else 1."""
+        if method in self.evaluations_per_step:
+            return int(self.evaluations_per_step[method])
+        facts = facts_of(self, method)
+        if facts is not None and facts.evaluations_per_step is not None:
+            return facts.evaluations_per_step
+        return 1
 
     def require(self, case: Case, method: str) -> None:
         """Raise ``ValueError`` for a method this adapter lacks or a case it cannot model."""
@@ -297,6 +349,6 @@ class FixedStepAdapter(abc.ABC):
             energy = total_energy(case.model, rec.x, rec.v)
         return Trajectory(
             t=rec.t, x=rec.x, v=rec.v, energy=energy, status=status, t_fail=t_fail,
-            nfev=rec.steps * int(self.evaluations_per_step.get(method, 1)), steps=rec.steps,
+            nfev=rec.steps * self.evaluations(method), steps=rec.steps,
             wall_s=rec.wall_s, message="; ".join(notes),
         )

@@ -167,11 +167,12 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
-from truestep.adapters.base import FixedStepAdapter, Recording
+from truestep.adapters.base import FactsSpec, FixedStepAdapter, Recording, resolve_facts
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
 from truestep.reference_impl.integrate import record_indices
 from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.solvers import MethodFacts, Stability
 
 INTEGRATORS: dict[str, int] = {
     "Euler": int(mujoco.mjtIntegrator.mjINT_EULER),
@@ -181,8 +182,33 @@ INTEGRATORS: dict[str, int] = {
 }
 """Method name (the MJCF ``<option integrator>`` value) -> ``mjtIntegrator``."""
 
-EVALUATIONS_PER_STEP = {"Euler": 1, "implicit": 1, "implicitfast": 1, "RK4": 4}
-"""Force evaluations MuJoCo makes per step: ``nfev`` is steps times this."""
+def implicit_damper_step(a: float, b: float) -> np.ndarray:
+    """``implicit``/``implicitfast`` on the linear test system: the velocity update is
+    implicit in the velocity derivatives of the forces (the damper), explicit in the
+    positions, then ``q' = q + h v'``: ``h v' = (h v - a q) / (1 + b)``."""
+    return np.array([[1.0 - a / (1.0 + b), 1.0 / (1.0 + b)], [-a / (1.0 + b), 1.0 / (1.0 + b)]])
+
+
+IMPLICIT_FACTS = MethodFacts(order=1, evaluations_per_step=1, symplectic=True,
+                             stability=Stability(imaginary=2.0, real=float("inf"),
+                                                 step_matrix=implicit_damper_step))
+"""``implicit`` and ``implicitfast``: the velocity update is implicit in the forces'
+velocity derivatives (every damper); without dampers it is the same step as ``Euler``."""
+
+METHOD_FACTS: dict[str, FactsSpec] = {
+    "Euler": "symplectic-euler",
+    "implicit": IMPLICIT_FACTS,
+    "implicitfast": IMPLICIT_FACTS,
+    "RK4": "rk4",
+}
+"""The facts of each integrator (MuJoCo's documentation, "Numerical integration").
+``Euler`` is semi-implicit Euler, velocity first: the reference's ``symplectic-euler``
+for springs and their dampers (tendon damping is explicit in it; only joint damping, the
+drag here, is implicit). ``RK4`` is the classical RK4, with every force at every stage."""
+
+EVALUATIONS_PER_STEP = {m: resolve_facts(f).evaluations_per_step for m, f in METHOD_FACTS.items()}
+"""Force evaluations MuJoCo makes per step (from :data:`METHOD_FACTS`): ``nfev`` is steps
+times this."""
 
 POINT_RADIUS = 1e-6
 """Sphere radius (m) for a point particle (radius 0): small enough that the contact
@@ -513,12 +539,7 @@ class MujocoAdapter(FixedStepAdapter):
 
     name = "mujoco"
     methods = tuple(INTEGRATORS)
-    evaluations_per_step = EVALUATIONS_PER_STEP
-    schemes: ClassVar[dict[str, str]] = {"Euler": "symplectic-euler", "implicit": "symplectic-euler",
-               "implicitfast": "symplectic-euler", "RK4": "rk4"}
-    """The reference scheme each integrator equals on an undamped spring scene (used for
-    exact stability limits): Euler updates velocity then position; the implicit variants
-    add only velocity derivatives (damping), so without damping they are the same step."""
+    method_facts: ClassVar[dict[str, FactsSpec]] = METHOD_FACTS
     capabilities = frozenset(
         {
             "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",

@@ -387,9 +387,10 @@ class PybulletAdapter(FixedStepAdapter):
 
     name = "pybullet"
     methods = ("default", "clean")
-    schemes: ClassVar[dict[str, str]] = {"default": "symplectic-euler", "clean": "symplectic-euler"}
-    """Bullet steps velocity then position (semi-implicit Euler), the reference's
-    symplectic Euler, with forces held at the start of the step."""
+    method_facts: ClassVar[dict[str, str]] = {"default": "symplectic-euler",
+                                               "clean": "symplectic-euler"}
+    """Bullet steps velocity then position (semi-implicit Euler) with the numpy forces,
+    dampers included, held at the start of the step: the reference's symplectic Euler."""
     capabilities = frozenset(
         {
             "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",

@@ -106,6 +106,7 @@ from truestep.cases.case import Case
 from truestep.reference_impl import forces
 from truestep.reference_impl.integrate import BLOWUP
 from truestep.reference_impl.model import ParticleModel
+from truestep.reference_impl.solvers import MethodFacts, Stability
 
 PLANE_HALF_LENGTH = 1.0e3
 """Half-length of a plane's segment, m, centred on the scene's centre projected onto it."""
@@ -224,15 +225,26 @@ def _plane_segment(
     return seg
 
 
+def exact_damper_step(a: float, b: float) -> np.ndarray:
+    """One ``space.step`` on the linear test system (one particle on one anchored damped
+    spring, along it; see the module docstring): ``q' = q + h v``, then
+    ``h v' = exp(-b) (h v - a q')``, the damper's decay applied exactly after the kick."""
+    decay = np.exp(-b)
+    return np.array([[1.0, 1.0], [-decay * a, decay * (1.0 - a)]])
+
+
 class PymunkAdapter(FixedStepAdapter):
     """pymunk's own integrator on 2-D particle scenes (see the module docstring)."""
 
     name = "pymunk"
     methods = ("default",)
     adaptive_methods = ()
-    schemes: ClassVar[dict[str, str]] = {"default": "symplectic-euler"}
+    method_facts: ClassVar[dict[str, MethodFacts]] = {"default": MethodFacts(
+        order=1, evaluations_per_step=1, symplectic=True,
+        stability=Stability(imaginary=2.0, real=float("inf"), step_matrix=exact_damper_step))}
     """Position first, then velocity from forces at the new position: the adjoint of the
-    reference's symplectic Euler, with the same stability region (``omega dt < 2``)."""
+    reference's symplectic Euler, first order and symplectic, stable for ``omega h < 2``
+    undamped; a spring's damper is integrated exactly (:func:`exact_damper_step`)."""
     capabilities = frozenset(
         {
             "point-masses", "2d", "uniform-gravity", "drag", "springs", "spring-damping",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from types import MappingProxyType
 
 import numpy as np
 
@@ -53,13 +54,12 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
 
     The same formulas as :class:`ParticleSystem` with :class:`LectureUpdate` and the
     plane-collision pass (tested equal to round-off), every step and record in one
-    call, on one thread: the engines step on one core, and so does this comparison (the
-    kernel's multi-core throughput is measured in ``benchmarks/test_particle_step.py``).
+    call, on one thread (the serial build of the kernel): the engines step on one core,
+    and so does this comparison; and a process that ran it may still fork. The kernel's
+    multi-core throughput is measured in ``benchmarks/test_particle_step.py``.
     """
-    import numba
-
     from truestep.reference_impl.integrate import record_indices
-    from truestep.reference_impl.kernels import rain_run
+    from truestep.reference_impl.kernels import rain_run_serial
 
     m = case.model
     system = ParticleSystem(m, passes_for(m))
@@ -71,16 +71,11 @@ def simulate_fused_rain(case: Case, dt: float) -> Trajectory:
     xs, vs = np.empty((len(marks), m.n, 3)), np.empty((len(marks), m.n, 3))
     xs[0], vs[0] = x, v
     stretches = np.diff(marks)
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        start = time.perf_counter()
-        rain_run(x, v, contact, step, m.gravity, float(m.drag), float(m.mass[0]),
-                 float(m.radius[0]), plane.point, plane.normal, float(plane.restitution),
-                 stretches, xs[1:], vs[1:])
-        wall = time.perf_counter() - start
-    finally:
-        numba.set_num_threads(threads)
+    start = time.perf_counter()
+    rain_run_serial(x, v, contact, step, m.gravity, float(m.drag), float(m.mass[0]),
+                    float(m.radius[0]), plane.point, plane.normal, float(plane.restitution),
+                    stretches, xs[1:], vs[1:])
+    wall = time.perf_counter() - start
     t = marks * step
     status, t_fail = finite_until(xs, t)
     energy = total_energy(m, xs, vs)
@@ -95,6 +90,8 @@ class ReferenceAdapter:
     name = "reference"
     methods = tuple(METHODS)
     adaptive_methods = tuple(m for m, cls in METHODS.items() if cls.adaptive)
+    method_facts = MappingProxyType({m: cls.facts for m, cls in METHODS.items()})
+    """Each solver's own facts (its class attribute ``facts``)."""
     capabilities = frozenset(
         {
             "ode", "second-order", "point-masses", "2d", "3d", "uniform-gravity", "drag",

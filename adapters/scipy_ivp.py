@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from types import MappingProxyType
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -11,6 +12,9 @@ from truestep.adapters.base import Trajectory, finite_until
 from truestep.adapters.reference import build_system, trajectory_from_states
 from truestep.cases.case import Case
 from truestep.reference_impl.particles import total_energy
+from truestep.reference_impl.solvers import MethodFacts, Stability
+
+INF = float("inf")
 
 
 class ScipyAdapter:
@@ -24,6 +28,18 @@ class ScipyAdapter:
     name = "scipy"
     methods = ("RK45", "DOP853", "Radau")
     adaptive_methods = methods
+    method_facts = MappingProxyType({
+        "RK45": "dopri5",
+        "DOP853": MethodFacts(order=8, evaluations_per_step=12, symplectic=False),
+        "Radau": MethodFacts(order=5, evaluations_per_step=None, symplectic=False,
+                             stability=Stability(imaginary=INF, real=INF, a_stable=True)),
+    })
+    """From scipy's documentation and sources (``scipy/integrate/_ivp``): ``RK45`` is
+    Dormand-Prince 5(4), the reference's ``dopri5`` tableau (six evaluations per accepted
+    step, first same as last); ``DOP853`` is Dormand-Prince 8(5,3), twelve stages with
+    the last reused; ``Radau`` is the three-stage Radau IIA of order 5, A- and L-stable,
+    whose evaluations follow its Newton iterations. All three choose their own steps:
+    their stability data never give a step limit here."""
     capabilities = frozenset(
         {
             "ode", "second-order", "point-masses", "2d", "3d", "uniform-gravity", "drag",

@@ -9,7 +9,6 @@ import numpy as np
 
 from truestep.reference_impl.model import ParticleModel
 
-
 FAMILIES: dict[str, str] = {
     "orbit": "orbits and plain ODEs",
     "oscillator": "oscillators",

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from truestep.cases.case import Case
+from truestep.reference_impl.solvers import MethodFacts, get_solver
 
 
 @dataclass
@@ -219,40 +220,31 @@ def linear_modes(case: Case) -> tuple[float, float] | None:
     return omega_max, zeta
 
 
-def stability_limit(case: Case, scheme: str | None) -> float | None:
-    """The exact largest stable step (s) of an integration scheme on a linear scene.
+def stability_limit(case: Case, method: MethodFacts | str | None) -> float | None:
+    """The exact largest stable step (s) of a method on a linear scene.
 
-    ``0.0`` means unstable at every step, ``inf`` stable at every step, ``None`` unknown.
-    Undamped (``dt * omega_max`` on the imaginary axis of each method's stability region):
-    symplectic Euler and velocity Verlet ``2 / omega`` (trace of the step matrix
-    ``2 - (omega dt)^2`` must stay above -2); RK4 ``2 sqrt(2) / omega`` (where
-    ``|R(i y)|^2 = 1 - y^6/72 + y^8/576`` returns to 1); explicit Euler
-    (``|1 + i y|^2 = 1 + y^2``), midpoint and Heun (``1 + y^4/4``) never; the lecture's
-    update never: its step matrix ``[[1 - y^2/2, dt], [-omega^2 dt, 1]]`` has determinant
-    ``1 + y^2/2 > 1``; implicit Euler always. With damping ratio ``zeta``, explicit Euler
-    is stable while ``|1 + z|^2 = 1 - 2 zeta y + y^2 < 1``: ``dt < 2 zeta / omega``.
+    ``method`` is the method's :class:`~truestep.reference_impl.solvers.MethodFacts` (an
+    engine's, :func:`truestep.adapters.base.facts_of`) or the name of a reference method.
+    ``0.0`` means unstable at every step, ``inf`` stable at every step, ``None`` unknown
+    (not a linear scene, several damped springs, or no stability data declared).
+
+    From the scene's fastest mode (:func:`linear_modes`: ``omega_max`` and its damping
+    ratio ``zeta``) and the method's stability data: the step is stable while
+    ``omega_max h`` stays below the method's reach on a mode of that damping ratio,
+    :meth:`~truestep.reference_impl.solvers.Stability.reach` (undamped: its interval on
+    the imaginary axis, e.g. ``2 / omega`` for symplectic Euler and Verlet,
+    ``2 sqrt(2) / omega`` for RK4, none for explicit Euler; damped: where its step
+    matrix's spectral radius reaches 1, e.g. ``2 zeta / omega`` for explicit Euler).
     """
     modes = linear_modes(case)
-    if modes is None or scheme is None:
+    facts = get_solver(method).facts if isinstance(method, str) else method
+    if modes is None or facts is None or facts.stability is None:
         return None
     omega, zeta = modes
     if omega == 0:
         return None
-    if scheme == "implicit-euler":
-        return float("inf")
-    if zeta == 0.0:
-        return {
-            "symplectic-euler": 2.0 / omega,
-            "verlet": 2.0 / omega,
-            "rk4": 2.0 * np.sqrt(2.0) / omega,
-            "euler": 0.0,
-            "midpoint": 0.0,
-            "heun": 0.0,
-            "lecture": 0.0,
-        }.get(scheme)
-    if scheme == "euler" and np.isfinite(zeta) and zeta < 1:
-        return 2.0 * zeta / omega
-    return None
+    reach = facts.stability.reach(zeta)
+    return None if reach is None else reach / omega
 
 
 @exact_solution("linear")

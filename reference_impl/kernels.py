@@ -108,8 +108,7 @@ def step_block(
                 V[2, j] = wz + (vn_new - vn) * nz
 
 
-@njit(parallel=True, cache=True)
-def rain_run(
+def _rain_run(
     x: np.ndarray,
     v: np.ndarray,
     contact: np.ndarray,
@@ -173,6 +172,13 @@ def rain_run(
                 v[lo + j, c] = V[c, j]
             contact[lo + j] = C[j] > 0.0
 
+
+rain_run = njit(parallel=True, cache=True)(_rain_run)
+"""The run on every core (blocks of particles in parallel): the benchmarks' throughput."""
+rain_run_serial = njit(cache=True)(_rain_run)
+"""The same loops on one thread. A process that has started numba's parallel layer must
+not fork (its children are killed on their first parallel loop); the serial kernel
+starts nothing, so the harness, which forks a process per run, uses it."""
 
 _NO_RECORDS = np.zeros((0, 0, 3))
 

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.adapters import get_adapter
+from truestep.adapters.base import facts_of
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
 from truestep.isolation import run_isolated_all, untimed_workers
@@ -34,15 +35,6 @@ BALL_RADIUS = 0.05
 DROP_HEIGHT = 1.0
 GRAVITY = 9.81
 BOUNCES = 3
-
-
-def scheme_of(engine: str, method: str) -> str | None:
-    """The integration scheme an engine's method amounts to, for exact stability limits."""
-    adapter = get_adapter(engine)
-    schemes = getattr(adapter, "schemes", None)
-    if schemes is not None:
-        return schemes.get(method)
-    return method if engine == "reference" else None
 
 
 def _search(engine: str, case: Case, method: str, quick: bool):
@@ -73,11 +65,12 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
             for method in adapter.methods:
                 row = {"case": case.name, "engine": engine, "method": method}
                 missing = adapter.missing(case, method)
-                exact = stability_limit(case, scheme_of(engine, method))
+                adaptive = method in adapter.adaptive_methods
+                exact = None if adaptive else stability_limit(case, facts_of(adapter, method))
                 row["dt_limit_exact"] = np.nan if exact is None else exact
                 if missing:
                     rows.append({**row, "status": "unsupported", "note": ",".join(sorted(missing))})
-                elif method in adapter.adaptive_methods:
+                elif adaptive:
                     rows.append({**row, "status": "skipped",
                                  "note": "adaptive: chooses its own step"})
                 elif (same := duplicate_of(adapter, case, method)) is not None:
@@ -202,13 +195,16 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
 
 def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *,
                  quick: bool) -> dict[str, pd.DataFrame]:
-    """Every table besides ``results``: ``stability`` and ``restitution``.
+    """Every table besides ``results``: ``stability`` (for the cases with a search) and
+    ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty).
 
     Neither is timed: their runs share the machine's cores (:func:`untimed_workers`).
     """
     preload()
     workers = untimed_workers()
+    bouncing = any("restitution" in c.tags for c in cases)
     return {
         "stability": stability_table(cases, engines, quick=quick, workers=workers),
-        "restitution": restitution_table(engines, quick=quick, workers=workers),
+        "restitution": restitution_table(engines, quick=quick, workers=workers) if bouncing
+        else pd.DataFrame(columns=RESTITUTION_COLUMNS),
     }

@@ -186,9 +186,9 @@ def preload() -> None:
     compiled spring loop of the reference implementation (the engine modules are
     imported by :func:`plan`).
 
-    Not the parallel rain kernel: compiling it starts numba's OpenMP layer, and a
-    process that has done so must not fork (its children are killed on their first
-    parallel loop); the few runs that use it load it themselves.
+    Never the parallel build of the rain kernel: running it starts numba's parallel
+    layer, and a process that has done so must not fork (its children are killed on
+    their first parallel loop); the harness runs its serial build.
     """
     from truestep.reference_impl.forces import compile_springs
 

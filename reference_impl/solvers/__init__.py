@@ -1,4 +1,5 @@
-"""The reference solvers, registered under the method names of DESIGN.md."""
+"""The reference solvers, registered under the method names of DESIGN.md; each carries
+its :class:`MethodFacts` as ``facts``."""
 
 from __future__ import annotations
 
@@ -11,7 +12,10 @@ from truestep.reference_impl.solvers.explicit_rk import (
     Heun,
     Midpoint,
     rk_stages,
+    stability_polynomial,
+    tableau_stability,
 )
+from truestep.reference_impl.solvers.facts import MethodFacts, Stability, StepMatrix
 from truestep.reference_impl.solvers.implicit import ImplicitEuler
 from truestep.reference_impl.solvers.splitting import LectureUpdate, SymplecticEuler, VelocityVerlet
 
@@ -51,10 +55,15 @@ __all__ = [
     "Heun",
     "ImplicitEuler",
     "LectureUpdate",
+    "MethodFacts",
     "Midpoint",
     "Solver",
+    "Stability",
+    "StepMatrix",
     "SymplecticEuler",
     "VelocityVerlet",
     "get_solver",
     "rk_stages",
+    "stability_polynomial",
+    "tableau_stability",
 ]

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import ClassVar
 
 import numpy as np
 
+from truestep.reference_impl.solvers.facts import MethodFacts
 from truestep.reference_impl.system import SecondOrderSystem, System
 
 
@@ -19,13 +21,24 @@ class Solver(ABC):
     2. evaluate the right-hand side only through :meth:`fun` (or :meth:`accel` for
        second-order systems), so that :attr:`nfev` counts every evaluation;
     3. set ``adaptive = True`` if it chooses its own step sizes; then :meth:`step` takes
-       the largest step it may try and returns the step it actually took.
+       the largest step it may try and returns the step it actually took;
+    4. declare its :class:`~truestep.reference_impl.solvers.facts.MethodFacts` as the
+       class attribute ``facts`` (order, evaluations per step, symplectic, stability);
+       ``order`` is set from it.
     """
 
     name: str = ""
-    order: int = 0
+    facts: ClassVar[MethodFacts]
+    order: ClassVar[int] = 0
+    """``facts.order``, set when a subclass declares its facts."""
     adaptive: bool = False
     needs_second_order: bool = False
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        facts = cls.__dict__.get("facts")
+        if facts is not None:
+            cls.order = facts.order
 
     def __init__(self, system: System) -> None:
         if self.needs_second_order and not isinstance(system, SecondOrderSystem):

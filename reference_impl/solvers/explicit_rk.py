@@ -2,7 +2,8 @@
 
 Euler, midpoint, Heun and classical RK4 are fixed-step tableaux; Dormand-Prince 5(4)
 adds an embedded error estimate and a step-size controller. Every method is stepped by
-:func:`rk_stages`, so a new method is a new tableau, not new code.
+:func:`rk_stages`, so a new method is a new tableau, not new code; its stability follows
+from the tableau too (:func:`tableau_stability`).
 """
 
 from __future__ import annotations
@@ -10,8 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numpy.polynomial import Polynomial
 
 from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.facts import MethodFacts, Stability, StepMatrix
 from truestep.reference_impl.system import System
 
 Stages = tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
@@ -53,11 +56,81 @@ def rk_stages(
     return k
 
 
+def stability_polynomial(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Coefficients ``gamma_k``, ``k = 0..s``, of the stability function of an explicit
+    tableau (``a`` strictly lower triangular ``(s, s)``, weights ``b`` ``(s,)``):
+    ``R(z) = 1 + z b^T (I - z a)^-1 1 = sum_k gamma_k z^k`` with ``gamma_0 = 1`` and
+    ``gamma_k = b^T a^(k-1) 1`` (``a`` is nilpotent, so the series ends at ``z^s``).
+    One step on ``y' = lambda y`` multiplies ``y`` by ``R(lambda h)``."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    gamma, ones = [1.0], np.ones(len(b))
+    for _ in range(len(b)):
+        gamma.append(float(b @ ones))
+        ones = a @ ones
+    return np.array(gamma)
+
+
+def polynomial_step_matrix(gamma: np.ndarray) -> StepMatrix:
+    """The step matrix ``R(Z)`` of a method with stability polynomial ``gamma`` on the
+    linear test system: ``Z = [[0, 1], [-a, -b]]`` is ``h`` times its right-hand side on
+    ``(q, h v)``."""
+    coefficients = tuple(float(g) for g in gamma)
+
+    def step(a: float, b: float) -> np.ndarray:
+        z = np.array([[0.0, 1.0], [-a, -b]])
+        m, power = np.zeros((2, 2)), np.eye(2)
+        for g in coefficients:
+            m += g * power
+            power = power @ z
+        return m
+
+    return step
+
+
+def _first_crossing(f: Polynomial, candidates: np.ndarray) -> float:
+    """The smallest positive real candidate root past which ``f`` is positive, or inf."""
+    real = np.sort(candidates.real[(np.abs(candidates.imag) <= 1e-9 * np.abs(candidates))
+                                   & (candidates.real > 0)])
+    for r in real:
+        if f(r * (1 + 1e-7)) > 0:
+            return float(r)
+    return float("inf")
+
+
+def tableau_stability(a: np.ndarray, b: np.ndarray, order: int) -> Stability:
+    """The stability data of an explicit tableau of the given order, from ``R(z)``.
+
+    ``imaginary``: the first ``y > 0`` where ``|R(i y)|^2 - 1`` turns positive (``0.0``
+    when it is positive for small ``y``). By the order conditions ``R(z) = e^z +
+    O(z^(order+1))``, so that polynomial in ``y`` has no terms of degree up to ``order``;
+    those coefficients are the tableau's round-off and are dropped before its roots are
+    taken. ``real``: the first ``x > 0`` where ``|R(-x)|`` exceeds 1, a root of
+    ``R(-x) - 1`` (divided by ``x``) or of ``R(-x) + 1``.
+    """
+    gamma = stability_polynomial(a, b)
+    k = np.arange(len(gamma))
+    on_imaginary = Polynomial(gamma * (1j) ** k)
+    f = Polynomial(on_imaginary.coef.real) ** 2 + Polynomial(on_imaginary.coef.imag) ** 2 - 1
+    coef = f.coef.copy()
+    coef[: order + 1] = 0.0
+    low = int(np.flatnonzero(coef)[0])
+    if coef[low] > 0:
+        imaginary = 0.0
+    else:
+        imaginary = _first_crossing(Polynomial(coef), Polynomial(coef[low:]).roots())
+    on_real = Polynomial(gamma * (-1.0) ** k)
+    grows = Polynomial((on_real**2 - 1).coef)
+    candidates = np.concatenate([Polynomial(on_real.coef[1:]).roots(), (on_real + 1).roots()])
+    real = _first_crossing(grows, candidates)
+    return Stability(imaginary=imaginary, real=real, step_matrix=polynomial_step_matrix(gamma))
+
+
 class ExplicitRungeKutta(Solver):
     """A fixed-step explicit Runge-Kutta method given by its tableau.
 
     Subclasses set ``A`` (``(s, s)``, strictly lower triangular), ``B`` (``(s,)``) and
-    ``order``; ``C`` is derived as the row sums of ``A``.
+    ``facts`` (the order, ``s`` evaluations per step, and the stability the tableau
+    gives, :func:`tableau_stability`); ``C`` is derived as the row sums of ``A``.
     """
 
     A: np.ndarray
@@ -84,34 +157,36 @@ class Euler(ExplicitRungeKutta):
     """Explicit Euler, ``x' = x + h f(x, t)``: the lecture's first method, order 1."""
 
     name = "euler"
-    order = 1
     A = np.array([[0.0]])
     B = np.array([1.0])
+    facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=False,
+                        stability=tableau_stability(A, B, order=1))
 
 
 class Midpoint(ExplicitRungeKutta):
     """The lecture's midpoint method: an Euler half step, then the midpoint slope; order 2."""
 
     name = "midpoint"
-    order = 2
     A = np.array([[0.0, 0.0], [0.5, 0.0]])
     B = np.array([0.0, 1.0])
+    facts = MethodFacts(order=2, evaluations_per_step=2, symplectic=False,
+                        stability=tableau_stability(A, B, order=2))
 
 
 class Heun(ExplicitRungeKutta):
     """Heun's method (explicit trapezoid): average of the slopes at both ends; order 2."""
 
     name = "heun"
-    order = 2
     A = np.array([[0.0, 0.0], [1.0, 0.0]])
     B = np.array([0.5, 0.5])
+    facts = MethodFacts(order=2, evaluations_per_step=2, symplectic=False,
+                        stability=tableau_stability(A, B, order=2))
 
 
 class RK4(ExplicitRungeKutta):
     """The classical fourth-order Runge-Kutta method."""
 
     name = "rk4"
-    order = 4
     A = np.array(
         [
             [0.0, 0.0, 0.0, 0.0],
@@ -121,6 +196,8 @@ class RK4(ExplicitRungeKutta):
         ]
     )
     B = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
+    facts = MethodFacts(order=4, evaluations_per_step=4, symplectic=False,
+                        stability=tableau_stability(A, B, order=4))
 
 
 class DormandPrince54(Solver):
@@ -132,11 +209,12 @@ class DormandPrince54(Solver):
     ``safety * norm**(-1/5)``, bounded to ``[min_factor, max_factor]`` (no growth right
     after a rejection). The last stage is the first of the next step (FSAL), so an
     accepted step costs six evaluations. The first step is chosen from the derivative's
-    size (Hairer, Norsett & Wanner, Solving ODEs I, II.4).
+    size (Hairer, Norsett & Wanner, Solving ODEs I, II.4). Its facts: order 5, six
+    evaluations per accepted step, and the stability of its fifth-order step (the six
+    stages before the FSAL one), which matters only to fixed steps.
     """
 
     name = "dopri5"
-    order = 5
     error_order = 4
     adaptive = True
     safety = 0.9
@@ -158,6 +236,8 @@ class DormandPrince54(Solver):
     E = np.array(
         [71 / 57600, 0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40]
     )
+    facts = MethodFacts(order=5, evaluations_per_step=6, symplectic=False,
+                        stability=tableau_stability(A[:6, :6], B[:6], order=5))
 
     def __init__(self, system: System, *, rtol: float = 1e-6, atol: float = 1e-6) -> None:
         super().__init__(system)

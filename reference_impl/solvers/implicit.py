@@ -10,11 +10,17 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.facts import MethodFacts, Stability
 from truestep.reference_impl.system import System
 
 DENSE_UP_TO = 300
 """Systems up to this dimension factorise a dense Newton matrix even when the Jacobian
 comes sparse: for small systems dense LU is far cheaper than sparse bookkeeping."""
+
+
+def implicit_euler_step(a: float, b: float) -> np.ndarray:
+    """Backward Euler on the test system: ``(I - Z)^-1`` with ``Z = [[0, 1], [-a, -b]]``."""
+    return np.array([[1.0 + b, 1.0], [-a, 1.0]]) / (1.0 + a + b)
 
 
 class ImplicitEuler(Solver):
@@ -27,11 +33,14 @@ class ImplicitEuler(Solver):
     half the previous one) and rebuilt at the current iterate when it does not, or when
     the step size changes. Iterations stop when the update is below ``tol`` in the RMS
     norm scaled by ``1 + |y|``. Order 1, A-stable and L-stable: on an undamped
-    oscillator it loses energy at every step size.
+    oscillator it loses energy at every step size. Its evaluations per step vary with
+    the Newton iterations (the solver counts them).
     """
 
     name = "implicit-euler"
-    order = 1
+    facts = MethodFacts(order=1, evaluations_per_step=None, symplectic=False,
+                        stability=Stability(imaginary=float("inf"), real=float("inf"),
+                                            a_stable=True, step_matrix=implicit_euler_step))
 
     def __init__(self, system: System, *, tol: float = 1e-10, max_iter: int = 20) -> None:
         super().__init__(system)

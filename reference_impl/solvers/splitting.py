@@ -1,6 +1,9 @@
 """Methods that step positions and velocities separately (second-order systems only).
 
-Each needs ``system.acceleration(q, v, t)`` and the state layout ``x = [q, v]``.
+Each needs ``system.acceleration(q, v, t)`` and the state layout ``x = [q, v]``. Their
+step matrices on the linear test system (:mod:`truestep.reference_impl.solvers.facts`)
+follow from their update formulas with ``h a = -a q - b (h v)`` in the units of
+``(q, h v)``.
 """
 
 from __future__ import annotations
@@ -8,6 +11,28 @@ from __future__ import annotations
 import numpy as np
 
 from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.facts import MethodFacts, Stability
+
+
+def symplectic_euler_step(a: float, b: float) -> np.ndarray:
+    """Symplectic Euler on the test system: ``h v' = -a q + (1 - b) h v``, ``q' = q + h v'``."""
+    return np.array([[1.0 - a, 1.0 - b], [-a, 1.0 - b]])
+
+
+def verlet_step(a: float, b: float) -> np.ndarray:
+    """Velocity Verlet as :class:`VelocityVerlet` steps it, on ``(q, h v, s)`` with ``s``
+    ``h^2`` times the acceleration it reuses (the last closing kick's, read at the
+    half-step velocity): ``h v_half = h v + s / 2``, ``q' = q + h v_half``,
+    ``s' = -a q' - b h v_half``, ``h v' = h v_half + s' / 2``."""
+    half = np.array([0.0, 1.0, 0.5])
+    q = np.array([1.0, 0.0, 0.0]) + half
+    s = -a * q - b * half
+    return np.array([q, half + 0.5 * s, s])
+
+
+def lecture_step(a: float, b: float) -> np.ndarray:
+    """The lecture's update: ``h v' = -a q + (1 - b) h v``, ``q' = q + (h v + h v') / 2``."""
+    return np.array([[1.0 - a / 2, 1.0 - b / 2], [-a, 1.0 - b]])
 
 
 class _SplitSolver(Solver):
@@ -26,11 +51,14 @@ class SymplecticEuler(_SplitSolver):
     """Semi-implicit (symplectic) Euler: ``v' = v + a(q, v) h``, then ``q' = q + v' h``.
 
     Order 1; on an undamped oscillator its energy error stays bounded for
-    ``omega h < 2``.
+    ``omega h < 2`` (the trace of its step matrix, ``2 - (omega h)^2``, stays above -2);
+    a damper, read at the step's start, decays for ``c h <= 2``.
     """
 
     name = "symplectic-euler"
-    order = 1
+    facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=True,
+                        stability=Stability(imaginary=2.0, real=2.0,
+                                            step_matrix=symplectic_euler_step))
 
     def step(self, dt: float) -> float:
         q, v, t = self._split()
@@ -44,11 +72,15 @@ class VelocityVerlet(_SplitSolver):
 
     The acceleration at the end of a step is reused as the start of the next, so a step
     costs one evaluation after the first. For velocity-dependent forces the closing
-    kick uses the half-step velocity, which keeps it explicit.
+    kick uses the half-step velocity, which keeps it explicit and makes it first order;
+    the reused acceleration carries that half-step velocity into the next step, so a
+    damper decays only for ``c h <= 2`` (:func:`verlet_step`). Undamped: stable for
+    ``omega h < 2`` (trace ``2 - (omega h)^2``, determinant 1).
     """
 
     name = "verlet"
-    order = 2
+    facts = MethodFacts(order=2, evaluations_per_step=1, symplectic=True, velocity_order=1,
+                        stability=Stability(imaginary=2.0, real=2.0, step_matrix=verlet_step))
 
     def __init__(self, system) -> None:
         super().__init__(system)
@@ -84,11 +116,15 @@ class LectureUpdate(_SplitSolver):
 
     With ``a`` evaluated once at the start of the step this equals
     ``p' = p + v h + a h^2 / 2``: exact under constant acceleration, and a first-order
-    method in general (the velocity update is explicit Euler).
+    method in general (the velocity update is explicit Euler). On an undamped
+    oscillator the determinant of its step matrix is ``1 + (omega h)^2 / 2``: unstable
+    at every step.
     """
 
     name = "lecture"
-    order = 1
+    facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=False,
+                        exact_constant_acceleration=True,
+                        stability=Stability(imaginary=0.0, real=2.0, step_matrix=lecture_step))
 
     def step(self, dt: float) -> float:
         q, v, t = self._split()
