@@ -90,8 +90,12 @@ class ReferenceAdapter:
     name = "reference"
     methods = tuple(METHODS)
     adaptive_methods = tuple(m for m, cls in METHODS.items() if cls.adaptive)
-    method_facts = MappingProxyType({m: cls.facts for m, cls in METHODS.items()})
-    """Each solver's own facts (its class attribute ``facts``)."""
+
+    @property
+    def method_facts(self) -> MappingProxyType:
+        """Each solver's own facts, read from its class attribute ``facts`` when asked."""
+        return MappingProxyType({m: cls.facts for m, cls in METHODS.items()})
+
     capabilities = frozenset(
         {
             "ode", "second-order", "point-masses", "2d", "3d", "uniform-gravity", "drag",

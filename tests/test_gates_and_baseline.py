@@ -3,6 +3,7 @@ comparison and the CI outputs, on a real quick run whose tables are then altered
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import xml.etree.ElementTree as ET
@@ -247,3 +248,18 @@ def test_cases_by_file_and_directory_and_the_python_api(tmp_path):
     assert same.empty
     with pytest.raises(truestep.SelectionError, match="no such case file"):
         truestep.load_cases(str(tmp_path / "missing.toml"))
+
+
+def test_declared_orders_are_gated_on_request(run_dir, monkeypatch, capsys):
+    """--declared-orders gates every fixed-step method's fit against its declared order;
+    a method declaring an order it does not have fails its gate."""
+    args = ["gate", "--results", str(run_dir / "results.csv"), "--declared-orders", "-v", "-q"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "ok   harmonic-oscillator declared order reference/rk4" in out
+    from truestep.reference_impl.solvers import RK4
+
+    monkeypatch.setattr(RK4, "facts", dataclasses.replace(RK4.facts, order=3))
+    assert main(args) == 1
+    assert "FAIL harmonic-oscillator declared order reference/rk4: measured order 3.99" in \
+        capsys.readouterr().out

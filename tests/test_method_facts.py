@@ -467,21 +467,23 @@ computes the same trajectory. The full sweep (down to 0.0125 s) measures 1.003."
 def test_declared_orders_hold_on_a_quick_run(quick_run):
     """The declared-order gates of every quick smooth case with an exact solution, for
     every engine, checked on a real quick run case by case (a gate does not name its
-    case): every one is evaluated, and every one holds but those the sweep cannot read
-    (:data:`UNREADABLE`), whose two errors still fall at the declared order."""
+    case): every one holds but those the sweep cannot read (:data:`UNREADABLE`), which
+    are not evaluated and whose two errors still fall at the declared order."""
     checked = []
     for case in QUICK_SMOOTH:
         gates = declared_order_gates([case], ENGINES, quick=True)
         verdicts = [v for v in check_gates([case], quick_run, extra=[(["*"], g) for g in gates])
                     if v.gate.file == DECLARED_FILE]
-        assert len(verdicts) == len(gates) and all(v.evaluated for v in verdicts)
+        assert len(verdicts) == len(gates)
         checked += verdicts
     assert len(checked) >= 50
-    failed = {(v.case, v.gate.engine, v.gate.method): v for v in checked if v.verdict != "pass"}
-    assert set(failed) == {k for k in UNREADABLE if k[1] in ENGINES}, \
-        "\n".join(v.line() for v in failed.values())
-    for (case, engine, method), v in failed.items():
-        assert v.measured == "order nan"
+    # A sweep the fit cannot read (fewer than two errors in the asymptotic range) leaves
+    # its gate not evaluated; every other gate is evaluated and holds.
+    skipped = {(v.case, v.gate.engine, v.gate.method): v for v in checked if not v.evaluated}
+    assert set(skipped) == {k for k in UNREADABLE if k[1] in ENGINES}
+    assert all(v.passed for v in checked if v.evaluated), \
+        "\n".join(v.line() for v in checked if v.evaluated and not v.passed)
+    for (case, engine, method), v in skipped.items():
         rows = quick_run[(quick_run["case"] == case) & (quick_run["engine"] == engine)
                          & (quick_run["method"] == method)]
         slope = np.polyfit(np.log(rows["dt"].astype(float)), np.log(rows["error"].astype(float)), 1)[0]

@@ -149,6 +149,16 @@ def _cases_of(results: pd.DataFrame, where: Path) -> list[Case]:
     return cases
 
 
+def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
+    """The declared-order gates (:mod:`truestep.declared`) of the installed engines that
+    ran, each on its own case."""
+    from truestep.declared import declared_order_pairs
+
+    ran = [e for e in dict.fromkeys(results["engine"].astype(str))
+           if e in registered() and engine_status(e) == "installed"]
+    return declared_order_pairs(cases, ran)
+
+
 def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
     from truestep.baseline import TOLERANCES
 
@@ -188,6 +198,8 @@ def cmd_gate(args: argparse.Namespace) -> int:
         if g.engine != "*" and g.engine not in engines:
             raise CaseError(g.file, f"{g.where}.engine",
                             f"unknown engine {g.engine!r} (not registered, not in {results_path})")
+    if args.declared_orders:
+        extra += declared_gates(cases, results)
     verdicts = check_gates(cases, results, tables["stability"], tables["restitution"], extra=extra)
 
     comparison = None
@@ -307,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
     gate.add_argument("--gates", action="append", default=[], metavar="FILE",
                       help="a gates file ([[gates]] tables with a `cases` pattern; optional "
                       "[baseline] tolerances); repeatable")
+    gate.add_argument("--declared-orders", action="store_true",
+                      help="also gate every fixed-step method's fitted order against the order "
+                      "its engine declares, on every smooth case with an exact solution")
     gate.add_argument("--baseline", default=None, metavar="DIR",
                       help="an earlier run's output directory to compare with, row by row")
     gate.add_argument("--tolerance", action="append", default=[], metavar="QUANTITY=X",

@@ -23,6 +23,10 @@ NOT_RUN = frozenset({"unsupported", "skipped"})
 """Row statuses of pairs the run did not simulate."""
 BROKEN = frozenset({"crashed", "timeout"})
 """Row statuses of runs that produced nothing to measure."""
+DECLARED = "declared"
+"""The ``where`` of the gates :mod:`truestep.declared` makes from the methods' facts. A
+sweep that gives no fittable order (unstable, or not yet converged, at every step) leaves
+such a gate not evaluated: the case's own gates and the baseline say what went wrong."""
 GATE_COLUMNS = ["case", "source", "gate", "kind", "engine", "method", "dt", "verdict",
                 "measured", "required"]
 """The columns of :func:`verdict_table` (and of ``truestep gate --json``'s gates)."""
@@ -129,6 +133,10 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
             return GateResult(case.name, g, False, broken, "every row of the sweep measured")
         ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
         order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale)
+        if not np.isfinite(order) and g.where == DECLARED:
+            return GateResult(case.name, g, True, "no order: fewer than two errors in the "
+                              "asymptotic range", f"{p['expect']:g} +- {p['tol']:g}",
+                              evaluated=False)
         return GateResult(case.name, g, _within(abs(order - p["expect"]), None, p["tol"]),
                           f"order {order:.3f}", f"{p['expect']:g} +- {p['tol']:g}")
     if g.kind == "no-worse-than":

@@ -149,8 +149,16 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
     parts.append("Least-squares slope of log(error) against log(dt) over the sweep, leaving "
                  "out errors above a tenth of the case's scale (not yet converged) and below "
                  "1e-11 of it (round-off).\n")
-    parts.append(folded(f"{orders['order'].notna().sum()} fitted orders",
-                        md_table(orders.dropna(subset=["order"]))))
+    fitted = orders.dropna(subset=["order"])
+    disagree = fitted[fitted["agrees"] == "no"]
+    parts.append(f"Against the orders the engines declare (on smooth cases with an exact "
+                 f"solution): {int((fitted['agrees'] == 'yes').sum())} fits agree, "
+                 f"{len(disagree)} do not"
+                 + (": " + "; ".join(f"{r.case} {r.engine} / {r.method} {r.order:.2f} "
+                                     f"(declared {r.declared:g})"
+                                     for r in disagree.itertuples(index=False)) if len(disagree)
+                    else "") + ".\n")
+    parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
     parts.append("## Work against precision, per case\n")
     drawn = draw_case_figures(cases, results, traces, fig_dir)
     for case in cases:

@@ -24,16 +24,31 @@ _fmt = fmt
 
 
 def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
-    """Fitted order of convergence per case, engine and fixed-step method."""
+    """Fitted order of convergence per case, engine and fixed-step method, beside the
+    order its engine declares there (:mod:`truestep.declared`; empty where none is
+    declared: non-smooth scenes, no exact solution, a method exact on the case) and
+    whether the fit is within the declared-order gates' tolerance of it."""
+    from truestep.adapters import engine_status, registered
+    from truestep.declared import DECLARED_ORDER_TOL, declared_order_pairs
+
+    ran = [e for e in dict.fromkeys(results["engine"].astype(str))
+           if e in registered() and engine_status(e) == "installed"]
+    declared = {(names[0], g.engine, g.method): g.params["expect"]
+                for names, g in declared_order_pairs(cases, ran)}
     rows = []
     scales = {c.name: c.error_scale for c in cases}
     steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
     for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
         order = fit_order(g["dt"].astype(float), g["error"].astype(float),
                           scale=scales.get(case, 1.0))
+        expect = declared.get((case, engine, method), np.nan)
+        agrees = "" if not (np.isfinite(expect) and np.isfinite(order)) else (
+            "yes" if abs(order - expect) <= DECLARED_ORDER_TOL else "no")
         rows.append({"case": case, "engine": engine, "method": method, "order": order,
+                     "declared": expect, "agrees": agrees,
                      "points": int(g["error"].notna().sum())})
-    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "points"])
+    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "declared", "agrees",
+                                       "points"])
 
 
 def _run_label(r: pd.Series) -> str:
