@@ -8,6 +8,7 @@ caches of this process stay as they are.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -57,9 +58,15 @@ def test_the_built_engines_are_registered_by_entry_point_as_the_fallback_says():
 def test_the_wheel_holds_one_top_level_package_and_sits_beside_a_users_adapters(tmp_path):
     """`pip install .` (not editable) adds only `truestep`; a user's own `adapters/`
     package imports beside it."""
-    wheels = tmp_path / "wheels"
+    wheels, source = tmp_path / "wheels", tmp_path / "source"
+    # Built from a copy of the package's folders: setuptools writes build/ beside the source.
+    source.mkdir()
+    for part in ("pyproject.toml", "README.md", "truestep", "adapters", "cases", "reference_impl"):
+        (shutil.copytree if (ROOT / part).is_dir() else shutil.copy)(
+            ROOT / part, source / part, **({"ignore": shutil.ignore_patterns("__pycache__")}
+                                           if (ROOT / part).is_dir() else {}))
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-                    "-q", "-w", str(wheels), str(ROOT)], check=True, capture_output=True, timeout=300)
+                    "-q", "-w", str(wheels), str(source)], check=True, capture_output=True, timeout=300)
     (wheel,) = wheels.glob("truestep-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     tops = {n.split("/")[0] for n in names}

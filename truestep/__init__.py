@@ -39,6 +39,8 @@ _EXPORTS: dict[str, str] = {
     "Exact": "truestep.cases.exact",
     "exact_solution": "truestep.cases.exact",
     "ParticleModel": "truestep.reference_impl.model",
+    "MethodFacts": "truestep.reference_impl.solvers.facts",
+    "Stability": "truestep.reference_impl.solvers.facts",
     "System": "truestep.reference_impl.system",
     "SecondOrderSystem": "truestep.reference_impl.system",
     "Tables": "truestep.api",
@@ -56,10 +58,12 @@ __all__ = [
     "Exact",
     "FixedStepAdapter",
     "Gate",
+    "MethodFacts",
     "ParticleModel",
     "Recording",
     "SecondOrderSystem",
     "SelectionError",
+    "Stability",
     "System",
     "Tables",
     "Trajectory",
@@ -97,5 +101,6 @@ if TYPE_CHECKING:
     from truestep.cases.exact import Exact, exact_solution
     from truestep.cases.loader import load_case, load_cases
     from truestep.reference_impl.model import ParticleModel
+    from truestep.reference_impl.solvers.facts import MethodFacts, Stability
     from truestep.reference_impl.system import SecondOrderSystem, System
     from truestep.runner import run_matrix

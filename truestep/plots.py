@@ -168,6 +168,10 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     return save(fig, path)
 
 
+SCORECARD_DPI = 96
+"""The scorecard is read first and its cells carry numbers: drawn sharper than the rest."""
+
+
 def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], target: float,
               path: Path) -> Path | None:
     """The report's overview: a row per engine/method, three panels.
@@ -225,4 +229,4 @@ def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], t
         ax.grid(which="minor", color="white", linewidth=1.5)
         ax.tick_params(which="minor", length=0)
     fig.tight_layout()
-    return save(fig, path)
+    return save(fig, path, dpi=SCORECARD_DPI)
