@@ -95,17 +95,27 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
              f"{seconds:.1f} s")
 
     # Longest first, so that no long search starts last while the other cores idle.
-    order = sorted(range(len(calls)), key=lambda k: -_search_cost(calls[k][1][1], calls[k][1][2]))
+    order = sorted(range(len(calls)),
+                   key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2]))
     run_isolated_all([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
 
 
-def _search_cost(case: Case, method: str) -> float:
+IMPLICIT_COST = 8.0
+"""Evaluations a step of a method whose count varies (implicit Euler's Newton iterations)
+is taken to cost, for scheduling only."""
+
+
+def _search_cost(engine: str, case: Case, method: str) -> float:
     """A rough relative cost of a search, for scheduling only: steps of its smallest-step
-    run times the particles, times the evaluations a step of ``method`` makes."""
+    run times the particles, times the evaluations a step of ``method`` makes (its
+    declared facts; :data:`IMPLICIT_COST` where the count varies)."""
+    from truestep.adapters.base import facts_of
+
     spec = case.stability
     steps = max(spec.min_steps, spec.horizon / spec.dt_lo)
-    per_step = {"rk4": 4.0, "implicit-euler": 8.0, "midpoint": 2.0, "heun": 2.0}.get(method, 1.0)
+    facts = facts_of(get_adapter(engine), method)
+    per_step = 1.0 if facts is None else float(facts.evaluations_per_step or IMPLICIT_COST)
     return steps * (case.model.n if case.model is not None else 1) * per_step
 
 
