@@ -58,6 +58,9 @@ class Trajectory:
         Seconds spent stepping (scene building excluded).
     message : str
         What went wrong, or notes the engine wants in the table.
+    path : str
+        Which code path of the engine ran, where it has several (the reference:
+        ``compiled`` or ``numpy``), for the table's ``path`` column.
     """
 
     t: np.ndarray
@@ -71,6 +74,7 @@ class Trajectory:
     wall_s: float = float("nan")
     message: str = ""
     alive: np.ndarray | None = None
+    path: str = ""
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
 

@@ -210,7 +210,7 @@ def test_the_inclined_wall_is_the_old_wall_and_contact_is_read_off_the_state():
         flag.append(bool(system.contact[0, 0]))
     case = figure_case("inclined-wall-drop")
     traj = run_reference(case, "lecture")
-    # The adapter may run this scene through its compiled kernel (fused multiply-adds).
+    # The adapter runs this scene through its compiled loop: equal to round-off.
     np.testing.assert_allclose(traj.x[:, 0], np.array(x), rtol=1e-9, atol=1e-12)
     p = case.model.planes[0]
     d, vn = (traj.x[:, 0] - p.point) @ p.normal, traj.v[:, 0] @ p.normal

@@ -280,6 +280,44 @@ def cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from truestep.api import select_engines
+    from truestep.bench import COLUMNS, scaling_plot, scaling_table
+
+    try:
+        sizes = [float(s) for s in args.sizes.split(",") if s.strip()]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 1:
+        raise UsageError(f"--sizes: expected particle counts of 1 or more, comma-separated, "
+                         f"got {args.sizes!r}")
+    if not args.budget > 0:
+        raise UsageError(f"--budget: expected seconds > 0, got {args.budget:g}")
+    engines = select_engines(args.engines, say=_say)
+    if not engines:
+        raise UsageError("--engines: no engine is installed")
+    out = Path(args.out)
+    start = time.perf_counter()
+    table = scaling_table(engines, sizes=sizes, budget_s=args.budget)
+    bandwidth = table.attrs["bandwidth_bytes_per_s"]
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out / "scaling.csv", index=False, columns=COLUMNS)
+    figure = scaling_plot(table, bandwidth, out / "figures" / "scaling.png")
+    shown = table.assign(note=table["note"].str.slice(0, 100))
+    with pd.option_context("display.width", 250, "display.max_rows", None,
+                           "display.max_colwidth", 100, "display.float_format", "{:.4g}".format):
+        print(shown.to_string(index=False))
+    per_step = table.attrs["bytes_per_particle_step"]
+    print(f"copy bandwidth {bandwidth / 1e9:.2f} GB/s (numpy copy, best of 5, measured in this "
+          f"run) = {bandwidth / per_step:.3g} particle-steps/s at {per_step} B per particle-step "
+          f"(positions and velocities, float64, read and written)")
+    warm = table.attrs["warmup_s"]
+    print(f"wrote {out / 'scaling.csv'} and {figure} in {time.perf_counter() - start:.1f} s: "
+          f"timed runs {table.attrs['elapsed_s'] - warm:.1f} s of the {args.budget:g} s budget, "
+          f"warm-ups {warm:.1f} s")
+    return 0
+
+
 CASES_HELP = ("cases: names or shell globs of the case library, case files and directories, "
               "comma-separated (default: every case of the library); each item must match")
 ENGINES_HELP = ("engines: registered names or module:Class of an adapter, comma-separated "
@@ -351,6 +389,28 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Draw the lecture's figures into DIR/figures.")
     fig.add_argument("--out", default="reports", metavar="DIR", help="output directory (default: reports)")
     fig.set_defaults(func=cmd_figures)
+
+    from truestep.bench import BUDGET_S, SIZES
+
+    sizes = ",".join(f"{n:.0e}".replace("e+0", "e") for n in SIZES)
+    bench = sub.add_parser("bench", help="particle-steps per second against n on the rain scene",
+                           description="How cost grows with work: run the particle-rain scene with "
+                           "n particles (1e2 to 1e6) through every fixed-step method of every engine, "
+                           "one timed run at a time in a process of its own, and print "
+                           "particle-steps per second with the fraction of the copy bandwidth "
+                           "measured in the same run; write DIR/scaling.csv and "
+                           "DIR/figures/scaling.png. Sizes that do not fit in the budget are "
+                           "rows that say so.")
+    bench.add_argument("--engines", default=None, metavar="NAMES", help=ENGINES_HELP)
+    bench.add_argument("--out", default="bench", metavar="DIR",
+                       help="output directory (default: bench)")
+    bench.add_argument("--budget", default=BUDGET_S, type=float, metavar="S",
+                       help=f"seconds for the timed runs (default: {BUDGET_S:g}; one warm-up per "
+                       "engine/method comes on top); each engine/method gets an equal share of "
+                       "what is left, and skips the sizes that would not fit")
+    bench.add_argument("--sizes", default=sizes, metavar="N,N,...",
+                       help=f"particle counts, comma-separated (default: {sizes})")
+    bench.set_defaults(func=cmd_bench)
     return parser
 
 

@@ -23,11 +23,12 @@ from truestep.progress import Progress
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
     "energy_drift_final", "nfev", "steps", "wall_s", "repeats", "t_fail", "missing", "message",
-    "case_source",
+    "case_source", "path",
 ]
 """The columns of ``results.csv`` (property columns follow, one per named property).
 ``case_source`` is the case's name when the case library holds it, else its file, so
-that ``truestep gate`` finds the case again."""
+that ``truestep gate`` finds the case again; ``path`` is the engine's code path (the
+reference: ``compiled`` or ``numpy``)."""
 
 
 @dataclass
@@ -146,6 +147,7 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         repeats=int(traj.extra.get("repeats", 0)),
         t_fail=traj.t_fail,
         message=traj.message,
+        path=traj.path,
     )
     row.update(measure(case, traj))
     if traces is not None:
@@ -183,16 +185,13 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
 
 def preload() -> None:
     """Load in this process what every forked run would otherwise load again: the
-    compiled spring loop of the reference implementation (the engine modules are
-    imported by :func:`plan`).
-
-    Never the parallel build of the rain kernel: running it starts numba's parallel
-    layer, and a process that has done so must not fork (its children are killed on
-    their first parallel loop); the harness runs its serial build.
-    """
+    compiled spring loop and the compiled stepping loop of the reference implementation
+    (the engine modules are imported by :func:`plan`)."""
+    from truestep.reference_impl.compiled import compile_all
     from truestep.reference_impl.forces import compile_springs
 
     compile_springs()
+    compile_all()
 
 
 def duplicate_of(adapter, case: Case, method: str) -> str | None:

@@ -1,0 +1,178 @@
+"""``truestep bench``: the scaling table, its figure and its command, on tiny sizes."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+import truestep.adapters
+from truestep import bench
+from truestep.adapters import get_adapter, resolve_engine
+from truestep.cli import main
+
+SIZES = (10, 100)
+TARGET_S = 0.02
+"""Tiny runs: these tests check the table's bookkeeping, not this machine's speed."""
+
+
+class CrashingAdapter:
+    """An engine that dies, raises or hangs in every run (the warm-up included)."""
+
+    name = "bench-crasher"
+    methods = ("dies", "raises", "hangs")
+    adaptive_methods = ()
+    capabilities = frozenset()
+
+    def missing(self, case, method):
+        return set()
+
+    def simulate(self, case, method, dt):
+        if method == "dies":
+            os._exit(3)
+        if method == "hangs":
+            time.sleep(60)
+        raise RuntimeError("engine exploded")
+
+
+@pytest.fixture(scope="module")
+def table() -> pd.DataFrame:
+    lines: list[str] = []
+    out = bench.scaling_table(["reference", "pymunk"], sizes=SIZES, budget_s=6.0,
+                              target_s=TARGET_S, progress=lines.append)
+    out.attrs["lines"] = lines
+    return out
+
+
+def test_the_rain_scene_at_n_is_the_case_s_own_block(case_named):
+    case = case_named("particle-rain")
+    same = bench.rain_case(case.model.n, case)
+    assert np.array_equal(same.model.x0, case.model.x0)
+    assert np.array_equal(same.model.v0, case.model.v0)
+    small, large = bench.rain_case(10, case), bench.rain_case(5000, case)
+    # the seeded draw fills row by row: a smaller scene is the first particles of a larger one
+    assert np.array_equal(small.model.x0, case.model.x0[:10])
+    assert np.array_equal(large.model.x0[:1000], case.model.x0)
+    box_lo, box_hi = np.array([-5.0, 0.51, 0.0]), np.array([5.0, 2.01, 0.0])  # the case file's
+    assert np.all(large.model.x0 >= box_lo) and np.all(large.model.x0 <= box_hi)
+    assert large.features == case.features and repr(large.model.planes) == repr(case.model.planes)
+    assert np.all(large.model.mass == case.model.mass[0])
+
+
+@pytest.mark.engine
+def test_every_engine_method_and_size_is_a_row(table):
+    expected = {(e, m, n) for e in ("reference", "pymunk") for m, n in
+                itertools.product(get_adapter(e).methods, SIZES)}
+    got = set(zip(table["engine"], table["method"], table["n"], strict=True))
+    assert got == expected and len(table) == len(expected)
+    assert list(table.columns) == bench.COLUMNS
+    assert set(table["status"]) <= {"ok", "skipped", "unsupported"}
+    run = table[~table["status"].isin(["unsupported"]) & ~table["note"].str.startswith(
+        ("adaptive", "the case skips it"))]
+    assert len(table.attrs["lines"]) == len(run)  # one progress line per row of a pair that ran
+    for engine in ("reference", "pymunk"):
+        assert ((table["engine"] == engine) & (table["status"] == "ok")).any()
+
+
+@pytest.mark.engine
+def test_rates_are_particle_steps_over_the_timed_wall(table):
+    ok = table[table["status"] == "ok"]
+    assert len(ok) and (ok["particle_steps_per_s"] > 0).all() and (ok["wall_s"] > 0).all()
+    assert (ok["steps"] >= bench.MIN_STEPS).all() and (ok["steps"] <= 1000).all()  # the case's 1 s
+    assert ((ok["repeats"] >= 1) & (ok["repeats"] <= bench.MAX_REPEATS)).all()
+    recomputed = ok["n"] * ok["steps"].astype(float) / ok["wall_s"]
+    np.testing.assert_allclose(ok["particle_steps_per_s"], recomputed, rtol=1e-12)
+    bandwidth = table.attrs["bandwidth_bytes_per_s"]
+    assert bandwidth > 1e8  # any machine that runs this moves more than 0.1 GB/s
+    np.testing.assert_allclose(ok["bandwidth_fraction"], recomputed * 96 / bandwidth, rtol=1e-12)
+    assert table.attrs["bytes_per_particle_step"] == 96
+
+
+@pytest.mark.engine
+def test_rows_not_run_say_why(table):
+    idle = table[table["status"] != "ok"]
+    assert (idle["note"].str.len() > 0).all()
+    assert idle["wall_s"].isna().all() and idle["particle_steps_per_s"].isna().all()
+    assert idle["steps"].isna().all() and idle["repeats"].isna().all()
+    dopri = table[(table["engine"] == "reference") & (table["method"] == "dopri5")]
+    assert (dopri["status"] == "skipped").all() and dopri["note"].str.contains("adaptive").all()
+    implicit = table[table["method"] == "implicit-euler"]
+    assert implicit["note"].str.startswith("the case skips it").all()  # the case file's [[run.skip]]
+
+
+@pytest.mark.engine
+def test_sizes_beyond_the_budget_are_skipped_with_the_numbers():
+    out = bench.scaling_table(["pymunk"], sizes=(10, 100, 1_000_000), budget_s=1.0,
+                              target_s=TARGET_S, progress=lambda line: None)
+    assert list(out["n"]) == [10, 100, 1_000_000]
+    assert out["status"].iloc[0] == "ok"  # the first size always runs: it calibrates
+    big = out.iloc[-1]
+    assert big["status"] == "skipped" and big["note"].startswith("budget: the run at n=1,000,000")
+    assert "share of the 1 s budget" in big["note"]
+    assert out.attrs["elapsed_s"] < 1.0 + bench.FIRST_TIMEOUT_S
+
+
+def test_a_crash_a_raise_and_a_hang_are_rows(monkeypatch):
+    monkeypatch.setattr(truestep.adapters, "_RESOLVED", dict(truestep.adapters._RESOLVED))
+    monkeypatch.setattr(bench, "FIRST_TIMEOUT_S", 0.5)  # the hang is killed after 0.5 s
+    name = resolve_engine("test_bench:CrashingAdapter")
+    out = bench.scaling_table([name], sizes=SIZES, budget_s=1.0, target_s=TARGET_S,
+                              progress=lambda line: None).set_index(["method", "n"])
+    assert out.loc[("dies", 10), "status"] == "crashed"
+    assert "exit code 3" in out.loc[("dies", 10), "note"]
+    assert out.loc[("raises", 10), "status"] == "crashed"
+    assert "RuntimeError: engine exploded" in out.loc[("raises", 10), "note"]
+    assert out.loc[("hangs", 10), "status"] == "timeout"
+    assert out.loc[("dies", 10), "note"].startswith("in the warm-up (n=10, untimed)")
+    for method in ("dies", "raises"):
+        assert out.loc[(method, 100), "status"] == "skipped"
+        assert out.loc[(method, 100), "note"] == "the warm-up at n=10 crashed"
+    assert out.loc[("hangs", 100), "note"] == "the warm-up at n=10 timed out"
+
+
+def test_the_figure_draws_what_ran_and_the_bandwidth_line(tmp_path):
+    rows = [("reference", "euler", n, 4, 0.2, n * 4 / 0.2, "ok", "") for n in (100, 1000, 10000)]
+    rows += [("reference", "lecture", n, 4, 0.1, n * 4 / 0.1, "ok", "") for n in (100, 1000)]
+    rows += [("pymunk", "default", 100, 8, 0.2, 4000.0, "ok", ""),
+             ("pymunk", "default", 1000, None, None, None, "skipped", "budget: the run ..."),
+             ("mujoco", "Euler", 100, None, None, None, "crashed", "engine process died")]
+    table = pd.DataFrame(rows, columns=["engine", "method", "n", "steps", "wall_s",
+                                        "particle_steps_per_s", "status", "note"])
+    path = bench.scaling_plot(table, 2e10, tmp_path / "figures" / "scaling.png")
+    with Image.open(path) as img:
+        assert img.format == "PNG" and img.width > 500
+
+
+def test_extrapolation_follows_an_affine_cost_and_a_faster_one():
+    affine = {n: 1e-3 + 1e-6 * n for n in (100, 1000)}
+    assert bench._extrapolate(affine, 10_000) == pytest.approx(1e-3 + 1e-6 * 10_000)
+    quadratic = {n: 1e-9 * n**2 for n in (100, 1000)}
+    assert bench._extrapolate(quadratic, 10_000) == pytest.approx(1e-9 * 10_000**2)
+    assert bench._extrapolate({100: 0.01}, 1000) == pytest.approx(0.1)  # one point: proportional
+
+
+@pytest.mark.engine
+def test_the_command_writes_the_table_and_the_figure(tmp_path, capsys):
+    out = tmp_path / "bench"
+    code = main(["bench", "--engines", "pymunk", "--sizes", "10,100", "--budget", "1",
+                 "--out", str(out)])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "copy bandwidth" in printed and "particle-steps/s" in printed
+    csv = pd.read_csv(out / "scaling.csv")
+    assert list(csv.columns) == bench.COLUMNS and list(csv["n"]) == [10, 100]
+    with Image.open(out / "figures" / "scaling.png") as img:
+        assert img.format == "PNG"
+
+
+@pytest.mark.parametrize("argv", [["--sizes", "ten"], ["--sizes", "0,100"], ["--budget", "0"]])
+def test_the_command_rejects_bad_input_and_writes_nothing(tmp_path, capsys, argv):
+    out = tmp_path / "bench"
+    assert main(["bench", "--engines", "pymunk", "--out", str(out), *argv]) == 2
+    assert "truestep: error: --" in capsys.readouterr().err
+    assert not out.exists()
