@@ -8,7 +8,9 @@ from the tableau too (:func:`tableau_stability`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from numpy.polynomial import Polynomial
@@ -17,17 +19,45 @@ from truestep.reference_impl.solvers.base import Solver
 from truestep.reference_impl.solvers.facts import MethodFacts, Stability, StepMatrix
 from truestep.reference_impl.system import System
 
-Stages = tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
-"""A tableau's stages as :func:`stages_of` gives them: ``(c_i, ((j, a_ij), ...))``."""
+Feed = tuple[slice | int, np.ndarray | float]
+"""Later stages that weigh a stage ``j``, and their weights: a slice of consecutive stages
+``i`` with their ``a_ij`` as a column, shape ``(len, 1)``, or one stage and its weight."""
+
+
+class Stages(NamedTuple):
+    """A tableau's stages as :func:`stages_of` gives them and :func:`rk_stages` steps them.
+
+    ``rows``: for each stage ``i`` its node ``c_i`` (the row sum of ``a``) and its
+    non-zero weights ``((j, a_ij), ...)`` in order of ``j`` (most of a tableau is zero).
+    ``columns``: for each stage ``j`` its node and the :data:`Feed` runs of later stages
+    that weigh it; ``None`` if no stage is weighed by more than one other (as in Euler,
+    midpoint, Heun and RK4).
+    """
+
+    rows: tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
+    columns: tuple[tuple[float, tuple[Feed, ...]], ...] | None
 
 
 def stages_of(a: np.ndarray) -> Stages:
-    """The stages of a strictly lower triangular ``a`` (s, s): each node ``c_i`` (the row
-    sum) with only the non-zero ``a_ij`` (most of a tableau is zero), as plain floats."""
-    return tuple(
+    """The :class:`Stages` of a strictly lower triangular ``a`` (s, s)."""
+    a = np.asarray(a, float)
+    rows = tuple(
         (float(row.sum()), tuple((int(j), float(row[j])) for j in np.flatnonzero(row[:i])))
-        for i, row in enumerate(np.asarray(a, float))
+        for i, row in enumerate(a)
     )
+    columns = []
+    for j, (c, _) in enumerate(rows):
+        feeds: list[Feed] = []
+        weighing = np.flatnonzero(a[j + 1 :, j]) + j + 1
+        for run in np.split(weighing, np.flatnonzero(np.diff(weighing) > 1) + 1):
+            if len(run) == 1:
+                feeds.append((int(run[0]), float(a[run[0], j])))
+            elif len(run) > 1:
+                lo, hi = int(run[0]), int(run[-1]) + 1
+                feeds.append((slice(lo, hi), a[lo:hi, j].reshape(-1, 1).copy()))
+        columns.append((c, tuple(feeds)))
+    by_column = any(np.count_nonzero(a[j + 1 :, j]) > 1 for j in range(len(a)))
+    return Stages(rows, tuple(columns) if by_column else None)
 
 
 def rk_stages(
@@ -41,18 +71,37 @@ def rk_stages(
 ) -> np.ndarray:
     """Fill ``k`` (shape ``(s, dim)``) with the stage derivatives of an explicit RK step.
 
-    Stage ``i`` is ``f(x + h * sum_j a[i, j] k[j], t + c[i] h)`` with ``stages`` from
-    :func:`stages_of`. If ``k0`` is given it is used as the first stage
+    Stage ``i`` is ``f(x_i, t + c[i] h)`` with ``x_i = x + h * sum_j a[i, j] k[j]`` and
+    ``stages`` from :func:`stages_of`. If ``k0`` is given it is used as the first stage
     (first-same-as-last methods) without an evaluation.
+
+    Each ``x_i`` is summed from ``x`` with its terms ``(h a_ij) k_j`` one at a time, in
+    the order of ``j``. Where every stage is weighed by at most one other, ``x_i`` is
+    summed when stage ``i`` comes. Otherwise (Dormand-Prince) each ``k_j``, once
+    evaluated, is added into all the later ``x_i`` that weigh it with one numpy product
+    and one add per run of them, since on small systems a numpy call costs more than its
+    arithmetic: the same sums in the same order, so the same to the last bit.
     """
-    for i, (c_i, row) in enumerate(stages):
-        if i == 0 and k0 is not None:
+    if stages.columns is None:
+        for i, (c, row) in enumerate(stages.rows):
+            if i == 0 and k0 is not None:
+                k[0] = k0
+                continue
+            xi = x
+            for j, a_ij in row:
+                xi = xi + (h * a_ij) * k[j]
+            k[i] = fun(xi, t + c * h)
+        return k
+    xs = np.empty_like(k)  # the x_i, summed as the stages become known
+    xs[:] = x
+    for j, (c, feeds) in enumerate(stages.columns):
+        if j == 0 and k0 is not None:
             k[0] = k0
-            continue
-        xi = x
-        for j, a_ij in row:
-            xi = xi + (h * a_ij) * k[j]
-        k[i] = fun(xi, t + c_i * h)
+        else:
+            k[j] = fun(xs[j], t + c * h)
+        for later, a in feeds:
+            rows = xs[later]  # added in place (``xs[later] += ...`` would copy them back)
+            rows += (h * a) * k[j]
     return k
 
 
@@ -265,20 +314,29 @@ class DormandPrince54(Solver):
         return min(100 * h0, h1, h_max)
 
     def step(self, dt: float) -> float:
-        """Take one accepted step of at most ``dt`` seconds; return its length."""
+        """Take one accepted step of at most ``dt`` seconds; return its length.
+
+        Each try fills the stage derivatives ``k`` (7, dim) in place: the six stages of
+        the fifth-order step, the first of them the previous step's last, and the
+        derivative at the new state, which is the error estimate's seventh stage and, if
+        the step is accepted, the next step's first.
+        """
         x, t = self.system.get_state(), self.system.get_time()
         if self._f0 is None:
             self._f0 = self.fun(x, t)
         if self._h is None:
             self._h = self._initial_step(x, t, self._f0, dt)
         h = min(self._h, dt)
+        k = self._k
+        abs_x = np.abs(x)
         rejected = False
         while True:
-            k = rk_stages(self.fun, x, t, h, self._stages, self._k[:6], self._f0)
+            rk_stages(self.fun, x, t, h, self._stages, k[:6], self._f0)
             x_new = x + h * (self.B[:6] @ k[:6])
-            self._k[6] = self.fun(x_new, t + h)
-            scale = self.atol + np.maximum(np.abs(x), np.abs(x_new)) * self.rtol
-            err = _rms(h * (self.E @ self._k) / scale)
+            f_new = self.fun(x_new, t + h)
+            k[6] = f_new
+            scale = self.atol + np.maximum(abs_x, np.abs(x_new)) * self.rtol
+            err = _rms(h * (self.E @ k) / scale)
             if err <= 1.0:
                 factor = self.max_factor if err == 0 else self.safety * err ** -0.2
                 factor = min(self.max_factor, factor)
@@ -295,10 +353,12 @@ class DormandPrince54(Solver):
             self.n_rejected += 1
             if h < 1e-14 * max(1.0, abs(t)):
                 raise FloatingPointError(f"dopri5: step size underflow at t={t:.6g}")
-        self._f0 = self._k[6].copy()
+        self._f0 = f_new  # a new array (System.derivative's contract): kept, not copied
         self.system.set_state(x_new, t + h)
         return h
 
 
 def _rms(a: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(a))))
+    """The root mean square of ``a`` (shape ``(dim,)``): the sum ``np.mean`` takes (numpy's
+    pairwise one), so the same number to the last bit, without ``np.mean``'s overhead."""
+    return math.sqrt(np.add.reduce(np.square(a)) / a.size)
