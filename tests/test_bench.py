@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 import truestep.adapters
-from truestep import bench
+from truestep import bench, report_scaling
 from truestep.adapters import get_adapter, resolve_engine
 from truestep.cli import main
 
@@ -176,3 +176,47 @@ def test_the_command_rejects_bad_input_and_writes_nothing(tmp_path, capsys, argv
     assert main(["bench", "--engines", "pymunk", "--out", str(out), *argv]) == 2
     assert "truestep: error: --" in capsys.readouterr().err
     assert not out.exists()
+
+
+def _synthetic() -> pd.DataFrame:
+    """Three engines; only two reach n = 1000; the numbers are chosen, not measured."""
+    rows = [("a", "fast", 100, 4e8), ("a", "slow", 100, 1e8), ("a", "fast", 1000, 3e8),
+            ("b", "x", 100, 2e7), ("b", "x", 1000, 1.5e7), ("c", "y", 100, 1e6)]
+    table = pd.DataFrame([{"engine": e, "method": m, "n": n, "particle_steps_per_s": r,
+                           "bandwidth_fraction": r * 96 / 1e10, "status": "ok", "note": ""}
+                          for e, m, n, r in rows]
+                         + [{"engine": "c", "method": "y", "n": 1000, "status": "skipped",
+                             "note": "budget"}])
+    table.attrs.update(bandwidth_bytes_per_s=1e10, bytes_per_particle_step=96, budget_s=20.0)
+    return table
+
+
+def test_the_report_sentence_states_what_the_table_holds():
+    [intro, compared] = report_scaling.scaling_lines(_synthetic())
+    assert "10.0 GB/s" in intro and "1.04e+08 particle-steps/s" in intro  # 1e10 / 96
+    assert "20 s budget" in intro
+    # n = 1000 is the largest n two engines reached; each engine's fastest method there
+    assert compared.startswith("At n = 1,000, the largest n that more than one engine reached")
+    assert "a / fast 3e+08 (288% of the bandwidth)" in compared  # 3e8 * 96 / 1e10
+    assert "b / x 1.5e+07 (14% of the bandwidth, 20.0x slower)" in compared  # 3e8 / 1.5e7
+    assert "c / y" not in compared and "a / slow" not in compared
+    assert "stayed in cache" in compared
+
+
+@pytest.mark.engine
+def test_the_report_section_recomputes_from_the_measured_table(table, tmp_path):
+    n, shared = report_scaling.comparison_n(table)
+    ok = table[(table["status"] == "ok") & (table["n"] == n)]
+    assert shared and ok["engine"].nunique() == 2
+    parts = report_scaling.scaling_section(table, tmp_path)
+    text = "\n".join(parts)
+    for engine, rows in ok.groupby("engine"):
+        best = rows.loc[rows["particle_steps_per_s"].idxmax()]
+        assert f"{engine} / {best.method} {best.particle_steps_per_s:.3g} (" in text
+    assert (tmp_path / "scaling.png").is_file()
+    assert f"{len(table)} rows of the scaling table" in text
+
+
+def test_a_run_without_the_rain_case_says_so(tmp_path):
+    parts = report_scaling.scaling_section(pd.DataFrame(), tmp_path)
+    assert "Not run" in parts[1] and not list(tmp_path.iterdir())

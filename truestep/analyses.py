@@ -1,4 +1,5 @@
-"""The analyses beyond the main sweep: stability limits and restitution per bounce."""
+"""The analyses beyond the main sweep: stability limits, restitution per bounce, and how
+cost grows with the number of particles."""
 
 from __future__ import annotations
 
@@ -35,6 +36,11 @@ BALL_RADIUS = 0.05
 DROP_HEIGHT = 1.0
 GRAVITY = 9.81
 BOUNCES = 3
+SCALING_BUDGET_S = 12.0
+"""Seconds of timed runs for the scaling table of a full run (``truestep bench`` takes
+longer by default, :data:`truestep.bench.BUDGET_S`, and goes to n = 1e6)."""
+SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
+"""Particle counts of a full run's scaling table."""
 
 
 def _search(engine: str, case: Case, method: str, quick: bool):
@@ -205,16 +211,30 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
 
 def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *,
                  quick: bool) -> dict[str, pd.DataFrame]:
-    """Every table besides ``results``: ``stability`` (for the cases with a search) and
-    ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty).
+    """Every table besides ``results``: ``stability`` (for the cases with a search),
+    ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
+    and ``scaling`` (particle-steps per second against n, :func:`truestep.bench.scaling_table`
+    in :data:`SCALING_BUDGET_S`, when the rain case is among ``cases`` and the run is not
+    ``quick``; else empty).
 
-    Neither is timed: their runs share the machine's cores (:func:`untimed_workers`).
+    The first two are not timed: their runs share the machine's cores
+    (:func:`untimed_workers`). The scaling table is timed, so it runs after them, one run
+    at a time.
     """
+    from truestep.bench import COLUMNS as SCALING_COLUMNS
+    from truestep.bench import RAIN_CASE, scaling_table
+
     preload()
     workers = untimed_workers()
     bouncing = any("restitution" in c.tags for c in cases)
-    return {
+    tables = {
         "stability": stability_table(cases, engines, quick=quick, workers=workers),
         "restitution": restitution_table(engines, quick=quick, workers=workers) if bouncing
         else pd.DataFrame(columns=RESTITUTION_COLUMNS),
     }
+    rain = next((c for c in cases if c.name == RAIN_CASE), None)
+    tables["scaling"] = (scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S,
+                                         case=rain)
+                         if rain is not None and not quick
+                         else pd.DataFrame(columns=SCALING_COLUMNS))
+    return tables

@@ -33,12 +33,15 @@ class Tables:
     results : one row per (case, engine, method, dt) (``results.csv``)
     stability : largest stable steps (``stability.csv``), empty if not searched
     restitution : bounces per engine, method, step and set restitution (``restitution.csv``)
+    scaling : particle-steps per second against n on the rain scene (``scaling.csv``),
+        empty in a ``quick`` run or without the rain case
     """
 
     results: pd.DataFrame
     stability: pd.DataFrame = field(default_factory=pd.DataFrame)
     restitution: pd.DataFrame = field(default_factory=pd.DataFrame)
     cases: list[Case] = field(default_factory=list)
+    scaling: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 def select_engines(engines: str | Iterable[str] | None = None, *,
@@ -95,7 +98,8 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
     names = select_engines(engines, say=say)
     traces: dict = {}
     results = run_matrix(chosen, names, quick=quick, progress=say, traces=traces)
-    tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame()}
+    tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame(),
+              "scaling": pd.DataFrame()}
     if analyses:
         tables = run_analyses(chosen, names, results, quick=quick)
     if out is not None:
@@ -103,7 +107,7 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
 
         write_report(Path(out), chosen, results, tables, quick=quick, argv=["run"],
                      traces=None if quick else traces, with_lecture_figures=False)
-    return Tables(results, tables["stability"], tables["restitution"], chosen)
+    return Tables(results, tables["stability"], tables["restitution"], chosen, tables["scaling"])
 
 
 def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,

@@ -29,6 +29,7 @@ from truestep.isolation import (
 from truestep.picks import survival
 from truestep.report_html import markdown_to_html
 from truestep.report_markdown import folded, link, md_table, with_units
+from truestep.report_scaling import scaling_section
 from truestep.report_sections import (
     hard_case_line,
     methods_section,
@@ -109,7 +110,8 @@ def draw_case_figures(cases: list[Case], results: pd.DataFrame, traces: dict | N
 
 SECTIONS = ("Which engine, which method", "Summary", "Measured orders of convergence",
             "Work against precision, per case", "Stability limits", "Restitution",
-            "Pairs not run", "The lecture's figures, reproduced", "How the numbers are made")
+            "How cost grows with work", "Pairs not run", "The lecture's figures, reproduced",
+            "How the numbers are made")
 """The report's top-level sections, in order (its table of contents)."""
 
 
@@ -202,6 +204,7 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
         parts.append(folded(f"{len(rest)} bounces", md_table(with_units(rest))))
     else:
         parts.append("Not run: no case of this run is tagged `restitution`.\n")
+    parts += scaling_section(tables.get("scaling"), fig_dir)
     absent = results[results["status"].isin(["unsupported", "skipped"])]
     parts.append("## Pairs not run\n")
     parts.append("Every case, engine and method that was not run, and why: `unsupported` "
@@ -251,7 +254,8 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
 def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
                  tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
                  traces: dict | None = None, with_lecture_figures: bool = True) -> None:
-    """Write results.csv, stability.csv, restitution.csv, index.md, index.html, figures/.
+    """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
+    the table), index.md, index.html, figures/.
 
     Everything is written into a scratch directory first and moved into ``out`` at the
     end, so a failure midway leaves the previous report whole.
@@ -262,6 +266,11 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
         results.to_csv(stage / "results.csv", index=False)
         for name in ("stability", "restitution"):
             tables[name].to_csv(stage / f"{name}.csv", index=False)
+        scaling = tables.get("scaling")
+        if scaling is not None and len(scaling):
+            from truestep.bench import COLUMNS as SCALING_COLUMNS
+
+            scaling.to_csv(stage / "scaling.csv", index=False, columns=SCALING_COLUMNS)
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,
                              traces=traces, lecture_figures=lecture)
@@ -274,3 +283,5 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
             shutil.move(str(stage / "figures"), figures)
         for f in stage.iterdir():
             os.replace(f, out / f.name)
+        if not (scaling is not None and len(scaling)):
+            (out / "scaling.csv").unlink(missing_ok=True)  # a table of an earlier run

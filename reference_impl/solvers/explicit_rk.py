@@ -296,6 +296,7 @@ class DormandPrince54(Solver):
         self._stages = stages_of(self.A[:6])
         self._k = np.empty((len(self.B), system.dim))
         self._f0: np.ndarray | None = None
+        self._x_end: np.ndarray | None = None  # the state the last step ended at
         self._h: float | None = None
         self.n_rejected = 0
 
@@ -319,10 +320,12 @@ class DormandPrince54(Solver):
         Each try fills the stage derivatives ``k`` (7, dim) in place: the six stages of
         the fifth-order step, the first of them the previous step's last, and the
         derivative at the new state, which is the error estimate's seventh stage and, if
-        the step is accepted, the next step's first.
+        the step is accepted, the next step's first, unless something between the steps
+        (a collision, an emitter) changed the state: then the derivative is evaluated
+        afresh at the state as it is.
         """
         x, t = self.system.get_state(), self.system.get_time()
-        if self._f0 is None:
+        if self._f0 is None or not np.array_equal(x, self._x_end):
             self._f0 = self.fun(x, t)
         if self._h is None:
             self._h = self._initial_step(x, t, self._f0, dt)
@@ -354,6 +357,7 @@ class DormandPrince54(Solver):
             if h < 1e-14 * max(1.0, abs(t)):
                 raise FloatingPointError(f"dopri5: step size underflow at t={t:.6g}")
         self._f0 = f_new  # a new array (System.derivative's contract): kept, not copied
+        self._x_end = x_new
         self.system.set_state(x_new, t + h)
         return h
 
