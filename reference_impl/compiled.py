@@ -783,18 +783,16 @@ def _run_independent(kind, rk_a, rk_b, rk_c, x, v, t0, h, n_steps, record, check
             q_lo = q_hi
             if n_planes > 0:  # the collision pass for the block, at the end of the step
                 rb, X0, X1, X2 = radius[lo:hi], X[0, lo:hi], X[1, lo:hi], X[2, lo:hi]
+                near_any = 0  # how many particle-planes of the block are within eps
                 for k in range(n_planes):
                     c0, c1, c2 = pp[k, 0], pp[k, 1], pp[k, 2]
                     n0, n1, n2 = pn[k, 0], pn[k, 1], pn[k, 2]
                     Dk = D[k, :m]
                     for j in range(m):
-                        Dk[j] = ((X0[j] - c0) * n0 + (X1[j] - c1) * n1 + (X2[j] - c2) * n2) - rb[j]
-                nearest = np.inf
-                for k in range(n_planes):
-                    Dk = D[k, :m]
-                    for j in range(m):
-                        nearest = min(nearest, Dk[j])
-                if not block_special and not nearest < EPS_DISTANCE:
+                        d = ((X0[j] - c0) * n0 + (X1[j] - c1) * n1 + (X2[j] - c2) * n2) - rb[j]
+                        Dk[j] = d
+                        near_any += not d >= EPS_DISTANCE  # NaN counts as near, as before
+                if not block_special and near_any == 0:
                     continue  # nothing in this block touches a plane, rests or is kicked
                 for j in range(m):
                     p = lo + j
