@@ -200,6 +200,7 @@ def test_the_report_sentence_states_what_the_table_holds():
     assert "a / fast 3e+08 (288% of the bandwidth)" in compared  # 3e8 * 96 / 1e10
     assert "b / x 1.5e+07 (14% of the bandwidth, 20.0x slower)" in compared  # 3e8 / 1.5e7
     assert "c / y" not in compared and "a / slow" not in compared
+    assert report_scaling.percent(0.0028) == "0.28%" and report_scaling.percent(0.5) == "50%"
     assert "stayed in cache" in compared
 
 

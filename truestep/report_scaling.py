@@ -16,6 +16,11 @@ from truestep.report_markdown import fmt, folded, md_table
 TITLE = "How cost grows with work"
 
 
+def percent(fraction: float) -> str:
+    """``0.14`` as ``14%``, ``0.0028`` as ``0.28%`` (two digits below 10%)."""
+    return f"{fraction:.0%}" if fraction >= 0.1 else f"{100 * fraction:.2g}%"
+
+
 def best_at(table: pd.DataFrame, n: int) -> pd.DataFrame:
     """Per engine, its fastest ``ok`` row at ``n`` particles (by ``particle_steps_per_s``),
     fastest engine first. Columns as the table's."""
@@ -62,7 +67,7 @@ def scaling_lines(table: pd.DataFrame) -> list[str]:
     best = best_at(table, n)
     top = best.iloc[0]
     cells = [f"{r.engine} / {r.method} {r.particle_steps_per_s:.3g} "
-             f"({r.bandwidth_fraction:.0%} of the bandwidth"
+             f"({percent(r.bandwidth_fraction)} of the bandwidth"
              + ("" if r.engine == top.engine
                 else f", {top.particle_steps_per_s / r.particle_steps_per_s:.1f}x slower") + ")"
              for r in best.itertuples(index=False)]
