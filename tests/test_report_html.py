@@ -223,3 +223,18 @@ def test_speed_table_gives_particle_steps_per_second_and_ratios():
     assert t.loc["mujoco", "slower_by"] == pytest.approx(150.0)
     text = "\n".join(speed_section([case], results))
     assert "the fastest engine, pymunk / default, takes 100 times as long" in text
+
+
+def test_an_image_line_from_case_text_reads_nothing(tmp_path):
+    from truestep.report_html import markdown_to_html
+
+    secret = tmp_path / "secret.png"
+    secret.write_bytes(b"not for the report")
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "figures" / "ok.png").write_bytes(b"\x89PNG drawn")
+    md = "\n".join([f"![x]({secret})", "![y](../secret.png)", "![z](figures/missing.png)",
+                    "![w](figures/ok.png)"])
+    page = markdown_to_html(md, tmp_path)
+    assert page.count("data:image/png;base64,") == 1  # only the report's own figure
+    assert "bm90IGZvciB0aGUgcmVwb3J0" not in page  # base64 of the secret
+    assert "figures/missing.png" in page  # shown as text, no traceback

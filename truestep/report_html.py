@@ -14,6 +14,15 @@ from pathlib import Path
 from truestep.report_markdown import slug
 
 
+def _own_figure(base: Path, target: str) -> Path | None:
+    """``base / target`` if it is a PNG the report drew (directly under ``base/figures``),
+    else ``None``: an image line from case text can name any path, and none is read."""
+    if not re.fullmatch(r"figures/[\w.-]+\.png", target) or ".." in target:
+        return None
+    path = base / target
+    return path if path.is_file() and not path.is_symlink() else None
+
+
 def markdown_to_html(md: str, base: Path) -> str:
     """A small Markdown-to-HTML conversion for the report's own subset, images inlined;
     headings get the anchors :func:`~truestep.report_markdown.slug` gives them."""
@@ -39,10 +48,13 @@ def markdown_to_html(md: str, base: Path) -> str:
             out.append(f"<details><summary>{inline(m.group(1))}</summary>" if m else line)
         elif line.startswith("!["):
             m = re.match(r"!\[(.*?)\]\((.*?)\)", line)
-            if m:
-                data = base64.b64encode((base / m.group(2)).read_bytes()).decode()
+            figure = _own_figure(base, m.group(2)) if m else None
+            if figure is not None:
+                data = base64.b64encode(figure.read_bytes()).decode()
                 out.append(f'<figure><img alt="{html.escape(m.group(1))}" '
                            f'src="data:image/png;base64,{data}"></figure>')
+            else:
+                out.append(f"<p>{inline(line)}</p>")  # text, as written: nothing is read
         elif line.startswith("|"):
             rows = []
             while i < len(lines) and lines[i].startswith("|"):
