@@ -19,6 +19,7 @@ from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.isolation import Outcome, run_isolated
 from truestep.progress import Progress
+from truestep.trust import checked
 
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
@@ -134,7 +135,10 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
     if isinstance(outcome, Outcome):
         row.update(status=outcome.status, message=outcome.message)
         return row
-    traj = outcome
+    traj = checked(outcome, case.model.n if case.model is not None else None)
+    if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
+        row.update(status="crashed", message=traj)
+        return row
     if traj.status == "ok" and (t_blow := metrics.energy_blowup(case, traj)) is not None:
         traj.status, traj.t_fail = "unstable", t_blow
         traj.message = (f"finite, but its energy grew from {traj.energy[0]:.4g} J to "
@@ -149,7 +153,11 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         message=traj.message,
         path=traj.path,
     )
-    row.update(measure(case, traj))
+    try:
+        row.update(measure(case, traj))
+    except Exception as err:  # measuring this run failed: this row says so, the run goes on
+        row.update(status="crashed", message=f"measuring the run failed: {type(err).__name__}: "
+                   f"{str(err)[:120]}")
     if traces is not None:
         trace = energy_trace(traj)
         if trace is not None:

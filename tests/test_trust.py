@@ -1,0 +1,58 @@
+"""What an adapter returns is checked before it is measured: a breach is that row's
+``crashed``, a non-finite state under ``ok`` is ``unstable`` at its time."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from truestep.adapters import get_adapter
+from truestep.runner import row_from
+
+
+@pytest.fixture(scope="module")
+def good(case_named):
+    case = case_named("bouncing-ball")
+    return case, get_adapter("reference").simulate(case, "rk4", case.dts[0])
+
+
+def _row(case, traj):
+    return row_from(case, "bad", "m", case.dts[0], adaptive=False, outcome=traj)
+
+
+def test_a_good_trajectory_is_measured(good):
+    case, traj = good
+    row = _row(case, dataclasses.replace(traj))
+    assert row["status"] == "ok" and np.isfinite(row["error"])
+
+
+@pytest.mark.parametrize("change", [
+    {"status": "splendid"},
+    {"x": "not an array"},
+    {"x": np.zeros((3, 1, 3))},  # records that do not match t
+    {"x": np.zeros((626, 2, 3))},  # the wrong number of particles
+    {"energy": np.zeros(5)},
+    {"t": np.zeros((2, 2))},
+])
+def test_a_breach_of_the_contract_is_that_row_crashed(good, change):
+    case, traj = good
+    row = _row(case, dataclasses.replace(traj, **change))
+    assert row["status"] == "crashed" and row["message"].startswith("adapter returned")
+    assert len(row["message"]) < 200
+
+
+def test_one_record_is_not_ok(good):
+    case, traj = good
+    one = dataclasses.replace(traj, t=traj.t[:1], x=traj.x[:1], v=traj.v[:1],
+                              energy=None if traj.energy is None else traj.energy[:1])
+    assert _row(case, one)["status"] == "crashed"
+
+
+def test_a_non_finite_state_is_unstable_at_its_time_whatever_the_adapter_said(good):
+    case, traj = good
+    x = traj.x.copy()
+    x[400:, 0, 1] = np.nan
+    row = _row(case, dataclasses.replace(traj, x=x, status="ok"))
+    assert row["status"] == "unstable" and row["t_fail"] == traj.t[400]
