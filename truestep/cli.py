@@ -106,26 +106,24 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _read_csv(path: Path, needs: set[str]) -> pd.DataFrame:
+def _read_csv(path: Path, needs: set[str], kind: str = "results") -> pd.DataFrame:
+    from truestep.tables_io import TableError, read_table
+
     try:
-        table = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as err:
-        raise UsageError(f"{path}: cannot read as CSV: {str(err).splitlines()[0][:200]}") from None
-    missing = needs - set(table.columns)
-    if missing:
-        raise UsageError(f"{path}: missing columns {', '.join(sorted(missing))}")
-    return table
+        return read_table(path, kind, needs, rows=kind == "results")
+    except TableError as err:
+        raise UsageError(str(err)) from None
 
 
 def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
     """``results`` and, beside it, ``stability`` and ``restitution`` (``None`` if absent)."""
     if not results_path.is_file():
         raise UsageError(f"{results_path}: no such file (run `truestep run` first)")
-    tables = {"results": _read_csv(results_path, RESULTS_NEEDS)}
+    tables = {"results": _read_csv(results_path, RESULTS_NEEDS, "results")}
     for name, needs in (("stability", {"case", "engine", "method", "dt_limit", "dt_limit_exact"}),
                         ("restitution", {"engine", "method", "dt", "e_set", "bounce", "e_measured"})):
         path = results_path.parent / f"{name}.csv"
-        tables[name] = _read_csv(path, needs) if path.is_file() else None
+        tables[name] = _read_csv(path, needs, name) if path.exists() else None
     return tables
 
 
