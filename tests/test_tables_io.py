@@ -53,3 +53,13 @@ def test_malformed_tables_are_exit_2_and_one_line(run_dir, capsys, table, damage
     assert code == 2, err
     assert len(lines) == 1 and len(lines[0]) < 300 and "Traceback" not in err
     assert table in lines[0]
+
+
+def test_an_unusable_out_fails_before_the_sweep(tmp_path, capsys):
+    target = tmp_path / "a-file"
+    target.write_text("kept")
+    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
+                 "--out", str(target)])
+    err = capsys.readouterr().err
+    assert code == 2 and "is a file" in err and "sweep" not in err
+    assert target.read_text() == "kept"

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -87,6 +88,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not engines:
         raise UsageError("--engines: no engine is installed")
     out = Path(args.out)
+    _check_out(out)
     clock = [time.perf_counter()]
 
     def lap() -> float:
@@ -104,6 +106,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"wrote {out}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
           f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
     return 0
+
+
+def _check_out(out: Path) -> None:
+    """Fail before the sweep if the report cannot be written at ``out``: a file there, or
+    a directory (or its parent) where this process cannot create files."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out: {out} is a file, not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=out.parent if out.parent.exists() else out,
+                                            prefix=".truestep-probe-")
+        probe.close()
+        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".truestep-probe-")
+        probe.close()
+    except OSError as err:
+        raise UsageError(f"--out: cannot write in {out}: {err.strerror or err}") from None
 
 
 def _read_csv(path: Path, needs: set[str], kind: str = "results") -> pd.DataFrame:
