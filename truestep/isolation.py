@@ -6,18 +6,27 @@ reports what happened. :func:`run_isolated` runs one child at a time: timed runs
 share the CPU with other runs of the harness. :func:`run_isolated_all` keeps up to
 ``workers`` children busy at once, for work whose wall time is not measured (stability
 searches, bounce tests).
+
+No child outlives its parent: each one asks the kernel for SIGKILL when its parent dies
+(Linux, :func:`truestep.oscalls.die_with_parent`), ignores SIGINT (a Ctrl-C reaches the
+whole process group; the parent decides) and takes SIGTERM by default; the parent kills
+the live ones when it is interrupted (:func:`kill_children`, :mod:`truestep.interrupts`).
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import Any
+
+from truestep import faults
+from truestep.oscalls import die_with_parent
 
 
 @dataclass
@@ -33,7 +42,14 @@ Call = tuple[Callable[..., Any], tuple, float]
 """``(fn, args, timeout_s)``: one isolated call."""
 
 
-def _child(conn, fn: Callable[..., Any], args: tuple) -> None:
+_LIVE: dict[int, Any] = {}
+"""The children started by this process and not yet joined, by pid."""
+
+
+def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
+    die_with_parent(parent)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         conn.send(("ok", fn(*args)))
     except BaseException as err:  # everything: the parent turns it into a row
@@ -59,8 +75,10 @@ def _start(index: int, call: Call) -> Running:
     fn, args, timeout = call
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(child, fn, args), daemon=True)
+    proc = ctx.Process(target=_child, args=(child, os.getpid(), fn, args), daemon=True)
     proc.start()
+    _LIVE[proc.pid] = proc
+    faults.note_child(proc.pid)
     child.close()
     return Running(index, proc, parent, time.monotonic() + timeout, timeout)
 
@@ -81,6 +99,15 @@ def _finish(run: Running, *, timed_out: bool) -> Outcome:
         if run.proc.is_alive() and timed_out:
             run.proc.kill()
         run.proc.join()
+        _LIVE.pop(run.proc.pid, None)
+
+
+def kill_children() -> None:
+    """SIGKILL every child this process started and has not joined yet, and reap them."""
+    for pid, proc in list(_LIVE.items()):
+        proc.kill()
+        proc.join()
+        _LIVE.pop(pid, None)
 
 
 def run_isolated_all(calls: Sequence[Call], workers: int = 1,
@@ -107,11 +134,13 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
                     outcomes[r.index] = _finish(r, timed_out=timed_out)
                     if done is not None:
                         done(r.index, outcomes[r.index])
+                    faults.child_finished()
     finally:
         for r in running:
             r.proc.kill()
             r.proc.join()
             r.conn.close()
+            _LIVE.pop(r.proc.pid, None)
     return outcomes  # type: ignore[return-value]
 
 

@@ -11,7 +11,6 @@ import os
 import platform
 import shutil
 import subprocess
-import tempfile
 from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
@@ -251,18 +250,32 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
     return collect
 
 
+REPORT_FILES = ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
+                "index.html", "figures")
+"""What :func:`write_report` writes into ``out``; any other entry of ``out`` is kept."""
+
+
 def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
                  tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
                  traces: dict | None = None, with_lecture_figures: bool = True) -> None:
     """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
     the table), index.md, index.html, figures/.
 
-    Everything is written into a scratch directory first and moved into ``out`` at the
-    end, so a failure midway leaves the previous report whole.
+    The whole new report is written into a staging folder beside ``out`` and put in
+    place of the old one as a whole (:mod:`truestep.publish`): at every instant ``out``
+    holds either the whole previous report or the whole new one, also when the process
+    is killed. Entries of the previous report that this one does not write are kept,
+    except ``scaling.csv`` (a table of an earlier run) and, when this run draws figures,
+    the old ``figures/``. On failure or interruption the staging folder is removed and
+    the children still drawing are killed.
     """
-    out.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out.parent if out.parent.exists() else None) as tmp:
-        stage = Path(tmp)
+    from truestep import faults, publish
+    from truestep.isolation import kill_children
+
+    out = publish.target(out)
+    publish.recover(out)
+    stage = publish.new_stage(out)
+    try:
         results.to_csv(stage / "results.csv", index=False)
         for name in ("stability", "restitution"):
             tables[name].to_csv(stage / f"{name}.csv", index=False)
@@ -271,17 +284,18 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
             from truestep.bench import COLUMNS as SCALING_COLUMNS
 
             scaling.to_csv(stage / "scaling.csv", index=False, columns=SCALING_COLUMNS)
+        faults.point("report-csv")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,
                              traces=traces, lecture_figures=lecture)
+        faults.point("report-figures")
         (stage / "index.md").write_text(md)
+        faults.point("report-index")
         (stage / "index.html").write_text(markdown_to_html(md, stage))
-        figures = out / "figures"
-        if (stage / "figures").exists():
-            if figures.exists():
-                shutil.rmtree(figures)
-            shutil.move(str(stage / "figures"), figures)
-        for f in stage.iterdir():
-            os.replace(f, out / f.name)
-        if not (scaling is not None and len(scaling)):
-            (out / "scaling.csv").unlink(missing_ok=True)  # a table of an earlier run
+        publish.carry_over(out, stage, drop={"scaling.csv"})
+        publish.swap(stage, out)
+    except BaseException:
+        kill_children()
+        raise
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
