@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -76,11 +77,37 @@ def _reproduce(args: argparse.Namespace) -> list[str]:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    """``truestep run``: sweep, analyses, report; checkpointed for ``--resume``.
+
+    SIGTERM or SIGINT stops the run: the children are killed, the staging folder is
+    removed, the previous report stays as it was, and the exit code is 128 + the signal
+    with one line that says so. Finished sweeps (and the analyses, once done) stay in the
+    journal beside ``--out`` (:mod:`truestep.journal`) until the report is published.
+    """
+    from truestep.interrupts import Interrupted, handled
+
+    with handled():
+        try:
+            return _run(args)
+        except Interrupted as err:
+            out = args.out or "reports"
+            where = (f"the new report is in {out}/" if err.published
+                     else f"{out}/ holds the previous report, untouched")
+            _say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}; "
+                 "`truestep run --resume` continues from the finished sweeps")
+            return 128 + err.signum
+
+
+def _run(args: argparse.Namespace) -> int:
+    from truestep import faults, publish
     from truestep.analyses import run_analyses
     from truestep.api import select_engines
+    from truestep.journal import Journal, JournalError, fingerprint
     from truestep.report import write_report
     from truestep.runner import run_matrix
 
+    resuming = args.resume is not None
+    args.out = args.out or args.resume or "reports"
     cases = _load(args.cases)
     if args.quick and args.cases == "*":
         cases = [c for c in cases if c.in_quick] or cases
@@ -89,6 +116,18 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UsageError("--engines: no engine is installed")
     out = Path(args.out)
     _check_out(out)
+    for line in publish.recover(out):
+        _say(f"{out}: {line} (left by a killed run)")
+    journal = Journal(Path(args.resume) if args.resume else out)
+    fp = fingerprint(cases, engines, args.quick)
+    if resuming:
+        try:
+            kept = journal.resume(fp)
+        except JournalError as err:
+            raise UsageError(f"--resume: {err}") from None
+        _say(f"resuming: {kept} finished sweeps in {journal.dir}")
+    else:
+        journal.start(fp)
     clock = [time.perf_counter()]
 
     def lap() -> float:
@@ -96,12 +135,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         return clock[-1] - clock[-2]
 
     traces: dict = {}
-    results = run_matrix(cases, engines, quick=args.quick, traces=traces)
+    results = run_matrix(cases, engines, quick=args.quick, traces=traces, journal=journal)
     t_sweep = lap()
-    tables = run_analyses(cases, engines, results, quick=args.quick)
+    tables = journal.analyses() if resuming else None
+    if tables is None:
+        with faults.phase("analyses"):
+            tables = run_analyses(cases, engines, results, quick=args.quick)
+        journal.put_analyses(tables)
     t_analyses = lap()
     write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
                  traces=None if args.quick else traces, with_lecture_figures=not args.quick)
+    journal.remove()
     t_report = lap()
     print(f"wrote {out}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
           f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
@@ -109,17 +153,20 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _check_out(out: Path) -> None:
-    """Fail before the sweep if the report cannot be written at ``out``: a file there, or
-    a directory (or its parent) where this process cannot create files."""
+    """Fail before the sweep if the report cannot be published at ``out``: a file there,
+    a mount point (the report is put in place by renaming a directory), a parent where
+    this process cannot create the staging folder and the journal, or an existing
+    directory whose entries it cannot replace."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out: {out} is a file, not a directory")
+    real = Path(os.path.realpath(out))
+    if real.exists() and os.path.ismount(real):
+        raise UsageError(f"--out: {out} is a mount point; name a directory inside it")
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = tempfile.NamedTemporaryFile(dir=out.parent if out.parent.exists() else out,
-                                            prefix=".truestep-probe-")
-        probe.close()
-        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".truestep-probe-")
-        probe.close()
+        real.parent.mkdir(parents=True, exist_ok=True)
+        for where in (real.parent, real) if real.exists() else (real.parent,):
+            probe = tempfile.NamedTemporaryFile(dir=where, prefix=".truestep-probe-")
+            probe.close()
     except OSError as err:
         raise UsageError(f"--out: cannot write in {out}: {err.strerror or err}") from None
 
@@ -356,8 +403,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="short sweeps of the quick cases, no energy or lecture figures (CI smoke run)")
     run.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)
     run.add_argument("--engines", default=None, metavar="NAMES", help=ENGINES_HELP)
-    run.add_argument("--out", default="reports", metavar="DIR",
-                     help="output directory (default: reports)")
+    run.add_argument("--out", default=None, metavar="DIR",
+                     help="output directory (default: reports, or the --resume DIR)")
+    run.add_argument("--resume", nargs="?", const="", default=None, metavar="DIR",
+                     help="continue the interrupted run whose --out was DIR (default: --out): "
+                     "take its finished sweeps (and analyses) from .DIR.partial beside it and "
+                     "run the rest; the cases, engines, --quick and truestep version must be "
+                     "the same (else exit 2). Without --resume a run starts afresh")
     run.set_defaults(func=cmd_run)
 
     gate = sub.add_parser("gate", help="check gates (and a baseline) against a run's tables",

@@ -9,11 +9,12 @@ import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from truestep import metrics
+from truestep import faults, metrics
 from truestep.adapters import get_adapter
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
@@ -21,6 +22,9 @@ from truestep.isolation import Outcome, run_isolated
 from truestep.progress import Progress
 from truestep.time_limit import TimeLimitExceeded, time_limit
 from truestep.trust import checked
+
+if TYPE_CHECKING:
+    from truestep.journal import Journal
 
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
@@ -251,13 +255,16 @@ def run_matrix(
     timing: Timing | None = None,
     progress: Callable[[str], None] | None = None,
     traces: dict | None = None,
+    journal: Journal | None = None,
 ) -> pd.DataFrame:
     """Run every (case, engine, method, dt) and return the tidy results table.
 
     Each case, engine and method's sweep runs in one child process at a time
     (:func:`run_sweep`). Energy traces of the runs go into ``traces`` when it is given
     (see :func:`row_from`). Progress goes to standard error (:class:`Progress`), or each
-    row's line to ``progress`` when it is given.
+    row's line to ``progress`` when it is given. With a ``journal``
+    (:class:`truestep.journal.Journal`), each finished sweep is checkpointed there, and a
+    sweep it already holds is taken from it instead of being run again.
     """
     timing = timing or Timing(max_repeats=1 if quick else 3)
     preload()
@@ -279,12 +286,28 @@ def run_matrix(
                 })
                 continue
             dts = [dt for _, dt, _, _ in entries]
-            for row in run_sweep(case, engine, method, dts, adaptive=adaptive,
-                                 timing=timing, traces=traces):
+            key = (case.name, engine, method)
+            kept = journal.sweep(key, dts) if journal is not None else None
+            if kept is not None:
+                rows += kept[0]
+                if traces is not None:
+                    traces.update(kept[1])
+                bar.done(f"{case.name:24s} {engine:9s} {method:17s} {len(kept[0])} rows from "
+                         "the interrupted run", n=len(kept[0]))
+                continue
+            swept: dict = {}
+            done = run_sweep(case, engine, method, dts, adaptive=adaptive, timing=timing,
+                             traces=swept if traces is not None else None)
+            for row in done:
                 rows.append(row)
                 bar.done(f"{case.name:24s} {engine:9s} {method:17s} {row['dt']:<9.3g} "
                          f"{row['status']:9s} err={row.get('error', np.nan):.3g} "
                          f"wall={row.get('wall_s', np.nan):.3g}s")
+                faults.point("sweep")
+            if traces is not None:
+                traces.update(swept)
+            if journal is not None:
+                journal.put_sweep(key, dts, done, swept)
     return tidy(rows, cases)
 
 
