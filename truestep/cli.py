@@ -85,16 +85,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     journal beside ``--out`` (:mod:`truestep.journal`) until the report is published.
     """
     from truestep.interrupts import Interrupted, handled
+    from truestep.journal import journal_dir
 
     with handled():
         try:
             return _run(args)
         except Interrupted as err:
-            out = args.out or "reports"
+            out = args.out or args.resume or "reports"
             where = (f"the new report is in {out}/" if err.published
                      else f"{out}/ holds the previous report, untouched")
-            _say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}; "
-                 "`truestep run --resume` continues from the finished sweeps")
+            kept = journal_dir(Path(args.resume or out))
+            sweeps = len(list(kept.glob("sweep-*.pkl")))
+            then = (f"; the same command with --resume continues from the {sweeps} finished "
+                    f"sweeps in {kept}" if (kept / "fingerprint.json").exists() else "")
+            _say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}{then}")
             return 128 + err.signum
 
 
@@ -398,7 +402,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run the matrix and the analyses, write the tables and the report",
                          description="Run every case with every engine and method that can model "
                          "it, the stability searches and the restitution sweep; write results.csv, "
-                         "stability.csv, restitution.csv, index.md, index.html and figures/.")
+                         "stability.csv, restitution.csv, index.md, index.html and figures/. The "
+                         "report is put in place as a whole: a run that fails or is killed leaves "
+                         "the previous one as it was. SIGTERM or SIGINT stops the run (exit 128 + "
+                         "the signal); its finished sweeps are kept for --resume.")
     run.add_argument("--quick", action="store_true",
                      help="short sweeps of the quick cases, no energy or lecture figures (CI smoke run)")
     run.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)

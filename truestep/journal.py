@@ -80,10 +80,13 @@ class Journal:
             raise JournalError(f"no interrupted run to resume: {self.dir} holds no "
                                "fingerprint.json") from None
         for field, what in (("truestep", "truestep version"), ("quick", "--quick"),
-                            ("engines", "engines"), ("cases", "cases or case files")):
+                            ("engines", "engines"), ("cases", "cases")):
             if kept.get(field) != fp[field]:
+                was, now = kept.get(field), fp[field]
+                if field == "cases":
+                    was, now = _case_change(was, now)
                 raise JournalError(f"the interrupted run in {self.dir} had other {what} "
-                                   f"({_short(kept.get(field))}, now {_short(fp[field])}); "
+                                   f"({_short(was)}, now {_short(now)}); "
                                    "run without --resume to start afresh")
         for tmp in self.dir.glob(".tmp-*"):
             tmp.unlink(missing_ok=True)
@@ -124,6 +127,18 @@ class Journal:
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
+def _case_change(was: Any, now: list) -> tuple[Any, Any]:
+    """What differs between two runs' cases: their names, or which files were edited."""
+    try:
+        names = [n for n, _ in was]
+    except (TypeError, ValueError):
+        return was, [n for n, _ in now]
+    if names != [n for n, _ in now]:
+        return names, [n for n, _ in now]
+    edited = ", ".join(n for (n, a), (_, b) in zip(was, now, strict=True) if a != b)
+    return f"{edited} as it was", f"{edited} edited"
+
+
 def _short(value: Any) -> str:
-    text = json.dumps(value)
+    text = value if isinstance(value, str) else json.dumps(value)
     return text if len(text) <= 60 else text[:57] + "..."
