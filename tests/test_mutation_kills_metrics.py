@@ -1,0 +1,194 @@
+"""The metrics on hand-made trajectories (mutation testing, benchmarks/mutation/README.md).
+
+Each number is worked out here from its definition: the distance to the exact positions
+at shared times, the relative energy error, the least-squares slope of log(error)
+against log(dt) (exactly ``p`` for errors ``C dt^p``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from truestep import metrics
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
+from truestep.cases.exact import Exact
+from truestep.reference_impl.model import Anchors, ParticleModel, Plane, Springs
+
+
+def particles(n=2, **kw):
+    base = dict(mass=np.ones(n), x0=np.zeros((n, 3)), v0=np.zeros((n, 3)), radius=np.zeros(n),
+                fixed=np.zeros(n, bool))
+    return ParticleModel(**(base | kw))
+
+
+def case(kind="particles", *, duration=0.3, error_norm="final", conservative=False, model=None,
+         exact=None):
+    if kind == "particles" and model is None:
+        model = particles()
+    return Case(name="m", file="m", title="m", description="", kind=kind, duration=duration,
+                dts=[0.1], quick_dts=[0.1], tolerances=[1e-6], quick_tolerances=[1e-6],
+                model=model, exact=exact, error_norm=error_norm, conservative=conservative)
+
+
+T = np.array([0.0, 0.1, 0.2, 0.3])
+
+
+def test_matching_finds_the_shared_times_to_1e9_relative():
+    k, j = metrics._matching(T, np.array([0.1 + 1e-12, 0.25, 0.3 - 1e-12, 0.0]))
+    np.testing.assert_array_equal(k, [1, 3, 0])
+    np.testing.assert_array_equal(j, [0, 2, 3])
+    k, j = metrics._matching(T, np.array([0.2 - 1e-12, 0.2 + 1e-12, 5.0, -1.0]))
+    np.testing.assert_array_equal(k, [2, 2])
+    np.testing.assert_array_equal(j, [0, 1])
+    big = np.array([0.0, 1000.0, 2000.0])
+    k, _ = metrics._matching(big, np.array([1000.0 + 5e-7, 2000.0 + 5e-6]))
+    np.testing.assert_array_equal(k, [1])  # 1e-9 relative to |t|, not absolute
+    k, j = metrics._matching(T, np.zeros(0))
+    assert len(k) == len(j) == 0 and k.dtype.kind == "i"
+
+
+def test_position_error_of_particles_is_the_worst_euclidean_distance():
+    x = np.zeros((4, 2, 3))
+    x[1, 0] = [3.0, 4.0, 0.0]  # 5 at t = 0.1
+    x[2, 1] = [1.0, 1.0, 1.0]  # sqrt 3 at t = 0.2
+    x[3, 0] = [0.0, 0.0, -2.0]
+    x[3, 1] = [1.0, 0.0, 0.0]  # 2 at the end
+    traj = Trajectory(t=T, x=x, v=None, energy=None)
+    exact = Exact(t=T.copy(), x=np.zeros((4, 2, 3)))
+    assert metrics.position_error(case(error_norm="final"), traj, exact) == 2.0
+    assert metrics.position_error(case(error_norm="max"), traj, exact) == 5.0
+    # the final error needs the end of the run among the shared times
+    assert np.isnan(metrics.position_error(case(duration=0.5), traj, exact))
+    assert np.isnan(metrics.position_error(case(), traj, Exact(t=np.array([7.0]), x=np.zeros((1, 2, 3)))))
+    # only the shared times count
+    part = Exact(t=np.array([0.2, 0.3]), x=np.zeros((2, 2, 3)))
+    assert metrics.position_error(case(error_norm="max"), traj, part) == pytest.approx(2.0)
+    # particles not alive, or not known exactly, are not compared
+    alive = np.ones((4, 2), bool)
+    alive[1, 0] = False
+    traj_a = Trajectory(t=T, x=x, v=None, energy=None, alive=alive)
+    assert metrics.position_error(case(error_norm="max"), traj_a, exact) == 2.0
+    unknown = np.zeros((4, 2, 3))
+    unknown[3, 0] = np.nan
+    assert metrics.position_error(case(error_norm="final"), traj, Exact(T.copy(), unknown)) == 1.0
+
+
+def test_position_error_of_an_ode_is_the_largest_component():
+    x = np.zeros((4, 1, 3))
+    x[3, 0] = [0.3, -0.4, 0.1]
+    x[1, 0] = [0.0, 0.0, 0.5]
+    traj = Trajectory(t=T, x=x, v=None, energy=None, alive=np.zeros((4, 1), bool))
+    exact = Exact(t=T.copy(), x=np.zeros((4, 1, 3)))
+    c = case("ode", model=None)
+    assert metrics.position_error(c, traj, exact) == pytest.approx(0.4)  # alive ignored for an ODE
+    c_max = case("ode", model=None, error_norm="max")
+    assert metrics.position_error(c_max, traj, exact) == pytest.approx(0.5)
+
+
+def test_energy_drift_is_relative_to_the_start_or_to_the_exact_curve():
+    traj = Trajectory(t=T, x=np.zeros((4, 1, 3)), v=None, energy=np.array([-2.0, -2.2, -1.9, -2.1]))
+    mx, end = metrics.energy_drift(case(conservative=True), traj, None)
+    assert mx == pytest.approx(0.1) and end == pytest.approx(0.05)
+    zero = Trajectory(t=T, x=traj.x, v=None, energy=np.array([0.0, 0.5, -1.0, 0.25]))
+    mx, end = metrics.energy_drift(case(conservative=True), zero, None)
+    assert (mx, end) == (1.0, 0.25)  # scaled by the largest |E| when E(0) = 0
+    flat = Trajectory(t=T, x=traj.x, v=None, energy=np.zeros(4))
+    assert metrics.energy_drift(case(conservative=True), flat, None) == (0.0, 0.0)
+    # damped: against the exact energy at the shared times, over |E_exact(0)|
+    exact = Exact(t=np.array([0.0, 0.2, 0.3]), x=np.zeros((3, 1, 3)),
+                  energy=np.array([4.0, 3.0, 1.0]))
+    mine = Trajectory(t=T, x=traj.x, v=None, energy=np.array([4.0, 9.0, 3.5, 2.0]))
+    mx, end = metrics.energy_drift(case(), mine, exact)
+    assert mx == pytest.approx(0.25) and end == pytest.approx(0.25)
+    exact0 = Exact(t=exact.t, x=exact.x, energy=np.array([0.0, 3.0, 1.5]))
+    assert metrics.energy_drift(case(), mine, exact0) == pytest.approx((4.0, 0.5))  # scale 1
+    # no energy, or nothing to compare with: NaN
+    for traj_, exact_ in [(Trajectory(T, traj.x, None, None), exact),
+                          (Trajectory(T, traj.x, None, np.zeros(0)), exact),
+                          (mine, None), (mine, Exact(t=exact.t, x=exact.x)),
+                          (mine, Exact(t=exact.t, x=exact.x, energy=np.ones(2))),
+                          (mine, Exact(t=np.array([9.0]), x=exact.x[:1], energy=np.ones(1)))]:
+        assert all(np.isnan(metrics.energy_drift(case(), traj_, exact_)))
+
+
+def test_energy_behaviour_reads_the_scene():
+    assert metrics.energy_behaviour(case()) == "conservative"
+    assert metrics.energy_behaviour(case("ode", model=None)) == "conservative"
+    assert metrics.energy_behaviour(case(model=particles(drag=0.1))) == "dissipative"
+    sp = Springs(np.array([0]), np.array([1]), np.ones(1), np.array([0.2]), np.ones(1))
+    assert metrics.energy_behaviour(case(model=particles(springs=sp))) == "dissipative"
+    sp0 = Springs(np.array([0]), np.array([1]), np.ones(1), np.zeros(1), np.ones(1))
+    assert metrics.energy_behaviour(case(model=particles(springs=sp0))) == "conservative"
+    an = Anchors(np.array([0]), np.zeros((1, 3)), np.ones(1), np.array([0.3]), np.ones(1))
+    assert metrics.energy_behaviour(case(model=particles(anchors=an))) == "dissipative"
+    up = np.array([0.0, 1.0, 0.0])
+    for plane, kind in [(Plane(np.zeros(3), up, 0.9), "dissipative"),
+                        (Plane(np.zeros(3), up, 1.0, 0.2), "dissipative"),
+                        (Plane(np.zeros(3), up, 1.0, 0.0), "conservative")]:
+        assert metrics.energy_behaviour(case(model=particles(planes=[plane]))) == kind
+    kick = particles(drag=0.1, impulses=[(0, np.ones(3), 0.0, 1.0)])
+    assert metrics.energy_behaviour(case(model=kick)) == "source"
+
+
+def test_energy_blowup_is_the_first_time_the_energy_is_that_far_from_its_start():
+    t = np.linspace(0.0, 4.0, 81)
+    grow = Trajectory(t=t, x=np.zeros((81, 2, 3)), v=None, energy=np.exp(t))
+    first = t[np.argmax(np.exp(t) - 1.0 > 1.0)]
+    assert metrics.energy_blowup(case(conservative=True), grow) == first
+    assert metrics.energy_blowup(case(), grow) == first  # a particle scene, not conservative
+    # a jump then a plateau is not a blow-up of a conservative scene ...
+    jump = Trajectory(t=t, x=grow.x, v=None, energy=np.where(t < 1.0, 1.0, 5.0))
+    assert metrics.energy_blowup(case(conservative=True), jump) is None
+    # ... but a dissipative scene whose energy stays above its start blew up
+    damped = case(model=particles(drag=0.5))
+    assert metrics.energy_blowup(damped, jump) == 1.0
+    small = Trajectory(t=t, x=grow.x, v=None, energy=1.0 + 0.5 * t / 4)
+    assert metrics.energy_blowup(case(conservative=True), small) is None  # never that far
+    src = case(model=particles(impulses=[(0, np.ones(3), 0.0, 1.0)]))
+    assert metrics.energy_blowup(src, grow) is None
+    assert metrics.energy_blowup(case("ode", model=None), grow) is None  # ODE, not conservative
+    assert metrics.energy_blowup(case("ode", model=None, conservative=True), grow) == first
+    assert metrics.energy_blowup(case(), Trajectory(t[:1], grow.x[:1], None, np.ones(1))) is None
+    assert metrics.energy_blowup(case(), Trajectory(t, grow.x, None, None)) is None
+
+
+def test_fit_order_is_the_slope_over_the_asymptotic_range():
+    dts = np.array([0.1, 0.05, 0.02, 0.01, 0.005])
+    assert metrics.fit_order(dts, 3.0 * dts**2) == pytest.approx(2.0, rel=1e-12)
+    # points outside [1e-11, 0.1] x scale are left out
+    err = 0.5 * dts**3
+    err[0] = 0.2  # not converged yet
+    assert metrics.fit_order(dts, err) == pytest.approx(3.0, rel=1e-12)
+    assert metrics.fit_order(dts, err, scale=10.0) != pytest.approx(3.0, rel=1e-3)
+    low = 1e-2 * dts**4
+    low[-1] = 1e-12  # round-off
+    assert metrics.fit_order(dts, low) == pytest.approx(4.0, rel=1e-12)
+    # scaled down, the first point is not converged and the round-off one counts
+    assert metrics.fit_order(dts[1:], low[1:], scale=1e-6) != pytest.approx(4.0, rel=1e-3)
+    assert np.isnan(metrics.fit_order(dts, np.array([1.0, 1.0, 1.0, 1.0, 1e-3])))
+    assert np.isnan(metrics.fit_order(dts[:2], np.array([0.05, np.nan])))
+    nonfinite = 2.0 * dts
+    nonfinite[1] = np.inf
+    assert metrics.fit_order(dts, np.minimum(nonfinite, 0.09)) != 1.0
+    assert metrics.fit_order(dts[2:], 2.0 * dts[2:]) == pytest.approx(1.0, rel=1e-12)
+    assert metrics.fit_order(list(dts[3:]), list(0.01 * dts[3:] ** 2)) == pytest.approx(2.0)
+
+
+def test_exact_for_evaluates_and_keeps_the_last_solutions():
+    m = particles(1, v0=np.array([[1.0, 2.0, 0.0]]), gravity=np.array([0.0, -10.0, 0.0]))
+    c = case(model=m, exact="uniform-gravity")
+    t = np.array([0.0, 0.5, 1.0])
+    ex = metrics.exact_for(c, t)
+    np.testing.assert_allclose(ex.x[:, 0], [[0, 0, 0], [0.5, 1.0 - 1.25, 0], [1.0, 2.0 - 5.0, 0]])
+    assert metrics.exact_for(c, t.copy()) is ex  # the same times: kept
+    assert metrics.exact_for(c, t[:2]) is not ex
+    other = case(model=m, exact="uniform-gravity")
+    assert metrics.exact_for(other, t) is not ex  # another case object
+    assert metrics.exact_for(case(), t) is None
+    for k in range(40):  # older entries fall out, the size stays bounded
+        metrics.exact_for(c, np.array([float(k)]))
+    assert len(metrics._EXACT_CACHE) <= metrics._EXACT_CACHE_SIZE == 32
+    assert metrics.exact_for(c, t) is not ex
+    assert metrics.exact_for(c, np.array([39.0])) is metrics.exact_for(c, np.array([39.0]))
