@@ -204,6 +204,10 @@ def test_the_vortex_field_swirls_about_its_axis():
                            np.array([[0.2, 7.0, 0.0], [2.0, 0.0, 0.0]]), np.zeros((2, 3)),
                            np.ones(2), 0.0)
     np.testing.assert_allclose(d, [[0.0, 0.0, -0.2], [0.0, 0.0, -2.0 * 0.25 / 4.0]], atol=1e-15)
+    # an axis but no centre: the axis runs through the origin
+    e = forces.field_force(ForceField("vortex", {"strength": 1.0, "axis": [1.0, 0.0, 0.0]}),
+                           np.array([[5.0, 0.3, 0.0]]), np.zeros((1, 3)), np.ones(1), 0.0)
+    np.testing.assert_allclose(e, [[0.0, 0.0, 0.3]], atol=1e-15)
 
 
 def test_the_wind_field_drags_toward_its_gusting_velocity():

@@ -70,6 +70,14 @@ def test_position_error_of_particles_is_the_worst_euclidean_distance():
     alive[1, 0] = False
     traj_a = Trajectory(t=T, x=x, v=None, energy=None, alive=alive)
     assert metrics.position_error(case(error_norm="max"), traj_a, exact) == 2.0
+    gone = np.ones((4, 2), bool)
+    gone[:, 1] = False  # particle 1 never alive: its error (up to sqrt 3) is not counted
+    x1 = np.zeros((4, 2, 3))
+    x1[:, 1] = [1.0, 1.0, 1.0]
+    x1[3, 0] = [0.0, 0.25, 0.0]
+    traj_g = Trajectory(t=T, x=x1, v=None, energy=None, alive=gone)
+    assert metrics.position_error(case(error_norm="max"), traj_g, exact) == 0.25
+    assert metrics.position_error(case(error_norm="final"), traj_g, exact) == 0.25
     unknown = np.zeros((4, 2, 3))
     unknown[3, 0] = np.nan
     assert metrics.position_error(case(error_norm="final"), traj, Exact(T.copy(), unknown)) == 1.0
