@@ -58,16 +58,21 @@ class ScipyAdapter:
         if method == "Radau" and system.jacobian(x0, 0.0) is not None:
             jac = system.jacobian
         options = {} if jac is None else {"jac": lambda t, y: jac(y, t)}
+        calls = [0]
+
+        def derivative(t: float, y: np.ndarray) -> np.ndarray:
+            calls[0] += 1
+            dy = system.derivative(y, t)
+            if not (np.isfinite(y).all() and np.isfinite(dy).all()):
+                raise _NonFinite(t, y)
+            return dy
+
         start = time.perf_counter()
-        sol = solve_ivp(
-            lambda t, y: system.derivative(y, t),
-            (0.0, case.duration),
-            x0,
-            method=method,
-            rtol=dt,
-            atol=dt,
-            **options,
-        )
+        try:
+            sol = solve_ivp(derivative, (0.0, case.duration), x0, method=method,
+                            rtol=dt, atol=dt, **options)
+        except _NonFinite as bad:  # scipy would step on with NaN (or raise): unstable, here
+            return _unstable_at(case, system, x0, bad, calls[0], time.perf_counter() - start)
         wall = time.perf_counter() - start
         t, states = sol.t, sol.y.T
         if len(t) > case.max_records + 1:
@@ -87,3 +92,24 @@ class ScipyAdapter:
             t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail,
             nfev=int(sol.nfev), steps=len(sol.t) - 1, wall_s=wall, message=message,
         )
+
+
+class _NonFinite(Exception):
+    """A derivative was asked at, or gave, a non-finite state (time ``t``, state ``y``)."""
+
+    def __init__(self, t: float, y: np.ndarray) -> None:
+        super().__init__(f"non-finite state or derivative at t = {t:.6g} s")
+        self.t, self.y = float(t), np.array(y, dtype=float)
+
+
+def _unstable_at(case: Case, system, x0: np.ndarray, bad: _NonFinite, nfev: int,
+                 wall: float) -> Trajectory:
+    """The start and the first non-finite state: status ``unstable`` at its time."""
+    t = np.array([0.0, bad.t])
+    states = np.stack([x0, bad.y])
+    x, v = trajectory_from_states(case, t, states)
+    energy = None
+    if case.kind != "ode":
+        energy = total_energy(case.model, x, v)
+    return Trajectory(t=t, x=x, v=v, energy=energy, status="unstable", t_fail=bad.t, nfev=nfev,
+                      steps=0, wall_s=wall, message=str(bad))

@@ -2,15 +2,24 @@
 
 from __future__ import annotations
 
+MAX_REASON = 240
+"""The longest reason an error line carries (a longer one is cut, with ``...``)."""
+
+
+def _one_line(text: str, limit: int) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
 
 class CaseError(ValueError):
     """A case file that cannot be used, with where and why.
 
     ``str(err)`` is ``"<file>: <field>: <reason>"``, ready to print as the CLI's
-    single error line.
+    single error line: one line, the field and reason cut to a few hundred characters.
     """
 
     def __init__(self, file: str, field: str, reason: str) -> None:
+        field, reason = _one_line(field, 120), _one_line(reason, MAX_REASON)
         self.file, self.field, self.reason = file, field, reason
         super().__init__(f"{file}: {field}: {reason}")
 

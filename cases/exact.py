@@ -32,26 +32,32 @@ ExactFn = Callable[[Case, np.ndarray], Exact]
 EXACT: dict[str, ExactFn] = {}
 
 
-def exact_solution(name: str, *, check: Callable[[Case], None] | None = None
+def exact_solution(name: str, *, check: Callable[[Case], None] | None = None,
+                   params: dict[str, str] | None = None, kind: str | None = None
                    ) -> Callable[[ExactFn], ExactFn]:
     """Register an exact solution under ``name``.
 
     When a case names it, the loader checks that it fits the scene: by ``check(case)``
     (which raises ``ValueError`` saying what does not fit) when given, else by
     evaluating the solution at ``t = 0``, which must raise the same way or return the
-    case's start.
+    case's start. ``params`` declares the ``[reference]`` parameters it reads (name ->
+    ``"positive"``, ``"nonnegative"``, ``"count"`` or ``"string"``): the loader checks
+    each and refuses any other; without it, any plain number, string or boolean passes.
+    ``kind`` (``"ode"`` or ``"particles"``) is the kind of case it solves, if only one.
     """
 
     def register(fn: ExactFn) -> ExactFn:
         if check is not None:
             fn.check = check  # type: ignore[attr-defined]
+        fn.params = params  # type: ignore[attr-defined]
+        fn.kind = kind  # type: ignore[attr-defined]
         EXACT[name] = fn
         return fn
 
     return register
 
 
-@exact_solution("circle")
+@exact_solution("circle", params={}, kind="ode")
 def circle(case: Case, t: np.ndarray) -> Exact:
     """``x' = (-y, x)``: the start rotated by angle ``t``; half the squared radius is kept."""
     y0 = case.ode.y0
@@ -90,7 +96,7 @@ def oscillator(m: float, k: float, c: float, u0: float, w0: float, t: np.ndarray
     return u, du
 
 
-@exact_solution("anchored-oscillator")
+@exact_solution("anchored-oscillator", params={}, kind="particles")
 def anchored_oscillator(case: Case, t: np.ndarray) -> Exact:
     """One particle on one anchored spring-damper, moving along the spring's line.
 
@@ -134,7 +140,7 @@ def kepler_state(e: float, mu: float, a: float, t: np.ndarray) -> np.ndarray:
     return np.stack([x, y, vx, vy], axis=1)
 
 
-@exact_solution("kepler")
+@exact_solution("kepler", params={}, kind="ode")
 def kepler(case: Case, t: np.ndarray) -> Exact:
     """The Kepler orbit from pericentre ``(a (1 - e), 0)``; energy ``-mu / (2 a)``."""
     mu = case.ode.params.get("mu", 1.0)
@@ -155,7 +161,8 @@ def _check_period(case: Case) -> None:
         raise ValueError(f"needs [reference] period, a positive number of seconds, got {period!r}")
 
 
-@exact_solution("periodic", check=_check_period)
+@exact_solution("periodic", check=_check_period, params={"period": "positive"},
+                kind="ode")
 def periodic(case: Case, t: np.ndarray) -> Exact:
     """A periodic orbit known only at its start and after whole periods (``period``, s)."""
     period = float(case.exact_params["period"])
@@ -247,7 +254,7 @@ def stability_limit(case: Case, method: MethodFacts | str | None) -> float | Non
     return None if reach is None else reach / omega
 
 
-@exact_solution("linear")
+@exact_solution("linear", params={}, kind="particles")
 def linear(case: Case, t: np.ndarray) -> Exact:
     """Any scene of zero-rest-length springs, uniform gravity and drag: a linear ODE.
 
@@ -354,7 +361,8 @@ def _check_reference_run(case: Case) -> None:
         raise ValueError(f"[reference] dt {dt:g} s makes {case.duration / dt:.3g} steps (at most 1e7)")
 
 
-@exact_solution("reference-run", check=_check_reference_run)
+@exact_solution("reference-run", check=_check_reference_run,
+                params={"method": "string", "rtol": "positive", "dt": "positive"})
 def reference_run(case: Case, t: np.ndarray) -> Exact:
     """No closed form: a run of the reference implementation far finer than the sweep,
     known at the end of the run only. ``[reference] method`` names it: ``dopri5`` (the

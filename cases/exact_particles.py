@@ -36,7 +36,7 @@ def _free_forces(case: Case, *, drag: bool) -> ParticleModel:
     return m
 
 
-@exact_solution("uniform-gravity")
+@exact_solution("uniform-gravity", params={}, kind="particles")
 def uniform_gravity(case: Case, t: np.ndarray) -> Exact:
     """Free flight ``x0 + v0 t + g t^2 / 2`` of every particle; energy conserved.
 
@@ -50,7 +50,7 @@ def uniform_gravity(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, x, v, _energy(m, x, v))
 
 
-@exact_solution("linear-drag")
+@exact_solution("linear-drag", params={}, kind="particles")
 def linear_drag(case: Case, t: np.ndarray) -> Exact:
     """Gravity and viscous drag ``m v' = m g - k v``: ``v = v_inf + (v0 - v_inf) e^(-t/tau)``.
 
@@ -69,7 +69,7 @@ def linear_drag(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, x, v, _energy(m, x, v))
 
 
-@exact_solution("two-body")
+@exact_solution("two-body", params={}, kind="particles")
 def two_body(case: Case, t: np.ndarray) -> Exact:
     """Two bodies under universal gravitation (no softening): a Kepler orbit and a drift.
 
@@ -112,7 +112,7 @@ def two_body(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, x, v, _energy(m, x, v, pot))
 
 
-@exact_solution("spring-pair")
+@exact_solution("spring-pair", params={}, kind="particles")
 def spring_pair(case: Case, t: np.ndarray) -> Exact:
     """Two free masses on one damped spring, moving along the spring's line.
 
@@ -212,7 +212,7 @@ def bounce_path(
     return x0 + vt * t[:, None] + (u - u0)[:, None] * n, vt + w[:, None] * n
 
 
-@exact_solution("bouncing-ball")
+@exact_solution("bouncing-ball", params={}, kind="particles")
 def bouncing_ball(case: Case, t: np.ndarray) -> Exact:
     """A ball of radius r bouncing on a frictionless plane with restitution ``e``
     (:func:`bounce_path`). No energy curve is given: it drops at every bounce, and a run
@@ -223,7 +223,7 @@ def bouncing_ball(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, x[:, None, :], v[:, None, :], None)
 
 
-@exact_solution("sliding-friction")
+@exact_solution("sliding-friction", params={}, kind="particles")
 def sliding_friction(case: Case, t: np.ndarray) -> Exact:
     """A particle sliding on a plane with Coulomb friction ``mu`` after a push ``v0``.
 
@@ -247,7 +247,7 @@ def sliding_friction(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, x, v, _energy(m, x, v))
 
 
-@exact_solution("bouncing-rain")
+@exact_solution("bouncing-rain", params={}, kind="particles")
 def bouncing_rain(case: Case, t: np.ndarray) -> Exact:
     """Many independent balls above one frictionless plane, each a :func:`bouncing_ball`.
 

@@ -17,9 +17,11 @@ import numpy as np
 from truestep.cases import plugins
 from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, StabilitySpec
 from truestep.cases.errors import CaseError, SelectionError
-from truestep.cases.fields import Fields
+from truestep.cases.fields import Fields, short
+from truestep.cases.limits import DEFAULT, Budget, Limits, override, read_limits
 from truestep.cases.scene import read_scene
 from truestep.reference_impl.system import SecondOrderSystem
+from truestep.time_limit import time_limit
 
 CASE_DIR = Path(__file__).resolve().parent
 ODE_DIMENSIONS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
@@ -28,6 +30,16 @@ constructing them)."""
 GATE_KINDS = {"order", "error", "energy_drift", "status", "property", "stability-limit", "speedup",
               "restitution", "no-worse-than"}
 GATE_NUMBERS = {"expect", "tol", "max", "min", "rel_tol", "factor", "bounce", "e_set"}
+MAX_FILE_BYTES = 16 * 2**20
+"""The largest case or gates file read (16 MiB): a scene bigger than that is built from
+blocks, meshes and emitters, not listed particle by particle."""
+MAX_NESTING = 32
+"""The deepest nesting of tables and arrays a case file may have."""
+EXACT_CHECK_S = 30.0
+"""How long checking that an exact solution fits its case may take, s."""
+REFERENCE_KEYS = {"exact", "error", "scale", "conservative"}
+PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
+"""``[reference]`` parameters that properties read (:mod:`truestep.properties`)."""
 
 
 def library() -> dict[str, Path]:
@@ -79,11 +91,12 @@ def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
     return list(out.values())
 
 
-def load_cases(selection: str | Iterable[str] = "*") -> list[Case]:
+def load_cases(selection: str | Iterable[str] = "*", *,
+               limits: dict[str, float] | None = None) -> list[Case]:
     """Load every case a selection names (:func:`case_files`); raises :class:`CaseError`
     on the first bad file and :class:`SelectionError` when an item matches nothing or
-    two cases share a name."""
-    cases = [load_case(p) for p in case_files(selection)]
+    two cases share a name. ``limits`` overrides the cost limits (:func:`load_case`)."""
+    cases = [load_case(p, limits=limits) for p in case_files(selection)]
     seen: dict[str, str] = {}
     for c in cases:
         if c.name in seen:
@@ -92,11 +105,25 @@ def load_cases(selection: str | Iterable[str] = "*") -> list[Case]:
     return cases
 
 
-def load_case(path: str | Path) -> Case:
-    """Load one case file, validating every field."""
+def load_case(path: str | Path, *, limits: dict[str, float] | None = None) -> Case:
+    """Load one case file, validating every field and its cost.
+
+    The cost limits are :data:`truestep.cases.limits.DEFAULT`, raised or lowered by the
+    file's ``[limits]`` table, then by ``limits`` (``{"steps": 1e8, ...}``, the command
+    line's ``--limit``). Raises :class:`CaseError` for anything that cannot be used.
+    """
     path = Path(path)
+    try:
+        return _load_case(path, limits or {})
+    except (MemoryError, RecursionError, OverflowError) as err:
+        raise CaseError(str(path), "<file>", f"cannot be loaded: {type(err).__name__}: "
+                        f"{str(err)[:80]}") from None
+
+
+def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
     file = str(path)
     f = _read_toml(path)
+    limits = override(read_limits(f, DEFAULT), limit_values)
     name = path.stem
     if name != name.lower() or not all(c.isalnum() or c == "-" for c in name):
         raise CaseError(file, "<name>", "case names are lower-case words joined by dashes")
@@ -111,14 +138,22 @@ def load_case(path: str | Path) -> Case:
     for where, values in (("dt", dts), ("quick_dt", quick_dts)):
         if max(values) > duration:
             raise run.error(where, f"a step of {max(values):g} s exceeds the duration {duration:g} s")
-    max_records = run.integer("max_records", 2000, minimum=2)
-    timeout_s = run.number("timeout", 120.0, positive=True)
+    tolerances_ok = all(1e-14 <= t < 1 for t in tolerances + quick_tolerances)
+    if not tolerances_ok:
+        raise run.error("tolerances", "every tolerance must lie in 1e-14..1 (below 1e-14 an "
+                        f"adaptive step cannot meet it in float64), got {short(tolerances)}")
+    max_records = run.integer("max_records", 2000, minimum=2, maximum=limits.records)
+    timeout_s = run.number("timeout", 120.0, positive=True, at_most=limits.timeout_s)
     in_quick = run.boolean("quick", True)
     skip = []
     for s in run.subs("skip"):
-        skip.append((s.string("engine"), s.string("method", "*"), s.string("reason")))
+        skip.append((s.string("engine"), s.string("method", "*"), s.text("reason", max_length=500)))
         s.done()
     run.done()
+    steps = duration / min(dts + quick_dts)
+    if steps > limits.steps:
+        raise run.error("dt", f"duration / dt = {steps:.3g} steps, over the limit of "
+                        f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)")
 
     ode = model = None
     if kind == "ode":
@@ -126,43 +161,30 @@ def load_case(path: str | Path) -> Case:
         if f.has("scene"):
             raise f.error("scene", "an ode case has no scene (kind = \"ode\")")
     else:
-        model = read_scene(f.sub("scene"))
+        model = read_scene(f.sub("scene"), Budget(limits))
         if model.n == 0:
             raise f.error("scene", "the scene has no particles")
+    _check_cost(f, limits, steps, max_records, model)
 
     ref = f.sub("reference", {})
     exact = ref.string("exact", None)
     error_norm = ref.string("error", "final", choices={"final", "max"})
     error_scale = ref.number("scale", 1.0, positive=True)
     conservative = ref.boolean("conservative", False)
-    exact_params = {k: ref.raw(k) for k in ref.table if k not in {"exact", "error", "scale", "conservative"}}
-    ref.done()
-    if exact is not None and _exact_fn(ref, exact) is None:
-        raise ref.error("exact", f"no exact solution named {exact!r}; known: "
+    fn = _exact_fn(ref, exact) if exact is not None else None
+    if exact is not None and fn is None:
+        raise ref.error("exact", f"no exact solution named {short(exact)}; known: "
                         f"{', '.join(plugins.exact_names())}")
+    exact_params = _exact_params(ref, fn)
+    ref.done()
 
-    stability = None
-    if f.has("stability"):
-        s = f.sub("stability")
-        stability = StabilitySpec(
-            horizon=s.number("horizon", positive=True),
-            dt_lo=s.number("dt_lo", positive=True),
-            dt_hi=s.number("dt_hi", positive=True),
-            max_runs=s.integer("max_runs", 30, minimum=3),
-            rel_tol=s.number("rel_tol", 1e-3, positive=True),
-            quick=s.boolean("quick", False),
-            min_steps=s.integer("min_steps", 5000, minimum=10),
-            budget_s=s.number("budget_s", 10.0, positive=True),
-        )
-        if stability.dt_lo >= stability.dt_hi:
-            raise s.error("dt_hi", f"must exceed dt_lo ({stability.dt_lo:g})")
-        s.done()
+    stability = _read_stability(f, limits)
 
     case = Case(
         name=name,
         file=file,
-        title=f.string("title", name),
-        description=f.string("description", ""),
+        title=f.text("title", name, max_length=200),
+        description=f.text("description", ""),
         kind=kind,
         duration=duration,
         dts=sorted(dts, reverse=True),
@@ -179,18 +201,108 @@ def load_case(path: str | Path) -> Case:
         max_records=max_records,
         gates=_read_gates(f),
         stability=stability,
-        properties=f.strings("properties", []),
+        properties=f.strings("properties", [], choices=_property_names()),
         skip=skip,
-        hard=f.string("hard", None),
+        hard=f.text("hard", None, max_length=2000),
         tags=f.strings("tags", []),
         family=f.string("family", "other", choices={*FAMILIES, "other"}),
         timeout_s=timeout_s,
         in_quick=in_quick,
     )
+    f.raw("limits", None)
     f.done()
+    _check_gate_steps(f, case)
     if exact is not None:
         _check_exact(case)
     return case
+
+
+def _property_names() -> set[str]:
+    from truestep.properties import PROPERTIES
+
+    return set(PROPERTIES)
+
+
+def _check_cost(f: Fields, limits: Limits, steps: float, records: int, model) -> None:
+    """Refuse a case whose finest run would do or keep more than ``limits`` allow."""
+    n = model.n if model is not None else 1
+    springs = (len(model.springs) + len(model.anchors.i)) if model is not None else 0
+    work = (n + springs) * steps
+    if work > limits.work:
+        raise f.error("run.dt", f"(particles + springs) x steps = ({n} + {springs}) x "
+                      f"{steps:.3g} = {work:.3g} updates, over the limit of {limits.work:.3g} "
+                      "(raise it with [limits] work or --limit work=N)")
+    memory_mb = records * n * 48 / 2**20
+    if memory_mb > limits.memory_mb:
+        raise f.error("run.max_records", f"{records} records of {n} particles need "
+                      f"{memory_mb:.4g} MiB, over the limit of {limits.memory_mb:g} MiB "
+                      "(raise it with [limits] memory_mb or --limit memory_mb=N)")
+
+
+def _read_stability(f: Fields, limits: Limits) -> StabilitySpec | None:
+    """``[stability]``: a bisection on dt over a horizon, within the step limit."""
+    if not f.has("stability"):
+        return None
+    s = f.sub("stability")
+    spec = StabilitySpec(
+        horizon=s.number("horizon", positive=True),
+        dt_lo=s.number("dt_lo", positive=True),
+        dt_hi=s.number("dt_hi", positive=True),
+        max_runs=s.integer("max_runs", 30, minimum=3, maximum=1000),
+        rel_tol=s.number("rel_tol", 1e-3, positive=True, below=1.0),
+        quick=s.boolean("quick", False),
+        min_steps=s.integer("min_steps", 5000, minimum=10, maximum=limits.steps),
+        budget_s=s.number("budget_s", 10.0, positive=True, at_most=limits.timeout_s),
+    )
+    if spec.dt_lo >= spec.dt_hi:
+        raise s.error("dt_hi", f"must exceed dt_lo ({spec.dt_lo:g})")
+    if spec.horizon / spec.dt_lo > limits.steps:
+        raise s.error("dt_lo", f"horizon / dt_lo = {spec.horizon / spec.dt_lo:.3g} steps, over "
+                      f"the limit of {limits.steps:.3g} (raise it with [limits] steps)")
+    s.done()
+    return spec
+
+
+def _exact_params(ref: Fields, fn) -> dict[str, object]:
+    """The ``[reference]`` parameters of the exact solution ``fn`` and of the properties.
+
+    An exact solution that declares its parameters (``fn.params``: name -> ``"positive"``,
+    ``"nonnegative"``, ``"count"``, ``"string"``) gets each checked and no other; one that
+    does not (an installed one) gets plain numbers, strings and booleans, which its own
+    check reads.
+    """
+    declared = dict(getattr(fn, "params", None) or {}) if fn is not None else {}
+    declared.update(PROPERTY_PARAMS)
+    open_ended = fn is not None and getattr(fn, "params", None) is None
+    out: dict[str, object] = {}
+    for key in [k for k in ref.table if k not in REFERENCE_KEYS]:
+        what = declared.get(key)
+        if what is None and not open_ended:
+            known = ", ".join(sorted(set(declared) | REFERENCE_KEYS))
+            raise ref.error(short(key).strip("'"), f"unknown field (known here: {known})")
+        if what in ("positive", "nonnegative"):
+            out[key] = ref.number(key, positive=what == "positive", nonnegative=what == "nonnegative")
+        elif what == "count":
+            out[key] = ref.integer(key, minimum=1, maximum=1000)
+        elif what == "string":
+            out[key] = ref.string(key)
+        else:
+            value = ref.raw(key)
+            if isinstance(value, float | int) and not isinstance(value, bool):
+                value = ref.number(key)
+            elif not isinstance(value, str | bool):
+                raise ref.error(key, f"expected a number, a string or a boolean, got {short(value)}")
+            out[key] = value
+    return out
+
+
+def _check_gate_steps(f: Fields, case: Case) -> None:
+    """A case's gate that reads one step (or tolerance) must name one its sweep runs."""
+    swept = set(case.dts) | set(case.quick_dts) | set(case.tolerances) | set(case.quick_tolerances)
+    for g in case.gates:
+        if g.dt is not None and not any(abs(g.dt - s) <= 1e-9 * s for s in swept):
+            raise CaseError(case.file, f"{g.where}.dt", f"{g.dt:g} is not a step or tolerance "
+                            f"of this case's sweep ({', '.join(f'{s:g}' for s in sorted(swept))})")
 
 
 def _exact_fn(ref: Fields, name: str):
@@ -230,12 +342,17 @@ def _check_exact(case: Case) -> None:
     is evaluated at ``t = 0`` and must return the scene's start in the trajectory layout."""
     fn = plugins.exact_solution(case.exact)
     where = "reference.exact"
+    kind = getattr(fn, "kind", None)
+    if kind is not None and kind != case.kind:
+        raise CaseError(case.file, where, f"{case.exact!r} is the exact solution of {kind} cases; "
+                        f"this case is kind = {case.kind!r}")
     try:
-        check = getattr(fn, "check", None)
-        if check is not None:
-            check(case)
-            return
-        start = fn(case, np.array([0.0]))
+        with time_limit(EXACT_CHECK_S, f"checking {case.exact!r}"):
+            check = getattr(fn, "check", None)
+            if check is not None:
+                check(case)
+                return
+            start = fn(case, np.array([0.0]))
     except Exception as err:  # an exact solution says why it does not fit by raising
         raise CaseError(case.file, where, f"{case.exact!r} does not fit this case: {err}") from None
     if case.kind == "ode":
@@ -365,11 +482,50 @@ def load_baseline_tolerances(path: str | Path) -> dict[str, float]:
 
 
 def _read_toml(path: Path) -> Fields:
+    """The TOML table of a file: at most :data:`MAX_FILE_BYTES`, UTF-8, nested at most
+    :data:`MAX_NESTING` deep; anything else is one :class:`CaseError`."""
     file = str(path)
     try:
-        data = tomllib.loads(path.read_text())
+        if path.is_dir():
+            raise CaseError(file, "<file>", "is a directory, not a case file")
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise CaseError(file, "<file>", f"{size / 2**20:.1f} MiB, over the {MAX_FILE_BYTES >> 20} "
+                            "MiB a case file may have")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise CaseError(file, "<file>", "no such file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+    except OSError as err:
+        raise CaseError(file, "<file>", f"cannot be read: {err.strerror or err}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = raw[: err.start].count(b"\n") + 1
+        raise CaseError(file, "<toml>", f"not UTF-8: byte 0x{raw[err.start]:02x} at line {line}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
         raise CaseError(file, "<toml>", str(err)) from None
+    except RecursionError:
+        raise CaseError(file, "<toml>", f"nested too deeply (at most {MAX_NESTING} levels)") from None
+    except ValueError as err:  # an integer beyond Python's digit limit, and the like
+        raise CaseError(file, "<toml>", f"a value cannot be read: {str(err)[:80]}") from None
+    depth = _depth(data)
+    if depth > MAX_NESTING:
+        raise CaseError(file, "<toml>", f"nested {depth} levels deep (at most {MAX_NESTING})")
     return Fields(file, data)
+
+
+def _depth(value: object) -> int:
+    """How deeply tables and arrays nest in ``value`` (iteratively: no recursion limit)."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        deepest = max(deepest, d)
+        if deepest > MAX_NESTING:
+            return deepest
+        if isinstance(v, dict):
+            stack.extend((x, d + 1) for x in v.values())
+        elif isinstance(v, list):
+            stack.extend((x, d + 1) for x in v)
+    return deepest

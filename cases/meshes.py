@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from truestep.cases.fields import Fields
+from truestep.cases.limits import Budget
 from truestep.reference_impl import meshes
 from truestep.reference_impl.emitters import spawn_mean
 from truestep.reference_impl.model import EmitterSpec, Springs
@@ -72,10 +73,11 @@ MESH_KINDS: set[str] = {"triangle", "tetrahedron", "cube", "rope", "cloth"}
 EMITTER_SHAPES = {"cube", "plane"}
 
 
-def read_mesh(f: Fields) -> MeshPart:
-    """Build a mass-spring mesh from a ``[[scene.meshes]]`` table."""
+def read_mesh(f: Fields, budget: Budget) -> MeshPart:
+    """Build a mass-spring mesh from a ``[[scene.meshes]]`` table, charging ``budget`` with
+    its particles and springs before it is built."""
     kind = f.string("kind", choices=MESH_KINDS)
-    mesh = _build(f, kind)
+    mesh = _build(f, kind, budget)
     n = len(mesh.vertices)
     stiffness = f.number("stiffness", positive=True)
     per_kind = np.full(len(mesh.edges), stiffness)
@@ -92,6 +94,8 @@ def read_mesh(f: Fields) -> MeshPart:
                                                for i in pinned):
         raise f.error("pinned", f"expected a list of vertex numbers, got {pinned!r}")
     bad = [i for i in pinned if not 0 <= i < n]
+    if len(pinned) > n:
+        raise f.error("pinned", f"{len(pinned)} vertex numbers for a {kind} of {n} vertices")
     if bad:
         raise f.error("pinned", f"vertex {bad[0]} out of range 0..{n - 1} of this {kind}")
     fixed = np.zeros(n, bool)
@@ -101,16 +105,25 @@ def read_mesh(f: Fields) -> MeshPart:
                     springs, mesh.faces)
 
 
-def _build(f: Fields, kind: str) -> meshes.Mesh:
+SMALL_MESHES = {"triangle": (3, 3), "tetrahedron": (4, 6), "cube": (8, 28)}
+"""Vertices and (at most) springs of the meshes of fixed size."""
+
+
+def _build(f: Fields, kind: str, budget: Budget) -> meshes.Mesh:
     """The mesh of the builder named ``kind``, from its own fields."""
+    if kind in SMALL_MESHES:
+        vertices, springs = SMALL_MESHES[kind]
+        budget.take(f, "kind", particles=vertices, springs=springs)
     if kind == "rope":
         count = f.integer("count", minimum=2)
+        budget.take(f, "count", particles=count, springs=count - 1)
         start, end = f.vec3("start"), f.vec3("end")
         if np.array_equal(start, end):
             raise f.error("end", "a rope needs distinct start and end points")
         return meshes.rope(count, start, end)
     if kind == "cloth":
         rows, cols = f.integer("rows", minimum=2), f.integer("cols", minimum=2)
+        budget.take(f, "rows", particles=rows * cols, springs=6 * rows * cols)
         spacing = f.number("spacing", positive=True)
         origin = f.vec3("origin", [0.0, 0.0, 0.0])
         u, w = _unit(f, "u", [1.0, 0.0, 0.0]), _unit(f, "w", [0.0, 0.0, -1.0])
@@ -142,8 +155,8 @@ def read_emitter(f: Fields) -> EmitterSpec:
         normal = _unit(f, "normal", [0.0, 1.0, 0.0])
     elif f.has("normal"):
         raise f.error("normal", "only a plane emitter has a normal (a cube sprays from all faces)")
-    lifetime = f.integer("lifetime", minimum=1)
-    jitter = f.integer("lifetime_jitter", 0, minimum=0)
+    lifetime = f.integer("lifetime", minimum=1, maximum=10**9)
+    jitter = f.integer("lifetime_jitter", 0, minimum=0, maximum=10**9)
     if jitter >= lifetime:
         raise f.error("lifetime_jitter", f"must be below lifetime ({lifetime}) so every life "
                                          "lasts at least one frame")
@@ -162,7 +175,7 @@ def read_emitter(f: Fields) -> EmitterSpec:
         per_area=f.boolean("per_area", False),
         normal=normal,
         particle_mass=f.number("particle_mass", 1.0, positive=True),
-        seed=f.integer("seed", 0, minimum=0),
+        seed=f.integer("seed", 0, minimum=0, maximum=2**63 - 1),
         speed_jitter=f.number("speed_jitter", 0.0, nonnegative=True, at_most=1.0),
         particle_size=f.number("particle_size", 0.01, positive=True),
         size_jitter=f.number("size_jitter", 0.0, nonnegative=True, at_most=1.0),
@@ -170,7 +183,10 @@ def read_emitter(f: Fields) -> EmitterSpec:
         color_death=_color(f, "color_death", [0.6, 0.1, 0.0]),
         fade_height=f.number("fade_height", 1.0, positive=True),
     )
-    most = math.ceil(spawn_mean(spec) + spec.rate_r) * (lifetime + jitter)
+    per_frame = spawn_mean(spec) + spec.rate_r
+    if not per_frame < 1e15:
+        raise f.error("rate_n", f"spawns {per_frame:.3g} particles per frame: no pool holds that")
+    most = math.ceil(per_frame) * (lifetime + jitter)
     if spec.capacity < most:
         raise f.error("capacity", f"the pool must hold the largest population, "
                                   f"ceil(n + r) x (lifetime + jitter) = {most}, got {spec.capacity}")

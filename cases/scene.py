@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from truestep.cases.fields import Fields
+from truestep.cases.fields import Fields, short
+from truestep.cases.limits import DEFAULT, Budget
 from truestep.cases.meshes import MeshPart, read_emitter, read_mesh
 from truestep.reference_impl.model import (
     Anchors,
@@ -21,18 +22,29 @@ from truestep.reference_impl.model import (
 )
 
 FIELD_KINDS = {"vortex", "wind"}
+FIELD_PARAMS: dict[str, dict[str, str]] = {
+    "vortex": {"center": "point", "axis": "direction", "strength": "number", "core": "positive"},
+    "wind": {"direction": "direction", "speed": "number", "gust": "number", "freq": "nonnegative",
+             "k": "nonnegative"},
+}
+"""Each field kind's parameters and what they must be (see
+:func:`truestep.reference_impl.forces.field_force`)."""
+FIELD_REQUIRED = {"vortex": {"strength"}, "wind": {"direction"}}
 
 
-def read_scene(f: Fields) -> ParticleModel:
-    """Build the model described by the ``scene`` table ``f``."""
+def read_scene(f: Fields, budget: Budget | None = None) -> ParticleModel:
+    """Build the model described by the ``scene`` table ``f``; ``budget`` (default: the
+    default limits) is charged with every part's particles and springs before it is built."""
+    budget = budget or Budget(DEFAULT)
     dimension = f.integer("dimension", 3)
     if dimension not in (2, 3):
         raise f.error("dimension", f"must be 2 or 3, got {dimension}")
-    parts = [_read_particles(p) for p in f.subs("particles")]
-    parts += [_read_block(b, dimension) for b in f.subs("blocks")]
-    parts += [read_mesh(m) for m in f.subs("meshes")]
+    parts = [_read_particles(p, budget) for p in f.subs("particles")]
+    parts += [_read_block(b, dimension, budget) for b in f.subs("blocks")]
+    parts += [read_mesh(m, budget) for m in f.subs("meshes")]
     emitters = [read_emitter(e) for e in f.subs("emitters")]
-    for e in emitters:
+    for i, e in enumerate(emitters):
+        budget.take(f, f"emitters[{i}].capacity", particles=e.capacity)
         parts.append(MeshPart.pool(e.capacity, e.particle_mass))
 
     offsets = np.cumsum([0] + [len(p.mass) for p in parts])
@@ -48,9 +60,12 @@ def read_scene(f: Fields) -> ParticleModel:
     radius, fixed = cat("radius"), cat("fixed").astype(bool)
 
     spring_sets = [_offset(p.springs, off) for p, off in zip(parts, offsets, strict=False)]
-    spring_sets += [_read_springs(s, x0, n) for s in f.subs("springs")]
+    spring_sets += [_read_springs(s, x0, n, budget) for s in f.subs("springs")]
     springs = _concat_springs(spring_sets)
-    anchors = _read_anchors(f.subs("anchors"), x0, n)
+    anchor_tables = f.subs("anchors")
+    if anchor_tables:
+        budget.take(f, "anchors", springs=len(anchor_tables))
+    anchors = _read_anchors(anchor_tables, x0, n)
 
     gravitation = None
     if f.has("gravitation"):
@@ -85,27 +100,38 @@ def read_scene(f: Fields) -> ParticleModel:
     return model
 
 
-def _read_particles(f: Fields) -> MeshPart:
+def _read_particles(f: Fields, budget: Budget) -> MeshPart:
     x0 = f.array("position", shape=(None, 3))
     n = len(x0)
+    if n == 0:
+        raise f.error("position", "a particle group needs at least one position")
+    budget.take(f, "position", particles=n)
     v0 = f.array("velocity", np.zeros((n, 3)), shape=(n, 3))
     mass = _per_particle(f, "mass", n, positive=True)
     radius = _per_particle(f, "radius", n, default=0.0)
     fixed_raw = f.raw("fixed", False)
-    fixed = np.broadcast_to(np.asarray(fixed_raw, dtype=bool), (n,)).copy()
+    if isinstance(fixed_raw, bool):
+        fixed = np.full(n, fixed_raw)
+    elif (isinstance(fixed_raw, list) and len(fixed_raw) == n
+          and all(isinstance(v, bool) for v in fixed_raw)):
+        fixed = np.array(fixed_raw, dtype=bool)
+    else:
+        raise f.error("fixed", f"expected true, false or a list of {n} of them, "
+                      f"got {short(fixed_raw)}")
     f.done()
     return MeshPart(mass, x0, v0, radius, fixed, Springs.empty())
 
 
-def _read_block(f: Fields, dimension: int) -> MeshPart:
+def _read_block(f: Fields, dimension: int, budget: Budget) -> MeshPart:
     """``count`` particles at seeded uniform random positions in the box ``[low, high]``."""
     count = f.integer("count", minimum=1)
+    budget.take(f, "count", particles=count)
     low, high = f.vec3("low"), f.vec3("high")
     if np.any(high < low):
         raise f.error("high", "every component must be at least the one of low")
     if dimension == 2 and (low[2] != 0 or high[2] != 0):
         raise f.error("low", "a 2-D scene keeps z = 0: low[2] and high[2] must be 0")
-    rng = np.random.default_rng(f.integer("seed", 0, minimum=0))
+    rng = np.random.default_rng(f.integer("seed", 0, minimum=0, maximum=2**63 - 1))
     x0 = low + (high - low) * rng.random((count, 3))
     v0 = np.tile(f.vec3("velocity", [0.0, 0.0, 0.0]), (count, 1))
     mass = np.full(count, f.number("mass", positive=True))
@@ -127,10 +153,11 @@ def _per_particle(f: Fields, name: str, n: int, *, default=None, positive=False)
     return arr
 
 
-def _read_springs(f: Fields, x0: np.ndarray, n: int) -> Springs:
-    pairs = f.array("pairs", shape=(None, 2)).astype(int)
-    if np.any(pairs < 0) or np.any(pairs >= n):
-        raise f.error("pairs", f"particle index out of range 0..{n - 1}")
+def _read_springs(f: Fields, x0: np.ndarray, n: int, budget: Budget) -> Springs:
+    pairs = f.indices("pairs", n, shape=(None, 2))
+    if len(pairs) == 0:
+        raise f.error("pairs", "a spring set needs at least one pair")
+    budget.take(f, "pairs", springs=len(pairs))
     if np.any(pairs[:, 0] == pairs[:, 1]):
         raise f.error("pairs", "a spring needs two different particles")
     m = len(pairs)
@@ -172,8 +199,8 @@ def _read_anchors(tables: list[Fields], x0: np.ndarray, n: int) -> Anchors:
 def _read_plane(f: Fields) -> Plane:
     normal = f.vec3("normal")
     norm = float(np.linalg.norm(normal))
-    if norm == 0:
-        raise f.error("normal", "must not be the zero vector")
+    if not 1e-150 < norm < np.inf:
+        raise f.error("normal", f"must be a non-zero vector of finite length, got {short(normal.tolist())}")
     plane = Plane(
         point=f.vec3("point"),
         normal=normal / norm,
@@ -186,14 +213,23 @@ def _read_plane(f: Fields) -> Plane:
 
 
 def _read_field(f: Fields) -> ForceField:
+    """A force field: its kind's parameters (:data:`FIELD_PARAMS`), each checked."""
     kind = f.string("kind", choices=FIELD_KINDS)
-    params = {k: v for k, v in f.table.items() if k != "kind"}
-    for k, v in params.items():
-        ok = isinstance(v, int | float) and not isinstance(v, bool)
-        ok = ok or (isinstance(v, list) and len(v) == 3)
-        if not ok:
-            raise f.error(k, f"expected a number or a 3-vector, got {v!r}")
-        f.raw(k)
+    params: dict[str, float | list[float]] = {}
+    for key in FIELD_REQUIRED[kind]:
+        f.raw(key)  # required: raises naming it when missing
+    for key, what in FIELD_PARAMS[kind].items():
+        if not f.has(key):
+            continue
+        if what == "point":
+            params[key] = f.vec3(key).tolist()
+        elif what == "direction":
+            vec = f.vec3(key)
+            if not 1e-150 < float(np.linalg.norm(vec)) < np.inf:
+                raise f.error(key, "must be a non-zero vector of finite length")
+            params[key] = vec.tolist()
+        else:
+            params[key] = f.number(key, positive=what == "positive", nonnegative=what == "nonnegative")
     f.done()
     return ForceField(kind, params)
 

@@ -129,7 +129,7 @@ class PackedScene:
                 *self.springs, *self.anchors, *self.gravitation, *self.impulses, *self.planes)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _applied_forces(f, x, v, t, mass, gravity, drag, si, sj, sk, sc, sr, ai, ap, ak, ac, ar,
                     grav_g, grav_eps, imp_i, imp_f, imp_on, imp_off):
     """The applied forces (N, (n, 3), into ``f``): :func:`forces.add_model_forces` without
@@ -182,7 +182,7 @@ def _applied_forces(f, x, v, t, mass, gravity, drag, si, sj, sk, sc, sr, ai, ap,
             f[p, 2] += imp_f[k, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _add_contact_forces(f, v, contact, pn, pmu):
     """:func:`collisions.add_contact_forces` for the particles in contact."""
     n = f.shape[0]
@@ -224,7 +224,7 @@ def _add_contact_forces(f, v, contact, pn, pmu):
             f[p, 2] = f2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _acceleration(a, f, x, v, t, contact, any_contact, mass, inv_mass, gravity, drag, si, sj,
                   sk, sc, sr, ai, ap, ak, ac, ar, grav_g, grav_eps, imp_i, imp_f, imp_on,
                   imp_off, pn, pmu):
@@ -239,7 +239,7 @@ def _acceleration(a, f, x, v, t, contact, any_contact, mass, inv_mass, gravity, 
         a[p, 2] = f[p, 2] * inv_mass[p]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _collide(x, v, t, dt, contact, f, radius, movable, inv_mass, mass, gravity, drag, si, sj,
              sk, sc, sr, ai, ap, ak, ac, ar, grav_g, grav_eps, imp_i, imp_f, imp_on, imp_off,
              pp, pn, pe, pmu, pth):
@@ -308,7 +308,7 @@ def _collide(x, v, t, dt, contact, f, radius, movable, inv_mass, mass, gravity, 
     return any_on
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _finite(x, v):
     """Every component finite and within BLOWUP (NaN fails both comparisons)."""
     for p in range(x.shape[0]):
@@ -318,7 +318,7 @@ def _finite(x, v):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _same_bits(a, b):
     ua = a.reshape(-1).view(np.uint64)
     ub = b.reshape(-1).view(np.uint64)
@@ -328,7 +328,7 @@ def _same_bits(a, b):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _run(kind, rk_a, rk_b, rk_c, x, v, t0, h, n_steps, record, check_every, xs, vs, ts,
          mass, inv_mass, radius, movable, gravity, drag, si, sj, sk, sc, sr, ai, ap, ak, ac,
          ar, grav_g, grav_eps, imp_i, imp_f, imp_on, imp_off, pp, pn, pe, pmu, pth):
@@ -463,7 +463,7 @@ def _run(kind, rk_a, rk_b, rk_c, x, v, t0, h, n_steps, record, check_every, xs, 
     return kept, steps, nfev, unstable
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _collide_p(p, X, V, t, dt, contact, radius, movable, inv_mass, mass, gravity, drag, imp_ptr,
                imp_f, imp_on, imp_off, pp, pn, pe, pmu, pth):
     """The collision and contact pass for particle ``p`` alone (its force depends on no
@@ -532,7 +532,7 @@ def _collide_p(p, X, V, t, dt, contact, radius, movable, inv_mass, mass, gravity
     return any_on
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _impulses_p(p, t, f0, f1, f2, imp_ptr, imp_f, imp_on, imp_off):
     """Add the impulses on particle ``p`` active at ``t`` (its entries ``imp_ptr[p]`` to
     ``imp_ptr[p + 1]`` of the impulses sorted by particle, in their order in the case)."""
@@ -545,7 +545,7 @@ def _impulses_p(p, t, f0, f1, f2, imp_ptr, imp_f, imp_on, imp_off):
     return f0, f1, f2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _contact_p(p, f0, f1, f2, v0, v1, v2, contact, pn, pmu):
     """The contact force of every plane particle ``p`` rests on, added to its applied
     force ``f`` (:func:`_add_contact_forces` for one particle)."""
@@ -588,7 +588,7 @@ BLOCK = 256
 reads and writes each particle's state once however many stages it has."""
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _accel_block(A, a0, U, u0, m, lo, t, special, q_lo, q_hi, mass, inv_mass, heavy, gravity,
                  drag, kicked, resting, imp_ptr, imp_f, imp_on, imp_off, contact, pn, pmu):
     """Accelerations (m/s^2) of the ``m`` particles ``lo`` to ``lo + m`` into columns
@@ -639,7 +639,7 @@ def _accel_block(A, a0, U, u0, m, lo, t, special, q_lo, q_hi, mass, inv_mass, he
         A[2, a0 + j] = f2 * inv_mass[p]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _run_independent(kind, rk_a, rk_b, rk_c, x, v, t0, h, n_steps, record, check_every, xs,
                       vs, ts, mass, inv_mass, radius, movable, gravity, drag, imp_ptr, imp_f,
                       imp_on, imp_off, pp, pn, pe, pmu, pth):
@@ -858,7 +858,7 @@ def _run_independent(kind, rk_a, rk_b, rk_c, x, v, t0, h, n_steps, record, check
     return kept, steps, nfev, unstable
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _finite_soa(X, V):
     """:func:`_finite` on states held by component (3, n)."""
     for c in range(3):
@@ -868,7 +868,7 @@ def _finite_soa(X, V):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _same_bit(a, b):
     """Whether two floats have the same bits (``-0.0`` and ``0.0`` differ, as bytes do)."""
     return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)

@@ -62,7 +62,7 @@ _NO_POINTS = np.zeros((0, 3))
 _NO_PARTICLES = np.zeros(0, dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _add_spring_loop(
     f: np.ndarray,
     x: np.ndarray,

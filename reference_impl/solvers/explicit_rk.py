@@ -304,6 +304,8 @@ class DormandPrince54(Solver):
         scale = self.atol + np.abs(x) * self.rtol
         d0 = _rms(x / scale)
         d1 = _rms(f0 / scale)
+        if not (math.isfinite(d0) and math.isfinite(d1)):
+            raise FloatingPointError(f"dopri5: non-finite state or derivative at t={t:.6g}")
         h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
         h0 = min(h0, h_max)
         f1 = self.fun(x + h0 * f0, t + h0)
@@ -329,6 +331,8 @@ class DormandPrince54(Solver):
             self._f0 = self.fun(x, t)
         if self._h is None:
             self._h = self._initial_step(x, t, self._f0, dt)
+        if not 0.0 < self._h < math.inf:
+            raise FloatingPointError(f"dopri5: no usable step size at t={t:.6g}")
         h = min(self._h, dt)
         k = self._k
         abs_x = np.abs(x)

@@ -78,12 +78,18 @@ class ImplicitEuler(Solver):
         y = x + dt * self.fun(x, t)
         fy = self.fun(y, t1)
         fresh = self._solve is None or self._solve_dt != dt
+        if not (np.isfinite(y).all() and np.isfinite(fy).all()):
+            raise FloatingPointError(f"implicit-euler: non-finite state or derivative at t={t:.6g}")
         if fresh:
             self._factorise(y, t1, fy, dt)
         prev = np.inf
         it = 0
         while True:
-            delta = self._solve(-(y - x - dt * fy))
+            residual = y - x - dt * fy
+            if not np.isfinite(residual).all():
+                raise FloatingPointError(f"implicit-euler: non-finite state or derivative at "
+                                         f"t={t:.6g}")
+            delta = self._solve(-residual)
             y = y + delta
             fy = self.fun(y, t1)
             it += 1
