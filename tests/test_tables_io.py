@@ -63,3 +63,26 @@ def test_an_unusable_out_fails_before_the_sweep(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "is a file" in err and "sweep" not in err
     assert target.read_text() == "kept"
+
+
+@pytest.mark.parametrize("table", ["results.csv", "stability.csv", "restitution.csv"])
+def test_a_malformed_baseline_is_exit_2_and_one_line_and_an_api_error(run_dir, tmp_path, capsys,
+                                                                      table):
+    """The baseline directory is read as strictly as the results: by ``truestep gate
+    --baseline`` (exit 2) and by ``truestep.compare`` (:class:`TableError`)."""
+    import truestep
+    from truestep.tables_io import TableError
+
+    base = tmp_path / "baseline"
+    base.mkdir()
+    for name in ("results.csv", "stability.csv", "restitution.csv"):
+        shutil.copy(run_dir / name, base / name)
+    (base / table).write_text("case,engine,method\n1,2,3\n")
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(base), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and table in err and "Traceback" not in err
+    assert len([line for line in err.splitlines() if line.strip()]) == 1
+    with pytest.raises(TableError, match=table):
+        truestep.compare(base, run_dir)
+    with pytest.raises(TableError, match="not a directory"):
+        truestep.compare(base / table, run_dir)

@@ -255,9 +255,9 @@ def _restitution_error(table: pd.DataFrame | None) -> pd.DataFrame | None:
 
 def read_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
     """``results``, ``stability``, ``restitution`` of a run's output directory (``None``
-    for a table the directory lacks)."""
-    out: dict[str, pd.DataFrame | None] = {}
-    for name in ("results", "stability", "restitution"):
-        path = Path(directory) / f"{name}.csv"
-        out[name] = pd.read_csv(path) if path.is_file() else None
-    return out
+    for a table the directory lacks), read strictly: a malformed or missing results table
+    raises :class:`~truestep.tables_io.TableError` (see
+    :func:`~truestep.tables_io.read_run_tables`)."""
+    from truestep.tables_io import read_run_tables
+
+    return read_run_tables(Path(directory))

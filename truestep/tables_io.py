@@ -21,6 +21,13 @@ NUMERIC = {
 }
 """Columns that must hold numbers (or be empty), per table."""
 
+REQUIRED = {
+    "results": frozenset({"case", "engine", "method", "dt", "dt_kind", "status", "error"}),
+    "stability": frozenset({"case", "engine", "method", "dt_limit", "dt_limit_exact"}),
+    "restitution": frozenset({"engine", "method", "dt", "e_set", "bounce", "e_measured"}),
+}
+"""Columns every reader of a table needs, per table."""
+
 TEXT = ("case", "engine", "method", "dt_kind", "status")
 """Columns that must hold names, not numbers, where a table has them."""
 
@@ -88,3 +95,22 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
             raise TableError(f"{path}: column status: unknown value {_short(sorted(unknown)[0])} "
                              f"(known: {', '.join(sorted(STATUSES))})")
     return table
+
+
+def read_run_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
+    """``results`` (required) and ``stability``, ``restitution`` (``None`` when absent) of a
+    run's output directory, each read strictly (:func:`read_table`); raises
+    :class:`TableError` for a directory that is not one, a missing results table or any
+    malformed table."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise TableError(f"{directory}: not a directory of a run's tables")
+    results = directory / "results.csv"
+    if not results.exists():
+        raise TableError(f"{results}: no such file (run `truestep run` first)")
+    out: dict[str, pd.DataFrame | None] = {
+        "results": read_table(results, "results", set(REQUIRED["results"]))}
+    for name in ("stability", "restitution"):
+        path = directory / f"{name}.csv"
+        out[name] = read_table(path, name, set(REQUIRED[name]), rows=False) if path.exists() else None
+    return out
