@@ -483,3 +483,13 @@ def test_the_registry_and_the_evaluation_count():
     solver.step(0.1)
     solver.accel(np.array([1.0]), np.array([0.0]), 0.0)
     assert solver.nfev == 5
+
+
+def test_method_facts_are_immutable_shared_data():
+    import dataclasses
+
+    for facts in (RK4.facts, RK4.facts.stability):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            facts.order = 3  # type: ignore[misc]
+        assert hash(facts) == hash(dataclasses.replace(facts))  # hashable, by value
+    assert len({cls.facts for cls in (Euler, Midpoint, Euler)}) == 2
