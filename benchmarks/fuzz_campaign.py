@@ -352,8 +352,9 @@ def classify_run(target: Target, path: Path, timeout: float, memory_gb: float) -
 
 
 def run_phase(target: Target, loaded: list[dict[str, Any]], m: int, seed: int, timeout: float,
-              memory_gb: float, jobs: int) -> list[dict[str, Any]]:
-    """``m`` loader-accepted mutants (chosen with ``seed``) through ``truestep run``."""
+              memory_gb: float, jobs: int, partial: Path | None = None) -> list[dict[str, Any]]:
+    """``m`` loader-accepted mutants (chosen with ``seed``) through ``truestep run``; each
+    record is appended to ``partial`` (JSON lines) as it is done."""
     accepted = [r for r in loaded if r["outcome"] == "accepted"]
     rng = random.Random(f"{seed}:run")
     chosen = rng.sample(accepted, min(m, len(accepted)))
@@ -363,6 +364,9 @@ def run_phase(target: Target, loaded: list[dict[str, Any]], m: int, seed: int, t
         rec = {"i": r["i"], "file": r["file"], "how": r["how"],
                **classify_run(target, Path(r["file"]), timeout, memory_gb)}
         done.append(rec)
+        if partial is not None:
+            with partial.open("a") as fh:
+                fh.write(json.dumps(rec, default=str) + "\n")
         if len(done) % 20 == 0:
             counts = collections.Counter(x["outcome"] for x in done)
             print(f"  run {len(done)}/{len(chosen)}: {dict(counts)}", file=sys.stderr, flush=True)
@@ -529,6 +533,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"fuzzing {target.repo} ({target.commit}, {target.layout} layout) with {target.python}; "
           f"files in {work}", file=sys.stderr, flush=True)
 
+    def save() -> None:
+        """The summary so far (after every phase, so a campaign cut short keeps its counts)."""
+        if args.json:
+            args.json.write_text(json.dumps(asdict(summary), indent=1, default=str))
+
     start = time.perf_counter()
     loaded = loader_phase(target, args.loader, args.seed, work, args.load_timeout, args.memory_gb)
     summary.seconds["loader"] = round(time.perf_counter() - start, 1)
@@ -536,7 +545,9 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.run:
         start = time.perf_counter()
-        ran = run_phase(target, loaded, args.run, args.seed, args.run_timeout, args.memory_gb * 2, args.jobs)
+        save()
+        ran = run_phase(target, loaded, args.run, args.seed, args.run_timeout, args.memory_gb * 2, args.jobs,
+                        work / "run-records.jsonl")
         summary.seconds["run"] = round(time.perf_counter() - start, 1)
         summarise("run", ran, summary, RUN_OUTCOMES)
         statuses: collections.Counter[str] = collections.Counter()
@@ -544,6 +555,7 @@ def main(argv: list[str] | None = None) -> int:
             statuses.update(r.get("statuses", {}))
         summary.run_statuses = dict(statuses)
 
+    save()
     if args.gate:
         start = time.perf_counter()
         control, gated = gate_phase(target, args.gate, args.seed, args.gate_timeout, work, args.jobs)
@@ -552,8 +564,8 @@ def main(argv: list[str] | None = None) -> int:
         summarise("gate", gated, summary, GATE_OUTCOMES)
 
     print_table(summary)
+    save()
     if args.json:
-        args.json.write_text(json.dumps(asdict(summary), indent=1, default=str))
         print(f"\nwrote {args.json}", file=sys.stderr)
     return 0
 
