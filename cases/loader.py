@@ -8,6 +8,7 @@ path: :func:`case_files` takes names, globs, files and directories.
 from __future__ import annotations
 
 import fnmatch
+import re
 import tomllib
 from collections.abc import Iterable
 from pathlib import Path
@@ -125,8 +126,9 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
     f = _read_toml(path)
     limits = override(read_limits(f, DEFAULT), limit_values)
     name = path.stem
-    if name != name.lower() or not all(c.isalnum() or c == "-" for c in name):
-        raise CaseError(file, "<name>", "case names are lower-case words joined by dashes")
+    if not re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", name) or len(name) > 80:
+        raise CaseError(file, "<name>", "case names (the file name) are lower-case ASCII words "
+                        "and digits joined by dashes, at most 80 characters")
 
     kind = f.string("kind", choices={"ode", "particles"})
     run = f.sub("run")

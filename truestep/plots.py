@@ -34,6 +34,12 @@ REPORT_DPI = 72
 """Resolution of the report's figures: sharp at the page's width, small when inlined."""
 
 
+def _plain(title: str) -> str:
+    """Case text as a plot title: dollar signs shown, never read as mathtext (an
+    unbalanced one would stop the figure)."""
+    return title.replace("$", r"\$")
+
+
 def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
     """Write ``fig`` as a compact PNG: ``dpi``, then reduced to a 128-colour palette.
 
@@ -81,7 +87,7 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.grid(True, which="major", alpha=0.3)
-    fig.suptitle(f"{title}: work against precision")
+    fig.suptitle(f"{_plain(title)}: work against precision")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.81, 0.5), fontsize=7,
                frameon=False)
@@ -161,7 +167,7 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     ax.set_yscale("log")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("|E(t) - E(0)| / |E(0)|  (floor 1e-16)")
-    ax.set_title(f"{title}: energy error over time")
+    ax.set_title(f"{_plain(title)}: energy error over time")
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()

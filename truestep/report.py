@@ -27,7 +27,7 @@ from truestep.isolation import (
 )
 from truestep.picks import survival
 from truestep.report_html import markdown_to_html
-from truestep.report_markdown import folded, link, md_table, with_units
+from truestep.report_markdown import folded, link, md_table, text, with_units
 from truestep.report_scaling import scaling_section
 from truestep.report_sections import (
     hard_case_line,
@@ -164,10 +164,10 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
     drawn = draw_case_figures(cases, results, traces, fig_dir)
     for case in cases:
         df = results[results["case"] == case.name]
-        parts.append(f"### {case.name}: {case.title}\n")
-        parts.append(" ".join(case.description.split()) + "\n")
+        parts.append(f"### {case.name}: {text(case.title)}\n")
+        parts.append(text(case.description) + "\n")
         if case.hard:
-            parts.append(f"What makes it hard: {' '.join(case.hard.split())}\n")
+            parts.append(f"What makes it hard: {text(case.hard)}\n")
         fig, energy_fig = drawn[case.name]
         if fig is not None:
             parts.append(f"![work-precision plot of {case.name}](figures/{fig.name})\n")

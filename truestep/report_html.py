@@ -11,7 +11,21 @@ import html
 import re
 from pathlib import Path
 
-from truestep.report_markdown import slug
+from truestep.report_markdown import ESCAPED, slug
+
+_PRIVATE = 0xE000
+"""Escaped characters are held as private-use code points while markup is read."""
+
+
+def _protect(text: str) -> str:
+    """Backslash-escaped characters (:func:`~truestep.report_markdown.text`) out of the
+    way of the markup rules."""
+    return re.sub("\\\\([" + re.escape(ESCAPED) + "])", lambda m: chr(_PRIVATE + ord(m.group(1))), text)
+
+
+def _restore(text: str) -> str:
+    """The protected characters back, as HTML text (escaped)."""
+    return re.sub("[\ue000-\ue07f]", lambda m: html.escape(chr(ord(m.group()) - _PRIVATE)), text)
 
 
 def _own_figure(base: Path, target: str) -> Path | None:
@@ -31,10 +45,11 @@ def markdown_to_html(md: str, base: Path) -> str:
     i = 0
 
     def inline(text: str) -> str:
-        text = html.escape(text)
+        text = html.escape(_protect(text))
         text = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", text)
         text = re.sub(r"`(.+?)`", r"<code>\1</code>", text)
         text = re.sub(r"\[([^\]]+)\]\((#[\w-]+)\)", r'<a href="\2">\1</a>', text)
+        text = _restore(text)
         return text.replace("  ", "<br>") if text.endswith("  ") else text
 
     while i < len(lines):
@@ -58,7 +73,7 @@ def markdown_to_html(md: str, base: Path) -> str:
         elif line.startswith("|"):
             rows = []
             while i < len(lines) and lines[i].startswith("|"):
-                rows.append([c.strip() for c in lines[i].strip("|").split("|")])
+                rows.append([c.strip() for c in _protect(lines[i]).strip("|").split("|")])
                 i += 1
             head, body = rows[0], rows[2:]
             out.append("<table><thead><tr>" + "".join(f"<th>{inline(c)}</th>" for c in head)

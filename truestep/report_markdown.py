@@ -21,13 +21,32 @@ def fmt(x: object, digits: int = 3) -> str:
     return str(x)
 
 
+ESCAPED = "\\`*_[]<>|!#&$~"
+"""Characters that Markdown (or HTML inside it) would read as markup; :func:`text`
+escapes each with a backslash."""
+_ESCAPE = re.compile("([" + re.escape(ESCAPED) + "])")
+
+
+def text(value: object) -> str:
+    """``value`` as Markdown that shows exactly its characters: whitespace (new lines
+    included) collapsed to single spaces, every markup character backslash-escaped.
+    Everything a case file or an adapter wrote (titles, descriptions, messages, names)
+    goes into the report through it, so it can neither inject markup nor embed a file."""
+    return _ESCAPE.sub(r"\\\1", " ".join(str(value).split()))
+
+
+def _cell(v: object) -> str:
+    return text(v) if isinstance(v, str) else fmt(v)
+
+
 def md_table(df: pd.DataFrame) -> str:
-    """A pipe table with numbers to three significant digits."""
+    """A pipe table with numbers to three significant digits; text cells go through
+    :func:`text`."""
     if df.empty:
         return "_(no rows)_\n"
     head = "| " + " | ".join(str(c) for c in df.columns) + " |"
     sep = "|" + "|".join("---" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(fmt(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    body = ["| " + " | ".join(_cell(v) for v in row) + " |" for row in df.itertuples(index=False)]
     return "\n".join([head, sep, *body]) + "\n"
 
 

@@ -18,7 +18,7 @@ from truestep.picks import (
     cheapest,
     survival,
 )
-from truestep.report_markdown import fmt, md_table, with_units
+from truestep.report_markdown import fmt, md_table, text, with_units
 
 _fmt = fmt
 
@@ -168,7 +168,7 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
             others = at[at["engine"] != g.engine]
             parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
             parts.append(
-                f"{case.title}: {g.engine} / {g.method} runs only what the scene needs (here "
+                f"{text(case.title)}: {g.engine} / {g.method} runs only what the scene needs (here "
                 "a compiled loop over independent particles, on one thread like the "
                 "engines), the engines their general machinery (broad phase, contact "
                 "solver, one body per particle). Each row: "
