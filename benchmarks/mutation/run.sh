@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Mutation testing of the numpy physics with cosmic-ray (see README.md beside this file).
 #
-#   bash benchmarks/mutation/run.sh all        # setup + init + exec + report (what README reports)
+#   bash benchmarks/mutation/run.sh all        # setup, init, before (BEFORE=1 exec), after (rerun)
 #   bash benchmarks/mutation/run.sh setup      # a copy of HEAD in $MUT and a venv in $VENV
 #   bash benchmarks/mutation/run.sh init       # the session: every mutant, filtered, sampled
 #   bash benchmarks/mutation/run.sh exec       # run the pending mutants (nice 19, one worker)
+#   BEFORE=1 bash benchmarks/mutation/run.sh exec   # the same without the kill tests ("before")
 #   bash benchmarks/mutation/run.sh rerun OLD NEW  # NEW = OLD with its survivors run again
 #   bash benchmarks/mutation/run.sh report [SESSION]
 #   bash benchmarks/mutation/run.sh tests      # the per-mutant test command (cosmic-ray runs it)
@@ -12,7 +13,9 @@
 # cosmic-ray mutates files in place, so everything runs in a copy of the committed tree
 # ($MUT, default /tmp/truestep-mut), never in the checkout this script lives in.
 # SAMPLE=k keeps every k-th mutant (default 40) in a fixed order (file, line, column,
-# operator, occurrence), so two runs of one tree test the same mutants.
+# operator, occurrence), so two runs of one tree test the same mutants; OFFSET=o (default
+# 0) keeps those at positions o, o + k, ... (so SAMPLE=40 with OFFSET=0 and 20 make up the
+# SAMPLE=20 one).
 set -euo pipefail
 shopt -s nullglob
 
@@ -22,6 +25,7 @@ MUT="${MUT:-/tmp/truestep-mut}"
 VENV="${VENV:-$MUT/.venv}"
 SESSION="${SESSION:-$MUT/session.sqlite}"
 SAMPLE="${SAMPLE:-40}"
+OFFSET="${OFFSET:-0}"
 CONFIG="benchmarks/mutation/cosmic-ray.toml"
 export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-$MUT/.numba-cache}"
 
@@ -29,6 +33,7 @@ export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-$MUT/.numba-cache}"
 # path of the mutated module (which file differs from the checksums init kept tells it).
 # One slow convergence study is left out (17 s a run).
 KILLS=(tests/test_mutation_kills_*.py)
+if [ "${BEFORE:-0}" = 1 ]; then KILLS=(); fi  # BEFORE=1: the suite as it was, without them
 SOLVER_TESTS=(tests/test_tableaux.py tests/test_solvers.py tests/test_dopri5_equivalence.py
               tests/test_stability_and_restitution.py)
 FORCE_TESTS=(tests/test_models_forces.py tests/test_solvers.py tests/test_bounce_properties.py)
@@ -57,20 +62,20 @@ init)
     sha256sum "${TARGETS[@]}" > .pristine.sha256
     "$VENV/bin/cosmic-ray" init "$CONFIG" "$SESSION"
     "$VENV/bin/cr-filter-operators" "$SESSION" "$CONFIG"
-    "$VENV/bin/python" - "$SESSION" "$SAMPLE" <<'EOF'
+    "$VENV/bin/python" - "$SESSION" "$SAMPLE" "$OFFSET" <<'EOF'
 """Keep every k-th mutant the operator filter left, in a fixed order; skip the rest."""
 import sys
 
 from cosmic_ray.work_db import WorkDB, use_db
 from cosmic_ray.work_item import WorkerOutcome, WorkResult
 
-session, k = sys.argv[1], int(sys.argv[2])
+session, k, offset = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 with use_db(session, WorkDB.Mode.open) as db:
     items = sorted(db.pending_work_items, key=lambda w: tuple(
         (str(m.module_path), m.start_pos, m.end_pos, m.operator_name, m.occurrence)
         for m in w.mutations))
-    drop = [w.job_id for n, w in enumerate(items) if n % k]
-    db.set_multiple_results(drop, WorkResult(output=f"not sampled (every {k}th kept)",
+    drop = [w.job_id for n, w in enumerate(items) if n % k != offset]
+    db.set_multiple_results(drop, WorkResult(output=f"not sampled (every {k}th from {offset} kept)",
                                              worker_outcome=WorkerOutcome.SKIPPED))
     print(f"{len(items)} mutants after the operator filter, {len(items) - len(drop)} sampled")
 EOF
@@ -140,7 +145,10 @@ tests)
     exec python -m pytest -x -q -p no:cacheprovider "${DESELECT[@]}" "${KILLS[@]}" "${tests[@]}"
     ;;
 all)
-    "$0" setup && "$0" init && "$0" exec && "$0" report
+    "$0" setup && "$0" init
+    cp "$SESSION" "$SESSION.init"
+    BEFORE=1 "$0" exec && "$0" report && cp "$SESSION" "$MUT/before.sqlite"
+    "$0" rerun "$MUT/before.sqlite" "$MUT/after.sqlite" && "$0" report "$MUT/after.sqlite"
     ;;
 *)
     echo "usage: $0 [all|setup|init|exec|rerun OLD NEW|report [SESSION]|tests]" >&2
