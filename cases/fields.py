@@ -209,13 +209,15 @@ class Fields:
         value = self.raw(name, default)
         if not _nested_integers(value, len(shape)):
             raise self.error(name, f"expected integers of shape {_fmt(shape)}, got {short(value)}")
-        arr = np.asarray(value, dtype=np.int64) if _fits_int64(value) else None
+        try:
+            arr = np.asarray(value, dtype=np.int64) if _fits_int64(value) else None
+        except ValueError:  # ragged: rows of different lengths
+            raise self.error(name, f"expected integers of shape {_fmt(shape)}, got {short(value)}") from None
+        if arr is not None and (arr.ndim != len(shape) or any(
+                s is not None and s != a for s, a in zip(shape, arr.shape, strict=True))):
+            raise self.error(name, f"expected shape {_fmt(shape)}, got {arr.shape}")
         if arr is None or np.any(arr < 0) or np.any(arr >= n):
             raise self.error(name, f"particle index out of range 0..{n - 1}")
-        wrong = arr.ndim != len(shape) or any(
-            s is not None and s != a for s, a in zip(shape, arr.shape, strict=True))
-        if wrong:
-            raise self.error(name, f"expected shape {_fmt(shape)}, got {arr.shape}")
         return arr
 
     def sub(self, name: str, default: Any = _MISSING) -> Fields:

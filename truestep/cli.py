@@ -27,9 +27,12 @@ from truestep.adapters import (
 )
 from truestep.cases import CaseError, SelectionError, load_case, load_cases
 from truestep.cases.case import Case
+from truestep.cases.limits import KEYS as LIMIT_KEYS
 from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
 from truestep.cases.plugins import PluginError
 
+RUN_BUDGET_S = 6 * 3600.0
+"""The default wall-clock budget of a whole ``truestep run``, s."""
 RESULTS_NEEDS = {"case", "engine", "method", "dt", "dt_kind", "status", "error"}
 """Columns ``truestep gate`` needs in a results table."""
 
@@ -58,8 +61,14 @@ def _check_case_gates(cases: list[Case], engines: set[str]) -> None:
                 raise CaseError(c.file, f"{g.where}.engine", f"unknown engine {g.engine!r}")
 
 
-def _load(selection: str) -> list[Case]:
-    cases = load_cases(selection)
+def _load(selection: str, limit_items: list[str] | None = None) -> list[Case]:
+    from truestep.cases.limits import parse_override
+
+    try:
+        limits = parse_override(limit_items or [])
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    cases = load_cases(selection, limits=limits)
     _check_case_gates(cases, set(registered()))
     return cases
 
@@ -85,6 +94,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     journal beside ``--out`` (:mod:`truestep.journal`) until the report is published.
     """
     from truestep.interrupts import Interrupted, handled
+    from truestep.isolation import set_run_budget
     from truestep.journal import journal_dir
 
     with handled():
@@ -100,19 +110,24 @@ def cmd_run(args: argparse.Namespace) -> int:
                     f"sweeps in {kept}" if (kept / "fingerprint.json").exists() else "")
             _say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}{then}")
             return 128 + err.signum
+        finally:
+            set_run_budget(None)
 
 
 def _run(args: argparse.Namespace) -> int:
     from truestep import faults, publish
     from truestep.analyses import run_analyses
     from truestep.api import select_engines
+    from truestep.isolation import set_run_budget
     from truestep.journal import Journal, JournalError, fingerprint
     from truestep.report import write_report
     from truestep.runner import run_matrix
 
     resuming = args.resume is not None
     args.out = args.out or args.resume or "reports"
-    cases = _load(args.cases)
+    if not 0 < args.budget < float("inf"):
+        raise UsageError(f"--budget: must be a positive number of seconds, got {args.budget:g}")
+    cases = _load(args.cases, args.limit)
     if args.quick and args.cases == "*":
         cases = [c for c in cases if c.in_quick] or cases
     engines = select_engines(args.engines, say=_say)
@@ -132,6 +147,7 @@ def _run(args: argparse.Namespace) -> int:
         _say(f"resuming: {kept} finished sweeps in {journal.dir}")
     else:
         journal.start(fp)
+    set_run_budget(args.budget)
     clock = [time.perf_counter()]
 
     def lap() -> float:
@@ -417,6 +433,13 @@ def build_parser() -> argparse.ArgumentParser:
                      "take its finished sweeps (and analyses) from .DIR.partial beside it and "
                      "run the rest; the cases, engines, --quick and truestep version must be "
                      "the same (else exit 2). Without --resume a run starts afresh")
+    run.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE",
+                     help="set a cost limit for every case, over the defaults and the case "
+                     "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable")
+    run.add_argument("--budget", type=float, default=RUN_BUDGET_S, metavar="S",
+                     help=f"wall-clock budget of the whole run, s (default {RUN_BUDGET_S:g}): work "
+                     "still running when it ends, and work not started, are timeout rows that say "
+                     "so, and the report is written")
     run.set_defaults(func=cmd_run)
 
     gate = sub.add_parser("gate", help="check gates (and a baseline) against a run's tables",

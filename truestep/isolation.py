@@ -42,6 +42,24 @@ Call = tuple[Callable[..., Any], tuple, float]
 """``(fn, args, timeout_s)``: one isolated call."""
 
 
+_RUN_DEADLINE: list[float | None] = [None]
+"""When the whole run's budget ends (``time.monotonic()``), if it has one."""
+BUDGET_SPENT = "the run's budget (truestep run --budget) was spent before this finished"
+
+
+def set_run_budget(seconds: float | None) -> None:
+    """Give every isolated call from now on at most ``seconds`` (s) in all, counted from
+    now (``None``: no run-wide budget). A call that would outlast it is cut at the end
+    of the budget, and calls after it are not started: both are ``timeout`` outcomes that
+    say so."""
+    _RUN_DEADLINE[0] = None if seconds is None else time.monotonic() + seconds
+
+
+def _budget_left() -> float:
+    end = _RUN_DEADLINE[0]
+    return float("inf") if end is None else end - time.monotonic()
+
+
 _LIVE: dict[int, Any] = {}
 """The children started by this process and not yet joined, by pid."""
 
@@ -69,6 +87,7 @@ class Running:
     conn: Any
     deadline: float
     timeout: float
+    by_budget: bool = False
 
 
 def _start(index: int, call: Call) -> Running:
@@ -80,13 +99,16 @@ def _start(index: int, call: Call) -> Running:
     _LIVE[proc.pid] = proc
     faults.note_child(proc.pid)
     child.close()
-    return Running(index, proc, parent, time.monotonic() + timeout, timeout)
+    left = _budget_left()
+    return Running(index, proc, parent, time.monotonic() + min(timeout, left), timeout,
+                   by_budget=left < timeout)
 
 
 def _finish(run: Running, *, timed_out: bool) -> Outcome:
     try:
         if timed_out:
-            return Outcome("timeout", message=f"no result within {run.timeout:g} s")
+            return Outcome("timeout", message=BUDGET_SPENT if run.by_budget
+                           else f"no result within {run.timeout:g} s")
         try:
             status, value = run.conn.recv()
         except EOFError:
@@ -123,7 +145,15 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
     try:
         while pending or running:
             while pending and len(running) < max(1, workers):
+                if _budget_left() <= 0:  # not started: this call's row says why
+                    index, _ = pending.pop()
+                    outcomes[index] = Outcome("timeout", message=BUDGET_SPENT)
+                    if done is not None:
+                        done(index, outcomes[index])
+                    continue
                 running.append(_start(*pending.pop()))
+            if not running:
+                continue
             now = time.monotonic()
             ready = wait([r.conn for r in running],
                          timeout=max(0.0, min(r.deadline for r in running) - now))

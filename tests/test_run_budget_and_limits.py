@@ -1,0 +1,37 @@
+"""The whole run has a wall-clock budget, and the cost limits can be set for a run."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from truestep.cli import main
+from truestep.isolation import BUDGET_SPENT
+
+
+def test_a_spent_budget_makes_timeout_rows_and_the_report_is_still_written(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["run", "--quick", "--cases", "free-fall,harmonic-oscillator", "--engines",
+                 "reference", "--budget", "0.5", "--out", str(out)])
+    assert code == 0
+    results = pd.read_csv(out / "results.csv")
+    spent = results[results["message"] == BUDGET_SPENT]
+    assert len(spent) and set(spent["status"]) == {"timeout"}
+    assert (out / "index.html").is_file()
+    stability = pd.read_csv(out / "stability.csv")
+    searched = stability[stability["status"] != "skipped"]
+    assert len(searched) and set(searched["status"]) == {"timeout"}  # not started after the end
+
+
+def test_limits_on_the_command_line_refuse_a_case_with_exit_2(tmp_path, capsys):
+    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
+                 "--limit", "steps=10", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "steps, over the limit of 10" in err and "Traceback" not in err
+    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
+                 "--limit", "stepz=10", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "--limit" in err and len(err.strip().splitlines()) == 1
+    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
+                 "--budget", "-1", "--out", str(tmp_path / "out")])
+    assert code == 2 and "--budget" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "results.csv").exists()
