@@ -160,16 +160,17 @@ class Fields:
         return list(value)
 
     def numbers(
-        self, name: str, default: Any = _MISSING, *, positive: bool = False, nonempty: bool = True
+        self, name: str, default: Any = _MISSING, *, positive: bool = False, nonempty: bool = True,
+        max_length: int = 10_000,
     ) -> list[float]:
-        """A list of finite numbers (at most 10 000)."""
+        """A list of finite numbers (at most ``max_length``)."""
         value = self.raw(name, default)
         if not isinstance(value, list) or not all(_is_number(v) for v in value):
             raise self.error(name, f"expected a list of numbers, got {short(value)}")
         if nonempty and not value:
             raise self.error(name, "must not be empty")
-        if len(value) > 10_000:
-            raise self.error(name, f"at most 10000 values, got {len(value)}")
+        if len(value) > max_length:
+            raise self.error(name, f"at most {max_length} values, got {len(value)}")
         out = [self._float(name, v) for v in value]
         if positive and any(v <= 0 for v in out):
             raise self.error(name, f"every value must be positive, got {short(value)}")

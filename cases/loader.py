@@ -36,6 +36,8 @@ MAX_FILE_BYTES = 16 * 2**20
 blocks, meshes and emitters, not listed particle by particle."""
 MAX_NESTING = 32
 """The deepest nesting of tables and arrays a case file may have."""
+MAX_SWEEP = 50
+"""The most steps (or tolerances) one sweep lists: each is a row per engine and method."""
 EXACT_CHECK_S = 30.0
 """How long checking that an exact solution fits its case may take, s."""
 REFERENCE_KEYS = {"exact", "error", "scale", "conservative"}
@@ -133,10 +135,11 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
     kind = f.string("kind", choices={"ode", "particles"})
     run = f.sub("run")
     duration = run.number("duration", positive=True)
-    dts = run.numbers("dt", positive=True)
-    quick_dts = run.numbers("quick_dt", dts[:2], positive=True)
-    tolerances = run.numbers("tolerances", [1e-4, 1e-6, 1e-8], positive=True)
-    quick_tolerances = run.numbers("quick_tolerances", tolerances[:2], positive=True)
+    dts = run.numbers("dt", positive=True, max_length=MAX_SWEEP)
+    quick_dts = run.numbers("quick_dt", dts[:2], positive=True, max_length=MAX_SWEEP)
+    tolerances = run.numbers("tolerances", [1e-4, 1e-6, 1e-8], positive=True, max_length=MAX_SWEEP)
+    quick_tolerances = run.numbers("quick_tolerances", tolerances[:2], positive=True,
+                                   max_length=MAX_SWEEP)
     for where, values in (("dt", dts), ("quick_dt", quick_dts)):
         if max(values) > duration:
             raise run.error(where, f"a step of {max(values):g} s exceeds the duration {duration:g} s")
