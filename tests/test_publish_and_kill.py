@@ -10,6 +10,7 @@ Python's start-up again); the kill is a real signal to that process.
 
 from __future__ import annotations
 
+import importlib
 import os
 import shutil
 import signal
@@ -98,6 +99,8 @@ def journal(tmp_path_factory) -> dict:
     report an uninterrupted resume from that journal writes."""
     base = tmp_path_factory.mktemp("kills")
     preload()
+    for name in ("truestep.analyses", "truestep.api", "truestep.report", "truestep.figures"):
+        importlib.import_module(name)  # here, so that every forked run runs the same code
     first = base / "first"
     first.mkdir()
     code, log = forked(RUN, first, {KILL_AT: "report-csv"})
