@@ -493,3 +493,15 @@ def test_method_facts_are_immutable_shared_data():
             facts.order = 3  # type: ignore[misc]
         assert hash(facts) == hash(dataclasses.replace(facts))  # hashable, by value
     assert len({cls.facts for cls in (Euler, Midpoint, Euler)}) == 2
+
+
+def test_a_stability_function_that_touches_minus_one_is_stable_past_the_touch():
+    # R(z) = 1 + z + z^2 / 8: R(-x) = 1 - x + x^2 / 8 reaches -1 at x = 4 without
+    # crossing it (a double root of R + 1) and leaves [-1, 1] at x = 8.
+    a, b = np.array([[0.0, 0.0], [0.5, 0.0]]), np.array([0.75, 0.25])
+    np.testing.assert_allclose(stability_polynomial(a, b), [1.0, 1.0, 0.125])
+    x = np.linspace(0.0, 8.0, 801)
+    assert np.max(np.abs(1 - x + x * x / 8)) <= 1.0 + 1e-15 < abs(1 - 8.01 + 8.01**2 / 8)
+    st = tableau_stability(a, b, order=1)
+    assert st.real == pytest.approx(8.0, rel=1e-9)
+    assert st.imaginary == 0.0  # |R(iy)|^2 = 1 + y^2 (1 - 1/4) + ...: grows at once
