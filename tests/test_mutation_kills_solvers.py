@@ -267,11 +267,17 @@ def test_implicit_euler_on_a_linear_system_is_the_resolvent(jac):
     solver, taken, y, t = one_step(ImplicitEuler, system, h)
     np.testing.assert_allclose(y, np.linalg.solve(np.eye(3) - h * A3, Y0), rtol=1e-9)
     assert taken == h and t == t0 + h and solver.n_jac == 1
+    # on a linear system Newton with the right matrix lands in one update and stops at
+    # the next: predictor, its derivative, two iterations (+ 3 differences for the matrix)
+    fd = 0 if jac else 3
+    assert solver.nfev == 4 + fd
     # a second step of the same size keeps the factorisation
     solver.step(h)
-    assert solver.n_jac == 1
-    solver.step(h / 2)  # a new step size: a new matrix
-    assert solver.n_jac == 2
+    assert solver.n_jac == 1 and solver.nfev == 8 + fd
+    solver.step(h / 2)  # a new step size (a shorter one too): a new matrix at once
+    assert solver.n_jac == 2 and solver.nfev == 12 + 2 * fd
+    np.testing.assert_allclose(system.get_state(), np.linalg.solve(
+        np.eye(3) - h / 2 * A3, np.linalg.solve(np.eye(3) - h * A3, y)), rtol=1e-9)
 
 
 @pytest.mark.parametrize("jac", [True, False])
