@@ -511,3 +511,22 @@ def test_a_stability_function_that_touches_minus_one_is_stable_past_the_touch():
     st = tableau_stability(a, b, order=1)
     assert st.real == pytest.approx(8.0, rel=1e-9)
     assert st.imaginary == 0.0  # |R(iy)|^2 = 1 + y^2 (1 - 1/4) + ...: grows at once
+
+
+def test_velocity_verlet_is_first_order_with_a_damper_and_second_without():
+    def error(c, h, t_end=2.0):
+        s = Damped(np.array([1.0]), np.array([0.0]), w2=1.0, c=c)
+        solver = VelocityVerlet(s)
+        for _ in range(round(t_end / h)):
+            solver.step(h)
+        wd = math.sqrt(1 - c * c / 4)
+        exact = math.exp(-c * t_end / 2) * (math.cos(wd * t_end) + c / (2 * wd) * math.sin(wd * t_end))
+        return abs(s.get_state()[0] - exact)
+
+    damped = math.log2(error(0.5, 0.02) / error(0.5, 0.01))
+    undamped = math.log2(error(0.0, 0.02) / error(0.0, 0.01))
+    assert abs(damped - 1.0) < 0.15 and abs(undamped - 2.0) < 0.15
+    facts = VelocityVerlet.facts
+    assert facts.order_for(velocity_forces=True) == 1 and facts.order_for(velocity_forces=False) == 2
+    for cls in (SymplecticEuler, LectureUpdate, RK4, Heun, ImplicitEuler):
+        assert cls.facts.order_for(velocity_forces=True) == cls.facts.order
