@@ -139,6 +139,10 @@ def test_spring_and_anchor_energies_are_half_k_stretch_squared():
                 np.array([2.0]))
     ea = 0.5 * 3.0 * (math.sqrt(9 + 9) - 2.0) ** 2
     assert forces.anchor_energy(x, a) == pytest.approx(ea, rel=1e-14)
+    x2 = x.copy()
+    x2[1] = [0.0, 1.0, 0.0]  # on its anchor point: stretch -2
+    np.testing.assert_allclose(forces.anchor_energy(np.stack([x, x2, x]), a),
+                               [ea, 0.5 * 3.0 * 4.0, ea], rtol=1e-14)
     assert forces.spring_energy(x, Springs.empty()) == 0.0
     assert forces.anchor_energy(x, Anchors.empty()) == 0.0
     # the energy's negative gradient is the (undamped) spring force
@@ -222,6 +226,10 @@ def test_the_wind_field_drags_toward_its_gusting_velocity():
     f = forces.field_force(ForceField("wind", {"direction": [0.0, 1.0, 0.0]}), np.zeros((2, 3)), v,
                            np.ones(2), t)
     np.testing.assert_allclose(f, -v)
+    # a gust without a frequency is a constant wind (sin 0 = 0)
+    f = forces.field_force(ForceField("wind", {"direction": [0.0, 0.0, 1.0], "speed": 1.0, "gust": 3.0}),
+                           np.zeros((2, 3)), np.zeros((2, 3)), np.ones(2), 0.7)
+    np.testing.assert_allclose(f, [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     with pytest.raises(ValueError, match="unknown kind 'rain'"):
         forces.field_force(ForceField("rain", {}), np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1), 0.0)
     acc = np.ones((2, 3))

@@ -176,6 +176,10 @@ def test_fit_order_is_the_slope_over_the_asymptotic_range():
     # scaled down, the first point is not converged and the round-off one counts
     assert metrics.fit_order(dts[1:], low[1:], scale=1e-6) != pytest.approx(4.0, rel=1e-3)
     assert np.isnan(metrics.fit_order(dts, np.array([1.0, 1.0, 1.0, 1.0, 1e-3])))
+    edge = 0.5 * dts**3
+    edge[0] = 0.1  # exactly at the bound: left out
+    assert metrics.fit_order(dts, edge) == pytest.approx(3.0, rel=1e-12)
+    assert metrics.fit_order(dts, edge, scale=10.0) != pytest.approx(3.0, rel=1e-3)
     assert np.isnan(metrics.fit_order(dts[:2], np.array([0.05, np.nan])))
     nonfinite = 2.0 * dts
     nonfinite[1] = np.inf

@@ -530,3 +530,34 @@ def test_velocity_verlet_is_first_order_with_a_damper_and_second_without():
     assert facts.order_for(velocity_forces=True) == 1 and facts.order_for(velocity_forces=False) == 2
     for cls in (SymplecticEuler, LectureUpdate, RK4, Heun, ImplicitEuler):
         assert cls.facts.order_for(velocity_forces=True) == cls.facts.order
+
+
+def test_a_narrow_bump_above_one_ends_the_real_stability_interval():
+    # R(-x) = 1 + x p(x), p(x) = -(1 - x)(1 - x / 1.5)(1 - x / 3): |R(-x)| <= 1 on [0, 1],
+    # above 1 on (1, 1.5), back below 1 on (1.5, 3): the stable interval is [0, 1].
+    s1, s2, s3 = 1 + 1 / 1.5 + 1 / 3, 1 / 1.5 + 1 / 3 + 1 / 4.5, 1 / 4.5
+    a = np.diag([1.0, 1.0, 1.0], k=-1)
+    b = np.array([1 - s1, s1 - s2, s2 - s3, s3])
+    np.testing.assert_allclose(stability_polynomial(a, b), [1, 1, s1, s2, s3], rtol=1e-14)
+
+    def r_minus(x):
+        return 1 - x + s1 * x**2 - s2 * x**3 + s3 * x**4
+
+    x = np.linspace(0.0, 1.0, 1001)
+    assert np.all(np.abs(r_minus(x)) <= 1 + 1e-15) and r_minus(1.2) > 1 and abs(r_minus(2.0)) < 1
+    assert tableau_stability(a, b, order=1).real == pytest.approx(1.0, rel=1e-9)
+
+
+def test_finite_difference_jacobians_step_by_at_least_sqrt_eps():
+    a = A3.copy()
+    a[0] = 0.0  # the first coordinate stays exactly 0
+    y0 = np.array([0.0, -0.5, 1.3])
+    h = 0.3
+    s = Linear(a, y0, jac=False)
+    ImplicitEuler(s).step(h)
+    np.testing.assert_allclose(s.get_state(), np.linalg.solve(np.eye(3) - h * a, y0), rtol=1e-9)
+
+
+def test_the_step_matrix_is_left_out_of_the_stability_repr():
+    text = repr(RK4.facts.stability)
+    assert text.startswith("Stability(imaginary=") and "step_matrix" not in text
