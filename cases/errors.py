@@ -4,6 +4,9 @@ from __future__ import annotations
 
 MAX_REASON = 240
 """The longest reason an error line carries (a longer one is cut, with ``...``)."""
+LINE = 300
+"""The longest whole line (file, field and reason) an error aims for; a file path so long
+that the reason would get fewer than 60 characters is the one excess allowed."""
 
 
 def _one_line(text: str, limit: int) -> str:
@@ -19,7 +22,8 @@ class CaseError(ValueError):
     """
 
     def __init__(self, file: str, field: str, reason: str) -> None:
-        field, reason = _one_line(field, 120), _one_line(reason, MAX_REASON)
+        field = _one_line(field, 80)
+        reason = _one_line(reason, max(60, min(MAX_REASON, LINE - len(file) - len(field) - 4)))
         self.file, self.field, self.reason = file, field, reason
         super().__init__(f"{file}: {field}: {reason}")
 

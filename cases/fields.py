@@ -27,7 +27,10 @@ def short(value: Any) -> str:
     an integer of more than 30 digits is described by its size."""
     if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 99:
         return f"an integer of about {int(value.bit_length() * math.log10(2))} digits"
-    text = repr(value)
+    try:
+        text = repr(value)
+    except ValueError:  # it holds an integer beyond Python's digit limit for str()
+        return f"a {type(value).__name__} holding an integer of over 4300 digits"
     return text if len(text) <= QUOTE_CHARS else text[: QUOTE_CHARS - 3] + "..."
 
 

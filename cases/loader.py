@@ -148,7 +148,7 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
         raise run.error("tolerances", "every tolerance must lie in 1e-14..1 (below 1e-14 an "
                         f"adaptive step cannot meet it in float64), got {short(tolerances)}")
     max_records = run.integer("max_records", 2000, minimum=2, maximum=limits.records)
-    timeout_s = run.number("timeout", 120.0, positive=True, at_most=limits.timeout_s)
+    timeout_s = run.number("timeout", 120.0, at_least=1.0, at_most=limits.timeout_s)
     in_quick = run.boolean("quick", True)
     skip = []
     for s in run.subs("skip"):

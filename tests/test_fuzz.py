@@ -128,7 +128,6 @@ KNOWN_ESCAPES = {
 prepended (or the table replaced) in the shipped case."""
 
 
-@pytest.mark.xfail(strict=False, reason="found by the fuzz campaign at 2213af4; the loader's fix is pending")
 @pytest.mark.parametrize("label", sorted(KNOWN_ESCAPES))
 def test_known_escapes(scratch: Path, worker: object, label: str) -> None:
     """The remaining failure classes of the campaign, as fixed files at a path of 60

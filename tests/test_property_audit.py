@@ -950,7 +950,7 @@ def stability_rows():
             return getattr(self.adapter, attribute)
 
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(analyses, "run_isolated_all", _in_process)
+        patch.setattr(analyses, "run_untimed", _in_process)
         patch.setattr(analyses, "get_adapter", Counting)
         table = analyses.stability_table(cases, engines, quick=True, workers=1)
     rows = {(r.case, r.engine, r.method): r for r in table.itertuples()}
@@ -1021,7 +1021,7 @@ def exact_limit_rows():
     cases = [case_of(name) for name in EXACT_LIMIT_CASES]
     engines = [e for e in ("reference", "pymunk", "pybullet", "mujoco") if _installed(e)]
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(analyses, "run_isolated_all", _in_process)
+        patch.setattr(analyses, "run_untimed", _in_process)
         patch.setattr(analyses, "_search", lambda *args: (SearchResult(np.nan, np.nan, 0, "not run"), 0.0))
         table = analyses.stability_table(cases, engines, quick=False, workers=1)
     return {(r.case, r.engine, r.method): r for r in table.itertuples()}

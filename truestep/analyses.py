@@ -13,7 +13,7 @@ from truestep.adapters import get_adapter
 from truestep.adapters.base import facts_of
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
-from truestep.isolation import run_isolated_all, untimed_workers
+from truestep.isolation import run_untimed, untimed_workers
 from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
@@ -103,7 +103,7 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
     # Longest first, so that no long search starts last while the other cores idle.
     order = sorted(range(len(calls)),
                    key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2]))
-    run_isolated_all([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
+    run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
 
 
@@ -205,7 +205,7 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
             groups[g].append({"engine": engine, "method": method, "dt": dt, "e_set": e,
                               "bounce": 1, "status": out.status, "note": out.message})
 
-    run_isolated_all(calls, workers, done)
+    run_untimed(calls, workers, done)
     return pd.DataFrame([r for g in groups for r in g], columns=RESTITUTION_COLUMNS)
 
 

@@ -8,11 +8,13 @@ no traceback; nothing already written is touched).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -155,14 +157,16 @@ def _run(args: argparse.Namespace) -> int:
         return clock[-1] - clock[-2]
 
     traces: dict = {}
-    results = run_matrix(cases, engines, quick=args.quick, traces=traces, journal=journal)
-    t_sweep = lap()
-    tables = journal.analyses() if resuming else None
-    if tables is None:
-        with faults.phase("analyses"):
-            tables = run_analyses(cases, engines, results, quick=args.quick)
-        journal.put_analyses(tables)
-    t_analyses = lap()
+    with _cluster(args.scheduler, journal) as cluster:
+        results = run_matrix(cases, engines, quick=args.quick, traces=traces, journal=journal,
+                             cluster=cluster)
+        t_sweep = lap()
+        tables = journal.analyses() if resuming else None
+        if tables is None:
+            with faults.phase("analyses"):
+                tables = run_analyses(cases, engines, results, quick=args.quick)
+            journal.put_analyses(tables)
+        t_analyses = lap()
     write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
                  traces=None if args.quick else traces, with_lecture_figures=not args.quick)
     journal.remove()
@@ -170,6 +174,30 @@ def _run(args: argparse.Namespace) -> int:
     print(f"wrote {out}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
           f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
     return 0
+
+
+@contextlib.contextmanager
+def _cluster(address: str | None, journal) -> Iterator[object]:
+    """The Dask cluster of ``--scheduler`` for the sweep and the untimed analyses (``None``
+    without one); a cluster that cannot be reached, or goes away, is one line (exit 2)
+    saying that the finished sweeps are kept for ``--resume``."""
+    if address is None:
+        yield None
+        return
+    from truestep.cluster import Cluster, ClusterError
+    from truestep.isolation import set_untimed_runner
+
+    try:
+        with Cluster(address) as cluster:
+            set_untimed_runner(cluster)
+            try:
+                yield cluster
+            finally:
+                set_untimed_runner(None)
+    except ClusterError as err:
+        kept = len(list(journal.dir.glob("sweep-*.pkl"))) if journal.dir.exists() else 0
+        raise UsageError(f"{err}; {kept} finished sweeps are kept in {journal.dir} "
+                         "(the same command with --resume continues from them)") from None
 
 
 def _check_out(out: Path) -> None:
@@ -205,10 +233,11 @@ def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
     if not results_path.is_file():
         raise UsageError(f"{results_path}: no such file (run `truestep run` first)")
     tables = {"results": _read_csv(results_path, RESULTS_NEEDS, "results")}
-    for name, needs in (("stability", {"case", "engine", "method", "dt_limit", "dt_limit_exact"}),
-                        ("restitution", {"engine", "method", "dt", "e_set", "bounce", "e_measured"})):
+    from truestep.tables_io import REQUIRED
+
+    for name in ("stability", "restitution"):
         path = results_path.parent / f"{name}.csv"
-        tables[name] = _read_csv(path, needs, name) if path.exists() else None
+        tables[name] = _read_csv(path, set(REQUIRED[name]), name) if path.exists() else None
     return tables
 
 
@@ -436,6 +465,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE",
                      help="set a cost limit for every case, over the defaults and the case "
                      "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable")
+    run.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="run the sweeps and the untimed analyses on a Dask cluster: "
+                     "tcp://HOST:PORT of a running `dask scheduler`, or local:N for a "
+                     "LocalCluster of N single-threaded worker processes; one timed run per "
+                     "host at a time (needs truestep[dask])")
     run.add_argument("--budget", type=float, default=RUN_BUDGET_S, metavar="S",
                      help=f"wall-clock budget of the whole run, s (default {RUN_BUDGET_S:g}): work "
                      "still running when it ends, and work not started, are timeout rows that say "

@@ -164,15 +164,22 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
                                           f"<= {hi:g}" if hi is not None else "") if s)
         return GateResult(case.name, g, _within(value, lo, hi), f"{name} {value:.4g}", bounds)
     if g.kind == "speedup":
-        ratios = []
+        ratios, elsewhere = [], []
         for other in p["over"]:
             o = _at_dt(results[(results["case"] == case.name) & (results["engine"] == other)
                                & (results["status"] == "ok")], g.dt)
+            if "host" in o and "host" in row.index:  # wall times compare within one machine
+                here = "" if pd.isna(row["host"]) else str(row["host"])
+                same = o["host"].fillna("").astype(str) == here
+                elsewhere += [other] if len(o) and not same.any() else []
+                o = o[same]
             if len(o):
                 ratios.append(float(np.nanmin(_num(o["wall_s"]))) / float(row["wall_s"]))
-        value = min(ratios) if ratios else np.nan
+        value = min(ratios) if ratios and not elsewhere else np.nan
+        where = f" ({', '.join(elsewhere)} timed on another host: not compared)" if elsewhere else ""
         return GateResult(case.name, g, _within(value, p["min"], None),
-                          f"speed-up {value:.3g}x over {', '.join(p['over'])}", f">= {p['min']:g}x")
+                          f"speed-up {value:.3g}x over {', '.join(p['over'])}{where}",
+                          f">= {p['min']:g}x")
     raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
 
 

@@ -174,6 +174,26 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
     return outcomes  # type: ignore[return-value]
 
 
+_UNTIMED: list[Any] = [None]
+"""The cluster untimed calls go to (:func:`set_untimed_runner`), if any."""
+
+
+def set_untimed_runner(cluster: Any) -> None:
+    """Send the calls of :func:`run_untimed` to ``cluster`` (a
+    :class:`truestep.cluster.Cluster`), or back to this machine's cores (``None``)."""
+    _UNTIMED[0] = cluster
+
+
+def run_untimed(calls: Sequence[Call], workers: int,
+                done: Callable[[int, Outcome], None] | None = None) -> list[Outcome]:
+    """Work whose wall time is not measured (stability searches, bounce drops): on every
+    worker of the cluster set by :func:`set_untimed_runner`, else as
+    :func:`run_isolated_all` with ``workers`` children at once."""
+    if _UNTIMED[0] is not None:
+        return _UNTIMED[0].untimed(calls, done)
+    return run_isolated_all(calls, workers, done)
+
+
 def start_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Running:
     """Start ``fn(*args)`` in a forked child and return at once (untimed work only)."""
     return _start(0, (fn, args, timeout))

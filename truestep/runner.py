@@ -24,17 +24,19 @@ from truestep.time_limit import TimeLimitExceeded, time_limit
 from truestep.trust import checked
 
 if TYPE_CHECKING:
+    from truestep.cluster import Cluster
     from truestep.journal import Journal
 
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
     "energy_drift_final", "nfev", "steps", "wall_s", "repeats", "t_fail", "missing", "message",
-    "case_source", "path",
+    "case_source", "path", "host",
 ]
 """The columns of ``results.csv`` (property columns follow, one per named property).
 ``case_source`` is the case's name when the case library holds it, else its file, so
 that ``truestep gate`` finds the case again; ``path`` is the engine's code path (the
-reference: ``compiled`` or ``numpy``)."""
+reference: ``compiled`` or ``numpy``); ``host`` the machine the row was timed on (empty
+for rows that did not run)."""
 
 
 @dataclass
@@ -256,50 +258,37 @@ def run_matrix(
     progress: Callable[[str], None] | None = None,
     traces: dict | None = None,
     journal: Journal | None = None,
+    cluster: Cluster | None = None,
 ) -> pd.DataFrame:
     """Run every (case, engine, method, dt) and return the tidy results table.
 
     Each case, engine and method's sweep runs in one child process at a time
-    (:func:`run_sweep`). Energy traces of the runs go into ``traces`` when it is given
+    (:func:`run_sweep`), or, with a ``cluster`` (:class:`truestep.cluster.Cluster`), as
+    one task on its workers (one timed run per host at a time). The rows come in the
+    same order either way. Energy traces of the runs go into ``traces`` when it is given
     (see :func:`row_from`). Progress goes to standard error (:class:`Progress`), or each
     row's line to ``progress`` when it is given. With a ``journal``
     (:class:`truestep.journal.Journal`), each finished sweep is checkpointed there, and a
-    sweep it already holds is taken from it instead of being run again.
+    sweep it already holds is taken from it instead of being run again. Every row
+    records the ``host`` it ran on.
     """
+    from truestep.cluster import SweepJob, host_name
+
     timing = timing or Timing(max_repeats=1 if quick else 3)
     preload()
     planned = [(case, engine, method, list(entries)) for case in cases for engine in engines
                for method, entries in itertools.groupby(plan(case, engine, quick=quick),
                                                         key=lambda e: e[0])]
     total = sum(len(entries) for *_, entries in planned if not entries[0][3])
-    rows = []
+    here = host_name()
+    parts: list[list[dict]] = [[] for _ in planned]
+    jobs: list[SweepJob] = []
     with Progress(total, "sweep", say=progress) as bar:
-        for case, engine, method, entries in planned:
-            adaptive, why_not = entries[0][2], entries[0][3]
-            if why_not:
-                status, _, detail = why_not.partition(":")
-                rows.append({
-                    "case": case.name, "engine": engine, "method": method,
-                    "dt_kind": "tolerance" if adaptive else "step", "status": status,
-                    "missing": detail if status == "unsupported" else "",
-                    "message": detail if status == "skipped" else "",
-                })
-                continue
-            dts = [dt for _, dt, _, _ in entries]
-            key = (case.name, engine, method)
-            kept = journal.sweep(key, dts) if journal is not None else None
-            if kept is not None:
-                rows += kept[0]
-                if traces is not None:
-                    traces.update(kept[1])
-                bar.done(f"{case.name:24s} {engine:9s} {method:17s} {len(kept[0])} rows from "
-                         "the interrupted run", n=len(kept[0]))
-                continue
-            swept: dict = {}
-            done = run_sweep(case, engine, method, dts, adaptive=adaptive, timing=timing,
-                             traces=swept if traces is not None else None)
+
+        def finished(k: int, done: list[dict], swept: dict) -> None:
+            case, engine, method, entries = planned[k]
+            parts[k] = done
             for row in done:
-                rows.append(row)
                 bar.done(f"{case.name:24s} {engine:9s} {method:17s} {row['dt']:<9.3g} "
                          f"{row['status']:9s} err={row.get('error', np.nan):.3g} "
                          f"wall={row.get('wall_s', np.nan):.3g}s")
@@ -307,8 +296,43 @@ def run_matrix(
             if traces is not None:
                 traces.update(swept)
             if journal is not None:
-                journal.put_sweep(key, dts, done, swept)
-    return tidy(rows, cases)
+                journal.put_sweep((case.name, engine, method), [dt for _, dt, _, _ in entries],
+                                  done, swept)
+
+        for k, (case, engine, method, entries) in enumerate(planned):
+            adaptive, why_not = entries[0][2], entries[0][3]
+            if why_not:
+                status, _, detail = why_not.partition(":")
+                parts[k] = [{
+                    "case": case.name, "engine": engine, "method": method,
+                    "dt_kind": "tolerance" if adaptive else "step", "status": status,
+                    "missing": detail if status == "unsupported" else "",
+                    "message": detail if status == "skipped" else "", "host": "",
+                }]
+                continue
+            dts = [dt for _, dt, _, _ in entries]
+            kept = journal.sweep((case.name, engine, method), dts) if journal is not None else None
+            if kept is not None:
+                parts[k] = kept[0]
+                if traces is not None:
+                    traces.update(kept[1])
+                bar.done(f"{case.name:24s} {engine:9s} {method:17s} {len(kept[0])} rows from "
+                         "the interrupted run", n=len(kept[0]))
+                continue
+            if cluster is not None:
+                jobs.append(SweepJob(k, case, engine, method, dts, adaptive, timing,
+                                     traces is not None))
+                continue
+            swept: dict = {}
+            done = run_sweep(case, engine, method, dts, adaptive=adaptive, timing=timing,
+                             traces=swept if traces is not None else None)
+            for row in done:
+                row["host"] = here
+            finished(k, done, swept)
+        if jobs:
+            for k, done, swept in cluster.sweeps(jobs):
+                finished(k, done, swept)
+    return tidy([row for part in parts for row in part], cases)
 
 
 def case_source(case: Case, lib: dict | None = None) -> str:

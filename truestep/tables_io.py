@@ -23,8 +23,8 @@ NUMERIC = {
 
 REQUIRED = {
     "results": frozenset({"case", "engine", "method", "dt", "dt_kind", "status", "error"}),
-    "stability": frozenset({"case", "engine", "method", "dt_limit", "dt_limit_exact"}),
-    "restitution": frozenset({"engine", "method", "dt", "e_set", "bounce", "e_measured"}),
+    "stability": frozenset({"case", "engine", "method", "dt_limit", "dt_limit_exact", "status"}),
+    "restitution": frozenset({"engine", "method", "dt", "e_set", "bounce", "e_measured", "status"}),
 }
 """Columns every reader of a table needs, per table."""
 
@@ -60,6 +60,8 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
         raise TableError(f"{path}: not UTF-8 text (byte {err.start})") from None
+    if text.count('"') % 2:
+        raise TableError(f"{path}: a quoted field is never closed (the file is cut short?)")
     lines = list(csv.reader(text.splitlines()))
     lines = [line for line in lines if line]
     if not lines:
@@ -89,6 +91,9 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
         if col in table and pd.api.types.is_numeric_dtype(table[col]) and table[col].notna().any():
             raise TableError(f"{path}: column {col}: numbers where names belong "
                              f"({_short(table[col].dropna().iloc[0])})")
+    if "status" in table and table["status"].isna().any():
+        row = int(table.index[table["status"].isna()][0]) + 2
+        raise TableError(f"{path}: column status: empty (row {row}): every row says what became of it")
     if "status" in table:
         unknown = set(table["status"].dropna().astype(str)) - STATUSES
         if unknown:
