@@ -22,7 +22,7 @@ from truestep.cases.fields import Fields, short
 from truestep.cases.limits import DEFAULT, Budget, Limits, override, read_limits
 from truestep.cases.scene import read_scene
 from truestep.reference_impl.system import SecondOrderSystem
-from truestep.time_limit import time_limit
+from truestep.time_limit import TimeLimitExceeded, time_limit
 
 CASE_DIR = Path(__file__).resolve().parent
 ODE_DIMENSIONS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
@@ -358,7 +358,7 @@ def _check_exact(case: Case) -> None:
                 check(case)
                 return
             start = fn(case, np.array([0.0]))
-    except Exception as err:  # an exact solution says why it does not fit by raising
+    except (Exception, TimeLimitExceeded) as err:  # it says why it does not fit by raising
         raise CaseError(case.file, where, f"{case.exact!r} does not fit this case: {err}") from None
     if case.kind == "ode":
         x0, shape = case.ode.y0[None, None, :], (1, 1, len(case.ode.y0))

@@ -35,3 +35,28 @@ def test_limits_on_the_command_line_refuse_a_case_with_exit_2(tmp_path, capsys):
                  "--budget", "-1", "--out", str(tmp_path / "out")])
     assert code == 2 and "--budget" in capsys.readouterr().err
     assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_a_step_that_runs_past_its_timeout_is_its_own_row_and_the_sweep_goes_on(tmp_path):
+    """An oscillator made 1e13 times stiffer: scipy's explicit RK45 needs ~1e8 steps at
+    any tolerance. Each step of the sweep stops at the case's timeout (1 s) as its own
+    ``timeout`` row, inside the one sweep process: not the whole sweep's time, twice."""
+    import re
+    import time
+
+    from truestep.cases.loader import CASE_DIR, load_case
+    from truestep.runner import Timing, run_sweep
+
+    text = (CASE_DIR / "harmonic-oscillator.toml").read_text()
+    text = re.sub(r"^stiffness = .*$", "stiffness = 1e14", text, count=1, flags=re.M)
+    text = re.sub(r"^duration = (.*)$", r"duration = \1\ntimeout = 1.0", text, count=1, flags=re.M)
+    text = re.sub(r"^\[stability\]\n(.+\n)+", "", text, flags=re.M)
+    text = re.sub(r"^\[\[gates\]\]\n(.+\n)+", "", text, flags=re.M)
+    path = tmp_path / "stiff-oscillator.toml"
+    path.write_text(text)
+    case = load_case(path)
+    started = time.perf_counter()
+    rows = run_sweep(case, "scipy", "RK45", [1e-4, 1e-6], adaptive=True, timing=Timing())
+    assert [r["status"] for r in rows] == ["timeout", "timeout"]
+    assert all("longer than 1 s" in r["message"] for r in rows)
+    assert time.perf_counter() - started < 6.0

@@ -103,20 +103,25 @@ def energy_trace(traj: Trajectory) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def simulate_sweep(engine: str, case: Case, method: str, dts: list[float],
-                   timing: Timing) -> list[Trajectory | str]:
+                   timing: Timing) -> list[Trajectory | Outcome | str]:
     """:func:`simulate_timed` at every step of a sweep, in one child process.
 
-    Each entry is the step's Trajectory, or the error message of an exception it raised
-    (the other steps still run). Runs of one case, engine and method share a process:
-    the engine's first-use costs are paid once, and no engine state outlives a run
+    Each entry is the step's Trajectory, the error message of an exception it raised, or
+    a ``timeout`` :class:`Outcome` for a step that ran past the case's ``timeout`` (the
+    other steps still run; a step stuck in compiled code that no signal interrupts is
+    left to the process's own timeout, :func:`run_sweep`). Runs of one case, engine and
+    method share a process: the engine's first-use costs are paid once, and no engine state outlives a run
     (every adapter builds and tears down its scene per run). The first step that runs
     warms the process up for all of them.
     """
-    out: list[Trajectory | str] = []
+    out: list[Trajectory | Outcome | str] = []
     for dt in dts:
         warm = any(isinstance(o, Trajectory) for o in out)
         try:
-            out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
+            with time_limit(case.timeout_s, f"the run at {dt:g}"):
+                out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
+        except TimeLimitExceeded as err:  # this step's timeout row; the sweep goes on
+            out.append(Outcome("timeout", message=str(err)))
         except Exception as err:  # a row that says so; the sweep goes on
             tb = traceback.extract_tb(err.__traceback__)
             where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
@@ -179,6 +184,10 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
     return row
 
 
+SWEEP_SLACK = 1.25
+"""The sweep process's own limit over the sum of its steps' limits: each step stops at its
+``timeout`` inside the process (:func:`simulate_sweep`); the process limit is the backstop
+for a step stuck where no signal reaches it."""
 _MEASURE_TIMED_OUT: dict[str, str] = {}
 """Case files whose measuring ran out of time once (its exact solution, mostly): their
 later rows say so at once instead of waiting out the limit again."""
@@ -202,7 +211,7 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
     others are measured.
     """
     outcome = run_isolated(simulate_sweep, (engine, case, method, dts, timing),
-                           case.timeout_s * len(dts))
+                           SWEEP_SLACK * case.timeout_s * len(dts) + 10.0)
     if outcome.status != "ok":
         return [run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
                         traces=traces) for dt in dts]

@@ -17,8 +17,9 @@ import time
 from collections.abc import Iterator
 
 
-class TimeLimitExceeded(Exception):
-    """A computation under :func:`time_limit` ran past its limit."""
+class TimeLimitExceeded(BaseException):
+    """A computation under :func:`time_limit` ran past its limit (a ``BaseException``, so
+    that the ``except Exception`` of the code it interrupts does not swallow it)."""
 
 
 def _usable() -> bool:
