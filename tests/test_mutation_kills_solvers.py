@@ -561,3 +561,15 @@ def test_finite_difference_jacobians_step_by_at_least_sqrt_eps():
 def test_the_step_matrix_is_left_out_of_the_stability_repr():
     text = repr(RK4.facts.stability)
     assert text.startswith("Stability(imaginary=") and "step_matrix" not in text
+
+
+def test_implicit_euler_rebuilds_at_an_iterate_when_the_predictor_s_matrix_is_slow():
+    """Found by the mutation run: from y0 = 2 at h = 0.4 the matrix built at the predictor
+    makes Newton converge slowly (updates shrink ~0.55 per iteration); it is rebuilt at the
+    current iterate, as the docstring says, and the step solves the quadratic."""
+    y0, h = 2.0, 0.4
+    solver = ImplicitEuler(Riccati(y0, jac=True))
+    solver.step(h)
+    assert solver.n_jac == 2
+    assert solver.system.get_state()[0] == pytest.approx(
+        (-1 + math.sqrt(1 + 4 * h * y0)) / (2 * h), rel=1e-9)

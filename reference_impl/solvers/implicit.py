@@ -77,11 +77,11 @@ class ImplicitEuler(Solver):
         t1 = t + dt
         y = x + dt * self.fun(x, t)
         fy = self.fun(y, t1)
-        fresh = self._solve is None or self._solve_dt != dt
         if not (np.isfinite(y).all() and np.isfinite(fy).all()):
             raise FloatingPointError(f"implicit-euler: non-finite state or derivative at t={t:.6g}")
-        if fresh:
+        if self._solve is None or self._solve_dt != dt:
             self._factorise(y, t1, fy, dt)
+        rebuilt = False  # at an iterate of this step (a matrix of the predictor does not count)
         prev = np.inf
         it = 0
         while True:
@@ -98,9 +98,9 @@ class ImplicitEuler(Solver):
                 break
             if not np.isfinite(size) or it >= self.max_iter:
                 raise FloatingPointError(f"implicit-euler: Newton failed at t={t:.6g}")
-            if size > 0.5 * prev and not fresh:
+            if size > 0.5 * prev and not rebuilt:
                 self._factorise(y, t1, fy, dt)
-                fresh = True
+                rebuilt = True
             prev = size
         self.system.set_state(y, t1)
         return dt
