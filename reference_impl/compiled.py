@@ -182,6 +182,41 @@ def _applied_forces(f, x, v, t, mass, gravity, drag, si, sj, sk, sc, sr, ai, ap,
             f[p, 2] += imp_f[k, 2]
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _plane_contact(f0, f1, f2, v0, v1, v2, n0, n1, n2, mu):
+    """One particle's applied force ``f`` (N) with a plane's contact force added: the
+    push into the plane (unit normal ``n``) cancelled, then Coulomb friction ``mu`` on
+    the tangential velocity ``v`` (kinetic), or holding it at rest (static, up to the
+    limit): :func:`collisions.add_contact_forces` for one particle and one plane."""
+    press = min(f0 * n0 + f1 * n1 + f2 * n2, 0.0)
+    f0 -= press * n0
+    f1 -= press * n1
+    f2 -= press * n2
+    if mu > 0.0:
+        limit = -mu * press
+        vn = v0 * n0 + v1 * n1 + v2 * n2
+        t0, t1, t2 = v0 - vn * n0, v1 - vn * n1, v2 - vn * n2
+        speed = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        ffn = f0 * n0 + f1 * n1 + f2 * n2
+        s0, s1, s2 = f0 - ffn * n0, f1 - ffn * n1, f2 - ffn * n2
+        ft = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        if speed > 0.0:
+            kinetic = limit / speed
+            f0 -= kinetic * t0
+            f1 -= kinetic * t1
+            f2 -= kinetic * t2
+        elif ft <= limit:
+            f0 -= s0
+            f1 -= s1
+            f2 -= s2
+        else:
+            static = limit / ft
+            f0 -= static * s0
+            f1 -= static * s1
+            f2 -= static * s2
+    return f0, f1, f2
+
+
 @njit(cache=True, error_model="numpy")
 def _add_contact_forces(f, v, contact, pn, pmu):
     """:func:`collisions.add_contact_forces` for the particles in contact."""
@@ -192,36 +227,8 @@ def _add_contact_forces(f, v, contact, pn, pmu):
         for p in range(n):
             if not contact[k, p]:
                 continue
-            fn = f[p, 0] * n0 + f[p, 1] * n1 + f[p, 2] * n2
-            press = min(fn, 0.0)
-            f0 = f[p, 0] - press * n0
-            f1 = f[p, 1] - press * n1
-            f2 = f[p, 2] - press * n2
-            if mu > 0.0:
-                limit = -mu * press
-                vn = v[p, 0] * n0 + v[p, 1] * n1 + v[p, 2] * n2
-                t0, t1, t2 = v[p, 0] - vn * n0, v[p, 1] - vn * n1, v[p, 2] - vn * n2
-                speed = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                ffn = f0 * n0 + f1 * n1 + f2 * n2
-                s0, s1, s2 = f0 - ffn * n0, f1 - ffn * n1, f2 - ffn * n2
-                ft = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-                if speed > 0.0:
-                    kinetic = limit / speed
-                    f0 -= kinetic * t0
-                    f1 -= kinetic * t1
-                    f2 -= kinetic * t2
-                elif ft <= limit:
-                    f0 -= s0
-                    f1 -= s1
-                    f2 -= s2
-                else:
-                    static = limit / ft
-                    f0 -= static * s0
-                    f1 -= static * s1
-                    f2 -= static * s2
-            f[p, 0] = f0
-            f[p, 1] = f1
-            f[p, 2] = f2
+            f[p, 0], f[p, 1], f[p, 2] = _plane_contact(f[p, 0], f[p, 1], f[p, 2], v[p, 0],
+                                                       v[p, 1], v[p, 2], n0, n1, n2, mu)
 
 
 @njit(cache=True, error_model="numpy")
@@ -550,36 +557,9 @@ def _contact_p(p, f0, f1, f2, v0, v1, v2, contact, pn, pmu):
     """The contact force of every plane particle ``p`` rests on, added to its applied
     force ``f`` (:func:`_add_contact_forces` for one particle)."""
     for k in range(pn.shape[0]):
-        if not contact[k, p]:
-            continue
-        n0, n1, n2 = pn[k, 0], pn[k, 1], pn[k, 2]
-        press = min(f0 * n0 + f1 * n1 + f2 * n2, 0.0)
-        f0 -= press * n0
-        f1 -= press * n1
-        f2 -= press * n2
-        mu = pmu[k]
-        if mu > 0.0:
-            limit = -mu * press
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            t0, t1, t2 = v0 - vn * n0, v1 - vn * n1, v2 - vn * n2
-            speed = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-            ffn = f0 * n0 + f1 * n1 + f2 * n2
-            s0, s1, s2 = f0 - ffn * n0, f1 - ffn * n1, f2 - ffn * n2
-            ft = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-            if speed > 0.0:
-                kinetic = limit / speed
-                f0 -= kinetic * t0
-                f1 -= kinetic * t1
-                f2 -= kinetic * t2
-            elif ft <= limit:
-                f0 -= s0
-                f1 -= s1
-                f2 -= s2
-            else:
-                static = limit / ft
-                f0 -= static * s0
-                f1 -= static * s1
-                f2 -= static * s2
+        if contact[k, p]:
+            f0, f1, f2 = _plane_contact(f0, f1, f2, v0, v1, v2, pn[k, 0], pn[k, 1], pn[k, 2],
+                                        pmu[k])
     return f0, f1, f2
 
 
