@@ -58,17 +58,11 @@ def local_run(tmp_path_factory) -> Path:
     return out
 
 
-def test_a_local_cluster_gives_a_local_run_s_tables(local_run: Path, tmp_path: Path) -> None:
-    out = tmp_path / "cluster"
-    assert _run(out, "--scheduler", "local:2") == 0
-    _same_but_timing(local_run, out)
-    results = pd.read_csv(out / "results.csv")
-    ran = results[results["status"].isin(["ok", "unstable"])]
-    assert ran["host"].notna().all() and set(ran["host"]) == {socket.gethostname()}
-
-
-def test_a_worker_killed_mid_run_loses_and_repeats_no_row(local_run: Path, tmp_path: Path,
-                                                         monkeypatch) -> None:
+def test_a_local_cluster_with_a_worker_killed_mid_run_gives_a_local_run_s_tables(
+        local_run: Path, tmp_path: Path, monkeypatch) -> None:
+    """Two single-threaded workers; one dies as it starts a sweep. That sweep runs again
+    on the other, every row is there exactly once, and every column but the timing ones
+    and ``host`` equals the local run's."""
     deaths = tmp_path / "deaths"
     deaths.mkdir()
     monkeypatch.setenv(KILL_WORKER, f"harmonic-oscillator/reference/rk4:1:{deaths}")
@@ -79,6 +73,8 @@ def test_a_worker_killed_mid_run_loses_and_repeats_no_row(local_run: Path, tmp_p
     keys = ["case", "engine", "method", "dt_kind", "dt"]
     assert not results.duplicated(keys).any()
     _same_but_timing(local_run, out)  # the sweep ran again elsewhere, to the same rows
+    ran = results[results["status"].isin(["ok", "unstable"])]
+    assert ran["host"].notna().all() and set(ran["host"]) == {socket.gethostname()}
 
 
 def test_a_sweep_that_kills_every_worker_is_crashed_rows(tmp_path: Path, monkeypatch) -> None:
