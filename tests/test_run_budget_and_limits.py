@@ -60,3 +60,16 @@ def test_a_step_that_runs_past_its_timeout_is_its_own_row_and_the_sweep_goes_on(
     assert [r["status"] for r in rows] == ["timeout", "timeout"]
     assert all("longer than 1 s" in r["message"] for r in rows)
     assert time.perf_counter() - started < 6.0
+
+
+def test_too_little_space_beside_out_fails_before_the_sweep(tmp_path, capsys, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 2**20, 2**20))
+    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "MiB free beside" in err and "sweep" not in err
+    assert not (tmp_path / "out").exists()

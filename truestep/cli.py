@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -33,6 +34,9 @@ from truestep.cases.limits import KEYS as LIMIT_KEYS
 from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
 from truestep.cases.plugins import PluginError
 
+REPORT_SPACE_MB = 64
+"""Room a new report needs beside ``--out`` besides twice the old one's size, MiB (the
+published report is about 10 MiB with its figures)."""
 RUN_BUDGET_S = 6 * 3600.0
 """The default wall-clock budget of a whole ``truestep run``, s."""
 RESULTS_NEEDS = {"case", "engine", "method", "dt", "dt_kind", "status", "error"}
@@ -217,6 +221,12 @@ def _check_out(out: Path) -> None:
             probe.close()
     except OSError as err:
         raise UsageError(f"--out: cannot write in {out}: {err.strerror or err}") from None
+    old = sum(f.stat().st_size for f in real.rglob("*") if f.is_file()) if real.exists() else 0
+    need = 2 * old + REPORT_SPACE_MB * 2**20  # the staged report beside the old one
+    free = shutil.disk_usage(real.parent).free
+    if free < need:
+        raise UsageError(f"--out: {free / 2**20:.0f} MiB free beside {out}; staging the report "
+                         f"there needs about {need / 2**20:.0f} MiB")
 
 
 def _read_csv(path: Path, needs: set[str], kind: str = "results") -> pd.DataFrame:
