@@ -410,7 +410,8 @@ def scaling_table(
 
     from truestep.runner import preload
 
-    preload()  # compile the reference's loops once, here, untimed: not in each warm-up child
+    if any(engine == "reference" for engine, _ in pairs):
+        preload()  # compile the reference's loops once, here, untimed: not in each warm-up
     warm_n = min(WARMUP_N, ns[0])
     max_steps = max(MIN_STEPS, case.steps_for(dt)[0])  # a run covers at most the case's duration
     first_timeout = FIRST_TIMEOUT_S + 5 * target_s
