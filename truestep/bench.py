@@ -101,8 +101,9 @@ PROBE_BUILD = 0.25
 """A child probes at n when building there is predicted to take at most this fraction
 of the target (building twice costs little)."""
 
-FIRST_TIMEOUT_S = 20.0
-"""Seconds the warm-up child and the first size of a pair may take at least (plus 5 x
+FIRST_TIMEOUT_S = 60.0
+"""(A cold numba cache compiles the reference's loops in about 30 s on this machine.)
+Seconds the warm-up child and the first size of a pair may take at least (plus 5 x
 the target), whatever is left of the share: an engine that compiles on first use (and
 caches what it compiled) may do so once."""
 
@@ -408,10 +409,6 @@ def scaling_table(
             scenes[n] = rain_case(n, case)
         return scenes[n]
 
-    from truestep.runner import preload
-
-    if any(engine == "reference" for engine, _ in pairs):
-        preload()  # compile the reference's loops once, here, untimed: not in each warm-up
     warm_n = min(WARMUP_N, ns[0])
     max_steps = max(MIN_STEPS, case.steps_for(dt)[0])  # a run covers at most the case's duration
     first_timeout = FIRST_TIMEOUT_S + 5 * target_s
