@@ -1,0 +1,190 @@
+"""The lecture's derivative of :class:`~truestep.reference_impl.particles.ParticleSystem`, compiled.
+
+The scene a compiled step reads (:class:`Scene`): its particles' constants, the tuple of
+the force kinds it declares (:mod:`~truestep.reference_impl.forces_kernels`), its
+impulses and its planes (``None`` when it has none). The derivative is the lecture's
+loop, as :meth:`ParticleSystem.acceleration` makes it: clear the accumulator, let every
+force kind add in, then the impulses, then the contact force for the particles resting on
+a plane, divide by the masses. :func:`accelerations` runs it over a tile in passes (any
+scene); :func:`particle_force` for one particle alone (scenes whose forces are all
+pointwise). The parts a scene may lack are slots (:mod:`~truestep.reference_impl.compose`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from truestep.reference_impl.collisions_kernels import contact_force
+from truestep.reference_impl.compose import slot
+from truestep.reference_impl.forces_kernels import KERNEL, Impulses
+
+
+class Particles(NamedTuple):
+    """The constants of a tile's particles, each (m,): ``mass`` (kg), ``inv_mass`` (1/kg, 0
+    for pinned particles), ``radius`` (m), ``movable`` (bool: not pinned) and
+    ``moving_mass`` (kg, 0 for pinned particles: what their energy counts)."""
+
+    mass: np.ndarray
+    inv_mass: np.ndarray
+    radius: np.ndarray
+    movable: np.ndarray
+    moving_mass: np.ndarray
+
+
+class Scene(NamedTuple):
+    """A particle scene as a compiled step reads it.
+
+    particles : Particles
+    forces : tuple of force kinds, only those the scene declares, in the order of
+        :func:`forces.add_model_forces` (impulses apart)
+    impulses : forces_kernels.Impulses or None
+    planes : tuple of collisions_kernels.Plane, or None
+    """
+
+    particles: Particles
+    forces: tuple
+    impulses: object
+    planes: object
+
+
+@slot
+def add_forces(scene, F, X, V, t):
+    """Add the force of every kind in ``scene.forces`` into ``F``, in order (each kind's
+    ``add``)."""
+
+
+@slot
+def add_impulses(scene, F, X, V, t):
+    """Add the impulses acting at ``t`` into ``F`` (``Impulses.add``), if the scene has any."""
+
+
+@slot
+def add_contact(scene, F, V, contact, any_contact):
+    """Add the contact force of every plane to the particles in contact with it
+    (:func:`add_contact_forces`), if the scene has planes."""
+
+
+@slot
+def point_force(scene, x, v, t, p):
+    """The force (N, 3-tuple) of every kind in ``scene.forces`` on particle ``p`` alone
+    (each kind's ``at`` in order, from zero); for scenes whose forces are all pointwise."""
+
+
+@slot
+def point_impulses(scene, f, t, p):
+    """``f`` with the impulses on particle ``p`` acting at ``t`` added, if any."""
+
+
+@slot
+def potential_energy(scene, X):
+    """The potential energy (J) of every kind in ``scene.forces``, summed in order."""
+
+
+@njit(**KERNEL)
+def tile_scene(scene, lo, hi):
+    """``scene`` for its particles ``lo`` to ``hi`` alone (a tile of a scene whose
+    particles do not act on one another)."""
+    p = scene.particles
+    particles = Particles(p.mass[lo:hi], p.inv_mass[lo:hi], p.radius[lo:hi], p.movable[lo:hi],
+                          p.moving_mass[lo:hi])
+    return Scene(particles, scene.forces, scene.impulses, scene.planes)
+
+
+@njit(**KERNEL)
+def tile_impulses(impulses, lo, hi):
+    """The impulses of particles ``lo`` to ``hi``, numbered from ``lo``."""
+    k = impulses.kicked
+    a, b = np.searchsorted(k, lo), np.searchsorted(k, hi)
+    return Impulses(impulses.start[lo:hi + 1], impulses.force, impulses.on, impulses.off,
+                    k[a:b], lo)
+
+
+@njit(**KERNEL)
+def tile_scene_with_impulses(scene, lo, hi):
+    """:func:`tile_scene` of a scene with impulses (their grouping sliced too)."""
+    tiled = tile_scene(scene, lo, hi)
+    return Scene(tiled.particles, scene.forces, tile_impulses(scene.impulses, lo, hi),
+                 scene.planes)
+
+
+@njit(**KERNEL)
+def applied_forces(scene, F, X, V, t):
+    """Clear ``F`` (N, (3, m)) and let every force of the scene add in, impulses last:
+    :meth:`ParticleSystem.accumulate_forces` (the contact force is not applied)."""
+    for c in range(3):
+        for p in range(F.shape[1]):
+            F[c, p] = 0.0
+    add_forces(scene, F, X, V, t)
+    add_impulses(scene, F, X, V, t)
+
+
+@njit(**KERNEL)
+def add_contact_forces(scene, F, V, contact, any_contact):
+    """The contact force of each plane for the particles in contact with it
+    (``contact`` (planes, m) bool), plane after plane, when any particle is:
+    :func:`collisions.add_contact_forces`."""
+    if not any_contact:
+        return
+    planes = scene.planes
+    for k in range(len(planes)):
+        plane = planes[k]
+        for p in range(F.shape[1]):
+            if contact[k, p]:
+                f = contact_force((F[0, p], F[1, p], F[2, p]), (V[0, p], V[1, p], V[2, p]),
+                                  plane)
+                F[0, p], F[1, p], F[2, p] = f
+
+
+@njit(**KERNEL)
+def accelerations(scene, A, F, X, V, t, contact, any_contact):
+    """``A = F / m`` (m/s^2, (3, m)) at positions ``X`` and velocities ``V`` at time ``t``:
+    :meth:`ParticleSystem.acceleration`, in passes over the tile; ``F`` is scratch."""
+    applied_forces(scene, F, X, V, t)
+    add_contact(scene, F, V, contact, any_contact)
+    w = scene.particles.inv_mass
+    for c in range(3):
+        for p in range(A.shape[1]):
+            A[c, p] = F[c, p] * w[p]
+
+
+@njit(**KERNEL)
+def particle_force(scene, x, v, t, p):
+    """The applied force on particle ``p`` alone, its impulses last, for scenes whose
+    forces are all pointwise."""
+    return point_impulses(scene, point_force(scene, x, v, t, p), t, p)
+
+
+@njit(**KERNEL)
+def resting_force(scene, f, v, contact, p):
+    """``f`` with the contact force of every plane particle ``p`` rests on added."""
+    planes = scene.planes
+    for k in range(len(planes)):
+        if contact[k, p]:
+            f = contact_force(f, v, planes[k])
+    return f
+
+
+@njit(**KERNEL)
+def scaled(f, w):
+    """``f * w`` of a 3-tuple: a force times an inverse mass."""
+    return (f[0] * w, f[1] * w, f[2] * w)
+
+
+@njit(**KERNEL)
+def kinetic_energy(V, particles):
+    """``sum m |v|^2 / 2`` of the movable particles, J."""
+    e = 0.0
+    for p in range(V.shape[1]):
+        e += particles.moving_mass[p] * (V[0, p] * V[0, p] + V[1, p] * V[1, p]
+                                         + V[2, p] * V[2, p])
+    return 0.5 * e
+
+
+@njit(**KERNEL)
+def total_energy(scene, X, V):
+    """Kinetic plus potential energy of the tile (J): :func:`particles.total_energy`
+    (impulses have no potential)."""
+    return kinetic_energy(V, scene.particles) + potential_energy(scene, X)

@@ -1,0 +1,188 @@
+"""An explicit Runge-Kutta step of :mod:`~truestep.reference_impl.solvers.explicit_rk`, compiled.
+
+:class:`Tableau` is a method's tableau as a compiled step reads it. Its stages are stepped
+as :func:`~truestep.reference_impl.solvers.explicit_rk.rk_stages` steps them (stage ``s``
+at ``x + sum_r (h a_sr) k_r``, the terms added one at a time in the order of ``r``, zero
+weights left out) and the step ends with ``x + h sum_s b_s k_s``, the sum from ``0.0`` in
+the order of the stages. The tableau is data: every explicit method shares one compiled
+step. Twin: :meth:`~truestep.reference_impl.solvers.explicit_rk.ExplicitRungeKutta.step`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.particles_kernels import (
+    accelerations,
+    particle_force,
+    point_force,
+    scaled,
+)
+from truestep.reference_impl.tiles import (
+    CONTACT,
+    SPECIAL,
+    collisions,
+    copy_into,
+    list_special,
+    load,
+    mark_special,
+    near_planes,
+    point_contact,
+    store,
+)
+
+
+@njit(**KERNEL)
+def add_terms(method, s, Y, K, out, h, last):
+    """``out = Y + sum_r (h a_sr) K[r]`` over the first ``last`` non-zero terms of row
+    ``s``, one term at a time, over a tile ((3, m) arrays; ``out`` may be ``Y``)."""
+    src = Y
+    for q in range(last):
+        r = method.cols[s, q]
+        w = h * method.weights[s, q]
+        Kr = K[r]
+        for c in range(3):
+            for j in range(Y.shape[1]):
+                out[c, j] = src[c, j] + w * Kr[c, j]
+        src = out
+
+
+@njit(**KERNEL)
+def stage_passes(method, s, scene, tile, t, h):
+    """Stage ``s`` over a tile in passes: its positions into ``XS`` and its velocities
+    (the derivative of the positions) into ``KX[s]``, then its accelerations into
+    ``KV[s]`` at ``t + c_s h``."""
+    n = method.terms[s]
+    X, V, XS, KX, KV = tile.X, tile.V, tile.XS, tile.KX, tile.KV
+    if n == 0:
+        copy_into(XS, X)
+        copy_into(KX[s], V)
+    else:
+        add_terms(method, s, X, KX, XS, h, n)
+        add_terms(method, s, V, KV, KX[s], h, n)
+    accelerations(scene, KV[s], tile.F, XS, KX[s], t + method.c[s] * h, tile.contact,
+                  tile.count[CONTACT] > 0)
+
+
+@njit(**KERNEL)
+def stage_fused(method, s, scene, tile, t, h):
+    """Stage ``s`` over a tile of independent particles: the terms of its row but the last
+    in passes, then each particle's stage state (the last term added) and acceleration in
+    one loop; the special particles' accelerations then again with their impulses and
+    contact."""
+    n = method.terms[s]
+    X, V, XS, VS, KX, KV = tile.X, tile.V, tile.XS, tile.VS, tile.KX, tile.KV
+    w, ts = scene.particles.inv_mass, t + method.c[s] * h
+    BX, BV = X, V
+    if n > 1:
+        add_terms(method, s, X, KX, XS, h, n - 1)
+        add_terms(method, s, V, KV, VS, h, n - 1)
+        BX, BV = XS, VS
+    r = method.cols[s, n - 1] if n > 0 else 0
+    a = h * method.weights[s, n - 1] if n > 0 else 0.0
+    KXs, KVs, KXr, KVr = KX[s], KV[s], KX[r], KV[r]
+    for j in range(X.shape[1]):
+        x, v = load(BX, j), load(BV, j)
+        if n > 0:
+            x = (x[0] + a * KXr[0, j], x[1] + a * KXr[1, j], x[2] + a * KXr[2, j])
+            v = (v[0] + a * KVr[0, j], v[1] + a * KVr[1, j], v[2] + a * KVr[2, j])
+        store(KXs, j, v)
+        store(KVs, j, scaled(point_force(scene, x, v, ts, j), w[j]))
+    for q in range(tile.count[SPECIAL]):
+        p = tile.special[q]
+        x, v = load(BX, p), load(BV, p)
+        if n > 0:
+            x = (x[0] + a * KXr[0, p], x[1] + a * KXr[1, p], x[2] + a * KXr[2, p])
+            v = (v[0] + a * KVr[0, p], v[1] + a * KVr[1, p], v[2] + a * KVr[2, p])
+        f = point_contact(scene, tile, particle_force(scene, x, v, ts, p), v, p)
+        store(KVs, p, scaled(f, w[p]))
+
+
+@njit(**KERNEL)
+def weighted(b, K, D):
+    """``D = sum_s b_s K[s]`` ((3, m)), summed from ``0.0`` in the order of the stages."""
+    for c in range(3):
+        for j in range(D.shape[1]):
+            D[c, j] = 0.0
+    for s in range(b.shape[0]):
+        w, Ks = b[s], K[s]
+        for c in range(3):
+            for j in range(D.shape[1]):
+                D[c, j] += w * Ks[c, j]
+
+
+@njit(**KERNEL)
+def tableau_passes(method, scene, tile, t, h):
+    """One step of the tableau over a tile in passes, then the collision pass; returns the
+    evaluations it made (its stages)."""
+    for s in range(method.b.shape[0]):
+        stage_passes(method, s, scene, tile, t, h)
+    X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
+    weighted(method.b, tile.KX, DX)
+    weighted(method.b, tile.KV, DV)
+    for c in range(3):
+        for j in range(X.shape[1]):
+            X[c, j] = X[c, j] + h * DX[c, j]
+            V[c, j] = V[c, j] + h * DV[c, j]
+    collisions(scene, tile, t + h, h)
+    return method.b.shape[0]
+
+
+@njit(**KERNEL)
+def tableau_fused(method, scene, tile, t, h):
+    """:func:`tableau_passes` for a tile of independent particles (:func:`stage_fused`),
+    the update in one loop that also marks the particles near a plane for the collision
+    pass, which visits only those and the special ones."""
+    for s in range(method.b.shape[0]):
+        stage_fused(method, s, scene, tile, t, h)
+    X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
+    weighted(method.b, tile.KX, DX)
+    weighted(method.b, tile.KV, DV)
+    radius = scene.particles.radius
+    for j in range(X.shape[1]):
+        x = (X[0, j] + h * DX[0, j], X[1, j] + h * DX[1, j], X[2, j] + h * DX[2, j])
+        store(X, j, x)
+        store(V, j, (V[0, j] + h * DV[0, j], V[1, j] + h * DV[1, j], V[2, j] + h * DV[2, j]))
+        tile.flags[j] = near_planes(scene, x, radius[j])
+    mark_special(scene, tile)
+    collisions(scene, tile, t + h, h)
+    list_special(scene, tile)
+    return method.b.shape[0]
+
+
+class Tableau(NamedTuple):
+    """An explicit tableau as a compiled step reads it: ``b`` and ``c`` ((s,) float64, the
+    method's ``B`` and row sums of ``A``); for each row ``s`` of ``A``, its ``terms[s]``
+    non-zero entries below the diagonal, their columns ``cols[s, :terms[s]]`` (int64) and
+    values ``weights[s, :terms[s]]`` in order (each (s, s))."""
+
+    b: np.ndarray
+    c: np.ndarray
+    terms: np.ndarray
+    cols: np.ndarray
+    weights: np.ndarray
+    passes = tableau_passes
+    fused = tableau_fused
+    carries_state = False
+
+    @classmethod
+    def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> Tableau:
+        """The tableau ``a`` (s, s), ``b`` (s,), ``c`` (s,) of a method."""
+        s = len(b)
+        terms = np.zeros(s, dtype=np.int64)
+        cols, weights = np.zeros((s, s), dtype=np.int64), np.zeros((s, s))
+        for i in range(s):
+            nonzero = np.flatnonzero(a[i, :i])
+            terms[i] = len(nonzero)
+            cols[i, :len(nonzero)] = nonzero
+            weights[i, :len(nonzero)] = a[i, nonzero]
+        return cls(np.array(b, dtype=float), np.array(c, dtype=float), terms, cols, weights)
+
+    @property
+    def stages(self) -> int:
+        """Stages a step evaluates."""
+        return len(self.b)

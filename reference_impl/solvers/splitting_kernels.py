@@ -1,0 +1,145 @@
+"""The splitting methods of :mod:`~truestep.reference_impl.solvers.splitting`, compiled.
+
+A splitting method's step is data (:class:`~truestep.reference_impl.solvers.splitting.Splitting`):
+a kick of the velocity by ``kick h`` times the acceleration, a drift of the positions
+``q' = q + h (old v + new v')`` by the velocities before and after it, and, when the kick is
+a half (velocity Verlet), the other half kick at the new positions, whose acceleration the
+next step reuses. :class:`KickDrift` and :class:`KickDriftKick` are those two shapes of
+step as a compiled step reads them.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from numba import njit
+
+from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.particles_kernels import (
+    accelerations,
+    particle_force,
+    point_force,
+    scaled,
+)
+from truestep.reference_impl.tiles import (
+    CONTACT,
+    FRESH,
+    SPECIAL,
+    collisions,
+    list_special,
+    load,
+    mark_special,
+    near_planes,
+    point_contact,
+    store,
+)
+
+
+@njit(**KERNEL)
+def drift(method, x, v, u, h):
+    """``x + h (old v + new u)`` of one component (m)."""
+    return x + h * (method.old * v + method.new * u)
+
+
+@njit(**KERNEL)
+def kick_drift_point(method, x, v, a, h):
+    """A particle's kick ``v' = v + h a`` and drift, on 3-tuples: ``(x', v')``."""
+    u = (v[0] + h * a[0], v[1] + h * a[1], v[2] + h * a[2])
+    return (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
+            drift(method, x[2], v[2], u[2], h)), u
+
+
+@njit(**KERNEL)
+def kick_drift_passes(method, scene, tile, t, h):
+    """One kick and drift over a tile, the acceleration in passes at the step's start;
+    then the collision pass. Returns the evaluations it made (1)."""
+    X, V, A = tile.X, tile.V, tile.A
+    accelerations(scene, A, tile.F, X, V, t, tile.contact, tile.count[CONTACT] > 0)
+    for j in range(X.shape[1]):
+        x, v = kick_drift_point(method, load(X, j), load(V, j), load(A, j), h)
+        store(X, j, x)
+        store(V, j, v)
+    collisions(scene, tile, t + h, h)
+    return 1
+
+
+@njit(**KERNEL)
+def kick_drift_fused(method, scene, tile, t, h):
+    """One kick and drift over a tile of independent particles in one loop that also marks
+    the particles near a plane; the special particles again from their saved start with
+    their impulses and contact; then the collision pass on the marked ones."""
+    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
+    w, radius = scene.particles.inv_mass, scene.particles.radius
+    special = tile.special
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        store(XS, p, load(X, p))
+        store(VS, p, load(V, p))
+    for j in range(X.shape[1]):
+        v = load(V, j)
+        a = scaled(point_force(scene, load(X, j), v, t, j), w[j])
+        x, v = kick_drift_point(method, load(X, j), v, a, h)
+        store(X, j, x)
+        store(V, j, v)
+        tile.flags[j] = near_planes(scene, x, radius[j])
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        x, v = load(XS, p), load(VS, p)
+        f = point_contact(scene, tile, particle_force(scene, x, v, t, p), v, p)
+        x, v = kick_drift_point(method, x, v, scaled(f, w[p]), h)
+        store(X, p, x)
+        store(V, p, v)
+    mark_special(scene, tile)
+    collisions(scene, tile, t + h, h)
+    list_special(scene, tile)
+    return 1
+
+
+class KickDrift(NamedTuple):
+    """A whole kick, then the drift with weights ``old`` and ``new``: symplectic Euler
+    (0, 1) and the lecture's update (1/2, 1/2). Twins: :meth:`SymplecticEuler.step`,
+    :meth:`LectureUpdate.step`."""
+
+    old: float
+    new: float
+    passes = kick_drift_passes
+    fused = kick_drift_fused
+    carries_state = False
+
+
+@njit(**KERNEL)
+def kick_drift_kick_passes(method, scene, tile, t, h):
+    """Half a kick with the acceleration kept from the last step (evaluated afresh on the
+    first step and after a collision pass that changed the state), the drift, the closing
+    half kick at the new positions and the half-step velocities; then the collision pass.
+    Returns the evaluations it made (1, or 2 afresh)."""
+    X, V, VS, A = tile.X, tile.V, tile.VS, tile.A
+    contact, count = tile.contact, tile.count
+    evaluations = 1
+    if count[FRESH]:
+        accelerations(scene, A, tile.F, X, V, t, contact, count[CONTACT] > 0)
+        evaluations = 2
+    kick = method.kick * h
+    for c in range(3):
+        for j in range(X.shape[1]):
+            VS[c, j] = V[c, j] + kick * A[c, j]
+            X[c, j] = drift(method, X[c, j], V[c, j], VS[c, j], h)
+    accelerations(scene, A, tile.F, X, VS, t + h, contact, count[CONTACT] > 0)
+    for c in range(3):
+        for j in range(X.shape[1]):
+            V[c, j] = VS[c, j] + kick * A[c, j]
+    count[FRESH] = collisions(scene, tile, t + h, h)
+    return evaluations
+
+
+class KickDriftKick(NamedTuple):
+    """Half kicks of ``kick`` h around the drift with weights ``old`` and ``new``, the
+    closing acceleration reused: velocity Verlet. Twin: :meth:`VelocityVerlet.step`. It
+    carries state from step to step over the whole scene (whether any particle's state
+    changed between steps), so a scene is one tile."""
+
+    kick: float
+    old: float
+    new: float
+    passes = kick_drift_kick_passes
+    carries_state = True

@@ -1,0 +1,334 @@
+"""How a compiled step lays out its particles: tiles, and the collision pass of each layout.
+
+A tile is a run of particles whose state a step holds component-major (positions ``X``
+and velocities ``V`` of shape (3, m), with its scratch: :class:`Tile`). A scene whose
+particles act on one another is one tile; a scene whose particles do not is cut into
+tiles of :data:`BLOCK` particles, and the driver (:mod:`~truestep.reference_impl.integrate_kernels`)
+takes each tile through every step before the next (temporal blocking: the tile stays in
+the cache). A tile is stepped in one of two layouts, chosen when a run is packed
+(:mod:`~truestep.reference_impl.compiled`):
+
+:class:`Passes`
+    any scene: the derivative in passes over the tile (clear, each force kind, impulses,
+    contact, divide), then the method's update, then the collision pass of
+    :class:`~truestep.reference_impl.collisions.PlaneCollisions` over the tile.
+:class:`Fused`
+    scenes whose forces are all pointwise (gravity, drag, impulses): each particle's
+    whole step in one loop the compiler vectorises, with the rare particles that rest on
+    a plane or feel an impulse (the tile's *special* particles) stepped again alone; the
+    collision pass then visits only the particles near a plane or resting on one.
+
+Both collide a particle with :func:`collisions_kernels.collide` and nothing else.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from truestep.reference_impl.collisions import EPS_DISTANCE
+from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
+from truestep.reference_impl.compose import slot
+from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.particles_kernels import applied_forces, particle_force
+
+BLOCK = 256
+"""Particles of a tile of independent particles: its state and scratch (about 100 bytes
+a particle) stay in the L1 cache through all its steps."""
+
+SPECIAL, FRESH, CONTACT, VISITED = 0, 1, 2, 3
+"""Entries of :attr:`Tile.count`: how many special particles ``special`` lists (fused);
+whether the next step evaluates its first acceleration afresh (a method that reuses the
+last one); how many particles the last collision pass left in contact; how many it
+visited (fused, listed in ``visited``)."""
+
+
+class Tile(NamedTuple):
+    """The state and scratch of a tile of ``m`` particles.
+
+    X, V : (3, m) positions (m) and velocities (m/s), the state
+    F, A : (3, m) forces (N) and accelerations (m/s^2)
+    XS, VS : (3, m) a stage's state, or the state a fused step saved
+    KX, KV : (stages, 3, m) the stage derivatives of a tableau
+    DX, DV : (3, m) their weighted sums
+    contact : (planes, m) bool, the particles in contact with each plane
+    resting : (m,) bool, in contact with any plane (fused)
+    flags : (8 ceil(m / 8),) uint8, the particles the fused collision pass visits
+    special : (m,) int64, the special particles (fused), ``count[SPECIAL]`` of them
+    visited : (m,) int64, the particles the last fused collision pass visited
+    count : (4,) int64, see :data:`SPECIAL`
+    """
+
+    X: np.ndarray
+    V: np.ndarray
+    F: np.ndarray
+    A: np.ndarray
+    XS: np.ndarray
+    VS: np.ndarray
+    KX: np.ndarray
+    KV: np.ndarray
+    DX: np.ndarray
+    DV: np.ndarray
+    contact: np.ndarray
+    resting: np.ndarray
+    flags: np.ndarray
+    special: np.ndarray
+    visited: np.ndarray
+    count: np.ndarray
+
+
+def scratch(size: int, stages: int, planes: int) -> Tile:
+    """The buffers of a tile of up to ``size`` particles (one-dimensional, each field of
+    :class:`Tile` flattened), allocated once per run by Python: a compiled step allocates
+    nothing (it is compiled without numba's reference counting, see :mod:`compose`)."""
+    size = max(size, 1)
+    f = [np.zeros(3 * size) for _ in range(6)]
+    return Tile(*f, np.zeros(stages * 3 * size), np.zeros(stages * 3 * size), np.zeros(3 * size),
+                np.zeros(3 * size), np.zeros(planes * size, dtype=np.bool_),
+                np.zeros(size, dtype=np.bool_), np.zeros(8 * ((size + 7) // 8), dtype=np.uint8),
+                np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64),
+                np.zeros(4, dtype=np.int64))
+
+
+@njit(**KERNEL)
+def tile_view(buffers, m):
+    """The tile of ``m`` particles in ``buffers`` (:func:`scratch`), its counts cleared."""
+    b = buffers
+    stages = b.KX.shape[0] // (3 * max(b.resting.shape[0], 1))
+    planes = b.contact.shape[0] // max(b.resting.shape[0], 1)
+    for k in range(b.count.shape[0]):
+        b.count[k] = 0
+    return Tile(b.X[:3 * m].reshape((3, m)), b.V[:3 * m].reshape((3, m)),
+                b.F[:3 * m].reshape((3, m)), b.A[:3 * m].reshape((3, m)),
+                b.XS[:3 * m].reshape((3, m)), b.VS[:3 * m].reshape((3, m)),
+                b.KX[:stages * 3 * m].reshape((stages, 3, m)),
+                b.KV[:stages * 3 * m].reshape((stages, 3, m)),
+                b.DX[:3 * m].reshape((3, m)), b.DV[:3 * m].reshape((3, m)),
+                b.contact[:planes * m].reshape((planes, m)), b.resting[:m],
+                b.flags[:8 * ((m + 7) // 8)], b.special[:m], b.visited[:m], b.count)
+
+
+@slot
+def collisions(scene, tile, t, dt):
+    """The collision and contact pass of the tile's layout after a step of ``dt`` (s)
+    ending at ``t`` (nothing for a scene without planes); returns whether it changed any
+    particle's state."""
+
+
+@slot
+def near_planes(scene, x, radius):
+    """Whether a particle at ``x`` (3-tuple, m) of ``radius`` (m) is within eps of a plane
+    of the scene (NaN counts as near), each plane's :func:`near_plane` or'ed; ``False``
+    without planes."""
+
+
+@slot
+def point_contact(scene, tile, f, v, p):
+    """``f`` with the contact force of every plane particle ``p`` rests on added
+    (:func:`particles_kernels.resting_force`); ``f`` without planes."""
+
+
+@njit(**KERNEL)
+def copy_into(D, S):
+    """``D = S`` for (3, m) arrays, in a loop (a slice assignment costs more on few
+    particles)."""
+    for c in range(3):
+        for j in range(D.shape[1]):
+            D[c, j] = S[c, j]
+
+
+@njit(**KERNEL)
+def load(A, p):
+    """Column ``p`` of a (3, m) array as a 3-tuple."""
+    return (A[0, p], A[1, p], A[2, p])
+
+
+@njit(**KERNEL)
+def store(A, p, a):
+    """Set column ``p`` of a (3, m) array to the 3-tuple ``a``."""
+    A[0, p], A[1, p], A[2, p] = a
+
+
+@njit(**KERNEL)
+def same_bits(a, b):
+    """Whether two floats have the same bits (``-0.0`` and ``0.0`` differ, as bytes do;
+    NaN counts as changed)."""
+    return a == b and np.copysign(1.0, a) == np.copysign(1.0, b)
+
+
+@njit(**KERNEL)
+def moved(x, v, y, u):
+    """Whether the state ``(y, u)`` differs from ``(x, v)`` in any bit (3-tuples)."""
+    return not (same_bits(x[0], y[0]) and same_bits(x[1], y[1]) and same_bits(x[2], y[2])
+                and same_bits(v[0], u[0]) and same_bits(v[1], u[1]) and same_bits(v[2], u[2]))
+
+
+@njit(**KERNEL)
+def near_plane(plane, x, radius):
+    """Whether a particle at ``x`` of ``radius`` is within eps of ``plane`` or its
+    distance is NaN: it is one the collision pass must see."""
+    return not signed_distance(x, radius, plane) >= EPS_DISTANCE
+
+
+@njit(**KERNEL)
+def passes_collisions(scene, tile, t, dt):
+    """The collision and contact pass over a tile (:class:`collisions.PlaneCollisions`):
+    planes one after the other, the applied force evaluated once, when the first particle
+    is found within eps of a plane. Sets the contact flags and ``count[CONTACT]``; returns
+    whether it changed any particle's state."""
+    X, V, F, contact = tile.X, tile.V, tile.F, tile.contact
+    par = scene.particles
+    planes = scene.planes
+    for k in range(contact.shape[0]):
+        for p in range(contact.shape[1]):
+            contact[k, p] = False
+    have_force = False
+    changed = False
+    on_any = 0
+    for k in range(len(planes)):
+        plane = planes[k]
+        for p in range(X.shape[1]):
+            if not par.movable[p]:
+                continue
+            x = load(X, p)
+            d = signed_distance(x, par.radius[p], plane)
+            if not within(d, par.radius[p], plane):
+                continue
+            if not have_force:  # the applied force at the end of the step, once per pass
+                applied_forces(scene, F, X, V, t)
+                have_force = True
+            v = load(V, p)
+            y, u, on = collide(x, v, load(F, p), par.inv_mass[p], d, plane, dt)
+            changed = changed or moved(x, v, y, u)
+            store(X, p, y)
+            store(V, p, u)
+            contact[k, p] = on
+            on_any += on
+    tile.count[CONTACT] = on_any
+    return changed
+
+
+@njit(**KERNEL)
+def passes_start(scene, tile, t):
+    """The collision pass on the first state (a particle may start on a plane); the first
+    step evaluates afresh."""
+    collisions(scene, tile, t, 0.0)
+    tile.count[FRESH] = 1
+
+
+class Passes(NamedTuple):
+    """The layout that runs the derivative in passes over a tile (any scene), in tiles of
+    ``size`` particles; ``collide`` is its collision pass."""
+
+    size: int
+    name = "passes"
+    start = passes_start
+    collide = passes_collisions
+
+
+@njit(**KERNEL)
+def collide_particle(scene, tile, p, t, dt):
+    """The collision and contact pass for particle ``p`` alone (its force depends on no
+    other particle): :func:`passes_collisions` restricted to it. Returns whether it rests
+    on any plane now."""
+    planes = scene.planes
+    par = scene.particles
+    for k in range(len(planes)):
+        tile.contact[k, p] = False
+    if not par.movable[p]:
+        return False
+    x, v = load(tile.X, p), load(tile.V, p)
+    f = (0.0, 0.0, 0.0)
+    have_force = False
+    resting = False
+    for k in range(len(planes)):
+        plane = planes[k]
+        d = signed_distance(x, par.radius[p], plane)
+        if not within(d, par.radius[p], plane):
+            continue
+        if not have_force:  # the applied force at the end of the step, once per pass
+            f = particle_force(scene, x, v, t, p)
+            have_force = True
+        x, v, on = collide(x, v, f, par.inv_mass[p], d, plane, dt)
+        tile.contact[k, p] = on
+        resting = resting or on
+    store(tile.X, p, x)
+    store(tile.V, p, v)
+    return resting
+
+
+@slot
+def kicked(scene, p):
+    """Whether particle ``p`` has impulses (``False`` for a scene without)."""
+
+
+@slot
+def list_kicked(scene, special):
+    """Write the particles that have impulses into ``special`` (int64); return how many
+    (0 for a scene without)."""
+
+
+@njit(**KERNEL)
+def list_special(scene, tile):
+    """List the tile's special particles in ``special``: those with impulses, then those
+    the last collision pass visited that rest on a plane and have none."""
+    n = list_kicked(scene, tile.special)
+    for q in range(tile.count[VISITED]):
+        p = tile.visited[q]
+        if tile.resting[p] and not kicked(scene, p):
+            tile.special[n] = p
+            n += 1
+    tile.count[SPECIAL] = n
+
+
+@njit(**KERNEL)
+def fused_collisions(scene, tile, t, dt):
+    """The collision pass of a fused step: on the particles ``flags`` marks (near a plane,
+    or special), each alone (:func:`collide_particle`), the flags cleared and the visited
+    ones listed."""
+    flags = tile.flags
+    words = flags.view(np.uint64)
+    seen = 0
+    for k in range(words.shape[0]):
+        if words[k] == 0:
+            continue
+        for p in range(8 * k, 8 * k + 8):
+            if flags[p]:
+                flags[p] = 0
+                tile.resting[p] = collide_particle(scene, tile, p, t, dt)
+                tile.visited[seen] = p
+                seen += 1
+    tile.count[VISITED] = seen
+    return False
+
+
+@njit(**KERNEL)
+def fused_start(scene, tile, t):
+    """The collision pass on the first state, every particle visited (with planes), then
+    the special particles listed."""
+    flags = tile.flags
+    for p in range(tile.X.shape[1]):
+        flags[p] = 1
+    collisions(scene, tile, t, 0.0)
+    for p in range(flags.shape[0]):
+        flags[p] = 0
+    list_special(scene, tile)
+
+
+class Fused(NamedTuple):
+    """The layout that steps each particle of a tile in one loop, for scenes whose forces
+    are all pointwise, in tiles of ``size`` particles; ``collide`` is its collision pass."""
+
+    size: int
+    name = "fused"
+    start = fused_start
+    collide = fused_collisions
+
+
+@njit(**KERNEL)
+def mark_special(scene, tile):
+    """Mark the special particles for the fused collision pass."""
+    for q in range(tile.count[SPECIAL]):
+        tile.flags[tile.special[q]] = 1
