@@ -65,7 +65,7 @@ def gravity_energy(kind, X, particles):
     g = kind.g
     e = 0.0
     for p in range(X.shape[1]):
-        e -= particles.energy_mass[p] * (X[0, p] * g[0] + X[1, p] * g[1] + X[2, p] * g[2])
+        e -= particles.moving_mass[p] * (X[0, p] * g[0] + X[1, p] * g[1] + X[2, p] * g[2])
     return e
 
 

@@ -94,7 +94,7 @@ def write(xs, vs, ts, r, tile, lo, t):
     ts[r] = t
 
 
-@njit(**KERNEL)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def first_bad(xs, vs, lo, hi, checked, kept):
     """The first record from ``checked`` to ``kept`` not finite in particles ``lo`` to
     ``hi``, or -1."""
@@ -106,7 +106,7 @@ def first_bad(xs, vs, lo, hi, checked, kept):
     return -1
 
 
-@njit(**KERNEL)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def stopped(xs, vs, ts, tile, lo, checked, kept, recorded, t):
     """``integrate``'s stop on a failed check: the records end at the first non-finite one
     since the last good check, or, if all of those are finite, with the state now (unless

@@ -92,7 +92,7 @@ def scratch(size: int, stages: int, planes: int) -> Tile:
                 np.zeros(4, dtype=np.int64))
 
 
-@njit(**KERNEL)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def tile_view(buffers, m):
     """The tile of ``m`` particles in ``buffers`` (:func:`scratch`), its counts cleared."""
     b = buffers

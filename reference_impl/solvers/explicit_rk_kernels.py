@@ -37,14 +37,15 @@ from truestep.reference_impl.tiles import (
 
 
 @njit(**KERNEL)
-def add_terms(method, s, Y, K, out, h, last):
+def add_terms(method, s, Y, K, out, h, last, V, starts_in_v):
     """``out = Y + sum_r (h a_sr) K[r]`` over the first ``last`` non-zero terms of row
-    ``s``, one term at a time, over a tile ((3, m) arrays; ``out`` may be ``Y``)."""
+    ``s``, one term at a time, over a tile ((3, m) arrays); with ``starts_in_v``, a stage
+    ``r`` without terms reads ``V`` for ``K[r]`` (see :func:`weighted`)."""
     src = Y
     for q in range(last):
         r = method.cols[s, q]
         w = h * method.weights[s, q]
-        Kr = K[r]
+        Kr = V if starts_in_v and method.terms[r] == 0 else K[r]
         for c in range(3):
             for j in range(Y.shape[1]):
                 out[c, j] = src[c, j] + w * Kr[c, j]
@@ -55,17 +56,39 @@ def add_terms(method, s, Y, K, out, h, last):
 def stage_passes(method, s, scene, tile, t, h):
     """Stage ``s`` over a tile in passes: its positions into ``XS`` and its velocities
     (the derivative of the positions) into ``KX[s]``, then its accelerations into
-    ``KV[s]`` at ``t + c_s h``."""
+    ``KV[s]`` at ``t + c_s h``. A stage without terms is the step's start: its state is
+    read where it is."""
     n = method.terms[s]
     X, V, XS, KX, KV = tile.X, tile.V, tile.XS, tile.KX, tile.KV
+    ts = t + method.c[s] * h
+    any_contact = tile.count[CONTACT] > 0
     if n == 0:
-        copy_into(XS, X)
-        copy_into(KX[s], V)
+        accelerations(scene, KV[s], tile.F, X, V, ts, tile.contact, any_contact)
     else:
-        add_terms(method, s, X, KX, XS, h, n)
-        add_terms(method, s, V, KV, KX[s], h, n)
-    accelerations(scene, KV[s], tile.F, XS, KX[s], t + method.c[s] * h, tile.contact,
-                  tile.count[CONTACT] > 0)
+        add_terms(method, s, X, KX, XS, h, n, V, True)
+        add_terms(method, s, V, KV, KX[s], h, n, V, False)
+        accelerations(scene, KV[s], tile.F, XS, KX[s], ts, tile.contact, any_contact)
+
+
+@njit(**KERNEL)
+def last_term(method, s, h):
+    """The column and ``h a_sr`` of the last non-zero term of row ``s`` (0, 0.0 if none)."""
+    n = method.terms[s]
+    if n == 0:
+        return 0, 0.0
+    return method.cols[s, n - 1], h * method.weights[s, n - 1]
+
+
+@njit(**KERNEL)
+def stage_point(X, V, KX, KV, r, a, n, p):
+    """Particle ``p``'s stage state: its state in ``X``, ``V``, plus ``a`` times its
+    ``KX[r]``, ``KV[r]`` when the stage has terms (``n > 0``); 3-tuples."""
+    x, v = load(X, p), load(V, p)
+    if n == 0:
+        return x, v
+    Kx, Kv = KX[r], KV[r]
+    return ((x[0] + a * Kx[0, p], x[1] + a * Kx[1, p], x[2] + a * Kx[2, p]),
+            (v[0] + a * Kv[0, p], v[1] + a * Kv[1, p], v[2] + a * Kv[2, p]))
 
 
 @njit(**KERNEL)
@@ -79,37 +102,41 @@ def stage_fused(method, s, scene, tile, t, h):
     w, ts = scene.particles.inv_mass, t + method.c[s] * h
     BX, BV = X, V
     if n > 1:
-        add_terms(method, s, X, KX, XS, h, n - 1)
-        add_terms(method, s, V, KV, VS, h, n - 1)
+        add_terms(method, s, X, KX, XS, h, n - 1, V, False)
+        add_terms(method, s, V, KV, VS, h, n - 1, V, False)
         BX, BV = XS, VS
-    r = method.cols[s, n - 1] if n > 0 else 0
-    a = h * method.weights[s, n - 1] if n > 0 else 0.0
+    r, a = last_term(method, s, h)
     KXs, KVs, KXr, KVr = KX[s], KV[s], KX[r], KV[r]
-    for j in range(X.shape[1]):
-        x, v = load(BX, j), load(BV, j)
-        if n > 0:
-            x = (x[0] + a * KXr[0, j], x[1] + a * KXr[1, j], x[2] + a * KXr[2, j])
-            v = (v[0] + a * KVr[0, j], v[1] + a * KVr[1, j], v[2] + a * KVr[2, j])
-        store(KXs, j, v)
-        store(KVs, j, scaled(point_force(scene, x, v, ts, j), w[j]))
+    if n == 0:
+        for j in range(X.shape[1]):
+            v = load(BV, j)
+            store(KXs, j, v)
+            store(KVs, j, scaled(point_force(scene, load(BX, j), v, ts, j), w[j]))
+    else:
+        for j in range(X.shape[1]):
+            x = (BX[0, j] + a * KXr[0, j], BX[1, j] + a * KXr[1, j], BX[2, j] + a * KXr[2, j])
+            v = (BV[0, j] + a * KVr[0, j], BV[1, j] + a * KVr[1, j], BV[2, j] + a * KVr[2, j])
+            store(KXs, j, v)
+            store(KVs, j, scaled(point_force(scene, x, v, ts, j), w[j]))
     for q in range(tile.count[SPECIAL]):
         p = tile.special[q]
-        x, v = load(BX, p), load(BV, p)
-        if n > 0:
-            x = (x[0] + a * KXr[0, p], x[1] + a * KXr[1, p], x[2] + a * KXr[2, p])
-            v = (v[0] + a * KVr[0, p], v[1] + a * KVr[1, p], v[2] + a * KVr[2, p])
+        x, v = stage_point(BX, BV, KX, KV, r, a, n, p)
         f = point_contact(scene, tile, particle_force(scene, x, v, ts, p), v, p)
         store(KVs, p, scaled(f, w[p]))
 
 
 @njit(**KERNEL)
-def weighted(b, K, D):
-    """``D = sum_s b_s K[s]`` ((3, m)), summed from ``0.0`` in the order of the stages."""
+def weighted(method, K, D, V, starts_in_v):
+    """``D = sum_s b_s K[s]`` ((3, m)), summed from ``0.0`` in the order of the stages;
+    with ``starts_in_v``, a stage without terms reads ``V`` for ``K[s]`` (the velocities of
+    the step's start, which a step in passes does not copy)."""
+    b = method.b
     for c in range(3):
         for j in range(D.shape[1]):
             D[c, j] = 0.0
     for s in range(b.shape[0]):
-        w, Ks = b[s], K[s]
+        w = b[s]
+        Ks = V if starts_in_v and method.terms[s] == 0 else K[s]
         for c in range(3):
             for j in range(D.shape[1]):
                 D[c, j] += w * Ks[c, j]
@@ -122,8 +149,8 @@ def tableau_passes(method, scene, tile, t, h):
     for s in range(method.b.shape[0]):
         stage_passes(method, s, scene, tile, t, h)
     X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
-    weighted(method.b, tile.KX, DX)
-    weighted(method.b, tile.KV, DV)
+    weighted(method, tile.KX, DX, V, True)
+    weighted(method, tile.KV, DV, V, False)
     for c in range(3):
         for j in range(X.shape[1]):
             X[c, j] = X[c, j] + h * DX[c, j]
@@ -140,8 +167,8 @@ def tableau_fused(method, scene, tile, t, h):
     for s in range(method.b.shape[0]):
         stage_fused(method, s, scene, tile, t, h)
     X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
-    weighted(method.b, tile.KX, DX)
-    weighted(method.b, tile.KV, DV)
+    weighted(method, tile.KX, DX, V, False)
+    weighted(method, tile.KV, DV, V, False)
     radius = scene.particles.radius
     for j in range(X.shape[1]):
         x = (X[0, j] + h * DX[0, j], X[1, j] + h * DX[1, j], X[2, j] + h * DX[2, j])
