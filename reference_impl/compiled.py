@@ -289,7 +289,9 @@ def prepared(model: ParticleModel, method: str, *, track_energy: bool = False,
              progress: Callable[[str], None] | None = None) -> tuple:
     """The packed run of ``method`` on ``model``: (loop, kind, layout, scene), the loop
     compiled or loaded from the cache (shown through ``progress``, stderr by default,
-    when slow)."""
+    when slow). The loop is the compiled function itself (``Dispatcher.get_overload``):
+    calling it skips the dispatcher's typing of the arguments (microseconds for the
+    scene's tuples, more than a small run's stepping)."""
     reason = compiled_reason(model, method)
     if reason is not None:
         raise ValueError(f"the compiled path cannot run {method} here: {reason}")
@@ -304,10 +306,12 @@ def prepared(model: ParticleModel, method: str, *, track_energy: bool = False,
         tiles.scratch(1, stages, len(model.planes)), np.zeros((1, n, 3)), np.zeros((1, n, 3)),
         np.zeros(1),
         EnergyMonitor(np.zeros(2)) if track_energy else None))
+    if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
+        return loop, kind, layout, scene
     if sig not in loop.overloads:
         with _shown_if_slow(describe(kind, layout, scene), progress or _stderr):
             loop.compile(sig)
-    return loop, kind, layout, scene
+    return loop.get_overload(sig), kind, layout, scene
 
 
 def run_compiled(model: ParticleModel, method: str, duration: float, h: float, *,

@@ -136,9 +136,12 @@ def add_spring_forces(F, X, V, i, j, stiffness, damping, rest):
         length, f = spring_force(d, u, stiffness[s], damping[s], rest[s])
         if length == 0.0:
             continue
-        for c in range(3):
-            F[c, a] -= f[c]
-            F[c, b] += f[c]
+        F[0, a] -= f[0]
+        F[1, a] -= f[1]
+        F[2, a] -= f[2]
+        F[0, b] += f[0]
+        F[1, b] += f[1]
+        F[2, b] += f[2]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -153,8 +156,9 @@ def add_anchor_forces(F, X, V, i, point, stiffness, damping, rest):
         length, f = spring_force(d, u, stiffness[s], damping[s], rest[s])
         if length == 0.0:
             continue
-        for c in range(3):
-            F[c, a] -= f[c]
+        F[0, a] -= f[0]
+        F[1, a] -= f[1]
+        F[2, a] -= f[2]
 
 
 @njit(**KERNEL)

@@ -29,7 +29,7 @@ from truestep.reference_impl.compose import slot
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
 from truestep.reference_impl.particles_kernels import total_energy
-from truestep.reference_impl.tiles import scratch, tile_view
+from truestep.reference_impl.tiles import load, scratch, store, tile_view
 
 
 class EnergyMonitor(NamedTuple):
@@ -76,11 +76,12 @@ def watch_energy(monitor, scene, tile):
 def finite(X, V):
     """Every component of the (3, m) state finite and within :data:`BLOWUP` (NaN fails
     both comparisons): :func:`integrate._finite`."""
-    for c in range(3):
-        for p in range(X.shape[1]):
-            if not (-BLOWUP < X[c, p] < BLOWUP and -BLOWUP < V[c, p] < BLOWUP):
-                return False
-    return True
+    ok = True
+    for p in range(X.shape[1]):
+        for c in range(3):
+            x, v = X[c, p], V[c, p]
+            ok &= (-BLOWUP < x) & (x < BLOWUP) & (-BLOWUP < v) & (v < BLOWUP)
+    return ok
 
 
 @njit(**KERNEL)
@@ -88,9 +89,8 @@ def write(xs, vs, ts, r, tile, lo, t):
     """Record the tile's state (particles ``lo ...``) and the time ``t`` at record ``r``."""
     X, V = tile.X, tile.V
     for p in range(X.shape[1]):
-        for c in range(3):
-            xs[r, lo + p, c] = X[c, p]
-            vs[r, lo + p, c] = V[c, p]
+        xs[r, lo + p, 0], xs[r, lo + p, 1], xs[r, lo + p, 2] = X[0, p], X[1, p], X[2, p]
+        vs[r, lo + p, 0], vs[r, lo + p, 1], vs[r, lo + p, 2] = V[0, p], V[1, p], V[2, p]
     ts[r] = t
 
 
@@ -127,10 +127,9 @@ def run_tile(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts,
     evaluations, unstable)."""
     m = scene.particles.mass.shape[0]
     tile = tile_view(buffers, m)
-    for c in range(3):
-        for p in range(m):
-            tile.X[c, p] = X0[c, lo + p]
-            tile.V[c, p] = V0[c, lo + p]
+    for p in range(m):
+        store(tile.X, p, load(X0, lo + p))
+        store(tile.V, p, load(V0, lo + p))
     t = 0.0
     start(scene, tile, t)
     write(xs, vs, ts, 0, tile, lo, t)

@@ -114,9 +114,10 @@ def tile_scene_with_impulses(scene, lo, hi):
 def applied_forces(scene, F, X, V, t):
     """Clear ``F`` (N, (3, m)) and let every force of the scene add in, impulses last:
     :meth:`ParticleSystem.accumulate_forces` (the contact force is not applied)."""
-    for c in range(3):
-        for p in range(F.shape[1]):
-            F[c, p] = 0.0
+    for p in range(F.shape[1]):
+        F[0, p] = 0.0
+        F[1, p] = 0.0
+        F[2, p] = 0.0
     add_forces(scene, F, X, V, t)
     add_impulses(scene, F, X, V, t)
 
@@ -145,9 +146,10 @@ def accelerations(scene, A, F, X, V, t, contact, any_contact):
     applied_forces(scene, F, X, V, t)
     add_contact(scene, F, V, contact, any_contact)
     w = scene.particles.inv_mass
-    for c in range(3):
-        for p in range(A.shape[1]):
-            A[c, p] = F[c, p] * w[p]
+    for p in range(A.shape[1]):
+        A[0, p] = F[0, p] * w[p]
+        A[1, p] = F[1, p] * w[p]
+        A[2, p] = F[2, p] * w[p]
 
 
 @njit(**KERNEL)

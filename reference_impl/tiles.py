@@ -131,12 +131,9 @@ def point_contact(scene, tile, f, v, p):
 
 
 @njit(**KERNEL)
-def copy_into(D, S):
-    """``D = S`` for (3, m) arrays, in a loop (a slice assignment costs more on few
-    particles)."""
-    for c in range(3):
-        for j in range(D.shape[1]):
-            D[c, j] = S[c, j]
+def axpy(y, a, x):
+    """``y + a x`` of 3-tuples (``a`` a float), component by component."""
+    return (y[0] + a * x[0], y[1] + a * x[1], y[2] + a * x[2])
 
 
 @njit(**KERNEL)

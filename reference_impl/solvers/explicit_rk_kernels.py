@@ -25,8 +25,8 @@ from truestep.reference_impl.particles_kernels import (
 from truestep.reference_impl.tiles import (
     CONTACT,
     SPECIAL,
+    axpy,
     collisions,
-    copy_into,
     list_special,
     load,
     mark_special,
@@ -46,9 +46,8 @@ def add_terms(method, s, Y, K, out, h, last, V, starts_in_v):
         r = method.cols[s, q]
         w = h * method.weights[s, q]
         Kr = V if starts_in_v and method.terms[r] == 0 else K[r]
-        for c in range(3):
-            for j in range(Y.shape[1]):
-                out[c, j] = src[c, j] + w * Kr[c, j]
+        for j in range(Y.shape[1]):
+            store(out, j, axpy(load(src, j), w, load(Kr, j)))
         src = out
 
 
@@ -94,11 +93,13 @@ def stage_point(X, V, KX, KV, r, a, n, p):
 @njit(**KERNEL)
 def stage_fused(method, s, scene, tile, t, h):
     """Stage ``s`` over a tile of independent particles: the terms of its row but the last
-    in passes, then each particle's stage state (the last term added) and acceleration in
-    one loop; the special particles' accelerations then again with their impulses and
-    contact."""
+    in passes, then, in one loop, each particle's stage state (the last term added), its
+    acceleration, and both added into the step's weighted sums ``DX``, ``DV`` (cleared
+    before the first stage); the special particles' accelerations then again with their
+    impulses and contact, and their ``DV`` summed afresh."""
     n = method.terms[s]
     X, V, XS, VS, KX, KV = tile.X, tile.V, tile.XS, tile.VS, tile.KX, tile.KV
+    DX, DV, b = tile.DX, tile.DV, method.b[s]
     w, ts = scene.particles.inv_mass, t + method.c[s] * h
     BX, BV = X, V
     if n > 1:
@@ -110,36 +111,29 @@ def stage_fused(method, s, scene, tile, t, h):
     if n == 0:
         for j in range(X.shape[1]):
             v = load(BV, j)
+            f = scaled(point_force(scene, load(BX, j), v, ts, j), w[j])
             store(KXs, j, v)
-            store(KVs, j, scaled(point_force(scene, load(BX, j), v, ts, j), w[j]))
+            store(KVs, j, f)
+            store(DX, j, axpy(load(DX, j), b, v))
+            store(DV, j, axpy(load(DV, j), b, f))
     else:
         for j in range(X.shape[1]):
-            x = (BX[0, j] + a * KXr[0, j], BX[1, j] + a * KXr[1, j], BX[2, j] + a * KXr[2, j])
-            v = (BV[0, j] + a * KVr[0, j], BV[1, j] + a * KVr[1, j], BV[2, j] + a * KVr[2, j])
+            x = axpy(load(BX, j), a, load(KXr, j))
+            v = axpy(load(BV, j), a, load(KVr, j))
+            f = scaled(point_force(scene, x, v, ts, j), w[j])
             store(KXs, j, v)
-            store(KVs, j, scaled(point_force(scene, x, v, ts, j), w[j]))
+            store(KVs, j, f)
+            store(DX, j, axpy(load(DX, j), b, v))
+            store(DV, j, axpy(load(DV, j), b, f))
     for q in range(tile.count[SPECIAL]):
         p = tile.special[q]
         x, v = stage_point(BX, BV, KX, KV, r, a, n, p)
         f = point_contact(scene, tile, particle_force(scene, x, v, ts, p), v, p)
         store(KVs, p, scaled(f, w[p]))
-
-
-@njit(**KERNEL)
-def weighted(method, K, D, V, starts_in_v):
-    """``D = sum_s b_s K[s]`` ((3, m)), summed from ``0.0`` in the order of the stages;
-    with ``starts_in_v``, a stage without terms reads ``V`` for ``K[s]`` (the velocities of
-    the step's start, which a step in passes does not copy)."""
-    b = method.b
-    for c in range(3):
-        for j in range(D.shape[1]):
-            D[c, j] = 0.0
-    for s in range(b.shape[0]):
-        w = b[s]
-        Ks = V if starts_in_v and method.terms[s] == 0 else K[s]
-        for c in range(3):
-            for j in range(D.shape[1]):
-                D[c, j] += w * Ks[c, j]
+        dv = (0.0, 0.0, 0.0)
+        for k in range(s + 1):
+            dv = axpy(dv, method.b[k], load(KV[k], p))
+        store(DV, p, dv)
 
 
 @njit(**KERNEL)
@@ -148,13 +142,16 @@ def tableau_passes(method, scene, tile, t, h):
     evaluations it made (its stages)."""
     for s in range(method.b.shape[0]):
         stage_passes(method, s, scene, tile, t, h)
-    X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
-    weighted(method, tile.KX, DX, V, True)
-    weighted(method, tile.KV, DV, V, False)
-    for c in range(3):
-        for j in range(X.shape[1]):
-            X[c, j] = X[c, j] + h * DX[c, j]
-            V[c, j] = V[c, j] + h * DV[c, j]
+    X, V = tile.X, tile.V
+    KX, KV, b, terms = tile.KX, tile.KV, method.b, method.terms
+    for j in range(X.shape[1]):
+        v = load(V, j)
+        dx, dv = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        for s in range(b.shape[0]):
+            dx = axpy(dx, b[s], v if terms[s] == 0 else load(KX[s], j))
+            dv = axpy(dv, b[s], load(KV[s], j))
+        store(X, j, axpy(load(X, j), h, dx))
+        store(V, j, axpy(v, h, dv))
     collisions(scene, tile, t + h, h)
     return method.b.shape[0]
 
@@ -164,11 +161,12 @@ def tableau_fused(method, scene, tile, t, h):
     """:func:`tableau_passes` for a tile of independent particles (:func:`stage_fused`),
     the update in one loop that also marks the particles near a plane for the collision
     pass, which visits only those and the special ones."""
+    X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
+    for j in range(X.shape[1]):
+        store(DX, j, (0.0, 0.0, 0.0))
+        store(DV, j, (0.0, 0.0, 0.0))
     for s in range(method.b.shape[0]):
         stage_fused(method, s, scene, tile, t, h)
-    X, V, DX, DV = tile.X, tile.V, tile.DX, tile.DV
-    weighted(method, tile.KX, DX, V, False)
-    weighted(method, tile.KV, DV, V, False)
     radius = scene.particles.radius
     for j in range(X.shape[1]):
         x = (X[0, j] + h * DX[0, j], X[1, j] + h * DX[1, j], X[2, j] + h * DX[2, j])

@@ -25,6 +25,7 @@ from truestep.reference_impl.tiles import (
     CONTACT,
     FRESH,
     SPECIAL,
+    axpy,
     collisions,
     list_special,
     load,
@@ -120,14 +121,15 @@ def kick_drift_kick_passes(method, scene, tile, t, h):
         accelerations(scene, A, tile.F, X, V, t, contact, count[CONTACT] > 0)
         evaluations = 2
     kick = method.kick * h
-    for c in range(3):
-        for j in range(X.shape[1]):
-            VS[c, j] = V[c, j] + kick * A[c, j]
-            X[c, j] = drift(method, X[c, j], V[c, j], VS[c, j], h)
+    for j in range(X.shape[1]):
+        x, v = load(X, j), load(V, j)
+        u = axpy(v, kick, load(A, j))
+        store(VS, j, u)
+        store(X, j, (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
+                     drift(method, x[2], v[2], u[2], h)))
     accelerations(scene, A, tile.F, X, VS, t + h, contact, count[CONTACT] > 0)
-    for c in range(3):
-        for j in range(X.shape[1]):
-            V[c, j] = VS[c, j] + kick * A[c, j]
+    for j in range(X.shape[1]):
+        store(V, j, axpy(load(VS, j), kick, load(A, j)))
     count[FRESH] = collisions(scene, tile, t + h, h)
     return evaluations
 
