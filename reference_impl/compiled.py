@@ -77,7 +77,7 @@ def method_kind(method: str | type):
     s = getattr(cls, "splitting", None)
     if s is None:
         return None
-    return KickDrift(s.old, s.new) if s.kick == 1.0 else KickDriftKick(s.kick, s.old, s.new)
+    return KickDrift(s.old, s.new, 1) if s.kick == 1.0 else KickDriftKick(s.kick, s.old, s.new)
 
 
 def compiled_reason(model: ParticleModel | None, method: str) -> str | None:
@@ -119,11 +119,22 @@ def forces_of(m: ParticleModel) -> tuple:
         kinds.append(Springs(_i64(s.i), _i64(s.j), _f64(s.stiffness), _f64(s.damping),
                              _f64(s.rest)))
     if len(a):
+        order, start = _grouped(_i64(a.i), m.n)
         kinds.append(Anchors(_i64(a.i), _f64(np.reshape(a.point, (-1, 3)).T),
-                             _f64(a.stiffness), _f64(a.damping), _f64(a.rest)))
+                             _f64(a.stiffness), _f64(a.damping), _f64(a.rest), start, order))
     if m.gravitation is not None:
         kinds.append(Gravitation(float(m.gravitation.G), float(m.gravitation.softening)))
     return tuple(kinds)
+
+
+def _grouped(particle: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Entries acting on particles ``particle`` (int, (k,)) grouped by particle, each
+    particle's in their order: ``order`` (k,) and ``start`` (n + 1,), particle ``p``'s
+    being ``order[start[p]:start[p + 1]]``."""
+    order = np.argsort(particle, kind="stable")
+    start = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(start, particle + 1, 1)
+    return _i64(order), _i64(np.cumsum(start))
 
 
 def impulses_of(m: ParticleModel) -> Impulses | None:
@@ -131,10 +142,7 @@ def impulses_of(m: ParticleModel) -> Impulses | None:
     if not m.impulses:
         return None
     particle = _i64([i for i, _, _, _ in m.impulses])
-    order = np.argsort(particle, kind="stable")
-    start = np.zeros(m.n + 1, dtype=np.int64)
-    np.add.at(start, particle + 1, 1)
-    start = np.cumsum(start)
+    order, start = _grouped(particle, m.n)
     force = _f64([f for _, f, _, _ in m.impulses]).reshape(-1, 3)[order].T
     on = _f64([t0 for _, _, t0, _ in m.impulses])[order]
     off = _f64([t1 for _, _, _, t1 in m.impulses])[order]
@@ -202,9 +210,31 @@ def force_slots(scene: Scene) -> dict:
                                                  "    special[q] = k[q] - scene.impulses.first",
                                                  "return k.shape[0]"], {})
                         if kicked else nothing(tiles.list_kicked, "0")),
-        "cut": (particles_kernels.tile_scene_with_impulses if kicked
-                else particles_kernels.tile_scene),
+        "cut": cut_glue(S),
     }
+
+
+def cut_glue(scene: Scene):
+    """The filling of the driver's slot ``cut``: ``scene`` for a tile of its particles,
+    each pointwise kind cut by its ``cut`` kernel (the others are never cut: such a scene
+    is one tile)."""
+    names = {"Scene": Scene, "tile_particles": particles_kernels.tile_particles}
+    parts = []
+    for i, k in enumerate(scene.forces):
+        cut = getattr(type(k), "cut", None)
+        if cut is None:
+            parts.append(f"scene.forces[{i}]")
+        else:
+            names[cut.py_func.__name__] = cut
+            parts.append(f"{cut.py_func.__name__}(scene.forces[{i}], lo, hi)")
+    impulses = "scene.impulses"
+    if scene.impulses is not None:
+        names["impulses_cut"] = type(scene.impulses).cut
+        impulses = "impulses_cut(scene.impulses, lo, hi)"
+    kinds = "".join(f"{part}, " for part in parts)
+    return glue(integrate_kernels.cut, [
+        f"return Scene(tile_particles(scene.particles, lo, hi), ({kinds}), {impulses}, "
+        "scene.planes)"], names)
 
 
 def plane_slots(layout, scene: Scene) -> dict:
@@ -229,14 +259,25 @@ def plane_slots(layout, scene: Scene) -> dict:
 
 def slots_for(kind, layout, scene: Scene, *, track_energy: bool = False) -> dict:
     """Every slot of the driver (:mod:`compose`) filled for ``scene`` stepped by the method
-    ``kind`` in ``layout``."""
-    return {
+    ``kind`` in ``layout``: in passes, the method's own step over a tile; fused, the
+    fused step (:func:`tiles.fused_step`) with the method's step of one particle, once
+    with the smooth acceleration and once with the whole one for special particles."""
+    slots = {
         **force_slots(scene), **plane_slots(layout, scene),
-        "step": getattr(type(kind), type(layout).name),
         "start": type(layout).start,
         "watch": (integrate_kernels.watch_energy if track_energy
                   else nothing(integrate_kernels.watch)),
     }
+    if isinstance(layout, Passes):
+        slots["step"] = type(kind).passes
+        return slots
+    point = kind.point_step()
+    slots.update(step=tiles.fused_step,
+                 point_step=instantiate(point, {**slots, "point_accel": tiles.smooth_accel},
+                                        _memo={}),
+                 special_step=instantiate(point, {**slots, "point_accel": tiles.special_accel},
+                                          _memo={}))
+    return slots
 
 
 _LOOPS: dict[str, object] = {}

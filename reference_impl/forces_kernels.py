@@ -17,7 +17,9 @@ compiled (:mod:`~truestep.reference_impl.compose`), never by a test at run time:
     (pointwise kinds, which act on each particle alone) the force ``f`` on particle ``p``
     with its own added, as a 3-tuple;
 ``energy(kind, X, particles)``
-    its potential energy, J (kinds without one: ``0.0``).
+    its potential energy, J (kinds without one: ``0.0``);
+``cut(kind, lo, hi)``
+    (pointwise kinds) the kind for the tile of particles ``lo`` to ``hi``.
 
 Arrays are component-major: positions ``X`` (m), velocities ``V`` (m/s) and forces ``F``
 (N) have shape ``(3, m)`` for the ``m`` particles of a tile; ``particles`` is a
@@ -42,6 +44,12 @@ KERNEL = {"cache": True, "error_model": "numpy", "inline": "always"}
 """How every kernel is compiled: into the step that calls it (numba inlines it before it
 types the step, so a call costs nothing), or on its own and cached when Python calls it;
 division by zero gives ``inf`` or ``nan`` as numpy does, never an exception."""
+
+
+@njit(**KERNEL)
+def uncut(kind, lo, hi):
+    """A pointwise kind whose parameters are the same for every particle, on a tile."""
+    return kind
 
 
 @njit(**KERNEL)
@@ -85,6 +93,7 @@ class Gravity(NamedTuple):
     at = gravity_at
     add = gravity_add
     energy = gravity_energy
+    cut = uncut
 
 
 @njit(**KERNEL)
@@ -110,6 +119,7 @@ class Drag(NamedTuple):
     at = drag_at
     add = drag_add
     energy = no_energy
+    cut = uncut
 
 
 @njit(**KERNEL)
@@ -216,9 +226,38 @@ def anchors_energy(kind, X, particles):
     return e
 
 
+@njit(**KERNEL)
+def anchors_at(kind, f, x, v, t, particles, p):
+    """The anchored springs of particle ``p`` alone (entries ``start[p]`` to
+    ``start[p + 1]`` of ``order``, in the case's order) subtracted from ``f``: what
+    :func:`add_anchor_forces` does to it, the same sums in the same order."""
+    f0, f1, f2 = f
+    point = kind.point
+    for q in range(kind.start[p], kind.start[p + 1]):
+        s = kind.order[q]
+        d = (x[0] - point[0, s], x[1] - point[1, s], x[2] - point[2, s])
+        length, g = spring_force(d, v, kind.stiffness[s], kind.damping[s], kind.rest[s])
+        if length == 0.0:
+            continue
+        f0 -= g[0]
+        f1 -= g[1]
+        f2 -= g[2]
+    return (f0, f1, f2)
+
+
+@njit(**KERNEL)
+def anchors_cut(kind, lo, hi):
+    """The anchors of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
+    return Anchors(kind.i, kind.point, kind.stiffness, kind.damping, kind.rest,
+                   kind.start[lo:hi + 1], kind.order)
+
+
 class Anchors(NamedTuple):
     """Damped springs from particles ``i`` (int64, (m,)) to fixed points ``point`` (m,
-    (3, m)); ``stiffness``, ``damping``, ``rest`` as :class:`Springs`. Twin:
+    (3, m)); ``stiffness``, ``damping``, ``rest`` as :class:`Springs`. An anchor acts on
+    its particle alone, so the kind is pointwise: particle ``p``'s anchors are entries
+    ``start[p]`` to ``start[p + 1]`` (int64, (n + 1,)) of ``order`` (int64, (m,): the
+    anchors grouped by particle, each particle's in the case's order). Twin:
     :func:`forces.add_anchors`."""
 
     i: np.ndarray
@@ -226,9 +265,13 @@ class Anchors(NamedTuple):
     stiffness: np.ndarray
     damping: np.ndarray
     rest: np.ndarray
-    pointwise = False
+    start: np.ndarray
+    order: np.ndarray
+    pointwise = True
+    at = anchors_at
     add = anchors_add
     energy = anchors_energy
+    cut = anchors_cut
 
 
 @njit(**KERNEL)
@@ -308,6 +351,14 @@ def impulses_add(kind, F, X, V, t, particles):
                                                t, particles, p)
 
 
+@njit(**KERNEL)
+def impulses_cut(kind, lo, hi):
+    """The impulses of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
+    k = kind.kicked
+    a, b = np.searchsorted(k, lo), np.searchsorted(k, hi)
+    return Impulses(kind.start[lo:hi + 1], kind.force, kind.on, kind.off, k[a:b], lo)
+
+
 class Impulses(NamedTuple):
     """Forces on single particles over time windows, grouped by particle (each particle's
     in the case's order): particle ``p``'s are entries ``start[p]`` to ``start[p + 1]``
@@ -326,3 +377,4 @@ class Impulses(NamedTuple):
     at = impulse_at
     add = impulses_add
     energy = no_energy
+    cut = impulses_cut

@@ -19,7 +19,7 @@ from numba import njit
 
 from truestep.reference_impl.collisions_kernels import contact_force
 from truestep.reference_impl.compose import slot
-from truestep.reference_impl.forces_kernels import KERNEL, Impulses
+from truestep.reference_impl.forces_kernels import KERNEL
 
 
 class Particles(NamedTuple):
@@ -84,30 +84,12 @@ def potential_energy(scene, X):
 
 
 @njit(**KERNEL)
-def tile_scene(scene, lo, hi):
-    """``scene`` for its particles ``lo`` to ``hi`` alone (a tile of a scene whose
-    particles do not act on one another)."""
-    p = scene.particles
-    particles = Particles(p.mass[lo:hi], p.inv_mass[lo:hi], p.radius[lo:hi], p.movable[lo:hi],
-                          p.moving_mass[lo:hi])
-    return Scene(particles, scene.forces, scene.impulses, scene.planes)
-
-
-@njit(**KERNEL)
-def tile_impulses(impulses, lo, hi):
-    """The impulses of particles ``lo`` to ``hi``, numbered from ``lo``."""
-    k = impulses.kicked
-    a, b = np.searchsorted(k, lo), np.searchsorted(k, hi)
-    return Impulses(impulses.start[lo:hi + 1], impulses.force, impulses.on, impulses.off,
-                    k[a:b], lo)
-
-
-@njit(**KERNEL)
-def tile_scene_with_impulses(scene, lo, hi):
-    """:func:`tile_scene` of a scene with impulses (their grouping sliced too)."""
-    tiled = tile_scene(scene, lo, hi)
-    return Scene(tiled.particles, scene.forces, tile_impulses(scene.impulses, lo, hi),
-                 scene.planes)
+def tile_particles(particles, lo, hi):
+    """The constants of particles ``lo`` to ``hi`` (a tile of a scene whose particles do
+    not act on one another)."""
+    p = particles
+    return Particles(p.mass[lo:hi], p.inv_mass[lo:hi], p.radius[lo:hi], p.movable[lo:hi],
+                     p.moving_mass[lo:hi])
 
 
 @njit(**KERNEL)

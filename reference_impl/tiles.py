@@ -13,10 +13,12 @@ the cache). A tile is stepped in one of two layouts, chosen when a run is packed
     contact, divide), then the method's update, then the collision pass of
     :class:`~truestep.reference_impl.collisions.PlaneCollisions` over the tile.
 :class:`Fused`
-    scenes whose forces are all pointwise (gravity, drag, impulses): each particle's
-    whole step in one loop the compiler vectorises, with the rare particles that rest on
-    a plane or feel an impulse (the tile's *special* particles) stepped again alone; the
-    collision pass then visits only the particles near a plane or resting on one.
+    scenes whose forces are all pointwise (gravity, drag, anchors, impulses): each
+    particle's whole step, every stage, in one loop the compiler vectorises
+    (:func:`fused_step`, with the method's step of one particle), the rare particles that
+    rest on a plane or feel an impulse (the tile's *special* particles) stepped again
+    alone; the collision pass then visits only the particles near a plane or resting on
+    one.
 
 Both collide a particle with :func:`collisions_kernels.collide` and nothing else.
 """
@@ -32,7 +34,12 @@ from truestep.reference_impl.collisions import EPS_DISTANCE
 from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
 from truestep.reference_impl.compose import slot
 from truestep.reference_impl.forces_kernels import KERNEL
-from truestep.reference_impl.particles_kernels import applied_forces, particle_force
+from truestep.reference_impl.particles_kernels import (
+    applied_forces,
+    particle_force,
+    point_force,
+    scaled,
+)
 
 BLOCK = 256
 """Particles of a tile of independent particles: its state and scratch (about 100 bytes
@@ -329,3 +336,66 @@ def mark_special(scene, tile):
     """Mark the special particles for the fused collision pass."""
     for q in range(tile.count[SPECIAL]):
         tile.flags[tile.special[q]] = 1
+
+
+@slot
+def point_accel(scene, tile, x, v, t, p):
+    """The acceleration (m/s^2, 3-tuple) of particle ``p`` at ``x``, ``v``, time ``t``, in
+    a fused step: :func:`smooth_accel`, or :func:`special_accel` for a special particle."""
+
+
+@slot
+def point_step(method, scene, tile, x, v, t, h, p):
+    """One step of ``method`` for particle ``p`` alone from ``x``, ``v`` (3-tuples) at time
+    ``t``, ``h`` s long: the method's step of one particle with :func:`smooth_accel`.
+    Returns ``(x', v')``."""
+
+
+@slot
+def special_step(method, scene, tile, x, v, t, h, p):
+    """:func:`point_step` with :func:`special_accel`."""
+
+
+@njit(**KERNEL)
+def smooth_accel(scene, tile, x, v, t, p):
+    """The acceleration of particle ``p`` under the scene's pointwise kinds (every force
+    but impulses and contact)."""
+    return scaled(point_force(scene, x, v, t, p), scene.particles.inv_mass[p])
+
+
+@njit(**KERNEL)
+def special_accel(scene, tile, x, v, t, p):
+    """The acceleration of particle ``p`` under its whole force: the pointwise kinds, its
+    impulses and the contact force of the planes it rests on."""
+    f = point_contact(scene, tile, particle_force(scene, x, v, t, p), v, p)
+    return scaled(f, scene.particles.inv_mass[p])
+
+
+@njit(**KERNEL)
+def fused_step(method, scene, tile, t, h):
+    """One step of ``method`` over a tile of independent particles: each particle's whole
+    step (:func:`point_step`) in one loop that also marks those near a plane; the special
+    particles' again (:func:`special_step`) from their state at the step's start, saved
+    first; then the collision pass on the marked ones and the special ones listed anew.
+    Returns the evaluations the step made."""
+    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
+    radius = scene.particles.radius
+    special = tile.special
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        store(XS, p, load(X, p))
+        store(VS, p, load(V, p))
+    for j in range(X.shape[1]):
+        x, v = point_step(method, scene, tile, load(X, j), load(V, j), t, h, j)
+        store(X, j, x)
+        store(V, j, v)
+        tile.flags[j] = near_planes(scene, x, radius[j])
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        x, v = special_step(method, scene, tile, load(XS, p), load(VS, p), t, h, p)
+        store(X, p, x)
+        store(V, p, v)
+    mark_special(scene, tile)
+    collisions(scene, tile, t + h, h)
+    list_special(scene, tile)
+    return method.evaluations

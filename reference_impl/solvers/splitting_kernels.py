@@ -15,25 +15,8 @@ from typing import NamedTuple
 from numba import njit
 
 from truestep.reference_impl.forces_kernels import KERNEL
-from truestep.reference_impl.particles_kernels import (
-    accelerations,
-    particle_force,
-    point_force,
-    scaled,
-)
-from truestep.reference_impl.tiles import (
-    CONTACT,
-    FRESH,
-    SPECIAL,
-    axpy,
-    collisions,
-    list_special,
-    load,
-    mark_special,
-    near_planes,
-    point_contact,
-    store,
-)
+from truestep.reference_impl.particles_kernels import accelerations
+from truestep.reference_impl.tiles import CONTACT, FRESH, axpy, collisions, load, point_accel, store
 
 
 @njit(**KERNEL)
@@ -65,47 +48,26 @@ def kick_drift_passes(method, scene, tile, t, h):
 
 
 @njit(**KERNEL)
-def kick_drift_fused(method, scene, tile, t, h):
-    """One kick and drift over a tile of independent particles in one loop that also marks
-    the particles near a plane; the special particles again from their saved start with
-    their impulses and contact; then the collision pass on the marked ones."""
-    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
-    w, radius = scene.particles.inv_mass, scene.particles.radius
-    special = tile.special
-    for q in range(tile.count[SPECIAL]):
-        p = special[q]
-        store(XS, p, load(X, p))
-        store(VS, p, load(V, p))
-    for j in range(X.shape[1]):
-        v = load(V, j)
-        a = scaled(point_force(scene, load(X, j), v, t, j), w[j])
-        x, v = kick_drift_point(method, load(X, j), v, a, h)
-        store(X, j, x)
-        store(V, j, v)
-        tile.flags[j] = near_planes(scene, x, radius[j])
-    for q in range(tile.count[SPECIAL]):
-        p = special[q]
-        x, v = load(XS, p), load(VS, p)
-        f = point_contact(scene, tile, particle_force(scene, x, v, t, p), v, p)
-        x, v = kick_drift_point(method, x, v, scaled(f, w[p]), h)
-        store(X, p, x)
-        store(V, p, v)
-    mark_special(scene, tile)
-    collisions(scene, tile, t + h, h)
-    list_special(scene, tile)
-    return 1
+def kick_drift_point_step(method, scene, tile, x, v, t, h, p):
+    """The kick and drift of particle ``p`` alone, its acceleration from the slot
+    ``point_accel`` (a filling of :func:`tiles.point_step`)."""
+    return kick_drift_point(method, x, v, point_accel(scene, tile, x, v, t, p), h)
 
 
 class KickDrift(NamedTuple):
     """A whole kick, then the drift with weights ``old`` and ``new``: symplectic Euler
-    (0, 1) and the lecture's update (1/2, 1/2). Twins: :meth:`SymplecticEuler.step`,
-    :meth:`LectureUpdate.step`."""
+    (0, 1) and the lecture's update (1/2, 1/2); one ``evaluations`` a step. Twins:
+    :meth:`SymplecticEuler.step`, :meth:`LectureUpdate.step`."""
 
     old: float
     new: float
+    evaluations: int
     passes = kick_drift_passes
-    fused = kick_drift_fused
     carries_state = False
+
+    def point_step(self):
+        """The step of one particle (a filling of :func:`tiles.point_step`)."""
+        return kick_drift_point_step
 
 
 @njit(**KERNEL)
