@@ -34,9 +34,8 @@ from contextlib import contextmanager
 import numpy as np
 from numba import typeof
 
-from truestep.reference_impl import compose, integrate_kernels, particles_kernels, tiles
+from truestep.reference_impl import tiles
 from truestep.reference_impl.collisions_kernels import Plane
-from truestep.reference_impl.compose import cache_name, glue, instantiate, nothing
 from truestep.reference_impl.forces_kernels import (
     Anchors,
     Drag,
@@ -44,14 +43,13 @@ from truestep.reference_impl.forces_kernels import (
     Gravity,
     Impulses,
     Springs,
-    impulse_at,
-    impulses_add,
 )
 from truestep.reference_impl.integrate_kernels import DrivenRun, EnergyMonitor, run
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.particles_kernels import Particles, Scene
 from truestep.reference_impl.solvers.explicit_rk_kernels import Tableau
 from truestep.reference_impl.solvers.splitting_kernels import KickDrift, KickDriftKick
+from truestep.reference_impl.step_slots import loop_for
 from truestep.reference_impl.tiles import BLOCK, Fused, Passes
 
 CompiledRun = DrivenRun
@@ -94,9 +92,10 @@ def compiled_reason(model: ParticleModel | None, method: str) -> str | None:
 
 
 def independent(model: ParticleModel) -> bool:
-    """Whether no particle of ``model`` acts on another (no springs, anchors or
-    gravitation): then it can be stepped in tiles of particles."""
-    return not len(model.springs) and not len(model.anchors) and model.gravitation is None
+    """Whether no particle of ``model`` acts on another (no springs between particles, no
+    gravitation): every force it declares is pointwise, and a method that carries nothing
+    over the whole scene from step to step steps it in fused tiles (:func:`layout_for`)."""
+    return not len(model.springs) and model.gravitation is None
 
 
 def _f64(a) -> np.ndarray:
@@ -170,129 +169,19 @@ def layout_for(kind, scene: Scene):
     return Passes(max(n, 1))
 
 
-def _kernel_calls(kinds: tuple, role: str, call: str) -> tuple[list[str], dict]:
-    """Lines calling each kind's kernel ``role`` as ``call`` (formatted with the kernel's
-    name and the kind's index), and the names they use."""
-    names = {getattr(type(k), role).py_func.__name__: getattr(type(k), role) for k in kinds}
-    lines = [call.format(fn=getattr(type(k), role).py_func.__name__, i=i)
-             for i, k in enumerate(kinds)]
-    return lines, names
+_PREPARED: dict[tuple, object] = {}
+"""The compiled loops of this process, by :func:`composition` (and energy watching)."""
 
 
-def force_slots(scene: Scene) -> dict:
-    """The fillings of the derivative's slots (:mod:`particles_kernels`) for ``scene``."""
-    P, S = particles_kernels, scene
-    kinds, pointwise = S.forces, all(type(k).pointwise for k in S.forces)
-    adds, add_names = _kernel_calls(kinds, "add", "{fn}(scene.forces[{i}], F, X, V, t, "
-                                                  "scene.particles)")
-    ats, at_names = _kernel_calls(kinds if pointwise else (), "at",
-                                  "f = {fn}(scene.forces[{i}], f, x, v, t, scene.particles, p)")
-    energies, e_names = _kernel_calls(kinds, "energy", "e += {fn}(scene.forces[{i}], X, "
-                                                       "scene.particles)")
-    kicked = S.impulses is not None
-    return {
-        "add_forces": glue(P.add_forces, adds, add_names),
-        "point_force": glue(P.point_force, ["f = (0.0, 0.0, 0.0)", *ats, "return f"], at_names),
-        "potential_energy": glue(P.potential_energy, ["e = 0.0", *energies, "return e"],
-                                 e_names),
-        "add_impulses": (glue(P.add_impulses, ["impulses_add(scene.impulses, F, X, V, t, "
-                                               "scene.particles)"], {"impulses_add": impulses_add})
-                         if kicked else nothing(P.add_impulses)),
-        "point_impulses": (glue(P.point_impulses, ["return impulse_at(scene.impulses, f, None, "
-                                                   "None, t, scene.particles, p)"],
-                                {"impulse_at": impulse_at})
-                           if kicked else nothing(P.point_impulses, "f")),
-        "kicked": (glue(tiles.kicked, ["return scene.impulses.start[p + 1] > "
-                                       "scene.impulses.start[p]"], {})
-                   if kicked else nothing(tiles.kicked, "False")),
-        "list_kicked": (glue(tiles.list_kicked, ["k = scene.impulses.kicked",
-                                                 "for q in range(k.shape[0]):",
-                                                 "    special[q] = k[q] - scene.impulses.first",
-                                                 "return k.shape[0]"], {})
-                        if kicked else nothing(tiles.list_kicked, "0")),
-        "cut": cut_glue(S),
-    }
-
-
-def cut_glue(scene: Scene):
-    """The filling of the driver's slot ``cut``: ``scene`` for a tile of its particles,
-    each pointwise kind cut by its ``cut`` kernel (the others are never cut: such a scene
-    is one tile)."""
-    names = {"Scene": Scene, "tile_particles": particles_kernels.tile_particles}
-    parts = []
-    for i, k in enumerate(scene.forces):
-        cut = getattr(type(k), "cut", None)
-        if cut is None:
-            parts.append(f"scene.forces[{i}]")
-        else:
-            names[cut.py_func.__name__] = cut
-            parts.append(f"{cut.py_func.__name__}(scene.forces[{i}], lo, hi)")
-    impulses = "scene.impulses"
-    if scene.impulses is not None:
-        names["impulses_cut"] = type(scene.impulses).cut
-        impulses = "impulses_cut(scene.impulses, lo, hi)"
-    kinds = "".join(f"{part}, " for part in parts)
-    return glue(integrate_kernels.cut, [
-        f"return Scene(tile_particles(scene.particles, lo, hi), ({kinds}), {impulses}, "
-        "scene.planes)"], names)
-
-
-def plane_slots(layout, scene: Scene) -> dict:
-    """The fillings of the collision slots (:mod:`tiles`) for ``scene`` in ``layout``."""
-    T = tiles
-    if scene.planes is None:
-        return {"add_contact": nothing(particles_kernels.add_contact),
-                "point_contact": nothing(T.point_contact, "f"),
-                "near_planes": nothing(T.near_planes, "False"),
-                "collisions": nothing(T.collisions, "False")}
-    near = " | ".join(f"near_plane(scene.planes[{k}], x, radius)"
-                      for k in range(len(scene.planes)))
-    return {
-        "add_contact": particles_kernels.add_contact_forces,
-        "point_contact": glue(T.point_contact, ["return resting_force(scene, f, v, "
-                                                "tile.contact, p)"],
-                              {"resting_force": particles_kernels.resting_force}),
-        "near_planes": glue(T.near_planes, [f"return {near}"], {"near_plane": T.near_plane}),
-        "collisions": type(layout).collide,
-    }
-
-
-def slots_for(kind, layout, scene: Scene, *, track_energy: bool = False) -> dict:
-    """Every slot of the driver (:mod:`compose`) filled for ``scene`` stepped by the method
-    ``kind`` in ``layout``: in passes, the method's own step over a tile; fused, the
-    fused step (:func:`tiles.fused_step`) with the method's step of one particle, once
-    with the smooth acceleration and once with the whole one for special particles."""
-    slots = {
-        **force_slots(scene), **plane_slots(layout, scene),
-        "start": type(layout).start,
-        "watch": (integrate_kernels.watch_energy if track_energy
-                  else nothing(integrate_kernels.watch)),
-    }
-    if isinstance(layout, Passes):
-        slots["step"] = type(kind).passes
-        return slots
-    point = kind.point_step()
-    slots.update(step=tiles.fused_step,
-                 point_step=instantiate(point, {**slots, "point_accel": tiles.smooth_accel},
-                                        _memo={}),
-                 special_step=instantiate(point, {**slots, "point_accel": tiles.special_accel},
-                                          _memo={}))
-    return slots
-
-
-_LOOPS: dict[str, object] = {}
-"""The loops composed in this process, by :func:`compose.cache_name`."""
-
-
-def loop_for(kind, layout, scene: Scene, *, track_energy: bool = False):
-    """The driver composed for ``scene`` and ``kind`` in ``layout`` (not yet compiled:
-    numba compiles it, or loads it from its cache, when it is first called)."""
-    slots = slots_for(kind, layout, scene, track_energy=track_energy)
-    name = cache_name("drive", slots)
-    if name not in _LOOPS:
-        _LOOPS[name] = instantiate(integrate_kernels.drive, slots, name=name,
-                                   options=compose.LOOP)
-    return _LOOPS[name]
+def composition(kind, layout, scene: Scene) -> tuple:
+    """What a compiled loop depends on, in short: the classes of the scene's force kinds,
+    whether it has impulses, its number of planes, the method's step (a tableau's pattern
+    of non-zero entries) and the layout. Runs that agree on it share one loop."""
+    pattern = (tuple(tuple(kind.cols[s, :kind.terms[s]]) for s in range(len(kind.b)))
+               if isinstance(kind, Tableau) else ())
+    planes = len(scene.planes) if scene.planes is not None else 0
+    return (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes,
+            type(kind), pattern, type(layout))
 
 
 def describe(kind, layout, scene: Scene) -> str:
@@ -315,14 +204,18 @@ def _shown_if_slow(label: str, say: Callable[[str], None]):
     """Say ``compiling ... <label>`` if the block runs longer than :data:`SLOW_S`, and how
     long it took once it is done."""
     began = time.perf_counter()
-    timer = threading.Timer(SLOW_S, say, (f"compiling reference kernels for {label} ...",))
+    line = f"compiling reference kernels for {label} ..."
+    timer = threading.Timer(SLOW_S, say, (line,))
     timer.daemon = True
-    timer.start()
+    if SLOW_S > 0:
+        timer.start()
+    else:
+        say(line)
     try:
         yield
     finally:
         timer.cancel()
-        if time.perf_counter() - began > SLOW_S:
+        if time.perf_counter() - began >= SLOW_S:
             say(f"compiled reference kernels for {label} in {time.perf_counter() - began:.1f} s")
 
 
@@ -339,20 +232,22 @@ def prepared(model: ParticleModel, method: str, *, track_energy: bool = False,
     kind = method_kind(method)
     scene = pack(model)
     layout = layout_for(kind, scene)
+    key = (composition(kind, layout, scene), track_energy)
+    if key in _PREPARED:
+        return _PREPARED[key], kind, layout, scene
     loop = loop_for(kind, layout, scene, track_energy=track_energy)
-    n = model.n
-    stages = len(kind.b) if isinstance(kind, Tableau) else 0
-    sig = tuple(typeof(a) for a in (
-        kind, 1, scene, np.zeros((3, n)), np.zeros((3, n)), 1.0, 1, np.zeros(1, bool),
-        tiles.scratch(1, stages, len(model.planes)), np.zeros((1, n, 3)), np.zeros((1, n, 3)),
-        np.zeros(1),
-        EnergyMonitor(np.zeros(2)) if track_energy else None))
     if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
         return loop, kind, layout, scene
+    stages = len(kind.b) if isinstance(kind, Tableau) else 0
+    sig = tuple(typeof(a) for a in (
+        kind, 1, scene, np.zeros((3, 1)), np.zeros((3, 1)), 1.0, 1, np.zeros(1, bool),
+        tiles.scratch(1, stages, len(model.planes)), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)),
+        np.zeros(1), EnergyMonitor(np.zeros(2)) if track_energy else None))
     if sig not in loop.overloads:
         with _shown_if_slow(describe(kind, layout, scene), progress or _stderr):
             loop.compile(sig)
-    return loop.get_overload(sig), kind, layout, scene
+    _PREPARED[key] = loop.get_overload(sig)
+    return _PREPARED[key], kind, layout, scene
 
 
 def run_compiled(model: ParticleModel, method: str, duration: float, h: float, *,

@@ -177,7 +177,7 @@ def test_collide_kernel_is_the_plane_collision_pass(k, dt):
         inside &= d_spec > -(plane.thickness + 2 * radius)
     idx = np.flatnonzero(inside)
     on = pass_._collide(system, plane, idx, f[idx], dt)
-    for q, p in enumerate(range(n)):
+    for p in range(n):
         d = signed_distance(tup(x[p]), radius[p], kp)
         assert d == pytest.approx(d_spec[p], abs=1e-15)
         assert within(d, radius[p], kp) == bool(inside[p])

@@ -210,6 +210,12 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
     process of its own, so that the row of the step that crashed or hung says so and the
     others are measured.
     """
+    prepare = getattr(get_adapter(engine), "prepare", None)
+    if prepare is not None:  # compile here, before the fork: every run finds it ready
+        try:
+            prepare(case, method)
+        except Exception:  # the sweep's own process fails alike, and its rows say why
+            pass
     outcome = run_isolated(simulate_sweep, (engine, case, method, dts, timing),
                            SWEEP_SLACK * case.timeout_s * len(dts) + 10.0)
     if outcome.status != "ok":

@@ -93,7 +93,7 @@ def point_step_lines(terms: list[list[int]], stages: int) -> list[str]:
     lines += ["dx, dv = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)"]
     lines += [f"dx, dv = axpy(dx, method.b[{s}], v{s}), axpy(dv, method.b[{s}], a{s})"
               for s in range(stages)]
-    return lines + ["return axpy(x, h, dx), axpy(v, h, dv)"]
+    return [*lines, "return axpy(x, h, dx), axpy(v, h, dv)"]
 
 
 class Tableau(NamedTuple):
