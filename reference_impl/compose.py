@@ -91,6 +91,22 @@ def _py(fn):
     return fn.py_func if isinstance(fn, Dispatcher) else fn
 
 
+def name_of(fn) -> str:
+    """The name of a kernel, compiled or plain."""
+    return _py(fn).__name__
+
+
+def source_of(filling) -> str:
+    """The source of a glue filling (:func:`glue`)."""
+    return _py(filling).__doc__ or ""
+
+
+def _function(value) -> bool:
+    """Whether ``value`` is a function that :func:`instantiate` can copy: compiled, or
+    plain Python (as every kernel is with ``NUMBA_DISABLE_JIT=1``)."""
+    return isinstance(value, (Dispatcher, FunctionType))
+
+
 def _reaches(fn, slots: dict, memo: dict) -> bool:
     """Whether ``fn``'s code names a slot, or a function that does."""
     py = _py(fn)
@@ -99,7 +115,7 @@ def _reaches(fn, slots: dict, memo: dict) -> bool:
     memo[py] = False
     g = getattr(py, "__globals__", {})
     memo[py] = any(isinstance(g.get(name), Slot) or (
-        isinstance(g.get(name), Dispatcher) and _reaches(g[name], slots, memo))
+        _function(g.get(name)) and _reaches(g[name], slots, memo))
         for name in getattr(getattr(py, "__code__", None), "co_names", ()))
     return memo[py]
 
@@ -119,7 +135,7 @@ def instantiate(fn, slots: dict, *, options: dict | None = None, name: str | Non
         if isinstance(value, Slot):
             value = slots[value.name]
             g[ident] = value
-        if isinstance(value, Dispatcher) and _reaches(value, slots, {}):
+        if _function(value) and _reaches(value, slots, {}):
             g[ident] = instantiate(value, slots, _memo=memo)
     copy = FunctionType(py.__code__, g, py.__name__, py.__defaults__, py.__closure__)
     copy.__qualname__ = name or py.__qualname__

@@ -12,7 +12,7 @@ the driver compiled with them.
 from __future__ import annotations
 
 from truestep.reference_impl import compose, integrate_kernels, particles_kernels, tiles
-from truestep.reference_impl.compose import cache_name, glue, instantiate, nothing
+from truestep.reference_impl.compose import cache_name, glue, instantiate, name_of, nothing
 from truestep.reference_impl.forces_kernels import impulse_at, impulses_add
 from truestep.reference_impl.particles_kernels import Scene
 from truestep.reference_impl.tiles import Passes
@@ -21,8 +21,8 @@ from truestep.reference_impl.tiles import Passes
 def _kernel_calls(kinds: tuple, role: str, call: str) -> tuple[list[str], dict]:
     """Lines calling each kind's kernel ``role`` as ``call`` (formatted with the kernel's
     name and the kind's index), and the names they use."""
-    names = {getattr(type(k), role).py_func.__name__: getattr(type(k), role) for k in kinds}
-    lines = [call.format(fn=getattr(type(k), role).py_func.__name__, i=i)
+    names = {name_of(getattr(type(k), role)): getattr(type(k), role) for k in kinds}
+    lines = [call.format(fn=name_of(getattr(type(k), role)), i=i)
              for i, k in enumerate(kinds)]
     return lines, names
 
@@ -73,8 +73,8 @@ def cut_glue(scene: Scene):
         if cut is None:
             parts.append(f"scene.forces[{i}]")
         else:
-            names[cut.py_func.__name__] = cut
-            parts.append(f"{cut.py_func.__name__}(scene.forces[{i}], lo, hi)")
+            names[name_of(cut)] = cut
+            parts.append(f"{name_of(cut)}(scene.forces[{i}], lo, hi)")
     impulses = "scene.impulses"
     if scene.impulses is not None:
         names["impulses_cut"] = type(scene.impulses).cut
