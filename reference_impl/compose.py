@@ -31,6 +31,13 @@ from numba.core.dispatcher import Dispatcher
 
 INLINE = {"error_model": "numpy", "inline": "always"}
 """How composed functions are compiled: into the loop that calls them."""
+COLD = {"cache": True, "error_model": "numpy", "_nrt": False}
+"""How the rarely called parts of a loop are compiled (a tile's start, a collision pass, a
+particle stepped again alone, the stop after a blow-up): on their own, called, so that
+numba does not copy them into the loop (it copies a function it inlines once for every
+place that calls it, a cost that grows with the square of the loop's size)."""
+COPY_COLD = {"error_model": "numpy", "_nrt": False}
+"""How a copy of a rarely called part is compiled (:func:`instantiate`)."""
 LOOP = {"cache": True, "error_model": "numpy", "_nrt": False}
 """How a composed loop is compiled: cached on disk, and without numba's reference counting
 (its arrays all come from Python, which holds them while it runs; it allocates none), so
@@ -140,8 +147,15 @@ def instantiate(fn, slots: dict, *, options: dict | None = None, name: str | Non
     copy = FunctionType(py.__code__, g, py.__name__, py.__defaults__, py.__closure__)
     copy.__qualname__ = name or py.__qualname__
     copy.__doc__, copy.__module__ = py.__doc__, py.__module__
-    memo[py] = njit(**(options or INLINE))(copy)
+    memo[py] = njit(**(options or _copy_options(fn)))(copy)
     return memo[py]
+
+
+def _copy_options(fn) -> dict:
+    """How a copy of ``fn`` is compiled: inlined if ``fn`` is, else on its own (not cached:
+    its globals are one loop's); never with reference counting (:data:`LOOP`)."""
+    inline = getattr(fn, "targetoptions", {}).get("inline", "never")
+    return {"error_model": "numpy", "_nrt": False, "inline": inline}
 
 
 def cache_name(base: str, slots: dict) -> str:

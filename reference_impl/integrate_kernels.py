@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from truestep.reference_impl.compose import slot
+from truestep.reference_impl.compose import COLD, slot
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
 from truestep.reference_impl.particles_kernels import total_energy
@@ -94,7 +94,7 @@ def write(xs, vs, ts, r, tile, lo, t):
     ts[r] = t
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**COLD)
 def first_bad(xs, vs, lo, hi, checked, kept):
     """The first record from ``checked`` to ``kept`` not finite in particles ``lo`` to
     ``hi``, or -1."""
@@ -106,7 +106,7 @@ def first_bad(xs, vs, lo, hi, checked, kept):
     return -1
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**COLD)
 def stopped(xs, vs, ts, tile, lo, checked, kept, recorded, t):
     """``integrate``'s stop on a failed check: the records end at the first non-finite one
     since the last good check, or, if all of those are finite, with the state now (unless
@@ -120,7 +120,7 @@ def stopped(xs, vs, ts, tile, lo, checked, kept, recorded, t):
     return kept
 
 
-@njit(**KERNEL)
+@njit(**COLD)
 def run_tile(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
     """Particles ``lo`` to ``lo + m`` of ``scene`` (a tile of m) from ``X0``, ``V0`` through
     ``n_steps`` steps of ``h`` s, in the scratch ``buffers``. Returns (records kept, steps,

@@ -119,12 +119,12 @@ def slots_for(kind, layout, scene: Scene, *, track_energy: bool = False) -> dict
     if isinstance(layout, Passes):
         slots["step"] = type(kind).passes
         return slots
-    point = kind.point_step()
     slots.update(step=tiles.fused_step,
-                 point_step=instantiate(point, {**slots, "point_accel": tiles.smooth_accel},
-                                        _memo={}),
-                 special_step=instantiate(point, {**slots, "point_accel": tiles.special_accel},
-                                          _memo={}))
+                 point_step=instantiate(kind.point_step(),
+                                        {**slots, "point_accel": tiles.smooth_accel}, _memo={}),
+                 special_step=instantiate(kind.special_step(),
+                                          {**slots, "point_accel": tiles.special_accel},
+                                          _memo={}, options=compose.COPY_COLD))
     return slots
 
 

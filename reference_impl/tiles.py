@@ -32,7 +32,7 @@ from numba import njit
 
 from truestep.reference_impl.collisions import EPS_DISTANCE
 from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
-from truestep.reference_impl.compose import slot
+from truestep.reference_impl.compose import COLD, slot
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.particles_kernels import (
     applied_forces,
@@ -99,7 +99,7 @@ def scratch(size: int, stages: int, planes: int) -> Tile:
                 np.zeros(4, dtype=np.int64))
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**COLD)
 def tile_view(buffers, m):
     """The tile of ``m`` particles in ``buffers`` (:func:`scratch`), its counts cleared."""
     b = buffers
@@ -176,7 +176,7 @@ def near_plane(plane, x, radius):
     return not signed_distance(x, radius, plane) >= EPS_DISTANCE
 
 
-@njit(**KERNEL)
+@njit(**COLD)
 def passes_collisions(scene, tile, t, dt):
     """The collision and contact pass over a tile (:class:`collisions.PlaneCollisions`):
     planes one after the other, the applied force evaluated once, when the first particle
@@ -214,7 +214,7 @@ def passes_collisions(scene, tile, t, dt):
     return changed
 
 
-@njit(**KERNEL)
+@njit(**COLD)
 def passes_start(scene, tile, t):
     """The collision pass on the first state (a particle may start on a plane); the first
     step evaluates afresh."""
@@ -232,7 +232,7 @@ class Passes(NamedTuple):
     collide = passes_collisions
 
 
-@njit(**KERNEL)
+@njit(**COLD)
 def collide_particle(scene, tile, p, t, dt):
     """The collision and contact pass for particle ``p`` alone (its force depends on no
     other particle): :func:`passes_collisions` restricted to it. Returns whether it rests
@@ -308,7 +308,7 @@ def fused_collisions(scene, tile, t, dt):
     return False
 
 
-@njit(**KERNEL)
+@njit(**COLD)
 def fused_start(scene, tile, t):
     """The collision pass on the first state, every particle visited (with planes), then
     the special particles listed."""

@@ -22,7 +22,7 @@ from truestep.reference_impl import tiles
 from truestep.reference_impl.compose import glue
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.particles_kernels import accelerations
-from truestep.reference_impl.tiles import CONTACT, axpy, collisions, load, store
+from truestep.reference_impl.tiles import CONTACT, axpy, collisions, load, point_accel, store
 
 
 @njit(**KERNEL)
@@ -78,6 +78,27 @@ def tableau_passes(method, scene, tile, t, h):
     return method.b.shape[0]
 
 
+@njit(**KERNEL)
+def tableau_point_loop(method, scene, tile, x, v, t, h, p):
+    """One particle's step of the tableau with its stages in a loop, their values in
+    column ``p`` of ``KX``, ``KV``: the sums of :func:`point_step_lines` in the same order,
+    for the rare particles a fused step takes again alone (a loop compiles faster than
+    the stages unrolled; their speed does not matter)."""
+    KX, KV, b = tile.KX, tile.KV, method.b
+    for s in range(b.shape[0]):
+        xs, vs = x, v
+        for q in range(method.terms[s]):
+            r = method.cols[s, q]
+            w = h * method.weights[s, q]
+            xs, vs = axpy(xs, w, load(KX[r], p)), axpy(vs, w, load(KV[r], p))
+        store(KX[s], p, vs)
+        store(KV[s], p, point_accel(scene, tile, xs, vs, t + method.c[s] * h, p))
+    dx, dv = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    for s in range(b.shape[0]):
+        dx, dv = axpy(dx, b[s], load(KX[s], p)), axpy(dv, b[s], load(KV[s], p))
+    return axpy(x, h, dx), axpy(v, h, dv)
+
+
 def point_step_lines(terms: list[list[int]], stages: int) -> list[str]:
     """The body of a tableau's step for one particle (see :meth:`Tableau.point_step`):
     its stages in order, stage ``s`` at ``x + sum (h a_sr) k_r`` over the non-zero entries
@@ -120,6 +141,10 @@ class Tableau(NamedTuple):
         terms = [list(self.cols[s, :self.terms[s]]) for s in range(len(self.b))]
         return glue(tiles.point_step, point_step_lines(terms, len(self.b)),
                     {"axpy": axpy, "point_accel": tiles.point_accel})
+
+    def special_step(self):
+        """The step of one special particle (a filling of :func:`tiles.special_step`)."""
+        return tableau_point_loop
 
     @classmethod
     def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> Tableau:

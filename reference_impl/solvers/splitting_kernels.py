@@ -69,6 +69,10 @@ class KickDrift(NamedTuple):
         """The step of one particle (a filling of :func:`tiles.point_step`)."""
         return kick_drift_point_step
 
+    def special_step(self):
+        """The step of one special particle (a filling of :func:`tiles.special_step`)."""
+        return kick_drift_point_step
+
 
 @njit(**KERNEL)
 def kick_drift_kick_passes(method, scene, tile, t, h):
