@@ -16,7 +16,7 @@ from typing import NamedTuple
 from numba import njit
 
 from truestep.reference_impl.collisions import EPS_DISTANCE, EPS_SPEED
-from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF
 
 
 class Plane(NamedTuple):
@@ -31,7 +31,7 @@ class Plane(NamedTuple):
     thickness: float
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def dot(a, b):
     """``a . b`` of two 3-tuples, summed in the order of the components."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -45,7 +45,7 @@ def signed_distance(x, radius, plane):
     return ((x[0] - p[0]) * n[0] + (x[1] - p[1]) * n[1] + (x[2] - p[2]) * n[2]) - radius
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def within(d, radius, plane):
     """Whether a particle at signed distance ``d`` is within eps of ``plane`` and has not
     crossed the whole of a thin wall (the ``inside`` test of ``PlaneCollisions``)."""
@@ -54,7 +54,7 @@ def within(d, radius, plane):
     return not (plane.thickness > 0.0 and not d > -(plane.thickness + 2.0 * radius))
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def contact_force(f, v, plane):
     """The applied force ``f`` (N) of a particle in contact with ``plane``, moving at
     ``v`` (m/s), with the contact force added: the push into the plane cancelled, then
@@ -85,7 +85,7 @@ def contact_force(f, v, plane):
     return (f0 - static * s0, f1 - static * s1, f2 - static * s2)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def sticking(w, f, fn, an, plane, dt):
     """Whether friction stops a particle in contact within the step (``PlaneCollisions.
     _sticking``): its tangential speed (of ``w``, m/s) at most ``eps_v + mu |a_N| dt`` and
@@ -100,7 +100,7 @@ def sticking(w, f, fn, an, plane, dt):
     return speed <= EPS_SPEED - mu * an * dt and ft <= -mu * fn
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def collide(x, v, f, inv_mass, d, plane, dt):
     """Penetration, collision and contact of one particle within eps of ``plane``
     (``PlaneCollisions._collide``): at ``x`` (m), ``v`` (m/s), signed distance ``d`` (m),

@@ -41,18 +41,25 @@ TIME_ROUNDOFF = 1e-9
 addition (``4 x 0.0025 = 0.009999999999999998``) counts as the time it stands for."""
 
 KERNEL = {"cache": True, "error_model": "numpy", "inline": "always"}
-"""How every kernel is compiled: into the step that calls it (numba inlines it before it
-types the step, so a call costs nothing), or on its own and cached when Python calls it;
-division by zero gives ``inf`` or ``nan`` as numpy does, never an exception."""
+"""How a kernel that names a slot of a composed step is compiled (:mod:`compose`): into
+the step that calls it (numba inlines it before it types the step: a call costs
+nothing), or on its own and cached when Python calls it; division by zero gives ``inf``
+or ``nan`` as numpy does, never an exception."""
+LEAF = {"cache": True, "error_model": "numpy", "_nrt": False}
+"""How a kernel off the hot path of a step is compiled (a collision response, an energy,
+cutting a tile): once, on its own, cached, and called, so that composing a step does not
+compile it again; without reference counting (a composed step has none,
+:data:`compose.LOOP`). A kernel in the hot path is inlined (:data:`KERNEL`): a call with
+its arrays would cost more than its arithmetic."""
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def uncut(kind, lo, hi):
     """A pointwise kind whose parameters are the same for every particle, on a tile."""
     return kind
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def no_energy(kind, X, particles):
     """The potential energy of a kind that has none (drag, impulses): 0 J."""
     return 0.0
@@ -66,7 +73,7 @@ def gravity_at(kind, f, x, v, t, particles, p):
     return (f[0] + m * g[0], f[1] + m * g[1], f[2] + m * g[2])
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def gravity_energy(kind, X, particles):
     """``-sum m g . x`` of the movable particles, J: the gravity term of
     :func:`particles.total_energy`."""
@@ -134,7 +141,7 @@ def spring_force(d, u, stiffness, damping, rest):
     return length, (magnitude * e0, magnitude * e1, magnitude * e2)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**KERNEL)
 def add_spring_forces(F, X, V, i, j, stiffness, damping, rest):
     """Damped springs between particles ``i[s]`` and ``j[s]`` (int, (m,)): the force of
     :func:`spring_force` subtracted at the first end and added at the second, spring after
@@ -154,7 +161,7 @@ def add_spring_forces(F, X, V, i, j, stiffness, damping, rest):
         F[2, b] += f[2]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**KERNEL)
 def add_anchor_forces(F, X, V, i, point, stiffness, damping, rest):
     """Damped springs from particles ``i[s]`` to the fixed points ``point[:, s]`` (m,
     (3, m)): the force of :func:`spring_force` subtracted at the particle. Twin:
@@ -177,14 +184,14 @@ def springs_add(kind, F, X, V, t, particles):
     add_spring_forces(F, X, V, kind.i, kind.j, kind.stiffness, kind.damping, kind.rest)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def stretch_energy(d0, d1, d2, stiffness, rest):
     """``k (|d| - r)^2 / 2`` of one spring stretched to ``d`` (m), J."""
     stretch = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - rest
     return 0.5 * (stiffness * stretch * stretch)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def springs_energy(kind, X, particles):
     """:func:`forces.spring_energy`, J."""
     e = 0.0
@@ -215,7 +222,7 @@ def anchors_add(kind, F, X, V, t, particles):
     add_anchor_forces(F, X, V, kind.i, kind.point, kind.stiffness, kind.damping, kind.rest)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def anchors_energy(kind, X, particles):
     """:func:`forces.anchor_energy`, J."""
     e = 0.0
@@ -245,7 +252,7 @@ def anchors_at(kind, f, x, v, t, particles, p):
     return (f0, f1, f2)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def anchors_cut(kind, lo, hi):
     """The anchors of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
     return Anchors(kind.i, kind.point, kind.stiffness, kind.damping, kind.rest,
@@ -302,7 +309,7 @@ def gravitation_add(kind, F, X, V, t, particles):
         F[2, p] += mass[p] * g2
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def gravitation_energy(kind, X, particles):
     """``-sum_{p<q} G m_p m_q / sqrt(r^2 + eps^2)``, J: :func:`forces.gravitation_energy`."""
     eps2 = kind.softening * kind.softening
@@ -351,7 +358,7 @@ def impulses_add(kind, F, X, V, t, particles):
                                                t, particles, p)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def impulses_cut(kind, lo, hi):
     """The impulses of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
     k = kind.kicked

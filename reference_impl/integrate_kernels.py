@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from truestep.reference_impl.compose import COLD, slot
-from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
 from truestep.reference_impl.particles_kernels import total_energy
 from truestep.reference_impl.tiles import load, scratch, store, tile_view
@@ -72,7 +72,7 @@ def watch_energy(monitor, scene, tile):
         monitor.bounds[1] = e
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def finite(X, V):
     """Every component of the (3, m) state finite and within :data:`BLOWUP` (NaN fails
     both comparisons): :func:`integrate._finite`."""

@@ -19,7 +19,7 @@ from numba import njit
 
 from truestep.reference_impl.collisions_kernels import contact_force
 from truestep.reference_impl.compose import slot
-from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF
 
 
 class Particles(NamedTuple):
@@ -83,7 +83,7 @@ def potential_energy(scene, X):
     """The potential energy (J) of every kind in ``scene.forces``, summed in order."""
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def tile_particles(particles, lo, hi):
     """The constants of particles ``lo`` to ``hi`` (a tile of a scene whose particles do
     not act on one another)."""
@@ -104,7 +104,7 @@ def applied_forces(scene, F, X, V, t):
     add_impulses(scene, F, X, V, t)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def add_contact_forces(scene, F, V, contact, any_contact):
     """The contact force of each plane for the particles in contact with it
     (``contact`` (planes, m) bool), plane after plane, when any particle is:
@@ -141,7 +141,7 @@ def particle_force(scene, x, v, t, p):
     return point_impulses(scene, point_force(scene, x, v, t, p), t, p)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def resting_force(scene, f, v, contact, p):
     """``f`` with the contact force of every plane particle ``p`` rests on added."""
     planes = scene.planes
@@ -157,7 +157,7 @@ def scaled(f, w):
     return (f[0] * w, f[1] * w, f[2] * w)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def kinetic_energy(V, particles):
     """``sum m |v|^2 / 2`` of the movable particles, J."""
     e = 0.0

@@ -33,7 +33,7 @@ from numba import njit
 from truestep.reference_impl.collisions import EPS_DISTANCE
 from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
 from truestep.reference_impl.compose import COLD, slot
-from truestep.reference_impl.forces_kernels import KERNEL
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF
 from truestep.reference_impl.particles_kernels import (
     applied_forces,
     particle_force,
@@ -155,14 +155,14 @@ def store(A, p, a):
     A[0, p], A[1, p], A[2, p] = a
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def same_bits(a, b):
     """Whether two floats have the same bits (``-0.0`` and ``0.0`` differ, as bytes do;
     NaN counts as changed)."""
     return a == b and np.copysign(1.0, a) == np.copysign(1.0, b)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def moved(x, v, y, u):
     """Whether the state ``(y, u)`` differs from ``(x, v)`` in any bit (3-tuples)."""
     return not (same_bits(x[0], y[0]) and same_bits(x[1], y[1]) and same_bits(x[2], y[2])

@@ -48,14 +48,13 @@ def stage_passes(method, s, scene, tile, t, h):
     read where it is."""
     n = method.terms[s]
     X, V, XS, KX, KV = tile.X, tile.V, tile.XS, tile.KX, tile.KV
-    ts = t + method.c[s] * h
-    any_contact = tile.count[CONTACT] > 0
-    if n == 0:
-        accelerations(scene, KV[s], tile.F, X, V, ts, tile.contact, any_contact)
-    else:
+    PX, PV = X, V
+    if n > 0:
         add_terms(method, s, X, KX, XS, h, n, V, True)
         add_terms(method, s, V, KV, KX[s], h, n, V, False)
-        accelerations(scene, KV[s], tile.F, XS, KX[s], ts, tile.contact, any_contact)
+        PX, PV = XS, KX[s]
+    accelerations(scene, KV[s], tile.F, PX, PV, t + method.c[s] * h, tile.contact,
+                  tile.count[CONTACT] > 0)
 
 
 @njit(**KERNEL)

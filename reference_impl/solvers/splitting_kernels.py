@@ -81,23 +81,24 @@ def kick_drift_kick_passes(method, scene, tile, t, h):
     half kick at the new positions and the half-step velocities; then the collision pass.
     Returns the evaluations it made (1, or 2 afresh)."""
     X, V, VS, A = tile.X, tile.V, tile.VS, tile.A
-    contact, count = tile.contact, tile.count
-    evaluations = 1
-    if count[FRESH]:
-        accelerations(scene, A, tile.F, X, V, t, contact, count[CONTACT] > 0)
-        evaluations = 2
+    count = tile.count
     kick = method.kick * h
-    for j in range(X.shape[1]):
-        x, v = load(X, j), load(V, j)
-        u = axpy(v, kick, load(A, j))
-        store(VS, j, u)
-        store(X, j, (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
-                     drift(method, x[2], v[2], u[2], h)))
-    accelerations(scene, A, tile.F, X, VS, t + h, contact, count[CONTACT] > 0)
+    first = 0 if count[FRESH] else 1
+    for e in range(first, 2):  # e = 0: the fresh evaluation; e = 1: the closing one
+        if e == 1:
+            for j in range(X.shape[1]):
+                x, v = load(X, j), load(V, j)
+                u = axpy(v, kick, load(A, j))
+                store(VS, j, u)
+                store(X, j, (drift(method, x[0], v[0], u[0], h),
+                             drift(method, x[1], v[1], u[1], h),
+                             drift(method, x[2], v[2], u[2], h)))
+        accelerations(scene, A, tile.F, X, V if e == 0 else VS, t + e * h, tile.contact,
+                      count[CONTACT] > 0)
     for j in range(X.shape[1]):
         store(V, j, axpy(load(VS, j), kick, load(A, j)))
     count[FRESH] = collisions(scene, tile, t + h, h)
-    return evaluations
+    return 2 - first
 
 
 class KickDriftKick(NamedTuple):
