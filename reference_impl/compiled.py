@@ -237,6 +237,7 @@ def prepared(model: ParticleModel, method: str, *, track_energy: bool = False,
         return _PREPARED[key], kind, layout, scene
     loop = loop_for(kind, layout, scene, track_energy=track_energy)
     if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
+        _PREPARED[key] = loop
         return loop, kind, layout, scene
     stages = len(kind.b) if isinstance(kind, Tableau) else 0
     sig = tuple(typeof(a) for a in (

@@ -46,14 +46,14 @@ the step that calls it (numba inlines it before it types the step: a call costs
 nothing), or on its own and cached when Python calls it; division by zero gives ``inf``
 or ``nan`` as numpy does, never an exception."""
 LEAF = {"cache": True, "error_model": "numpy", "_nrt": False}
-"""How a kernel off the hot path of a step is compiled (a collision response, an energy,
-cutting a tile): once, on its own, cached, and called, so that composing a step does not
+"""How a kernel off the hot path of a step is compiled (a collision response, an
+energy): once, on its own, cached, and called, so that composing a step does not
 compile it again; without reference counting (a composed step has none,
 :data:`compose.LOOP`). A kernel in the hot path is inlined (:data:`KERNEL`): a call with
 its arrays would cost more than its arithmetic."""
 
 
-@njit(**LEAF)
+@njit(**KERNEL)
 def uncut(kind, lo, hi):
     """A pointwise kind whose parameters are the same for every particle, on a tile."""
     return kind
@@ -252,7 +252,7 @@ def anchors_at(kind, f, x, v, t, particles, p):
     return (f0, f1, f2)
 
 
-@njit(**LEAF)
+@njit(**KERNEL)
 def anchors_cut(kind, lo, hi):
     """The anchors of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
     return Anchors(kind.i, kind.point, kind.stiffness, kind.damping, kind.rest,
@@ -358,7 +358,7 @@ def impulses_add(kind, F, X, V, t, particles):
                                                t, particles, p)
 
 
-@njit(**LEAF)
+@njit(**KERNEL)
 def impulses_cut(kind, lo, hi):
     """The impulses of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
     k = kind.kicked

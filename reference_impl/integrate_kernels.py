@@ -171,7 +171,9 @@ def drive(method, size, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, 
 class DrivenRun:
     """What :func:`run` returns: the records (t (T,) s; x, v (T, n, 3), m and m/s), the
     counts of :class:`~truestep.reference_impl.integrate.Run`, the wall time of the
-    stepping (s) and ``extra`` (``energy_min``, ``energy_max`` in J when tracked)."""
+    stepping (s), ``extra`` (``energy_min``, ``energy_max`` in J when tracked) and
+    ``rerun_whole``: whether a blow-up in one tile of several had the run made again as
+    one tile (the wall time is that run's)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -182,6 +184,7 @@ class DrivenRun:
     t_fail: float | None
     wall_s: float
     extra: dict[str, float] = field(default_factory=dict)
+    rerun_whole: bool = False
 
 
 def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float,
@@ -206,6 +209,7 @@ def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float
     args = (scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor)
     start = time.perf_counter()
     kept, steps, nfev, unstable, split = loop(method, size, *args)
+    rerun = bool(split)
     if split:
         start = time.perf_counter()
         buffers = scratch(max(n, 1), stages, planes)
@@ -216,4 +220,4 @@ def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float
              if monitor is not None else {})
     return DrivenRun(ts[:kept].copy(), xs[:kept].copy(), vs[:kept].copy(), int(nfev), int(steps),
                      "unstable" if unstable else "ok",
-                     float(ts[kept - 1]) if unstable else None, wall, extra)
+                     float(ts[kept - 1]) if unstable else None, wall, extra, rerun)

@@ -83,7 +83,7 @@ def potential_energy(scene, X):
     """The potential energy (J) of every kind in ``scene.forces``, summed in order."""
 
 
-@njit(**LEAF)
+@njit(**KERNEL)
 def tile_particles(particles, lo, hi):
     """The constants of particles ``lo`` to ``hi`` (a tile of a scene whose particles do
     not act on one another)."""

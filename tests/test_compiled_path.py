@@ -133,6 +133,9 @@ def test_a_blow_up_in_one_tile_ends_the_run_as_the_whole_scene_does(method):
     model = unstable_in_one_tile()
     assert compiled.layout_for(compiled.method_kind(method), compiled.pack(model)).size < model.n
     fast, _ = run_compiled(model, method, 1.0, 1e-3, max_records=40)
+    assert fast.rerun_whole
+    stable, _ = run_compiled(dataclasses.replace(model, mass=np.ones(model.n)), method, 0.2, 1e-3)
+    assert stable.status == "ok" and not stable.rerun_whole
     system = ParticleSystem(model, passes_for(model))
     slow = integrate(get_solver(method)(system), 1.0, 1e-3, max_records=40)
     assert fast.status == slow.status == "unstable"
@@ -205,6 +208,15 @@ def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named
     before = compose.cache_name("drive", slots)
     monkeypatch.setattr(compose, "FINGERPRINT", "another source")
     assert compose.cache_name("drive", slots) != before
+
+
+def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named,
+                                                                         monkeypatch):
+    monkeypatch.setattr(compiled, "_PREPARED", {})
+    compiled.compile_all([case_named("free-fall").model], progress=lambda line: None)
+    # euler, midpoint and heun, rk4 (three patterns of a tableau), a kick and drift, and
+    # velocity Verlet; the adaptive and implicit methods run on the numpy path
+    assert len(compiled._PREPARED) == 5
 
 
 def test_method_facts_choose_the_step():

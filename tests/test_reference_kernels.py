@@ -28,7 +28,6 @@ from truestep.reference_impl.model import Plane as ModelPlane
 from truestep.reference_impl.particles import ParticleSystem, total_energy
 from truestep.reference_impl.particles_kernels import Particles, kinetic_energy
 
-RNG = np.random.default_rng(21)
 ROUND_OFF = 1e-15
 
 
@@ -43,6 +42,7 @@ def tup(a) -> tuple:
 
 
 def test_gravity_and_drag_kernels_are_add_gravity_and_add_drag_bit_for_bit():
+    RNG = np.random.default_rng(1)
     n = 7
     mass, f0, v = RNG.uniform(0.1, 3, n), RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3))
     g = np.array([0.3, -9.81, 0.0])
@@ -61,6 +61,7 @@ def test_gravity_and_drag_kernels_are_add_gravity_and_add_drag_bit_for_bit():
 
 
 def test_spring_kernels_are_the_lecture_spring_on_both_ends():
+    RNG = np.random.default_rng(2)
     n = 5
     x, v = RNG.normal(size=(3, n)), RNG.normal(size=(3, n))
     x[:, 4] = x[:, 3]  # a zero-length spring 3-4 exerts nothing
@@ -85,6 +86,7 @@ def test_spring_kernels_are_the_lecture_spring_on_both_ends():
 
 
 def test_force_kinds_and_their_energies_match_the_numpy_scene():
+    RNG = np.random.default_rng(3)
     n = 6
     x, v = RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3))
     mass, fixed = RNG.uniform(0.5, 2, n), np.array([False] * 5 + [True])
@@ -128,7 +130,9 @@ def test_impulse_kernel_is_add_impulses_with_its_round_off_margin(t):
 
 
 def planes_and_states(count: int):
-    """Particles within eps of axis-aligned and slanted planes, some below them."""
+    """Axis-aligned and slanted planes, with and without friction, a thin wall among
+    them (the same every time)."""
+    RNG = np.random.default_rng(4)
     for k in range(count):
         normal = RNG.normal(size=3) if k % 2 else np.eye(3)[k % 3] * (-1) ** k
         normal /= np.linalg.norm(normal)
@@ -139,6 +143,7 @@ def planes_and_states(count: int):
 @pytest.mark.parametrize("k", range(6))
 def test_contact_force_kernel_is_add_contact_forces(k):
     plane = list(planes_and_states(6))[k]
+    RNG = np.random.default_rng(50 + k)
     n = 12
     f, v = RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3))
     v[:4] -= np.outer(v[:4] @ plane.normal, plane.normal)  # sliding along the plane
@@ -156,6 +161,7 @@ def test_contact_force_kernel_is_add_contact_forces(k):
 @pytest.mark.parametrize("dt", [0.0, 1e-3])
 def test_collide_kernel_is_the_plane_collision_pass(k, dt):
     plane = list(planes_and_states(6))[k]
+    RNG = np.random.default_rng(60 + k)
     n = 16
     radius = RNG.uniform(0, 0.05, n)
     depth = np.concatenate([RNG.uniform(-0.02, 0, 8), np.zeros(4), RNG.uniform(-1, -0.2, 4)])
@@ -188,3 +194,70 @@ def test_collide_kernel_is_the_plane_collision_pass(k, dt):
         np.testing.assert_allclose(y, system.positions[p], rtol=1e-14, atol=1e-14)
         np.testing.assert_allclose(u, system.velocities[p], rtol=1e-13, atol=1e-13)
         assert resting == on[spot]
+
+
+def test_anchors_of_one_particle_are_the_anchor_loop_on_it():
+    RNG = np.random.default_rng(5)
+    n = 4
+    x, v = RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3))
+    anchors = Anchors(np.array([2, 0, 2, 3]), RNG.normal(size=(4, 3)), RNG.uniform(1, 5, 4),
+                      RNG.uniform(0, 1, 4), RNG.uniform(0.1, 1, 4))
+    anchors.point[3] = x[3]  # a zero-length anchor exerts nothing
+    model = ParticleModel(mass=np.ones(n), x0=x, v0=v, radius=np.zeros(n),
+                          fixed=np.zeros(n, bool), anchors=anchors)
+    from truestep.reference_impl.compiled import forces_of
+
+    (kind,) = forces_of(model)
+    spec = np.full((n, 3), 0.5)
+    forces.add_anchors(spec, x, v, anchors)
+    par = particles(np.ones(n))
+    for p in range(n):  # particle 2 has two anchors, added in the case's order
+        f = fk.anchors_at(kind, (0.5, 0.5, 0.5), tup(x[p]), tup(v[p]), 0.0, par, p)
+        np.testing.assert_array_equal(f, spec[p])
+    cut = fk.anchors_cut(kind, 2, 4)
+    f = fk.anchors_at(cut, (0.5, 0.5, 0.5), tup(x[2]), tup(v[2]), 0.0, par, 0)
+    np.testing.assert_array_equal(f, spec[2])
+
+
+@pytest.mark.parametrize("slide", [0.2, 0.9, 1.1, 5.0])
+@pytest.mark.parametrize("speed", [0.0, 1e-12, 1e-4])
+def test_friction_stops_a_particle_in_contact_as_the_numpy_pass_does(slide, speed):
+    """On a rough floor (mu = 0.5, a_N = -9.81): the particle stops within the step when its
+    tangential speed is below eps_v + mu |a_N| dt and its tangential force below
+    mu |F_N| (``slide`` times that limit), else it keeps sliding."""
+    dt, mu, mass = 1e-3, 0.5, 2.0
+    plane = ModelPlane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.3, mu)
+    x, v = np.array([[0.0, 0.0, 0.0]]), np.array([[speed, 0.0, 0.0]])
+    f = np.array([[slide * mu * 9.81 * mass, -9.81 * mass, 0.0]])
+    model = ParticleModel(mass=np.array([mass]), x0=x, v0=v, radius=np.zeros(1),
+                          fixed=np.zeros(1, bool), planes=[plane])
+    system = ParticleSystem(model)
+    on = PlaneCollisions([plane], model.radius, model.fixed, model.mass)._collide(
+        system, plane, np.array([0]), f, dt)
+    kp = Plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 0.3, mu, 0.0)
+    y, u, resting = collide(tup(x[0]), tup(v[0]), tup(f[0]), 1.0 / mass, 0.0, kp, dt)
+    assert resting == bool(on[0]) is True
+    np.testing.assert_array_equal(u, system.velocities[0])
+    np.testing.assert_array_equal(y, system.positions[0])
+    if speed > 0:  # (a particle at rest stays at rest in the pass either way)
+        assert (u[0] == 0.0) == (slide <= 1.0 and speed < 1e-3)
+
+
+def test_the_blow_up_checks_find_every_component_out_of_range():
+    from truestep.reference_impl.integrate import BLOWUP
+    from truestep.reference_impl.integrate_kernels import finite, first_bad
+
+    base = np.zeros((3, 4))
+    assert finite(base, base)
+    for value in (BLOWUP, -BLOWUP, np.inf, -np.inf, np.nan, 2 * BLOWUP, -2 * BLOWUP):
+        for which in range(2):
+            for c, p in ((0, 0), (1, 3), (2, 2)):
+                x, v = base.copy(), base.copy()
+                (x, v)[which][c, p] = value
+                assert not finite(x, v), (value, which, c, p)
+                xs, vs = np.zeros((5, 4, 3)), np.zeros((5, 4, 3))
+                (xs, vs)[which][3, p, c] = value
+                assert first_bad(xs, vs, 0, 4, 1, 5) == 3
+                assert first_bad(xs, vs, 0, 4, 1, 3) == -1  # not among these records
+                assert first_bad(xs, vs, 0, p, 1, 5) == -1  # nor among these particles
+    assert finite(base + 0.999 * BLOWUP, base - 0.999 * BLOWUP)
