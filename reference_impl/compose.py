@@ -6,7 +6,7 @@ and layout (:mod:`~truestep.reference_impl.solvers.explicit_rk_kernels`,
 and the derivative (:mod:`~truestep.reference_impl.particles_kernels`) are written once,
 against *slots*: named placeholders (:func:`slot`) for what a scene may or may not have,
 its force kinds, impulses and planes, an energy monitor, the method's step. A run fills
-the slots (:func:`~truestep.reference_impl.compiled.slots_for`): a kernel, a few lines of
+the slots (:func:`~truestep.reference_impl.step_slots.slots_for`): a kernel, a few lines of
 glue that call the kernels of the kinds the scene declares in order (:func:`glue`), or
 nothing. :func:`instantiate` then compiles the driver with every slot it reaches filled:
 a copy of each function that names a slot (directly or through what it calls), whose
@@ -45,7 +45,7 @@ that passing arrays between the functions it is made of costs nothing."""
 
 KERNEL_MODULES = ("forces_kernels", "collisions_kernels", "particles_kernels", "tiles",
                   "solvers/explicit_rk_kernels", "solvers/splitting_kernels",
-                  "integrate_kernels", "compose", "collisions", "integrate")
+                  "integrate_kernels", "compose", "step_slots", "collisions", "integrate")
 """The modules whose source a compiled loop is made of (beside this one's folder)."""
 
 FINGERPRINT = hashlib.sha256(b"".join(
