@@ -128,11 +128,13 @@ def _reaches(fn, slots: dict, memo: dict) -> bool:
 
 
 def instantiate(fn, slots: dict, *, options: dict | None = None, name: str | None = None,
-                _memo: dict | None = None) -> Dispatcher:
+                _memo: dict | None = None, _tag: str | None = None) -> Dispatcher:
     """``fn`` compiled with its slots filled from ``slots`` (slot name -> filling), and
     every function it calls that reaches a slot instantiated alike; compiled with
-    ``options`` (default :data:`INLINE`) under the qualified ``name`` (default its own)."""
+    ``options`` (default :data:`INLINE`) under the qualified ``name`` (default its own,
+    tagged with the fillings: :func:`copy_name`)."""
     memo = {} if _memo is None else _memo
+    tag = fillings_tag(slots) if _tag is None else _tag
     py = _py(fn)
     if py in memo:
         return memo[py]
@@ -143,9 +145,9 @@ def instantiate(fn, slots: dict, *, options: dict | None = None, name: str | Non
             value = slots[value.name]
             g[ident] = value
         if _function(value) and _reaches(value, slots, {}):
-            g[ident] = instantiate(value, slots, _memo=memo)
+            g[ident] = instantiate(value, slots, _memo=memo, _tag=tag)
     copy = FunctionType(py.__code__, g, py.__name__, py.__defaults__, py.__closure__)
-    copy.__qualname__ = name or py.__qualname__
+    copy.__qualname__ = name or copy_name(py.__qualname__, tag)
     copy.__doc__, copy.__module__ = py.__doc__, py.__module__
     memo[py] = njit(**(options or _copy_options(fn)))(copy)
     return memo[py]
@@ -158,11 +160,28 @@ def _copy_options(fn) -> dict:
     return {"error_model": "numpy", "_nrt": False, "inline": inline}
 
 
-def cache_name(base: str, slots: dict) -> str:
-    """A name for a loop compiled with these fillings: ``base`` and a hash of
-    :data:`FINGERPRINT` and the fillings (each kernel's name, each glue's source)."""
+def fillings_tag(slots: dict) -> str:
+    """A hash of :data:`FINGERPRINT` and the fillings (each kernel's name, each glue's
+    source): the same for the same composition in every process, else different."""
     text = FINGERPRINT + "".join(f"{k}={_label(v)};" for k, v in sorted(slots.items()))
-    return f"{base}_{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def cache_name(base: str, slots: dict) -> str:
+    """A name for a loop compiled with these fillings: ``base`` and :func:`fillings_tag`."""
+    return f"{base}_{fillings_tag(slots)}"
+
+
+def copy_name(qualname: str, tag: str) -> str:
+    """The qualified name of a copy made for the fillings tagged ``tag``.
+
+    A copy compiled on its own (not inlined) is a symbol of its loop's machine code, named
+    by numba from its qualified name, its types and a counter that starts afresh in every
+    process. Two loops loaded from numba's cache into one process may each hold a copy of
+    the same function made in a different process with the same count; the linker then
+    takes one for both, and one loop runs another's step. The tag keeps the names of
+    copies for different fillings apart."""
+    return f"{qualname}__{tag}"
 
 
 def _label(filling) -> str:

@@ -210,6 +210,67 @@ def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named
     assert compose.cache_name("drive", slots) != before
 
 
+TWO_FILLINGS = '''
+import sys
+import numpy as np
+from numba import njit
+from truestep.reference_impl.compose import COLD, LOOP, glue, instantiate, slot
+
+
+@slot
+def f(x):
+    """A slot."""
+
+
+@njit(**COLD)
+def middle(a):
+    for k in range(a.shape[0]):
+        a[k] = f(a[k])
+        if a[k] > 1e300:
+            a[k] = np.sqrt(a[k]) + np.sin(a[k]) * np.cos(a[k])
+
+
+def loop(a, n):
+    for _ in range(n):
+        middle(a)
+    return a[0]
+
+
+FILLINGS = {"plus": ["return x + 1.0"], "times": ["return x * 10.0"]}
+
+
+def compiled(name):
+    return instantiate(loop, {"f": glue(f, FILLINGS[name], {})}, name=f"loop_{name}",
+                       options=LOOP)
+
+
+if __name__ == "__main__":
+    print(*(compiled(name)(np.ones(3), 1) for name in sys.argv[1:]))
+'''
+
+
+def test_loops_from_the_cache_made_in_other_processes_keep_their_own_copies(tmp_path):
+    """Two loops, each with its own copy of a rarely called part compiled on its own
+    (``middle``, :data:`compose.COLD`, as the collision passes are; filled differently),
+    compiled and cached by two processes that count their functions alike, then both
+    loaded from the cache into a third: each runs its own copy (the copies' names differ
+    by their fillings, :func:`compose.copy_name`; with one name, the linker gave both
+    loops the first copy, and Heun's step ran Euler's)."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "two_fillings.py").write_text(TWO_FILLINGS)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_DISABLE_JIT": "0"}
+
+    def run(*names: str) -> list[str]:
+        return subprocess.run([sys.executable, "two_fillings.py", *names], cwd=tmp_path,
+                              env=env, capture_output=True, text=True, check=True).stdout.split()
+
+    assert run("plus") == ["2.0"] and run("times") == ["10.0"]
+    assert run("plus", "times") == ["2.0", "10.0"]
+
+
 def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named,
                                                                          monkeypatch):
     monkeypatch.setattr(compiled, "_PREPARED", {})
