@@ -81,8 +81,9 @@ class StabilitySpec:
     rel_tol : relative width at which bisection stops;
     quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses);
     min_steps : every run of the search takes at least this many steps;
-    budget_s : seconds of simulation after which the bisection stops where it is (the
-    note says so), so that no search holds the whole run up.
+    budget_s : a safety valve, s: a search still running after this long is a ``timeout``
+    row with no limit (searches are bounded by ``max_runs`` and ``rel_tol``, never by time,
+    so that every machine finds the same limit).
     """
 
     horizon: float
@@ -92,7 +93,7 @@ class StabilitySpec:
     rel_tol: float = 1e-3
     quick: bool = False
     min_steps: int = 5000  # truestep.stability.MIN_STEPS
-    budget_s: float = 10.0
+    budget_s: float = 300.0
 
 
 @dataclass

@@ -257,7 +257,7 @@ def _read_stability(f: Fields, limits: Limits) -> StabilitySpec | None:
         rel_tol=s.number("rel_tol", 1e-3, positive=True, below=1.0),
         quick=s.boolean("quick", False),
         min_steps=s.integer("min_steps", 5000, minimum=10, maximum=limits.steps),
-        budget_s=s.number("budget_s", 10.0, positive=True, at_most=limits.timeout_s),
+        budget_s=s.number("budget_s", 300.0, positive=True, at_most=limits.timeout_s),
     )
     if spec.dt_lo >= spec.dt_hi:
         raise s.error("dt_hi", f"must exceed dt_lo ({spec.dt_lo:g})")
@@ -302,12 +302,20 @@ def _exact_params(ref: Fields, fn) -> dict[str, object]:
 
 
 def _check_gate_steps(f: Fields, case: Case) -> None:
-    """A case's gate that reads one step (or tolerance) must name one its sweep runs."""
-    swept = set(case.dts) | set(case.quick_dts) | set(case.tolerances) | set(case.quick_tolerances)
+    """A case's gate that reads one step (or tolerance) must name one that its sweep runs,
+    and, for a case that ``--quick`` runs, one that its quick sweep runs too: a CI smoke run
+    (``truestep run --quick`` then ``truestep gate``) then finds a row for every gate."""
+    sweeps = [("sweep", set(case.dts) | set(case.tolerances))]
+    if case.in_quick:
+        sweeps.append(("quick sweep", set(case.quick_dts) | set(case.quick_tolerances)))
     for g in case.gates:
-        if g.dt is not None and not any(abs(g.dt - s) <= 1e-9 * s for s in swept):
-            raise CaseError(case.file, f"{g.where}.dt", f"{g.dt:g} is not a step or tolerance "
-                            f"of this case's sweep ({', '.join(f'{s:g}' for s in sorted(swept))})")
+        if g.dt is None:
+            continue
+        for which, swept in sweeps:
+            if not any(abs(g.dt - s) <= 1e-9 * s for s in swept):
+                raise CaseError(case.file, f"{g.where}.dt", f"{g.dt:g} is not a step or "
+                                f"tolerance of this case's {which} "
+                                f"({', '.join(f'{s:g}' for s in sorted(swept))})")
 
 
 def _exact_fn(ref: Fields, name: str):

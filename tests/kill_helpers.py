@@ -9,8 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
-TIMING_COLUMNS = ("wall_s", "repeats")
-"""The columns of the tables that depend on wall time (results.csv only has them)."""
+from truestep.runner import MACHINE_COLUMNS as TIMING_COLUMNS
 
 
 def snapshot(root: Path) -> dict[str, bytes]:

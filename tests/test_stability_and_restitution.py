@@ -12,7 +12,7 @@ from truestep.adapters import get_adapter
 from truestep.cases import load_cases
 from truestep.cases.exact import stability_limit
 from truestep.restitution import bounces
-from truestep.stability import MIN_STEPS, bisect_limit, energy_grows, is_stable
+from truestep.stability import MIN_STEPS, SearchTimeout, bisect_limit, energy_grows, is_stable
 
 T = np.linspace(0.0, 100.0, 20001)
 
@@ -82,14 +82,23 @@ def test_bisection_finds_a_known_boundary_within_its_budget():
     assert len(calls) == r.runs <= 30
 
 
-def test_bisection_stops_at_its_time_budget_with_the_bracket_reached():
-    def slow_stable_at(dt):
-        time.sleep(0.05)
+def test_a_slow_machine_finds_the_same_limit_and_only_the_safety_valve_is_a_timeout():
+    """The search is bounded by runs, not by seconds: slow calls give the same bracket as
+    fast ones; past ``budget_s`` it raises instead of reporting where it happened to be."""
+
+    def fast(dt):
         return dt <= 0.2
 
-    r = bisect_limit(slow_stable_at, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=0.2)
-    assert r.runs <= 7 and r.dt_limit <= 0.2 < r.dt_unstable
-    assert "budget" in r.note and f"{r.dt_limit:.4g}" in r.note
+    def slow(dt):
+        time.sleep(0.02)
+        return dt <= 0.2
+
+    quick, patient = (bisect_limit(f, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=60.0)
+                      for f in (fast, slow))
+    assert (quick.dt_limit, quick.dt_unstable, quick.runs) == (
+        patient.dt_limit, patient.dt_unstable, patient.runs)
+    with pytest.raises(SearchTimeout, match="safety limit"):
+        bisect_limit(slow, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=0.1)
 
 
 def exact_bouncing_ball(t, h0, e, g=9.81):

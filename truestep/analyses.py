@@ -17,7 +17,7 @@ from truestep.isolation import run_untimed, untimed_workers
 from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
-from truestep.stability import search_case
+from truestep.stability import SearchTimeout, search_case
 
 STABILITY_COLUMNS = ["case", "engine", "method", "dt_limit", "dt_limit_exact", "dt_unstable",
                      "runs", "status", "note"]
@@ -44,9 +44,13 @@ SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
 
 
 def _search(engine: str, case: Case, method: str, quick: bool):
+    """``(SearchResult or the safety valve's message, seconds)`` of one search."""
     adapter = get_adapter(engine)
     start = time.perf_counter()
-    result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    try:
+        result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    except SearchTimeout as err:
+        return str(err), time.perf_counter() - start
     return result, time.perf_counter() - start
 
 
@@ -94,6 +98,10 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
             _say(f"stability {row['case']} {row['engine']}/{row['method']}: {out.status}")
             return
         r, seconds = out.value
+        if isinstance(r, str):  # the safety valve fired: no limit from this machine's speed
+            row.update(status="timeout", note=r)
+            _say(f"stability {row['case']} {row['engine']}/{row['method']}: timeout ({r})")
+            return
         row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status="ok",
                    note=r.note)
         _say(f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "

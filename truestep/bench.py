@@ -382,7 +382,9 @@ def scaling_table(
     ``warmup_s`` (those of the warm-up children, outside the budget).
     """
     from truestep.cases.loader import library, load_case
+    from truestep.numerics import pin_threads
 
+    pin_threads()
     case = case or load_case(library()[RAIN_CASE])
     ns = sorted({round(float(s)) for s in sizes})
     if not ns or ns[0] < 1:

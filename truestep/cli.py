@@ -304,6 +304,58 @@ def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
     return tol
 
 
+def _narrowed(tables: dict, cases: set[str] | None, engines: set[str] | None) -> dict:
+    from truestep.baseline import narrow
+
+    return narrow(tables, cases=cases, engines=engines)
+
+
+def _baseline_scope(run_dir: Path, results: pd.DataFrame, args: argparse.Namespace,
+                    cases: list[Case]) -> tuple[set[str], set[str]]:
+    """The cases and engines a baseline is compared on: those the current run was asked
+    for (its ``run.json``; else those in its results), narrowed by ``--cases`` and
+    ``--engines``. Baseline rows outside them are not "vanished": the run never asked
+    for them."""
+    from truestep.report import read_run_record
+
+    record = read_run_record(run_dir) or {}
+    ran_cases = set(record.get("cases") or results["case"].astype(str))
+    ran_engines = set(record.get("engines") or results["engine"].astype(str))
+    if args.cases:
+        ran_cases &= {c.name for c in cases}
+    if args.engines:
+        ran_engines &= {e.strip() for e in args.engines.split(",") if e.strip()}
+    return ran_cases, ran_engines
+
+
+def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path,
+                     run_dir: Path) -> None:
+    """``--identical``: every non-timing cell equal to the baseline's, when both runs had
+    the same packages and floating-point environment (their ``run.json``); else one line
+    saying why the promise does not apply, and the tolerances alone decide."""
+    from truestep.baseline import identical
+    from truestep.numerics import differences
+    from truestep.report import read_run_record
+
+    old, new = read_run_record(base_dir), read_run_record(run_dir)
+    if old is None or new is None:
+        missing = base_dir if old is None else run_dir
+        print(f"--identical: {missing}/run.json is missing: cannot tell whether both runs "
+              "had the same packages; compared with tolerances only")
+        return
+    diff = differences(old.get("numerics", {}), new.get("numerics", {}))
+    if old.get("truestep") != new.get("truestep"):
+        diff.insert(0, f"truestep {old.get('truestep')} -> {new.get('truestep')}")
+    if diff:
+        print(f"--identical: not comparable bit for bit ({'; '.join(diff)[:300]}); "
+              "compared with tolerances only")
+        return
+    findings, cells = identical(baseline, current)
+    comparison.findings += findings
+    print(f"--identical: {cells} non-timing cells compared, "
+          f"{sum(f.change == 'differs' for f in findings)} differ")
+
+
 def cmd_gate(args: argparse.Namespace) -> int:
     from truestep import ci_outputs
     from truestep.baseline import compare
@@ -311,6 +363,10 @@ def cmd_gate(args: argparse.Namespace) -> int:
 
     results_path = Path(args.results)
     tables = _run_tables(results_path)
+    asked_engines = ({e.strip() for e in args.engines.split(",") if e.strip()}
+                     if args.engines else None)
+    if asked_engines is not None:
+        tables = _narrowed(tables, None, asked_engines)
     results = tables["results"]
     cases = load_cases(args.cases) if args.cases else _cases_of(results, results_path)
     engines = set(registered()) | set(results["engine"].astype(str))
@@ -332,11 +388,17 @@ def cmd_gate(args: argparse.Namespace) -> int:
         baseline = _run_tables(base_dir / "results.csv")
         if args.time_against and "/" not in args.time_against:
             raise UsageError(f"--time-against: expected ENGINE/METHOD, got {args.time_against!r}")
-        comparison = compare(baseline, tables, tolerances=_tolerances(args.tolerance, args.gates),
+        scope_cases, scope_engines = _baseline_scope(results_path.parent, results, args, cases)
+        baseline = _narrowed(baseline, scope_cases, scope_engines)
+        current = _narrowed(tables, scope_cases, scope_engines)
+        comparison = compare(baseline, current, tolerances=_tolerances(args.tolerance, args.gates),
                              time_against=args.time_against,
                              scales={c.name: c.error_scale for c in cases})
-    elif args.tolerance or args.time_against:
-        raise UsageError("--tolerance and --time-against compare against a baseline: add --baseline DIR")
+        if args.identical:
+            _check_identical(comparison, baseline, current, base_dir, results_path.parent)
+    elif args.tolerance or args.time_against or args.identical:
+        raise UsageError("--tolerance, --time-against and --identical compare against a "
+                         "baseline: add --baseline DIR")
 
     failed = [v for v in verdicts if v.verdict == "fail"]
     held = [v for v in verdicts if v.verdict == "pass"]
@@ -351,16 +413,20 @@ def cmd_gate(args: argparse.Namespace) -> int:
             print(v.line())
     worse = comparison.worse() if comparison is not None else []
     if comparison is not None:
+        shown = 0
         for f in comparison.findings:
-            if args.verbose or f.change in ("worse", "vanished"):
+            if args.verbose or f.change in ("worse", "vanished") or (
+                    f.change == "differs" and shown < 20):
+                shown += f.change == "differs"
                 print(f.line())
     passed = not failed and not reasons and not worse
     summary = f"{len(held)} gates held, {len(failed)} failed, {len(skipped)} not evaluated"
     if comparison is not None:
         n = {k: sum(f.change == k for f in comparison.findings)
-             for k in ("worse", "better", "appeared", "vanished")}
+             for k in ("worse", "better", "appeared", "vanished", "differs")}
         summary += (f"; baseline: {comparison.compared} rows compared, {n['worse']} worse, "
-                    f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished")
+                    f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished"
+                    + (f", {n['differs']} cells differ" if args.identical else ""))
     for r in reasons:
         print(f"FAIL {r}")
     print(summary)
@@ -440,6 +506,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_env(args: argparse.Namespace) -> int:
+    """``truestep env``: the variables that give this machine truestep's numbers, as shell
+    ``export`` lines (for processes truestep does not start itself: Dask workers)."""
+    import shlex
+
+    from truestep.numerics import environment
+
+    for key, value in environment().items():
+        print(f"export {key}={shlex.quote(os.environ.get(key, value))}")
+    return 0
+
+
 CASES_HELP = ("cases: names or shell globs of the case library, case files and directories, "
               "comma-separated (default: every case of the library); each item must match")
 ENGINES_HELP = ("engines: registered names or module:Class of an adapter, comma-separated "
@@ -504,6 +582,13 @@ def build_parser() -> argparse.ArgumentParser:
                       "its engine declares, on every smooth case with an exact solution")
     gate.add_argument("--baseline", default=None, metavar="DIR",
                       help="an earlier run's output directory to compare with, row by row")
+    gate.add_argument("--engines", default=None, metavar="NAMES",
+                      help="only the rows of these engines (comma-separated), for the gates and "
+                      "the baseline")
+    gate.add_argument("--identical", action="store_true",
+                      help="with --baseline: also require every non-timing cell to equal the "
+                      "baseline's, bit for bit (when both runs' run.json name the same packages "
+                      "and floating-point environment; else says why not and uses tolerances)")
     gate.add_argument("--tolerance", action="append", default=[], metavar="QUANTITY=X",
                       help="override a baseline tolerance (error, energy_drift, nfev, order, "
                       "dt_limit, e_error, wall_ratio); repeatable")
@@ -531,6 +616,13 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Draw the lecture's figures into DIR/figures.")
     fig.add_argument("--out", default="reports", metavar="DIR", help="output directory (default: reports)")
     fig.set_defaults(func=cmd_figures)
+
+    env = sub.add_parser("env", help="print the environment that gives truestep's numbers",
+                         description="Print, as shell export lines, the variables truestep sets "
+                         "in its own processes so that every machine computes the same numbers "
+                         "(one BLAS thread, the same OpenBLAS kernels, numpy's SIMD dispatch up "
+                         "to AVX2). Start Dask workers after `eval \"$(truestep env)\"`.")
+    env.set_defaults(func=cmd_env)
 
     from truestep.bench import BUDGET_S, SIZES
 

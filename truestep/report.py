@@ -53,19 +53,26 @@ def footer(argv: list[str]) -> str:
             versions.append(f"{p} {metadata.version(p)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{p} (not installed)")
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
-    except OSError:
-        rev = ""
+    rev = git_revision()
     return (
         "---\n\n"
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.system()} "
         f"{platform.release()}, Python {platform.python_version()}.  \n"
         f"Packages: {', '.join(versions)}.  \n"
+        f"Numerics: {numerics_line()}.  \n"
         f"Revision: {rev or 'unknown'}.  \n"
         f"Reproduce: `truestep {' '.join(argv) if argv else 'run'}`\n"
     )
+
+
+def numerics_line() -> str:
+    """The floating-point environment in a few words (:mod:`truestep.numerics`)."""
+    from truestep.numerics import fingerprint
+
+    fp = fingerprint()
+    simd = ", ".join(fp["numpy_simd"]) or "baseline only"
+    return (f"BLAS {'; '.join(fp['blas'])}; numpy SIMD dispatch {simd}"
+            + (" (TRUESTEP_NUMERICS=native)" if fp["native"] else ""))
 
 
 def middle(values: list[float]) -> float | None:
@@ -251,7 +258,49 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
 
 
 REPORT_FILES = ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
-                "index.html", "figures")
+                "index.html", "figures", "run.json")
+RUN_FILE = "run.json"
+"""What a run was asked for and what decided its numbers besides the code (:func:`run_record`)."""
+
+
+def git_revision() -> str:
+    """The short git revision of truestep's source, or ``""`` outside a checkout."""
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
+    except OSError:
+        return ""
+
+
+def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool,
+               argv: list[str]) -> dict:
+    """``run.json``: the truestep version and revision, the command, whether it was quick,
+    the cases and engines the run was asked for (in order), and the floating-point
+    environment (:func:`truestep.numerics.fingerprint`): with equal ``numerics`` and
+    revision, two runs' non-timing columns are equal bit for bit."""
+    from truestep import __version__
+    from truestep.numerics import fingerprint
+
+    return {"truestep": __version__, "revision": git_revision(),
+            "command": "truestep " + " ".join(argv or ["run"]), "quick": bool(quick),
+            "cases": [c.name for c in cases],
+            "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
+            "numerics": fingerprint()}
+
+
+def read_run_record(directory: Path) -> dict | None:
+    """The ``run.json`` of an output directory, or ``None`` when it has none (a run of an
+    older truestep) or it cannot be read as one."""
+    import json
+
+    path = Path(directory) / RUN_FILE
+    try:
+        if not path.is_file() or path.stat().st_size > 1 << 20:
+            return None
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) else None
 """What :func:`write_report` writes into ``out``; any other entry of ``out`` is kept."""
 
 
@@ -284,6 +333,10 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
             from truestep.bench import COLUMNS as SCALING_COLUMNS
 
             scaling.to_csv(stage / "scaling.csv", index=False, columns=SCALING_COLUMNS)
+        import json
+
+        (stage / RUN_FILE).write_text(json.dumps(run_record(cases, results, quick=quick,
+                                                            argv=argv), indent=1) + "\n")
         faults.point("report-csv")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,

@@ -74,6 +74,10 @@ def cheapest_table(cases: list[Case], results: pd.DataFrame) -> pd.DataFrame:
                 row[f"error <= {target:g} scale"] = "none of the runs"
                 continue
             cell = f"{_run_label(wall)}, {_fmt(float(wall['wall_s']))} s"
+            if wall["tied"]:
+                tied = wall["tied"].split("; ")
+                more = f" and {len(tied) - 3} more" if len(tied) > 3 else ""
+                cell += f" (tied within timing noise: {', '.join(tied[:3])}{more})"
             key = ("engine", "method", "dt")
             if [wall[k] for k in key] != [evals[k] for k in key]:
                 cell += f"; fewest evaluations: {_run_label(evals)}, {int(evals['nfev'])}"
@@ -155,6 +159,27 @@ def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> 
                                        "particle_steps_per_s", "error", "slower_by"])
 
 
+def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
+    """How many times as long the fastest engine takes as ``mine`` at the gate's step, with
+    the interval the timings' noise leaves (:func:`truestep.picks.noise_band`); engines
+    tied for fastest are named together."""
+    from truestep.picks import noise_band, tied_with_fastest
+
+    tied = others[tied_with_fastest(others)].sort_values(["engine", "method"])
+    names = " and ".join(f"{r.engine} / {r.method}" for r in tied.itertuples(index=False))
+    fastest = tied.loc[tied["wall_s"].astype(float).idxmin()]
+    w_e, w_r = float(fastest["wall_s"]), float(mine["wall_s"])
+    b_e = float(noise_band(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))[0])
+    b_r = float(noise_band(np.array([w_r]), np.array([mine.get("wall_s_spread", np.nan)]))[0])
+    low, high = (w_e - b_e) / (w_r + b_r), (w_e + b_e) / max(w_r - b_r, 1e-300)
+    who = (f"the fastest engine, {names}," if len(tied) == 1
+           else f"the fastest engines, {names} (tied within timing noise),")
+    return (f"At dt {_fmt(gate.dt)} s {who} take{'s' if len(tied) == 1 else ''} "
+            f"{low:.0f} to {high:.0f} times as long as {gate.engine} / {gate.method} "
+            f"({w_e / w_r:.0f} times by the median wall times; the interval is each time's "
+            f"noise band; gate: at least {gate.params['min']:g} times).\n")
+
+
 def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
     """For each case with a ``speedup`` gate: what modelling only what the scene needs is
     worth, the gated method against every engine at the same steps."""
@@ -175,12 +200,9 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
                 "particle-steps per second at the same step and the error against the exact "
                 "bounce solution; `slower_by` is its wall time over "
                 f"{g.engine} / {g.method}'s.\n")
-            if len(others):
-                fastest = others.sort_values("wall_s").iloc[0]
-                parts.append(
-                    f"At dt {_fmt(g.dt)} s the fastest engine, {fastest.engine} / "
-                    f"{fastest.method}, takes {fastest.slower_by:.0f} times as long as "
-                    f"{g.engine} / {g.method} (gate: at least {g.params['min']:g} times).\n")
+            mine = at[(at["engine"] == g.engine) & (at["method"] == g.method)]
+            if len(others) and len(mine):
+                parts.append(speedup_sentence(g, others, mine.iloc[0]))
             parts.append(md_table(with_units(table)))
     return parts
 
@@ -189,6 +211,19 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
 
 def _pair(r) -> str:
     return f"{r.engine} / {r.method}"
+
+
+def _tied_group(ranked: pd.DataFrame) -> pd.DataFrame:
+    """The head of a scorecard ranking (sorted by cases reached, then cost ratio) that
+    cannot be told apart by timing: the same cases reached, and cost ratios within
+    timing noise of the first's (:data:`truestep.picks.TIE_NOISE` on each side)."""
+    from truestep.picks import TIE_NOISE
+
+    top = ranked.iloc[0]
+    ratio = ranked["cost_ratio"].to_numpy(float)
+    same = (ranked["cases_reached"].to_numpy() == top.cases_reached) & (
+        ratio * (1 - TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE))
+    return ranked[same]
 
 
 def family_sentence(family: str, names: list[str], card: pd.DataFrame,
@@ -203,16 +238,21 @@ def family_sentence(family: str, names: list[str], card: pd.DataFrame,
     mine = card[card["family"] == family]
     parts = []
     fast = mine[np.isfinite(mine["cost_ratio"].to_numpy(float))].sort_values(
-        ["cases_reached", "cost_ratio"], ascending=[False, True])
+        ["cases_reached", "cost_ratio", "engine", "method"], ascending=[False, True, True, True])
     if len(fast):
         top = fast.iloc[0]
-        text = (f"for accuracy per second, **{_pair(top)}**: it reaches {SCORECARD_TARGET:g} of "
-                f"the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
-                f"{float(top.cost_ratio):.2f}x the fastest run's time (median)")
-        if len(fast) > 1:
-            nxt = fast.iloc[1]
+        group = _tied_group(fast)
+        names = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
+        tie = " (tied within timing noise)" if len(group) > 1 else ""
+        text = (f"for accuracy per second, {names}{tie}: "
+                f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
+                f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
+                f"{float(top.cost_ratio):.2g}x the fastest run's time (median)")
+        rest = fast.iloc[len(group):]
+        if len(rest):
+            nxt = rest.iloc[0]
             text += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
-                     f"{float(nxt.cost_ratio):.2f}x)")
+                     f"{float(nxt.cost_ratio):.2g}x)")
         parts.append(text)
     else:
         loose = picks[(picks["case"].isin(names)) & (picks["by"] == "wall_s")
@@ -272,6 +312,7 @@ def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict,
 def methods_section(cases: list[Case]) -> list[str]:
     """How the numbers are made, with every number read from the constant that sets it."""
     from truestep.analyses import BALL_RADIUS, DROP_HEIGHT, RESTITUTION_DTS, RESTITUTION_SET
+    from truestep.picks import TIE_NOISE
     from truestep.runner import Timing
     from truestep.stability import GROWTH_TOL, SETTLE_TOL
 
@@ -279,10 +320,18 @@ def methods_section(cases: list[Case]) -> list[str]:
     steps = sorted({c.stability.min_steps for c in cases if c.stability})
     lines = ["## How the numbers are made\n",
              f"- **Timing**: scenes are built outside the timed region; each case, engine and "
-             f"method runs in a process of its own, one at a time, warmed up for "
-             f"{timing.warmup_fraction:.0%} of the run first; runs shorter than "
-             f"{1000 * timing.budget_s / timing.max_repeats:.0f} ms are timed "
-             f"{timing.max_repeats} times (the median), longer ones once.",
+             f"method runs in a process of its own, one at a time, on one thread, warmed up "
+             f"for {timing.warmup_fraction:.0%} of the run first; runs shorter than "
+             f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
+             f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
+             f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
+             f"longer ones once; the wall time is the median and `wall_s_spread` half the "
+             f"interquartile range. Runs whose times lie within each other's noise "
+             f"(their spread, and at least {100 * TIE_NOISE:.0f}% of the time) are "
+             f"**tied**: a pick names them together.",
+             "- **One answer on every machine**: every column but the timings and the host "
+             "is the same, bit for bit, for the same revision and package versions "
+             "(`run.json` records them, and the floating-point environment).",
              "- **Engines as configured**: engine defaults that would distort a comparison "
              "are switched off (pybullet's linear and angular damping; pymunk's pixel-scale "
              "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "

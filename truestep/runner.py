@@ -29,38 +29,94 @@ if TYPE_CHECKING:
 
 RESULT_COLUMNS = [
     "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
-    "energy_drift_final", "nfev", "steps", "wall_s", "repeats", "t_fail", "missing", "message",
-    "case_source", "path", "host",
+    "energy_drift_final", "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail",
+    "missing", "message", "case_source", "path", "host",
 ]
 """The columns of ``results.csv`` (property columns follow, one per named property).
 ``case_source`` is the case's name when the case library holds it, else its file, so
 that ``truestep gate`` finds the case again; ``path`` is the engine's code path (the
 reference: ``compiled`` or ``numpy``); ``host`` the machine the row was timed on (empty
-for rows that did not run)."""
+for rows that did not run); ``wall_s_spread`` half the interquartile range of the timed
+runs (:func:`spread`)."""
+MACHINE_COLUMNS = ("wall_s", "wall_s_spread", "repeats", "host", "case_source")
+"""The columns of ``results.csv`` that depend on the machine and its load (timings, the
+host) or on where the case file lies (``case_source`` of a file outside the library).
+Every other column is the same, bit for bit, for the same revision and package versions on any
+machine (:mod:`truestep.numerics`), except the message of a row whose engine is not
+deterministic (:data:`NOT_REPEATABLE`)."""
 
 
-@dataclass
+@dataclass(frozen=True)
 class Timing:
     """How runs are timed: a short warm-up, a first timed run (whose trajectory is kept),
-    then more timed repeats while they fit in the budget.
+    then more timed runs until the timing is stable.
 
     The warm-up runs the same scene, engine and method for :attr:`warmup_fraction` of the
-    duration (JIT compilation, caches, lazy imports, first-call costs). Repeats:
-    ``clamp(budget_s / first time, 1, max_repeats)`` timed runs in all; the reported wall
-    time is their median, never including the warm-up or scene building. Runs shorter
-    than ``budget_s / max_repeats`` (17 ms) are the ones scheduling noise distorts most,
-    and they get all the repeats; a run of 50 ms or more is timed once.
+    duration (JIT compilation, caches, lazy imports, first-call costs). A first run
+    shorter than :attr:`min_total_s` is repeated until the timed runs add up to
+    :attr:`min_total_s` and number at least :attr:`min_repeats` (at most
+    :attr:`max_repeats`): short runs are the ones scheduling and timer noise distort most.
+    A run up to :attr:`long_run_s` is timed twice, so that its spread is known; a longer
+    one once (one run of that length is not moved by noise beyond a few percent). The
+    reported wall time is the median of the timed runs, and ``wall_s_spread`` half their
+    interquartile range (:func:`spread`). Neither the warm-up nor scene building is
+    timed. How many runs are timed depends on the machine's speed; nothing else does.
     """
 
-    budget_s: float = 0.05
-    max_repeats: int = 3
+    min_total_s: float = 0.05
+    min_repeats: int = 3
+    max_repeats: int = 25
+    long_run_s: float = 0.5
     warmup_fraction: float = 0.05
+
+    def runs_after(self, first_s: float) -> int:
+        """How many timed runs in all, after a first one of ``first_s`` seconds."""
+        if first_s >= self.long_run_s:
+            return 1
+        if first_s >= self.min_total_s:
+            return 2
+        wanted = int(np.ceil(self.min_total_s / max(first_s, 1e-9)))
+        return int(np.clip(wanted, self.min_repeats, self.max_repeats))
+
+
+QUICK_TIMING = Timing(min_total_s=0.005, min_repeats=2, max_repeats=5, long_run_s=0.05)
+"""``--quick`` runs time less: a smoke run, whose picks are still called with their spread."""
+
+
+def spread(walls: list[float]) -> float:
+    """Half the interquartile range of timed runs' wall times, s (half their range with
+    fewer than four runs; NaN for one run): how far the median may move with noise."""
+    if len(walls) < 2:
+        return float("nan")
+    if len(walls) < 4:
+        return (max(walls) - min(walls)) / 2
+    q25, q75 = np.percentile(walls, [25, 75])
+    return float(q75 - q25) / 2
+
+
+def _same_run(a: Trajectory, b: Trajectory) -> bool:
+    """Whether two runs of the same scene ended in the same state, bit for bit."""
+    if (a.status, a.nfev, a.steps, len(a.t)) != (b.status, b.nfev, b.steps, len(b.t)):
+        return False
+    pairs = [(a.t[-1:], b.t[-1:]), (a.x[-1:], b.x[-1:])]
+    if a.v is not None and b.v is not None:
+        pairs.append((a.v[-1:], b.v[-1:]))
+    return all(np.array_equal(p, q, equal_nan=True) for p, q in pairs)
+
+
+NOT_REPEATABLE = "not repeatable: timed runs of the same scene ended in different states"
+"""The note of a row whose engine gave another end state when run again (an engine that is
+not deterministic): its numbers may differ from run to run and machine to machine."""
 
 
 def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing, *,
                    warm_up: bool = True) -> Trajectory:
     """Warm up (unless this process has just run the same case and method), time, keep
-    the first timed trajectory; runs inside the child process."""
+    the first timed trajectory; runs inside the child process.
+
+    Every further timed run is checked to end where the first did, bit for bit; a run
+    that does not puts :data:`NOT_REPEATABLE` in the row's message.
+    """
     adapter = get_adapter(engine)
     if warm_up:
         short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
@@ -69,10 +125,16 @@ def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timi
     traj = adapter.simulate(case, method, dt)
     walls = [traj.wall_s]
     if traj.status == "ok":
-        n = int(np.clip(timing.budget_s / max(traj.wall_s, 1e-9), 1, timing.max_repeats))
-        walls += [adapter.simulate(case, method, dt).wall_s for _ in range(n - 1)]
+        repeatable = True
+        for _ in range(timing.runs_after(traj.wall_s) - 1):
+            again = adapter.simulate(case, method, dt)
+            walls.append(again.wall_s)
+            repeatable = repeatable and _same_run(traj, again)
         traj.wall_s = statistics.median(walls)
+        if not repeatable:
+            traj.message = "; ".join(m for m in (traj.message, NOT_REPEATABLE) if m)
     traj.extra["repeats"] = np.array(len(walls))
+    traj.extra["wall_s_spread"] = np.array(spread(walls))
     return traj
 
 
@@ -160,6 +222,7 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         nfev=traj.nfev,
         steps=traj.steps,
         wall_s=traj.wall_s,
+        wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
         repeats=int(traj.extra.get("repeats", 0)),
         t_fail=traj.t_fail,
         message=traj.message,
@@ -220,12 +283,15 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
 
 
 def preload() -> None:
-    """Load in this process what every forked run would otherwise load again: the
-    compiled spring loop and the compiled stepping loop of the reference implementation
-    (the engine modules are imported by :func:`plan`)."""
+    """Prepare this process for runs, once for every forked run: one thread for every BLAS
+    and OpenMP runtime (:func:`truestep.numerics.pin_threads`), the compiled spring loop
+    and the compiled stepping loop of the reference implementation (the engine modules
+    are imported by :func:`plan`)."""
+    from truestep.numerics import pin_threads
     from truestep.reference_impl.compiled import compile_all
     from truestep.reference_impl.forces import compile_springs
 
+    pin_threads()
     compile_springs()
     compile_all()
 
@@ -283,7 +349,7 @@ def run_matrix(
     """
     from truestep.cluster import SweepJob, host_name
 
-    timing = timing or Timing(max_repeats=1 if quick else 3)
+    timing = timing or (QUICK_TIMING if quick else Timing())
     preload()
     planned = [(case, engine, method, list(entries)) for case in cases for engine in engines
                for method, entries in itertools.groupby(plan(case, engine, quick=quick),

@@ -149,6 +149,11 @@ class SearchResult:
     note: str
 
 
+class SearchTimeout(Exception):
+    """A search still running when its safety limit (``[stability] budget_s``) ran out:
+    its row is ``timeout`` and reports no limit, so that no machine's speed decides one."""
+
+
 def bisect_limit(
     stable_at: Callable[[float], bool],
     dt_lo: float,
@@ -160,25 +165,31 @@ def bisect_limit(
 ) -> SearchResult:
     """Bisect (geometrically) for the boundary between stable and unstable steps.
 
-    Assumes stability is monotone in dt. Stops when ``dt_unstable / dt_limit - 1`` is
-    below ``rel_tol``, after ``max_runs`` calls of ``stable_at``, or once the calls have
-    taken ``budget_s`` seconds (the note then gives the bracket reached).
+    Assumes stability is monotone in dt. Bounded by work alone: it stops when
+    ``dt_unstable / dt_limit - 1`` is below ``rel_tol`` or after ``max_runs`` calls of
+    ``stable_at``, so the same code gives the same bracket on every machine. ``budget_s``
+    is a safety valve, not a bound: a search whose calls have taken longer raises
+    :class:`SearchTimeout` instead of reporting the bracket it happened to reach.
     """
     start = time.perf_counter()
+
+    def stable(dt: float) -> bool:
+        if time.perf_counter() - start > budget_s:
+            raise SearchTimeout(f"still searching after its {budget_s:g} s safety limit "
+                                f"([stability] budget_s), at {runs} runs: no limit reported")
+        return stable_at(dt)
+
     runs = 1
-    if not stable_at(dt_lo):
+    if not stable(dt_lo):
         return SearchResult(0.0, dt_lo, runs, f"unstable at every step tried (even {dt_lo:g} s)")
     runs += 1
-    if stable_at(dt_hi):
+    if stable(dt_hi):
         return SearchResult(dt_hi, math.inf, runs, f"stable at every step tried (up to {dt_hi:g} s)")
     lo, hi = dt_lo, dt_hi
     while hi / lo - 1 > rel_tol and runs < max_runs:
-        if time.perf_counter() - start > budget_s:
-            return SearchResult(lo, hi, runs, f"stopped at its {budget_s:g} s budget after "
-                                f"{runs} runs: the limit lies between {lo:.4g} and {hi:.4g} s")
         mid = math.sqrt(lo * hi)
         runs += 1
-        if stable_at(mid):
+        if stable(mid):
             lo = mid
         else:
             hi = mid
@@ -192,7 +203,8 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
 
     Each run covers the horizon, and at least :data:`MIN_STEPS` steps, recording every step.
     ``quick`` stops at 1% instead of the case's ``rel_tol`` and runs at least
-    :data:`QUICK_MIN_STEPS` steps. The search stops at ``budget_s`` seconds of runs.
+    :data:`QUICK_MIN_STEPS` steps. A search still running after ``budget_s`` seconds
+    raises :class:`SearchTimeout` (a safety valve: it never shortens a search).
     """
     from truestep.metrics import energy_behaviour
 

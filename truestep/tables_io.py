@@ -14,7 +14,7 @@ STATUSES = frozenset({"ok", "unstable", "crashed", "timeout", "unsupported", "sk
 
 NUMERIC = {
     "results": ("dt", "error", "energy_drift", "energy_drift_final", "nfev", "steps", "wall_s",
-                "repeats", "t_fail"),
+                "wall_s_spread", "repeats", "t_fail"),
     "stability": ("dt_limit", "dt_limit_exact", "dt_unstable", "runs"),
     "restitution": ("dt", "e_set", "bounce", "e_measured", "e_apex", "v_in", "v_out", "apex",
                     "penetration"),
