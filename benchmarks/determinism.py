@@ -89,12 +89,13 @@ RUN = re.compile(r"[\w.-]+ / [\w.-]+ \((?:dt|tol) [^)]*\)")
 BOLD = re.compile(r"\*\*([^*]+)\*\*")
 
 
-def picks(report: Path) -> dict[str, str]:
-    """The picks an ``index.md`` states, times and ratios left out: each cell of the
-    cheapest-run table (the runs it names) and each family sentence (the engines and
-    methods it names, in order)."""
+def picks(report: Path) -> dict[str, tuple[str, str]]:
+    """The picks an ``index.md`` states, times and ratios left out, as ``(named, group)``:
+    for each cell of the cheapest-run table the run it names by wall time and the runs
+    it names as tied with it; for each family sentence the first run named for accuracy
+    per second and every run it names there (runs tied with it, and the next)."""
     text = (report / "index.md").read_text()
-    found: dict[str, str] = {}
+    found: dict[str, tuple[str, str]] = {}
     summary = text.split("## Summary", 1)[-1].split("\n## ", 1)[0]
     rows = [line for line in summary.splitlines() if line.startswith("|")]
     if rows:
@@ -102,21 +103,28 @@ def picks(report: Path) -> dict[str, str]:
         for line in rows[2:]:
             cells = [c.strip() for c in line.strip("|").split("|")]
             for col, cell in zip(header[1:], cells[1:], strict=False):
-                found[f"cheapest {cells[0]} {col}"] = " | ".join(RUN.findall(cell)) or cell
+                by_wall = cell.split("; fewest evaluations", 1)[0]
+                runs = RUN.findall(by_wall)
+                named = runs[0] if runs else by_wall
+                found[f"cheapest {cells[0]} {col}"] = (named, " | ".join(sorted(runs)))
     choose = text.split("## Which engine, which method", 1)[-1].split("\n## ", 1)[0]
     for line in choose.splitlines():
         if line.startswith("- **"):
             family = BOLD.findall(line)[0]
-            names = re.findall(r"(?:\*\*|next |, )([\w.-]+ / [\w.-]+)", line)
-            found[f"family {family}"] = ", ".join(names)
+            speed = line.split("for accuracy per second, ", 1)[-1].split(";", 1)[0]
+            names = re.findall(r"\*\*([\w.-]+ / [\w.-]+)\*\*", speed)
+            found[f"family {family}"] = (names[0] if names else "", ", ".join(sorted(names)))
     return found
 
 
-def changed_picks(a: Path, b: Path) -> tuple[int, int, list[str]]:
+def changed_picks(a: Path, b: Path) -> tuple[int, int, int, list[str]]:
+    """(cells whose named run changed, cells whose tie group changed, cells, which)."""
     pa, pb = picks(a), picks(b)
     keys = sorted(set(pa) | set(pb))
-    changed = [k for k in keys if pa.get(k) != pb.get(k)]
-    return len(changed), len(keys), changed
+    named = [k for k in keys if pa.get(k, ("", ""))[0] != pb.get(k, ("", ""))[0]]
+    group = [k for k in keys if pa.get(k, ("", ""))[1] != pb.get(k, ("", ""))[1]]
+    return len(named), len(group), len(keys), [
+        f"{k}: {pa.get(k)} -> {pb.get(k)}" for k in keys if k in named or k in group]
 
 
 def main() -> None:
@@ -133,9 +141,10 @@ def main() -> None:
 
     def report(pair: str, a: Path, b: Path, seconds: str) -> None:
         cells = differing_cells(a, b)
-        n, total, which = changed_picks(a, b)
-        lines.append(f"{pair:10s} cells differing {sum(cells.values()):5d} {cells}  picks "
-                     f"changed {n}/{total}  ({seconds})")
+        named, group, total, which = changed_picks(a, b)
+        lines.append(f"{pair:10s} cells differing {sum(cells.values()):5d} {cells}  picks: "
+                     f"named run changed {named}/{total}, tie group changed {group}/{total}  "
+                     f"({seconds})")
         print(lines[-1], flush=True)
         for k in which[:40]:
             print(f"    {k}", flush=True)

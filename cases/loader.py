@@ -135,8 +135,7 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
     kind = f.string("kind", choices={"ode", "particles"})
     run = f.sub("run")
     duration = run.number("duration", positive=True)
-    dts = run.numbers("dt", positive=True, max_length=MAX_SWEEP)
-    quick_dts = run.numbers("quick_dt", dts[:2], positive=True, max_length=MAX_SWEEP)
+    dts, quick_dts = _read_steps(run, duration)
     tolerances = run.numbers("tolerances", [1e-4, 1e-6, 1e-8], positive=True, max_length=MAX_SWEEP)
     quick_tolerances = run.numbers("quick_tolerances", tolerances[:2], positive=True,
                                    max_length=MAX_SWEEP)
@@ -299,6 +298,38 @@ def _exact_params(ref: Fields, fn) -> dict[str, object]:
                 raise ref.error(key, f"expected a number, a string or a boolean, got {short(value)}")
             out[key] = value
     return out
+
+
+STEP_FIT = 1e-9
+"""How close ``duration / dt`` must be to a whole number (relative): a run takes exactly the
+step its row is labelled with."""
+
+
+def _read_steps(run: Fields, duration: float) -> tuple[list[float], list[float]]:
+    """The fixed-step sweep of ``[run]``: ``dt`` and ``quick_dt`` (s), each a whole number
+    of steps into the duration, or ``steps`` and ``quick_steps`` (step counts, for a
+    duration such as a period that no round step divides; dt = duration / steps)."""
+    if run.has("steps"):
+        for key in ("dt", "quick_dt"):
+            if run.has(key):
+                raise run.error(key, "give the sweep as dt or as steps, not both")
+        counts = run.numbers("steps", positive=True, max_length=MAX_SWEEP)
+        quick = run.numbers("quick_steps", counts[:2], positive=True, max_length=MAX_SWEEP)
+        for key, values in (("steps", counts), ("quick_steps", quick)):
+            if any(v != round(v) or v > 1e15 for v in values):
+                raise run.error(key, f"step counts are whole numbers, got {short(values)}")
+        return [duration / n for n in counts], [duration / n for n in quick]
+    dts = run.numbers("dt", positive=True, max_length=MAX_SWEEP)
+    quick_dts = run.numbers("quick_dt", dts[:2], positive=True, max_length=MAX_SWEEP)
+    for key, values in (("dt", dts), ("quick_dt", quick_dts)):
+        for dt in values:
+            n = duration / dt
+            if n >= 0.5 and abs(n - round(n)) > STEP_FIT * n:
+                raise run.error(key, f"{dt:g} s does not divide the duration {duration:.10g} s "
+                                f"({n:.6g} steps): the run would take steps of "
+                                f"{duration / max(round(n), 1):.6g} s; choose a duration of "
+                                "whole steps, or give the sweep as `steps`")
+    return dts, quick_dts
 
 
 def _check_gate_steps(f: Fields, case: Case) -> None:

@@ -146,7 +146,8 @@ def bounce_case(e: float, dt: float) -> Case:
         dimension=2,
     )
     t_first = np.sqrt(2 * DROP_HEIGHT / GRAVITY)
-    duration = t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25
+    steps = int(np.ceil((t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25) / dt))
+    duration = steps * dt  # whole steps: the run steps exactly the dt its rows are labelled with
     return Case(
         name=f"bounce-e{e:g}", file="<restitution sweep>", title="restitution sweep",
         description="", kind="particles", duration=duration, dts=[dt], quick_dts=[dt],
