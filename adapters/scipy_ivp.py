@@ -9,7 +9,7 @@ from types import MappingProxyType
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from truestep.adapters.base import Trajectory, finite_until
+from truestep.adapters.base import EnergyExtremes, Trajectory, finite_until
 from truestep.adapters.reference import build_system, trajectory_from_states
 from truestep.cases.case import Case
 from truestep.reference_impl.particles import total_energy
@@ -52,7 +52,10 @@ class ScipyAdapter:
     def missing(self, case: Case, method: str) -> set[str]:
         return case.features - self.capabilities
 
-    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False
+                 ) -> Trajectory:
+        """Run ``case`` with solve_ivp's ``method`` at tolerance ``dt``; ``monitor``: also
+        the energy's extremes over every accepted step (before the records are thinned)."""
         system = build_system(case)
         x0 = system.get_state()
         jac = None
@@ -78,6 +81,7 @@ class ScipyAdapter:
             return _unstable_at(case, system, x0, bad, calls[0], time.perf_counter() - start)
         wall = time.perf_counter() - start
         t, states = sol.t, sol.y.T
+        extremes = _extremes(case, system, t, states) if monitor else None
         if len(t) > case.max_records + 1:
             keep = np.unique(np.linspace(0, len(t) - 1, case.max_records + 1).round().astype(int))
             t, states = t[keep], states[keep]
@@ -89,12 +93,23 @@ class ScipyAdapter:
             energy = total_energy(case.model, x, v)
         status, t_fail = finite_until(states, t)
         message = ""
-        if not sol.success:
-            status, t_fail, message = "unstable", float(sol.t[-1]), sol.message
+        if not sol.success and status == "ok":  # finite, but scipy could not go on
+            status, t_fail, message = "solver-failed", float(sol.t[-1]), sol.message
         return Trajectory(
             t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail,
             nfev=int(sol.nfev), steps=len(sol.t) - 1, wall_s=wall, message=message,
+            extremes=extremes,
         )
+
+
+def _extremes(case: Case, system, t: np.ndarray, states: np.ndarray) -> EnergyExtremes | None:
+    """The energy's extremes over every accepted step."""
+    x, v = trajectory_from_states(case, t, states)
+    if case.kind == "ode":
+        e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
+        return None if e[0] is None else EnergyExtremes.of(t, np.array(e, dtype=float))
+    with np.errstate(all="ignore"):
+        return EnergyExtremes.of(t, total_energy(case.model, x, v))
 
 
 class _NonFinite(Exception):

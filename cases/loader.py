@@ -40,7 +40,7 @@ MAX_SWEEP = 50
 """The most steps (or tolerances) one sweep lists: each is a row per engine and method."""
 EXACT_CHECK_S = 30.0
 """How long checking that an exact solution fits its case may take, s."""
-REFERENCE_KEYS = {"exact", "error", "scale", "conservative"}
+REFERENCE_KEYS = {"exact", "error", "scale", "conservative", "escape_energy"}
 PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
 """``[reference]`` parameters that properties read (:mod:`truestep.properties`)."""
 
@@ -172,9 +172,10 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
 
     ref = f.sub("reference", {})
     exact = ref.string("exact", None)
-    error_norm = ref.string("error", "final", choices={"final", "max"})
+    error_norm = ref.string("error", "max", choices={"final", "max"})
     error_scale = ref.number("scale", 1.0, positive=True)
     conservative = ref.boolean("conservative", False)
+    escape_energy = ref.number("escape_energy", None)
     fn = _exact_fn(ref, exact) if exact is not None else None
     if exact is not None and fn is None:
         raise ref.error("exact", f"no exact solution named {short(exact)}; known: "
@@ -202,6 +203,7 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
         error_norm=error_norm,
         error_scale=error_scale,
         conservative=conservative,
+        escape_energy=escape_energy,
         max_records=max_records,
         gates=_read_gates(f),
         stability=stability,
@@ -324,7 +326,7 @@ def _read_steps(run: Fields, duration: float) -> tuple[list[float], list[float]]
     for key, values in (("dt", dts), ("quick_dt", quick_dts)):
         for dt in values:
             n = duration / dt
-            if n >= 0.5 and abs(n - round(n)) > STEP_FIT * n:
+            if n >= 1 and abs(n - round(n)) > STEP_FIT * n:
                 raise run.error(key, f"{dt:g} s does not divide the duration {duration:.10g} s "
                                 f"({n:.6g} steps): the run would take steps of "
                                 f"{duration / max(round(n), 1):.6g} s; choose a duration of "

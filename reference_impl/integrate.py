@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.base import Solver, SolverFailed
 
 BLOWUP = 1e12
 """A state component beyond this magnitude counts as a blow-up (SI units throughout)."""
@@ -32,9 +33,14 @@ class Run:
     extra : dict of str to ndarray, shape (T, ...)
         The system's :meth:`~truestep.reference_impl.system.System.observe` at each record.
     status : str
-        ``ok``, or ``unstable`` if the state went non-finite or beyond ``BLOWUP``.
+        ``ok``; ``unstable`` if the state went non-finite or beyond ``BLOWUP``;
+        ``solver-failed`` if a step's equations had no solution the solver found
+        (:class:`~truestep.reference_impl.solvers.base.SolverFailed`).
     t_fail : float or None
-        Time of the first step at which the state was found unstable.
+        Time of the first step at which the state was found unstable (or the solver
+        failed).
+    message : str
+        What the solver said when it stopped the run, or ``""``.
     """
 
     t: np.ndarray
@@ -45,6 +51,7 @@ class Run:
     extra: dict[str, np.ndarray]
     status: str = "ok"
     t_fail: float | None = None
+    message: str = ""
 
 
 def record_indices(n_steps: int, max_records: int) -> np.ndarray:
@@ -55,7 +62,8 @@ def record_indices(n_steps: int, max_records: int) -> np.ndarray:
 
 
 def integrate(
-    solver: Solver, t_end: float, dt: float, *, max_records: int = 2000
+    solver: Solver, t_end: float, dt: float, *, max_records: int = 2000,
+    record_at: np.ndarray | None = None, on_step: Callable[[], None] | None = None,
 ) -> Run:
     """Step ``solver.system`` from its current time to ``t_end``.
 
@@ -63,12 +71,17 @@ def integrate(
     adaptive solver takes steps of its own choosing, at most ``t_end - t`` each, and
     every accepted step is recorded. After each step the system's ``between_steps``
     runs (collisions, emitters, lifetimes). Stepping stops at the first non-finite or
-    runaway state, which is recorded with status ``unstable``.
+    runaway state, which is recorded with status ``unstable``, or at a step the solver
+    could not solve (status ``solver-failed``, with its message).
+
+    ``record_at``: the step indices (``0..n``) a fixed-step run records, instead of
+    :func:`record_indices`'s; ``on_step``: called after every accepted step of an adaptive
+    solver (to keep its continuous extension, say).
     """
     system = solver.system
     t0 = system.get_time()
     ts, xs, obs = [t0], [system.get_state()], [system.observe()]
-    status, t_fail, steps = "ok", None, 0
+    status, t_fail, steps, message = "ok", None, 0, ""
     start = time.perf_counter()
     if solver.adaptive:
         t = t0
@@ -79,9 +92,14 @@ def integrate(
         while t_end - t > slack:
             try:
                 h = solver.step(t_end - t)
-            except FloatingPointError:
-                status, t_fail = "unstable", t
+            except FloatingPointError as err:
+                status, t_fail, message = "unstable", t, str(err)
                 break
+            except SolverFailed as err:
+                status, t_fail, message = "solver-failed", t, str(err)
+                break
+            if on_step is not None:
+                on_step()
             system.between_steps(h)
             steps += 1
             t = system.get_time()
@@ -96,13 +114,17 @@ def integrate(
     else:
         n_steps = round((t_end - t0) / dt)
         marks = np.zeros(n_steps + 1, dtype=bool)
-        marks[record_indices(n_steps, max_records)] = True
+        marks[record_indices(n_steps, max_records) if record_at is None
+              else np.asarray(record_at, int)] = True
         checked = 1  # records before this index are known finite
         for i in range(1, n_steps + 1):
             try:
                 solver.step(dt)
-            except FloatingPointError:
-                status, t_fail = "unstable", system.get_time()
+            except FloatingPointError as err:
+                status, t_fail, message = "unstable", system.get_time(), str(err)
+                break
+            except SolverFailed as err:
+                status, t_fail, message = "solver-failed", system.get_time(), str(err)
                 break
             system.between_steps(dt)
             steps = i
@@ -126,7 +148,8 @@ def integrate(
                 break
     wall = time.perf_counter() - start
     extra = {k: np.array([o[k] for o in obs]) for k in obs[0]}
-    return Run(np.array(ts), np.array(xs), solver.nfev, steps, wall, extra, status, t_fail)
+    return Run(np.array(ts), np.array(xs), solver.nfev, steps, wall, extra, status, t_fail,
+               message)
 
 
 def _finite(x: np.ndarray) -> bool:

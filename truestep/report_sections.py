@@ -314,7 +314,7 @@ def methods_section(cases: list[Case]) -> list[str]:
     from truestep.analyses import BALL_RADIUS, DROP_HEIGHT, RESTITUTION_DTS, RESTITUTION_SET
     from truestep.picks import TIE_NOISE
     from truestep.runner import Timing
-    from truestep.stability import GROWTH_TOL, SETTLE_TOL
+    from truestep.stability import GROWTH_TOL, LEAVE_TOL, RISE_TOL
 
     timing = Timing()
     steps = sorted({c.stability.min_steps for c in cases if c.stability})
@@ -337,23 +337,32 @@ def methods_section(cases: list[Case]) -> list[str]:
              "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "
              "or clamp is added anywhere.",
              f"- **Errors** are distances from the exact solution (or, where none exists, "
-             f"from a fine run of the reference that the case names) in the case's units; "
-             f"the targets {', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of "
-             f"each case's scale.",
-             f"- **Unstable**: the state goes non-finite, or the energy of a scene without "
-             f"energy sources keeps growing through every quarter of the run; in a search, "
-             f"its late half's peak rises above the early half's band by more than "
-             f"{GROWTH_TOL:g} of the band's width, or, in a dissipative scene, its late "
-             f"half's median stays above the start by more than {SETTLE_TOL:g} of the energy "
-             f"it gave off. Searches bisect the step over each case's horizon, with at least "
-             f"{', '.join(str(s) for s in steps)} steps per run.",
+             f"from a fine run of the reference that the case names, known along the whole "
+             f"run) in the case's units, the worst over the run (`error`; `error_final` at "
+             f"the end, `error_v` the velocities'); the targets "
+             f"{', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of each case's "
+             f"scale. **Energy drift** is the energy error over the case's energy scale (the "
+             f"largest kinetic energy, or swing of potential energy, along the exact motion: "
+             f"the same wherever the potential's zero lies), over every step.",
+             f"- **Unstable**: the state goes non-finite; or the motion does what the scene "
+             f"cannot: a bound orbit reaches its escape energy, a damped scene rises more "
+             f"than {RISE_TOL:g} of its energy scale above its start, a conservative scene "
+             f"stays more than {LEAVE_TOL:g} of it above its start through the late half of "
+             f"the run, or the energy keeps growing through every quarter of the run. A "
+             f"solver that cannot solve a step is `solver-failed`, never unstable. Searches "
+             f"bisect the step over each case's horizon, with at least "
+             f"{', '.join(str(s) for s in steps)} steps per run; there the late half's peak "
+             f"may also not rise above the early half's band by more than {GROWTH_TOL:g} of "
+             f"its width; the limit found is checked below itself for a boundary that is not "
+             f"monotone.",
              f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
              f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
              f"{SURVIVAL_ENERGY:g} of the energy.",
              f"- **Restitution**: a ball of radius {BALL_RADIUS:g} m dropped from "
              f"{DROP_HEIGHT:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
-             f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s; per bounce "
-             f"from the rebound and impact speeds and from apex heights, each read from the "
-             f"first sample outside the contact.",
+             f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s, every step "
+             f"recorded; per bounce from the rebound and impact speeds (the samples either "
+             f"side of the contact) and from apex heights (the highest height each flight "
+             f"reached at a step).",
              ""]
     return lines
