@@ -324,7 +324,7 @@ def _read_steps(run: Fields, duration: float) -> tuple[list[float], list[float]]
     for key, values in (("dt", dts), ("quick_dt", quick_dts)):
         for dt in values:
             n = duration / dt
-            if n >= 0.5 and abs(n - round(n)) > STEP_FIT * n:
+            if n >= 1 and abs(n - round(n)) > STEP_FIT * n:
                 raise run.error(key, f"{dt:g} s does not divide the duration {duration:.10g} s "
                                 f"({n:.6g} steps): the run would take steps of "
                                 f"{duration / max(round(n), 1):.6g} s; choose a duration of "
