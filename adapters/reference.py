@@ -94,13 +94,16 @@ class ReferenceAdapter:
         cls = get_solver(method)
         if cls.needs_second_order and not isinstance(system, SecondOrderSystem):
             raise TypeError(f"{method} needs a position/velocity split, {case.name} has none")
+        samples = None
         if cls.adaptive:
             solver = cls(system, rtol=dt, atol=dt)
             step = case.duration
+            samples = np.linspace(0.0, case.duration, case.max_records + 1)
         else:
             solver = cls(system)
             step = case.steps_for(dt)[1]
-        run = integrate(solver, case.duration, step, max_records=case.max_records)
+        run = integrate(solver, case.duration, step, max_records=case.max_records,
+                        sample_at=samples)
         x, v = trajectory_from_states(case, run.t, run.x)
         alive = run.extra.get("alive")
         if case.kind == "ode":

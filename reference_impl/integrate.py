@@ -64,6 +64,7 @@ def record_indices(n_steps: int, max_records: int) -> np.ndarray:
 def integrate(
     solver: Solver, t_end: float, dt: float, *, max_records: int = 2000,
     record_at: np.ndarray | None = None, on_step: Callable[[], None] | None = None,
+    sample_at: np.ndarray | None = None,
 ) -> Run:
     """Step ``solver.system`` from its current time to ``t_end``.
 
@@ -76,7 +77,14 @@ def integrate(
 
     ``record_at``: the step indices (``0..n``) a fixed-step run records, instead of
     :func:`record_indices`'s; ``on_step``: called after every accepted step of an adaptive
-    solver (to keep its continuous extension, say).
+    solver (to keep its continuous extension, say); ``sample_at``: times (s) at which an
+    adaptive solver with a continuous extension also records the run between its steps.
+
+    An adaptive solver with a continuous extension (``solver.dense()``) stops each step at
+    the first event the system watches for (:meth:`~truestep.reference_impl.system.System.event_watch`:
+    a particle reaching a plane, friction stopping it), and the passes act there. A step
+    cut at an event is not recorded when ``sample_at`` is given (its state is the instant
+    of a jump, two-valued); the samples around it are.
     """
     system = solver.system
     t0 = system.get_time()
@@ -89,7 +97,15 @@ def integrate(
         # ``extra`` keeps the keys of the first observation: if it has none, nothing
         # observed later would be kept, so the system is not asked again.
         observed = bool(obs[0])
+        locate = hasattr(solver, "dense")
+        grid = np.asarray(sample_at, float) if sample_at is not None and locate else None
+        next_sample = 0
+        if locate:
+            system.located = True
+            system.rest_height = float(getattr(solver, "atol", 0.0))
         while t_end - t > slack:
+            watch = system.event_watch() if locate else None
+            g0 = watch(system.get_state()) if watch is not None else None
             try:
                 h = solver.step(t_end - t)
             except FloatingPointError as err:
@@ -100,15 +116,33 @@ def integrate(
                 break
             if on_step is not None:
                 on_step()
+            full = h
+            if watch is not None:
+                h = _stop_at_event(system, solver, watch, g0, t, h)
+            if grid is not None:  # the run between steps, by the solver's continuous extension
+                dense = solver.dense()
+                while next_sample < len(grid) and grid[next_sample] < t + h - slack:
+                    if grid[next_sample] > t + slack:
+                        ts.append(float(grid[next_sample]))
+                        xs.append(dense(grid[next_sample]))
+                        if observed:
+                            obs.append(system.observe())
+                    next_sample += 1
             system.between_steps(h)
             steps += 1
             t = system.get_time()
             x = system.get_state()
-            ts.append(t)
-            xs.append(x)
-            if observed:
-                obs.append(system.observe())
+            if h == full or grid is None or t_end - t <= slack:  # not a step cut at an event
+                ts.append(t)
+                xs.append(x)
+                if observed:
+                    obs.append(system.observe())
             if not _well_inside(x) and not _finite(x):
+                if ts[-1] != t:
+                    ts.append(t)
+                    xs.append(x)
+                    if observed:
+                        obs.append(system.observe())
                 status, t_fail = "unstable", t
                 break
     else:
@@ -150,6 +184,41 @@ def integrate(
     extra = {k: np.array([o[k] for o in obs]) for k in obs[0]}
     return Run(np.array(ts), np.array(xs), solver.nfev, steps, wall, extra, status, t_fail,
                message)
+
+
+EVENT_PRECISION = 1e-12
+"""An event is located to this fraction of the run's time (at least 1 s of it)."""
+
+
+def _stop_at_event(system, solver, watch, g0: np.ndarray, t0: float, h: float) -> float:
+    """Cut the step just taken back to its first event, if one happened in it.
+
+    The components of ``watch`` that went from ``>= 0`` (at the start, ``g0``) to ``< 0``
+    (at the end) mark events; the solver's continuous extension (``solver.dense()``) is
+    bisected, on those components alone (``watch.focus``), for the first time any of
+    them is below zero, to :data:`EVENT_PRECISION`, and the system is set to the state
+    just there. Returns the step kept (s). An event at the very start of the step is
+    left to the pass at its end (no step of zero length)."""
+    g1 = watch(system.get_state())
+    crossing = (g0 >= 0) & (g1 < 0)
+    if not crossing.any():
+        return h
+    dense = solver.dense()
+    index, values = watch.focus(crossing)
+    lo, hi = t0, t0 + h
+    precision = EVENT_PRECISION * max(1.0, abs(t0 + h))
+    while hi - lo > precision:
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if (values(dense(mid, index)) < 0).any():
+            hi = mid
+        else:
+            lo = mid
+    if hi - t0 <= precision:
+        return h
+    system.set_state(dense(hi), hi)
+    return hi - t0
 
 
 def _finite(x: np.ndarray) -> bool:

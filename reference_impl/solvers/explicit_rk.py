@@ -402,13 +402,19 @@ class DenseStep:
     hk7: np.ndarray
     hdk: np.ndarray
 
-    def __call__(self, t: float) -> np.ndarray:
-        """The state at time ``t`` (s) within the step, shape (dim,)."""
+    def __call__(self, t: float, index: np.ndarray | None = None) -> np.ndarray:
+        """The state at time ``t`` (s) within the step, shape (dim,); or only its
+        components ``index``."""
         theta = (t - self.t0) / self.h
-        r2 = self.x1 - self.x0
-        r3 = self.hk1 - r2
-        r4 = r2 - self.hk7 - r3
-        return self.x0 + theta * (r2 + (1 - theta) * (r3 + theta * (r4 + (1 - theta) * self.hdk)))
+        if index is None:
+            x0, x1, hk1, hk7, hdk = self.x0, self.x1, self.hk1, self.hk7, self.hdk
+        else:
+            x0, x1, hk1, hk7, hdk = (a[index] for a in (self.x0, self.x1, self.hk1, self.hk7,
+                                                        self.hdk))
+        r2 = x1 - x0
+        r3 = hk1 - r2
+        r4 = r2 - hk7 - r3
+        return x0 + theta * (r2 + (1 - theta) * (r3 + theta * (r4 + (1 - theta) * hdk)))
 
 
 def _rms(a: np.ndarray) -> float:
