@@ -280,7 +280,7 @@ or emitters; on the cloth the two round apart, :data:`ROUNDED_STEPS`)."""
 @pytest.mark.parametrize(("name", "tol"), AGREED_WITH_SCIPY,
                          ids=[f"{n}-{t:g}" for n, t in AGREED_WITH_SCIPY])
 def test_the_steps_evaluations_and_states_of_scipys_rk45(case_named, runs, name, tol):
-    case = case_named(name)
+    case = recorded_case(case_named(name))
     theirs = get_adapter("scipy").simulate(case, "RK45", tol)
     new, _ = runs(name, tol)
     assert (new.steps, new.nfev) == (theirs.steps, theirs.nfev)
