@@ -51,7 +51,7 @@ def test_gate_fails_naming_measured_and_required(quick_report, tmp_path, capsys)
     assert main(["gate", "--results", str(path), "--cases", "circle-field"]) == 1
     out = capsys.readouterr().out
     assert "FAIL circle-field gates[2] order reference/rk4" in out
-    assert "measured order 1.99" in out and "required 4 +- 0.2" in out
+    assert "measured order 2.0" in out and "required 4 +- 0.2" in out
 
 
 def test_bad_input_exits_2_with_one_line_and_loses_nothing(quick_report, tmp_path, capsys):
