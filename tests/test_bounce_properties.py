@@ -14,6 +14,8 @@ floor under soft contact) gives ~100% errors.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -98,7 +100,7 @@ def test_a_flight_that_is_not_ballistic_is_measured_by_the_heights_it_reaches(ca
     here from the bounce steps this loop knows."""
     case = case_named("bouncing-ball")
     dt = 4e-3
-    n = int(round(2.5 / dt))
+    n = round(2.5 / dt)
     u, w = np.empty(n + 1), np.empty(n + 1)
     u[0], w[0] = H0, 0.0
     hits = []
@@ -112,7 +114,7 @@ def test_a_flight_that_is_not_ballistic_is_measured_by_the_heights_it_reaches(ca
     x, v = np.zeros((n + 1, 1, 3)), np.zeros((n + 1, 1, 3))
     x[:, 0, 1], v[:, 0, 1] = u + R, w
     traj = Trajectory(t=t, x=x, v=v, energy=None, steps=n)
-    reached = np.array([u[a:b].max() for a, b in zip(hits[:3], hits[1:4], strict=True)])
+    reached = np.array([u[a:b].max() for a, b in itertools.pairwise(hits[:4])])
     extrapolated = np.array([u[a] + w[a] ** 2 / (2 * G) for a in hits[:3]])
     exact = H0 * E ** (2 * np.arange(1, 4))
     want = float(np.max(np.abs(reached / exact - 1)))

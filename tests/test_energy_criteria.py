@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from truestep.adapters import get_adapter
+from truestep.energy_scale import energy_scale
 from truestep.metrics import energy_behaviour
 from truestep.runner import Timing, run_one
-from truestep.energy_scale import energy_scale
 from truestep.stability import energy_grows, energy_keeps_growing, is_stable
 
 T = np.linspace(0.0, 10.0, 4001)

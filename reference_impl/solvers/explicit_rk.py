@@ -374,6 +374,9 @@ class DormandPrince54(Solver):
             rejected = True
             self.n_rejected += 1
             if h < 1e-14 * max(1.0, abs(t)):
+                if not np.isfinite(err):
+                    raise FloatingPointError(f"dopri5: non-finite state or derivative at "
+                                             f"t={t:.6g}")
                 raise SolverFailed(f"dopri5: step size underflow at t={t:.6g}: the error "
                                    "estimate stays above the tolerance at every step size")
         self._f0 = f_new  # a new array (System.derivative's contract): kept, not copied
