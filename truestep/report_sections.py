@@ -320,8 +320,10 @@ def methods_section(cases: list[Case]) -> list[str]:
     steps = sorted({c.stability.min_steps for c in cases if c.stability})
     lines = ["## How the numbers are made\n",
              f"- **Timing**: scenes are built outside the timed region; each case, engine and "
-             f"method runs in a process of its own, one at a time, on one thread, warmed up "
-             f"for {timing.warmup_fraction:.0%} of the run first; runs shorter than "
+             f"method runs in a process of its own, one at a time, on one thread; each row is "
+             f"first run untimed and watched at every step (its numbers come from that run, "
+             f"which also warms the process up), then timed, each timed run checked to end "
+             f"where it did; runs shorter than "
              f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
              f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
              f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "

@@ -131,21 +131,24 @@ def watches_every_step(adapter) -> bool:
 
 def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing, *,
                    warm_up: bool = True) -> Trajectory:
-    """Warm up (unless this process has just run the same case and method), make the run
-    the row is measured from, then time; runs inside the child process.
+    """Make the run the row is measured from, then time; runs inside the child process.
 
     The measured run is watched at every step where the adapter can
     (``simulate(..., monitor=True)``: the energy's extremes over every step) and is not
-    timed. The timed runs follow (:meth:`Timing.runs_after`), and every one of them is
-    checked to end where the measured run did, bit for bit; one that does not puts
-    :data:`NOT_REPEATABLE` in the row's message.
+    timed; it also warms the process up (compilation, caches, first-call costs) for the
+    timed runs. An adapter that cannot watch is warmed up instead by a short run
+    (:attr:`Timing.warmup_fraction` of the duration; unless ``warm_up`` is false: this
+    process has just run the same case and method). The timed runs follow
+    (:meth:`Timing.runs_after`), and every one of them is checked to end where the
+    measured run did, bit for bit; one that does not puts :data:`NOT_REPEATABLE` in the
+    row's message.
     """
     adapter = get_adapter(engine)
-    if warm_up:
+    monitor = watches_every_step(adapter)
+    if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
         short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
                                                        min(dt, case.duration)))
         adapter.simulate(short, method, dt)
-    monitor = watches_every_step(adapter)
     traj = adapter.simulate(case, method, dt, monitor=True) if monitor else None
     timed = adapter.simulate(case, method, dt)
     if traj is None:
