@@ -109,6 +109,11 @@ class ScipyAdapter:
         )
 
 
+EVENT_DEPTH = 1e-12
+"""m (or m/s, for friction's stop): how far past zero an event function is when solve_ivp's
+event fires; the collision pass takes the particle from there."""
+
+
 @dataclass
 class _Pieces:
     """solve_ivp's answer for a run cut at its impacts, in the fields the adapter reads:
@@ -140,13 +145,13 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float,
     while case.duration - t > slack:
         watch = system.event_watch()
         g0 = watch(x)
-        # At the plane now means just sent off it by the pass (or held in contact, which
-        # the watch leaves out): watching its zero would stop the next piece at once.
-        watched = np.isfinite(g0) & (g0 > 0)
+        watched = np.isfinite(g0)
 
         def event(_t: float, y: np.ndarray, watch=watch, watched=watched) -> float:
+            # A particle the pass has just sent off a plane starts exactly on it: the
+            # events fire EVENT_DEPTH past the plane, so that its zero now is no event.
             g = watch(y)[watched]
-            return float(np.min(g)) if len(g) else 1.0
+            return float(np.min(g)) + EVENT_DEPTH if len(g) else 1.0
 
         event.terminal, event.direction = True, -1
         sol = solve_ivp(derivative, (t, case.duration), x, method=method, rtol=tol, atol=tol,
