@@ -136,12 +136,11 @@ class Adapter(Protocol):
        ``nfev``: ``method_facts``, a mapping from a method to its ``MethodFacts`` or to
        the name of the reference method whose facts it shares (``"verlet"``,
        ``"symplectic-euler"``, ``"rk4"`` ...); ``schemes``, a mapping to such names only,
-       is read too (:func:`facts_of`).
-
+       is read too (:func:`facts_of`);
     9. optionally, accept ``simulate(case, method, dt, monitor=True)``: the run a row is
        measured from (untimed), watched at every step, its ``Trajectory.extremes`` the
        lowest and highest energy over every step; the harness then times plain runs and
-       checks they end in the same state;
+       checks they end in the same state.
 
     :class:`FixedStepAdapter` does 2 to 4 and 9 for an engine that steps a particle scene.
     """
