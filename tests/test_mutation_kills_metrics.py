@@ -172,6 +172,8 @@ def test_motion_failures_read_the_energy_against_its_scale():
     escaped = motion_failure(bound, orbit, 4.0)
     assert escaped.t == 2.0 and "escaped" in escaped.reason
     assert motion_failure(case(conservative=True), orbit, 4.0) is None  # 0.52 of 4 J: no jump
+    spike = Trajectory(t=t, x=x, v=None, energy=np.where((t > 1.0) & (t < 1.2), 0.3, -0.5))
+    assert motion_failure(bound, spike, 4.0) is None  # through a close encounter and back
     src = case(model=particles(impulses=[(0, np.ones(3), 0.0, 1.0)]))
     assert motion_failure(src, grow, 1.0) is None
     assert motion_failure(case(), Trajectory(t[:1], x[:1], None, np.ones(1)), 1.0) is None

@@ -242,9 +242,9 @@ def family_sentence(family: str, names: list[str], card: pd.DataFrame,
     if len(fast):
         top = fast.iloc[0]
         group = _tied_group(fast)
-        names = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
+        picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
         tie = " (tied within timing noise)" if len(group) > 1 else ""
-        text = (f"for accuracy per second, {names}{tie}: "
+        text = (f"for accuracy per second, {picked}{tie}: "
                 f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
                 f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
                 f"{float(top.cost_ratio):.2g}x the fastest run's time (median)")

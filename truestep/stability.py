@@ -6,7 +6,8 @@ scene cannot do (:func:`motion_failure`), each judged against the case's energy 
 lies), over every step where the run was watched at every step:
 
 - **escape**: a case that declares an escape energy (``[reference] escape_energy``: a bound
-  orbit's is 0) reaches it;
+  orbit's is 0) reaches it and stays there to the end (a symplectic method's energy
+  error spikes through a close encounter and comes back: no escape);
 - **gain**: a dissipative scene (damping, drag, inelastic or frictional contact, no energy
   source) rises above its start by more than :data:`RISE_TOL` of ``S``, anywhere in the run;
 - **left for good**: a conservative scene's energy rises above its start by more than
@@ -152,14 +153,11 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
     top = traj.extremes
     e0 = float(e[0])
     escape = case.escape_energy
-    if escape is not None:
-        hit = np.nonzero(e >= escape)[0]
-        if len(hit):
-            return Failure(float(t[hit[0]]), f"escaped: its energy reached {e[hit[0]]:.4g} J, "
-                           f"at or above the case's escape energy {escape:g} J")
-        if top is not None and top.e_max >= escape:
-            return Failure(top.t_max, f"escaped: its energy reached {top.e_max:.4g} J between "
-                           f"records, at or above the case's escape energy {escape:g} J")
+    if escape is not None and e[-1] >= escape:
+        below = np.nonzero(e < escape)[0]
+        first = int(below[-1]) + 1 if len(below) else 0  # above it from here to the end
+        return Failure(float(t[first]), f"escaped: its energy rose to {e[first]:.4g} J, at or "
+                       f"above the case's escape energy {escape:g} J, and stayed there")
     behaviour = energy_behaviour(case)
     if behaviour == "source":
         return None
