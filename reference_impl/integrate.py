@@ -97,7 +97,7 @@ def integrate(
         # ``extra`` keeps the keys of the first observation: if it has none, nothing
         # observed later would be kept, so the system is not asked again.
         observed = bool(obs[0])
-        locate = hasattr(solver, "dense")
+        locate = callable(getattr(solver, "dense", None))
         grid = np.asarray(sample_at, float) if sample_at is not None and locate else None
         next_sample = 0
         if locate:
