@@ -99,7 +99,7 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
             lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
             for w in worst.itertuples(index=False):
-                lines.append(f"- {w.engine} / {w.method}: requested {w.e_set:g}, measured "
+                lines.append(f"- {text(w.engine)} / {text(w.method)}: requested {w.e_set:g}, measured "
                              f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s.")
             lines.append("")
     hard = [c for c in cases if c.hard]
@@ -122,11 +122,12 @@ def hard_case_line(case: Case, results: pd.DataFrame) -> str:
     groups = []
     for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"),
                         key=lambda kv: -kv[0]):
-        names = ", ".join(f"{e}/{m}" for e, m in zip(g["engine"], g["method"], strict=True))
+        names = ", ".join(f"{text(e)}/{text(m)}"
+                          for e, m in zip(g["engine"], g["method"], strict=True))
         groups.append(f"{_fmt(float(dt))} s: {names}")
     never = s[s["dt_survived"].isna()]
     if len(never):
-        names = ", ".join(f"{e}/{m} ({f or 'failed'})"
+        names = ", ".join(f"{text(e)}/{text(m)} ({text(f or 'failed')})"
                           for e, m, f in zip(never["engine"], never["method"], never["failure"],
                                              strict=True))
         groups.append(f"at no step of the sweep: {names}")
@@ -168,19 +169,20 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
             others = at[at["engine"] != g.engine]
             parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
             parts.append(
-                f"{text(case.title)}: {g.engine} / {g.method} runs only what the scene needs (here "
+                f"{text(case.title)}: {text(g.engine)} / {text(g.method)} runs only what the "
+                "scene needs (here "
                 "a compiled loop over independent particles, on one thread like the "
                 "engines), the engines their general machinery (broad phase, contact "
                 "solver, one body per particle). Each row: "
                 "particle-steps per second at the same step and the error against the exact "
                 "bounce solution; `slower_by` is its wall time over "
-                f"{g.engine} / {g.method}'s.\n")
+                f"{text(g.engine)} / {text(g.method)}'s.\n")
             if len(others):
                 fastest = others.sort_values("wall_s").iloc[0]
                 parts.append(
-                    f"At dt {_fmt(g.dt)} s the fastest engine, {fastest.engine} / "
-                    f"{fastest.method}, takes {fastest.slower_by:.0f} times as long as "
-                    f"{g.engine} / {g.method} (gate: at least {g.params['min']:g} times).\n")
+                    f"At dt {_fmt(g.dt)} s the fastest engine, {text(fastest.engine)} / "
+                    f"{text(fastest.method)}, takes {fastest.slower_by:.0f} times as long as "
+                    f"{text(g.engine)} / {text(g.method)} (gate: at least {g.params['min']:g} times).\n")
             parts.append(md_table(with_units(table)))
     return parts
 
@@ -188,7 +190,8 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
 
 
 def _pair(r) -> str:
-    return f"{r.engine} / {r.method}"
+    """``engine / method`` of a row, as markdown text (:func:`text`)."""
+    return f"{text(r.engine)} / {text(r.method)}"
 
 
 def family_sentence(family: str, names: list[str], card: pd.DataFrame,
