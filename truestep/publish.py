@@ -18,7 +18,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import stat
 from pathlib import Path
 
 from truestep import faults
@@ -88,40 +87,16 @@ def recover(out: Path) -> list[str]:
 
 
 def new_stage(out: Path) -> Path:
-    """A fresh, empty staging folder for ``out`` (created with ``out``'s permissions)."""
+    """A fresh, empty staging folder for ``out``, made by this process (its owner and
+    mode are this process's and its umask's, never those of the folder it replaces)."""
     stage = scratch(out, "staging")
-    if stage.exists():
+    if os.path.islink(stage) or (os.path.lexists(stage) and not stage.is_dir()):
+        stage.unlink()
+    elif stage.exists():
         shutil.rmtree(stage)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage.mkdir()
-    if out.is_dir():
-        os.chmod(stage, stat.S_IMODE(out.stat().st_mode))
     return stage
-
-
-def _link_or_copy(src: str, dst: str) -> None:
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copy2(src, dst)
-
-
-def carry_over(out: Path, stage: Path, drop: set[str]) -> None:
-    """Give ``stage`` every entry of the current ``out`` that it does not have itself,
-    except those named in ``drop`` (hard links where possible, else copies; symbolic
-    links as links)."""
-    if not out.is_dir():
-        return
-    for entry in os.scandir(out):
-        dst = stage / entry.name
-        if entry.name in drop or os.path.lexists(dst):
-            continue
-        if entry.is_symlink():
-            os.symlink(os.readlink(entry.path), dst)
-        elif entry.is_dir():
-            shutil.copytree(entry.path, dst, symlinks=True, copy_function=_link_or_copy)
-        else:
-            _link_or_copy(entry.path, os.fspath(dst))
 
 
 def swap(stage: Path, out: Path) -> None:
