@@ -129,3 +129,13 @@ def test_the_new_report_takes_its_owner_and_mode_from_the_run(tmp_path):
     assert stat.S_IMODE(os.stat(rep).st_mode) == 0o777 & ~umask
     assert {os.stat(p).st_uid for p in [rep, *rep.rglob("*")]} == {os.geteuid()}
     assert (rep / MARKER).read_text() == MARKER_TEXT
+
+
+def test_the_python_api_refuses_the_same_folders(tmp_path):
+    import truestep
+
+    mine = _mine(tmp_path / "mine")
+    before = snapshot(mine)
+    with pytest.raises(OutRefused, match="not a report truestep wrote"):
+        truestep.run("free-fall", engines=["reference"], quick=True, analyses=False, out=mine)
+    assert snapshot(mine) == before

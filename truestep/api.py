@@ -85,17 +85,31 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
         progress: Callable[[str], None] | None = None) -> Tables:
     """Run the matrix (and, with ``analyses``, the stability searches and the restitution
     sweep) and return the tables; with ``out``, also write the report there as
-    ``truestep run --out`` does.
+    ``truestep run --out`` does (a folder truestep may replace, locked for the run, else
+    :class:`~truestep.report_folder.OutRefused` or :class:`~truestep.run_lock.LockBusy`).
 
     ``cases``: a selection as ``--cases`` takes it (names, globs, files, directories) or
     loaded :class:`Case` objects; ``engines``: as :func:`select_engines`.
     """
-    from truestep.analyses import run_analyses
-    from truestep.runner import run_matrix
-
     say = progress or (lambda msg: print(msg, file=sys.stderr))
     chosen = _cases(cases)
     names = select_engines(engines, say=say)
+    if out is None:
+        return _run(chosen, names, quick=quick, analyses=analyses, out=None, say=say)
+    from truestep.report_folder import check_out
+    from truestep.run_lock import RunLock
+
+    check_out(Path(out))
+    with RunLock(Path(out)):
+        return _run(chosen, names, quick=quick, analyses=analyses, out=Path(out), say=say)
+
+
+def _run(chosen: list[Case], names: list[str], *, quick: bool, analyses: bool,
+         out: Path | None, say: Callable[[str], None]) -> Tables:
+    """:func:`run` once its cases and engines are chosen (and ``out``, if any, locked)."""
+    from truestep.analyses import run_analyses
+    from truestep.runner import run_matrix
+
     traces: dict = {}
     results = run_matrix(chosen, names, quick=quick, progress=say, traces=traces)
     tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame(),
@@ -105,7 +119,7 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
     if out is not None:
         from truestep.report import write_report
 
-        write_report(Path(out), chosen, results, tables, quick=quick, argv=["run"],
+        write_report(out, chosen, results, tables, quick=quick, argv=["run"],
                      traces=None if quick else traces, with_lecture_figures=False)
     return Tables(results, tables["stability"], tables["restitution"], chosen, tables["scaling"])
 

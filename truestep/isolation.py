@@ -160,8 +160,12 @@ def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
         tb = traceback.extract_tb(err.__traceback__)
         where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
         reply = ("crashed", f"{type(err).__name__}: {str(err)[:MESSAGE_CHARS]}{where}")
+    output = capture.stop()
     try:
-        conn.send((*reply, capture.stop()))
+        conn.send((*reply, output))
+    except Exception as err:  # a value that cannot be pickled: the call's row says so
+        conn.send(("crashed", f"its result cannot be sent back: {type(err).__name__}: "
+                   f"{str(err)[:200]}", output))
     finally:
         conn.close()
 

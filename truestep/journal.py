@@ -284,11 +284,15 @@ class Journal:
         return rows, traces
 
     def put_sweep(self, key: SweepKey, dts: list[float], rows: list[dict], traces: dict) -> None:
-        """Checkpoint a finished sweep."""
+        """Checkpoint a finished sweep (one holding a value JSON cannot carry exactly is
+        not checkpointed: a resumed run runs it again)."""
         if self.run is None:
             return
-        body = {"key": list(key), "dts": [float(d) for d in dts], "rows": rows_to(rows),
-                "traces": traces_to(traces)}
+        try:
+            body = {"key": list(key), "dts": [float(d) for d in dts], "rows": rows_to(rows),
+                    "traces": traces_to(traces)}
+        except DataError:
+            return
         path = self.dir / self._sweep_name(key)
         _write_atomic(path, _encode("sweep", self.run, body))
         self._survey.sweeps[path.name] = path
@@ -304,11 +308,15 @@ class Journal:
             return None
 
     def put_analyses(self, tables: dict) -> None:
-        """Checkpoint the analyses' tables."""
+        """Checkpoint the analyses' tables (unless a value has no exact JSON form)."""
         if self.run is None:
             return
+        try:
+            body = tables_to(tables)
+        except DataError:
+            return
         path = self.dir / ANALYSES_FILE
-        _write_atomic(path, _encode("analyses", self.run, tables_to(tables)))
+        _write_atomic(path, _encode("analyses", self.run, body))
         self._survey.analyses = path
 
     def remove(self) -> None:
