@@ -1178,14 +1178,16 @@ def attack_new_run_after_a_kill(c: Campaign, where: Path) -> tuple[bool, str]:
 
 def hostile_run(c: Campaign) -> tuple[Path, Result]:
     """A run of the Hostile adapter (names and messages of markup, bidi and escapes) with
-    a case whose title and description hold the same (made once)."""
+    a case whose title and description hold the same, and a stability search (whose lines
+    name the engine and methods too), made once."""
     if not hasattr(c, "_hostile"):
         where = c.folder("hostile-run")
         cases = where / "cases"
         cases.mkdir()
         case_file(cases, "hostile-text", extra="", body=CASE.format(
             duration="1.0", dt="[0.01, 0.005]",
-            extra='[reference]\nexact = "uniform-gravity"\n').replace(
+            extra='[reference]\nexact = "uniform-gravity"\n'
+                  '[stability]\nhorizon = 0.5\ndt_lo = 1e-3\ndt_hi = 0.2\nquick = true\n').replace(
             'title = "a case of the campaign"',
             'title = "T<script>alert(1)</script>\\u202eeltit"\n'
             'description = "D<img src=x onerror=alert(1)> \\u200b\\u001b[31m"'))

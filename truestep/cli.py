@@ -471,7 +471,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     shown = table.assign(note=table["note"].str.slice(0, 100))
     with pd.option_context("display.width", 250, "display.max_rows", None,
                            "display.max_colwidth", 100, "display.float_format", "{:.4g}".format):
-        print(shown.to_string(index=False))
+        print("\n".join(visible(line) for line in shown.to_string(index=False).splitlines()))
     per_step = table.attrs["bytes_per_particle_step"]
     print(f"copy bandwidth {bandwidth / 1e9:.2f} GB/s (numpy copy, best of 5, measured in this "
           f"run) = {bandwidth / per_step:.3g} particle-steps/s at {per_step} B per particle-step "
