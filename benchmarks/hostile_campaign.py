@@ -562,6 +562,20 @@ def attack_report_holding_a_link_elsewhere(c: Campaign, where: Path) -> tuple[bo
     return refused(result)
 
 
+def attack_planted_scratch_folder_beside_out(c: Campaign, where: Path) -> tuple[bool, str]:
+    """A link named like the folder a killed run moved its old report to
+    (``.rep.old-PID`` of a pid that is gone), leading to someone's files, with ``rep``
+    absent: the link is never followed and the files are untouched."""
+    folder = user_folder(where / "mine")
+    before = snapshot(folder)
+    (where / ".rep.old-999999").symlink_to(folder)
+    result = c.quick_run(where, "rep", cases="free-fall")
+    if snapshot(folder) != before:
+        return False, f"the linked folder changed: {result.why()}"
+    real = (where / "rep").is_dir() and not (where / "rep").is_symlink()
+    return result.code == 0 and real, f"rep is a real folder: {real}; {result.why()}"
+
+
 def attack_modes_and_owners_come_from_the_old_report(c: Campaign, where: Path) -> tuple[bool, str]:
     """A report folder made world-writable, its figures owned by another user: the new
     report's folder has this process's mode (umask) and owner."""
@@ -1483,6 +1497,7 @@ def attacks() -> dict[int, list[Callable]]:
         2: [attack_out_is_a_folder_of_other_files, attack_out_is_the_current_directory,
             attack_out_is_the_home_directory, attack_out_is_a_link_to_other_files,
             attack_out_is_a_file, attack_report_holding_a_link_elsewhere,
+            attack_planted_scratch_folder_beside_out,
             attack_modes_and_owners_come_from_the_old_report, attack_a_process_writing_into_out,
             attack_figures_command_into_a_folder_of_other_files,
             attack_bench_command_into_a_folder_of_other_files],

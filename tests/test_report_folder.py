@@ -139,3 +139,17 @@ def test_the_python_api_refuses_the_same_folders(tmp_path):
     with pytest.raises(OutRefused, match="not a report truestep wrote"):
         truestep.run("free-fall", engines=["reference"], quick=True, analyses=False, out=mine)
     assert snapshot(mine) == before
+
+
+def test_scratch_names_planted_beside_out_are_removed_never_followed(tmp_path):
+    from truestep import publish
+
+    elsewhere = _mine(tmp_path / "elsewhere")
+    before = snapshot(elsewhere)
+    (tmp_path / ".rep.old-999999").symlink_to(elsewhere)
+    (tmp_path / ".rep.staging-999998").symlink_to(elsewhere)
+    (tmp_path / ".rep.old-999997").write_text("a file")
+    done = publish.recover(tmp_path / "rep")
+    assert len(done) == 3 and not (tmp_path / "rep").exists()
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(".rep.")]
+    assert snapshot(elsewhere) == before

@@ -15,9 +15,11 @@ folders of processes that are gone.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
+import stat
 from pathlib import Path
 
 from truestep import faults
@@ -75,15 +77,31 @@ def recover(out: Path) -> list[str]:
     done = []
     stale = [(kind, pid, path) for kind, pid, path in _scratch_of(out)
              if pid == os.getpid() or not _alive(pid)]
-    olds = sorted((p for kind, _, p in stale if kind == "old"), key=lambda p: -p.stat().st_mtime)
-    if not out.exists() and olds:
+    olds = sorted((p for kind, _, p in stale if kind == "old" and _ours(p)),
+                  key=lambda p: -p.stat().st_mtime)
+    if not os.path.lexists(out) and olds:
         os.rename(olds[0], out)
         done.append(f"put the previous report back from {olds[0].name}")
     for _, _, path in stale:
-        if path.exists():
+        if not os.path.lexists(path):
+            continue
+        if _ours(path):
             shutil.rmtree(path, ignore_errors=True)
-            done.append(f"removed {path.name}")
+        else:  # a link or a file under a scratch folder's name: removed, never followed
+            with contextlib.suppress(OSError):
+                path.unlink()
+        done.append(f"removed {path.name}")
     return done
+
+
+def _ours(path: Path) -> bool:
+    """Whether ``path`` is a directory (not a link) of this process's user, as the
+    scratch folders a run makes are."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid()
 
 
 def new_stage(out: Path) -> Path:
