@@ -57,7 +57,7 @@ JOURNAL_FILE = "journal.json"
 ANALYSES_FILE = "analyses.json"
 SWEEP_FILE = re.compile(r"sweep-[0-9a-f]{32}\.json")
 TMP_PREFIX = ".tmp-"
-MAX_CHECKPOINT_BYTES = 256 * 2**20
+MAX_CHECKPOINT_BYTES = 64 * 2**20
 """The largest checkpoint read (a sweep's rows and traces are well under 1 MiB)."""
 MAX_HEADER_BYTES = 1024
 """The longest header line of a checkpoint file."""

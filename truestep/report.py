@@ -38,6 +38,7 @@ from truestep.report_sections import (
     speed_table,
     summary,
 )
+from truestep.visible import visible
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet",
             "mujoco")
@@ -64,8 +65,15 @@ def footer(argv: list[str]) -> str:
         f"{platform.release()}, Python {platform.python_version()}.  \n"
         f"Packages: {', '.join(versions)}.  \n"
         f"Revision: {rev or 'unknown'}.  \n"
-        f"Reproduce: `truestep {' '.join(argv) if argv else 'run'}`\n"
+        f"Reproduce: {_command(argv)}\n"
     )
+
+
+def _command(argv: list[str]) -> str:
+    """``truestep ARGV`` as a code span; an argument that holds a backtick or a hidden
+    character (a ``--cases`` item from outside) is shown as text instead."""
+    line = f"truestep {' '.join(argv) if argv else 'run'}"
+    return f"`{line}`" if "`" not in line and visible(line) == line else text(line)
 
 
 def middle(values: list[float]) -> float | None:
