@@ -141,3 +141,16 @@ def test_load_case_refuses_the_gates_the_command_line_refuses(tmp_path, capsys):
         assert f"gates[0].{field}" in capsys.readouterr().err
     path = _case(tmp_path, extra=gates["an unknown engine"][0])
     assert load_case(path, engines={"nosuch"}).gates[0].engine == "nosuch"
+
+
+def test_the_python_api_refuses_gates_on_unknown_engines_as_the_command_line_does(tmp_path):
+    import pandas as pd
+
+    import truestep
+    from truestep.api import Tables
+
+    tables = Tables(pd.DataFrame({"case": ["free-fall"], "engine": ["mine"]}))
+    gate = {"cases": "*", "kind": "order", "engine": "nosuch", "method": "x", "expect": 1.0,
+            "tol": 0.1}
+    with pytest.raises(CaseError, match="unknown engine 'nosuch'"):
+        truestep.check(tables, gates=[gate])

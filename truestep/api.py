@@ -21,7 +21,8 @@ from pathlib import Path
 import pandas as pd
 
 from truestep.adapters import adapter_class, engine_status, registered, resolve_engine
-from truestep.cases import Case, load_cases
+from truestep.cases import Case, CaseError, load_cases
+from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.gates import GateResult, check_gates, verdict_table
 
@@ -129,7 +130,9 @@ def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
     """Every gate's verdict (:class:`~truestep.gates.GateResult`) on ``tables``.
 
     ``gates``: a gates file, several, or gate dictionaries (the keys of a ``[[gates]]``
-    table, with ``cases``); ``case_gates``: also check the gates in the case files.
+    table, with ``cases``); ``case_gates``: also check the gates in the case files. A
+    gate naming an engine that is neither registered nor in the results is refused
+    (:class:`~truestep.cases.CaseError`), as ``truestep gate`` refuses it.
     """
     extra = []
     for g in ([] if gates is None else [gates] if isinstance(gates, str | Path | dict) else gates):
@@ -142,6 +145,11 @@ def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
                           read_gate(Fields("<gate>", table), f"gates[{len(extra)}]")))
         else:
             extra += load_gates_file(g)
+    engines = set(registered()) | set(tables.results["engine"].astype(str))
+    for _, g in extra:
+        if g.engine != "*" and g.engine not in engines:
+            raise CaseError(g.file, f"{g.where}.engine", f"unknown engine {short(g.engine)} "
+                            "(not registered, not in the results)")
     cases = tables.cases if case_gates else [dataclasses.replace(c, gates=[]) for c in tables.cases]
     return check_gates(cases, tables.results, tables.stability, tables.restitution, extra=extra)
 
