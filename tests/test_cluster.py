@@ -22,6 +22,7 @@ import pytest
 
 from truestep.cli import main
 from truestep.cluster import KILL_WORKER
+from truestep.report_folder import MARKER, MARKER_TEXT
 
 CASES = "free-fall,harmonic-oscillator"
 TIMING = {"wall_s", "repeats", "host"}
@@ -130,6 +131,7 @@ def test_the_scheduler_going_away_ends_the_run_with_one_error_and_keeps_the_swee
                               stderr=subprocess.DEVNULL)
     out = tmp_path / "out"
     out.mkdir()
+    (out / MARKER).write_text(MARKER_TEXT)
     (out / "index.md").write_text("the previous report")
     try:
         run = subprocess.Popen([bin_dir / "truestep", "run", "--quick", "--cases",

@@ -16,7 +16,7 @@ from pathlib import Path
 from kill_helpers import still_running
 
 from truestep.adapters.reference import ReferenceAdapter
-from truestep.isolation import run_isolated, start_isolated
+from truestep.isolation import finish_isolated, run_isolated, start_isolated
 
 
 def _spawn(pids: Path, how: str, then: str = "return") -> str:
@@ -137,9 +137,8 @@ def test_a_failed_rows_message_shows_the_engines_output(tmp_path, capfd):
 
 
 def test_start_isolated_children_lead_their_own_process_group():
-    run = start_isolated(time.sleep, (30,), 60.0)
+    run = start_isolated(time.sleep, (30,), 0.5)
     try:
         assert os.getpgid(run.proc.pid) == run.proc.pid
     finally:
-        run.proc.kill()
-        run.proc.join()
+        assert finish_isolated(run).status == "timeout"

@@ -236,7 +236,8 @@ def kill_children() -> None:
     """SIGKILL every child this process started and has not joined yet, with everything
     below it, and reap them."""
     for pid, proc in list(_LIVE.items()):
-        _end(proc)
+        if proc._parent_pid == os.getpid():  # not a copy inherited through a fork
+            _end(proc)
         _LIVE.pop(pid, None)
 
 
