@@ -204,12 +204,13 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         "dt_kind": "tolerance" if adaptive else "step",
     }
     if isinstance(outcome, str):
-        row.update(status="crashed", message=outcome)
+        row.update(status="crashed", message=outcome[:MESSAGE_CHARS])
         return row
     if isinstance(outcome, Outcome):
-        row.update(status=outcome.status, message=outcome.message)
+        row.update(status=outcome.status, message=with_output(outcome.message, outcome.output))
         return row
-    traj = checked(outcome, case.model.n if case.model is not None else None)
+    traj = checked(outcome, case.model.n if case.model is not None else None,
+                   duration=case.duration)
     if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
         row.update(status="crashed", message=traj)
         return row
@@ -225,8 +226,8 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
         repeats=int(traj.extra.get("repeats", 0)),
         t_fail=traj.t_fail,
-        message=traj.message,
-        path=traj.path,
+        message=str(traj.message)[:MESSAGE_CHARS],
+        path=str(traj.path)[:MESSAGE_CHARS],
     )
     failed = _MEASURE_TIMED_OUT.get(case.file)
     try:
@@ -247,6 +248,22 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
     return row
 
 
+MESSAGE_CHARS = 2000
+"""The most characters of a row's message (an adapter's, an exception's, its output)."""
+OUTPUT_CHARS = 500
+"""The most characters of an engine process's own output a failed row shows."""
+
+
+def with_output(message: str, output: str) -> str:
+    """A failed row's message, with the end of what its engine process wrote (captured by
+    :mod:`truestep.isolation`, never shown on truestep's own output)."""
+    output = " ".join(output.split())
+    if output:
+        shown = output if len(output) <= OUTPUT_CHARS else "..." + output[-OUTPUT_CHARS:]
+        message = f"{message}; engine output: {shown}" if message else f"engine output: {shown}"
+    return message[:MESSAGE_CHARS]
+
+
 SWEEP_SLACK = 1.25
 """The sweep process's own limit over the sum of its steps' limits: each step stops at its
 ``timeout`` inside the process (:func:`simulate_sweep`); the process limit is the backstop
@@ -260,8 +277,11 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
             timing: Timing, traces: dict | None = None) -> dict:
     """One row of ``results.csv``: run one step in its own process, then measure."""
     outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
-    return row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
-                    outcome=outcome.value if outcome.status == "ok" else outcome)
+    row = row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
+                   outcome=outcome.value if outcome.status == "ok" else outcome)
+    if outcome.status == "ok" and row["status"] in ("crashed", "timeout"):
+        row["message"] = with_output(row.get("message", ""), outcome.output)
+    return row
 
 
 def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptive: bool,
@@ -278,8 +298,12 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
     if outcome.status != "ok":
         return [run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
                         traces=traces) for dt in dts]
-    return [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
+    rows = [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
             for dt, o in zip(dts, outcome.value, strict=True)]
+    for row in rows:
+        if row["status"] in ("crashed", "timeout"):
+            row["message"] = with_output(row.get("message", ""), outcome.output)
+    return rows
 
 
 def preload() -> None:
