@@ -16,7 +16,7 @@ from truestep.cases import load_cases
 from truestep.checkpoint_data import DataError, load_json, tables_from, tables_to
 from truestep.cli import main
 from truestep.journal import Journal, JournalError, fingerprint
-from truestep.runner import run_matrix
+from truestep.runner import MACHINE_COLUMNS, run_matrix
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 
@@ -106,8 +106,8 @@ def test_planted_and_damaged_checkpoints_are_ignored_never_loaded(swept, tmp_pat
         rows = run_matrix(cases, ["reference"], quick=True, journal=resumed,
                           progress=lambda _: None)
         pd.testing.assert_frame_equal(
-            rows.drop(columns=["host", "wall_s", "repeats"]),
-            results.drop(columns=["host", "wall_s", "repeats"]))
+            rows.drop(columns=list(MACHINE_COLUMNS)),
+            results.drop(columns=list(MACHINE_COLUMNS)))
         assert not mark.exists()
     finally:
         for p in journal.dir.iterdir():
