@@ -172,6 +172,13 @@ def periodic(case: Case, t: np.ndarray) -> Exact:
     return Exact(t[keep], np.tile(y0, (int(keep.sum()), 1))[:, None, :])
 
 
+LINEAR_MAX_PARTICLES = 1000
+"""The most particles a dense linear solve (the ``linear`` exact solution, the modes of
+:func:`linear_modes`) takes on: its matrices grow with the square of the particles and
+its work with the cube (1000 particles: 2001 x 2001 exponentials, a 3000 x 3000
+eigenproblem, seconds each). A bigger scene has no exact solution of this kind."""
+
+
 def linear_modes(case: Case) -> tuple[float, float] | None:
     """Highest angular frequency (rad/s) and its damping ratio, if the scene is linear.
 
@@ -179,10 +186,13 @@ def linear_modes(case: Case) -> tuple[float, float] | None:
     length along straight lines or have zero rest length, no gravity, drag, fields,
     gravitation or planes. ``omega_max^2`` is the largest eigenvalue of
     ``M^(-1/2) K M^(-1/2)`` with ``K`` the stiffness matrix of the springs at the start;
-    the damping ratio is reported for a single damped spring, and NaN otherwise.
+    the damping ratio is reported for a single damped spring, and NaN otherwise. ``None``
+    for a scene of more than :data:`LINEAR_MAX_PARTICLES` particles (not computed).
     """
     m = case.model
     if m is None or m.planes or m.fields or m.gravitation is not None or m.drag:
+        return None
+    if m.n > LINEAR_MAX_PARTICLES:
         return None
     if np.any(m.gravity) or m.emitters or m.impulses:
         return None
@@ -254,7 +264,21 @@ def stability_limit(case: Case, method: MethodFacts | str | None) -> float | Non
     return None if reach is None else reach / omega
 
 
-@exact_solution("linear", params={}, kind="particles")
+def _check_linear(case: Case) -> None:
+    """What ``linear`` needs, checked before any matrix is built: zero rest lengths, no
+    planes or fields, at most :data:`LINEAR_MAX_PARTICLES` particles."""
+    m = case.model
+    if m is None:
+        raise ValueError("'linear' is the exact solution of particle scenes")
+    if np.any(m.springs.rest != 0) or np.any(m.anchors.rest != 0) or m.planes or m.fields:
+        raise ValueError(f"{case.file}: reference.exact: 'linear' needs zero-rest-length "
+                         "springs and no planes or fields")
+    if m.n > LINEAR_MAX_PARTICLES:
+        raise ValueError(f"'linear' solves at most {LINEAR_MAX_PARTICLES} particles densely "
+                         f"(its matrices grow with their square); this scene has {m.n}")
+
+
+@exact_solution("linear", check=_check_linear, params={}, kind="particles")
 def linear(case: Case, t: np.ndarray) -> Exact:
     """Any scene of zero-rest-length springs, uniform gravity and drag: a linear ODE.
 
@@ -266,10 +290,8 @@ def linear(case: Case, t: np.ndarray) -> Exact:
     """
     from scipy.linalg import expm
 
+    _check_linear(case)
     m = case.model
-    if np.any(m.springs.rest != 0) or np.any(m.anchors.rest != 0) or m.planes or m.fields:
-        raise ValueError(f"{case.file}: reference.exact: 'linear' needs zero-rest-length "
-                         "springs and no planes or fields")
     n = m.n
     free = ~m.fixed
     K = np.zeros((n, n))

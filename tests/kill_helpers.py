@@ -19,9 +19,10 @@ def snapshot(root: Path) -> dict[str, bytes]:
 
 
 def scratch_left(out: Path) -> list[str]:
-    """Staging and old folders of ``out`` beside it (the journal does not count)."""
+    """Staging and old folders of ``out`` beside it (the journal does not count, nor the
+    lock file a killed run leaves for the next run to take over)."""
     return sorted(n for n in os.listdir(out.parent)
-                  if n.startswith(f".{out.name}.") and not n.endswith(".partial"))
+                  if n.startswith(f".{out.name}.") and not n.endswith((".partial", ".lock")))
 
 
 def _running(pid: int) -> bool:

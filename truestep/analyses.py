@@ -55,7 +55,9 @@ def _search(engine: str, case: Case, method: str, quick: bool):
 
 
 def _say(msg: str) -> None:
-    print(msg, file=sys.stderr)
+    from truestep.visible import visible
+
+    print(visible(msg), file=sys.stderr)
 
 
 def stability_table(cases: list[Case], engines: list[str], *, quick: bool,

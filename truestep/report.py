@@ -38,6 +38,7 @@ from truestep.report_sections import (
     speed_table,
     summary,
 )
+from truestep.visible import visible
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet",
             "mujoco")
@@ -61,7 +62,7 @@ def footer(argv: list[str]) -> str:
         f"Packages: {', '.join(versions)}.  \n"
         f"Numerics: {numerics_line()}.  \n"
         f"Revision: {rev or 'unknown'}.  \n"
-        f"Reproduce: `truestep {' '.join(argv) if argv else 'run'}`\n"
+        f"Reproduce: {_command(argv)}\n"
     )
 
 
@@ -73,6 +74,13 @@ def numerics_line() -> str:
     simd = ", ".join(fp["numpy_simd"]) or "baseline only"
     return (f"BLAS {'; '.join(fp['blas'])}; numpy SIMD dispatch {simd}"
             + (" (TRUESTEP_NUMERICS=native)" if fp["native"] else ""))
+
+
+def _command(argv: list[str]) -> str:
+    """``truestep ARGV`` as a code span; an argument that holds a backtick or a hidden
+    character (a ``--cases`` item from outside) is shown as text instead."""
+    line = f"truestep {' '.join(argv) if argv else 'run'}"
+    return f"`{line}`" if "`" not in line and visible(line) == line else text(line)
 
 
 def middle(values: list[float]) -> float | None:
@@ -162,7 +170,7 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
     parts.append(f"Against the orders the engines declare (on smooth cases with an exact "
                  f"solution): {int((fitted['agrees'] == 'yes').sum())} fits agree, "
                  f"{len(disagree)} do not"
-                 + (": " + "; ".join(f"{r.case} {r.engine} / {r.method} {r.order:.2f} "
+                 + (": " + "; ".join(f"{r.case} {text(r.engine)} / {text(r.method)} {r.order:.2f} "
                                      f"(declared {r.declared:g})"
                                      for r in disagree.itertuples(index=False)) if len(disagree)
                     else "") + ".\n")
@@ -257,8 +265,6 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
     return collect
 
 
-REPORT_FILES = ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
-                "index.html", "figures", "run.json")
 RUN_FILE = "run.json"
 """What a run was asked for and what decided its numbers besides the code (:func:`run_record`)."""
 
@@ -293,16 +299,13 @@ def read_run_record(directory: Path) -> dict | None:
     older truestep) or it cannot be read as one."""
     import json
 
-    path = Path(directory) / RUN_FILE
+    from truestep.cases.files import read_regular
+
     try:
-        if not path.is_file() or path.stat().st_size > 1 << 20:
-            return None
-        record = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        record = json.loads(read_regular(Path(directory) / RUN_FILE, 1 << 20).decode("utf-8"))
+    except (OSError, ValueError):  # FileRefused is an OSError
         return None
     return record if isinstance(record, dict) else None
-"""What :func:`write_report` writes into ``out``; any other entry of ``out`` is kept."""
-
 
 def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
                  tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
@@ -313,18 +316,22 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
     The whole new report is written into a staging folder beside ``out`` and put in
     place of the old one as a whole (:mod:`truestep.publish`): at every instant ``out``
     holds either the whole previous report or the whole new one, also when the process
-    is killed. Entries of the previous report that this one does not write are kept,
-    except ``scaling.csv`` (a table of an earlier run) and, when this run draws figures,
-    the old ``figures/``. On failure or interruption the staging folder is removed and
-    the children still drawing are killed.
+    is killed. ``out`` must be a folder truestep may replace
+    (:func:`truestep.report_folder.check_out`: absent, empty, or a report truestep wrote
+    holding nothing else), checked again here, after the run; the new report carries the
+    marker (:data:`truestep.report_folder.MARKER`). On failure or interruption the
+    staging folder is removed and the children still drawing are killed.
     """
     from truestep import faults, publish
     from truestep.isolation import kill_children
+    from truestep.report_folder import check_out, write_marker
 
     out = publish.target(out)
     publish.recover(out)
+    check_out(out)
     stage = publish.new_stage(out)
     try:
+        write_marker(stage)
         results.to_csv(stage / "results.csv", index=False)
         for name in ("stability", "restitution"):
             tables[name].to_csv(stage / f"{name}.csv", index=False)
@@ -345,7 +352,6 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
         (stage / "index.md").write_text(md)
         faults.point("report-index")
         (stage / "index.html").write_text(markdown_to_html(md, stage))
-        publish.carry_over(out, stage, drop={"scaling.csv"})
         publish.swap(stage, out)
     except BaseException:
         kill_children()

@@ -103,7 +103,7 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
             lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
             for w in worst.itertuples(index=False):
-                lines.append(f"- {w.engine} / {w.method}: requested {w.e_set:g}, measured "
+                lines.append(f"- {text(w.engine)} / {text(w.method)}: requested {w.e_set:g}, measured "
                              f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s.")
             lines.append("")
     hard = [c for c in cases if c.hard]
@@ -126,11 +126,12 @@ def hard_case_line(case: Case, results: pd.DataFrame) -> str:
     groups = []
     for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"),
                         key=lambda kv: -kv[0]):
-        names = ", ".join(f"{e}/{m}" for e, m in zip(g["engine"], g["method"], strict=True))
+        names = ", ".join(f"{text(e)}/{text(m)}"
+                          for e, m in zip(g["engine"], g["method"], strict=True))
         groups.append(f"{_fmt(float(dt))} s: {names}")
     never = s[s["dt_survived"].isna()]
     if len(never):
-        names = ", ".join(f"{e}/{m} ({f or 'failed'})"
+        names = ", ".join(f"{text(e)}/{text(m)} ({text(f or 'failed')})"
                           for e, m, f in zip(never["engine"], never["method"], never["failure"],
                                              strict=True))
         groups.append(f"at no step of the sweep: {names}")
@@ -166,7 +167,8 @@ def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
     from truestep.picks import noise_band, tied_with_fastest
 
     tied = others[tied_with_fastest(others)].sort_values(["engine", "method"])
-    names = " and ".join(f"{r.engine} / {r.method}" for r in tied.itertuples(index=False))
+    names = " and ".join(f"{text(r.engine)} / {text(r.method)}"
+                         for r in tied.itertuples(index=False))
     fastest = tied.loc[tied["wall_s"].astype(float).idxmin()]
     w_e, w_r = float(fastest["wall_s"]), float(mine["wall_s"])
     b_e = float(noise_band(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))[0])
@@ -175,7 +177,7 @@ def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
     who = (f"the fastest engine, {names}," if len(tied) == 1
            else f"the fastest engines, {names} (tied within timing noise),")
     return (f"At dt {_fmt(gate.dt)} s {who} take{'s' if len(tied) == 1 else ''} "
-            f"{low:.0f} to {high:.0f} times as long as {gate.engine} / {gate.method} "
+            f"{low:.0f} to {high:.0f} times as long as {text(gate.engine)} / {text(gate.method)} "
             f"({w_e / w_r:.0f} times by the median wall times; the interval is each time's "
             f"noise band; gate: at least {gate.params['min']:g} times).\n")
 
@@ -193,13 +195,14 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
             others = at[at["engine"] != g.engine]
             parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
             parts.append(
-                f"{text(case.title)}: {g.engine} / {g.method} runs only what the scene needs (here "
+                f"{text(case.title)}: {text(g.engine)} / {text(g.method)} runs only what the "
+                "scene needs (here "
                 "a compiled loop over independent particles, on one thread like the "
                 "engines), the engines their general machinery (broad phase, contact "
                 "solver, one body per particle). Each row: "
                 "particle-steps per second at the same step and the error against the exact "
                 "bounce solution; `slower_by` is its wall time over "
-                f"{g.engine} / {g.method}'s.\n")
+                f"{text(g.engine)} / {text(g.method)}'s.\n")
             mine = at[(at["engine"] == g.engine) & (at["method"] == g.method)]
             if len(others) and len(mine):
                 parts.append(speedup_sentence(g, others, mine.iloc[0]))
@@ -210,7 +213,8 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
 
 
 def _pair(r) -> str:
-    return f"{r.engine} / {r.method}"
+    """``engine / method`` of a row, as markdown text (:func:`text`)."""
+    return f"{text(r.engine)} / {text(r.method)}"
 
 
 def _tied_group(ranked: pd.DataFrame) -> pd.DataFrame:
@@ -244,25 +248,25 @@ def family_sentence(family: str, names: list[str], card: pd.DataFrame,
         group = _tied_group(fast)
         picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
         tie = " (tied within timing noise)" if len(group) > 1 else ""
-        text = (f"for accuracy per second, {picked}{tie}: "
+        line = (f"for accuracy per second, {picked}{tie}: "
                 f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
                 f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
                 f"{float(top.cost_ratio):.2g}x the fastest run's time (median)")
         rest = fast.iloc[len(group):]
         if len(rest):
             nxt = rest.iloc[0]
-            text += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
+            line += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
                      f"{float(nxt.cost_ratio):.2g}x)")
-        parts.append(text)
+        parts.append(line)
     else:
         loose = picks[(picks["case"].isin(names)) & (picks["by"] == "wall_s")
                       & (picks["engine"] != "")].sort_values("wall_s")
-        text = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
+        line = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
         if len(loose):
             r = loose.iloc[0]
-            text += (f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
+            line += (f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
                      f"({fmt(float(r.wall_s))} s)")
-        parts.append(text)
+        parts.append(line)
     steady = mine[np.isfinite(mine["stability_ratio"].to_numpy(float))]
     if len(steady):
         best = float(steady["stability_ratio"].max())

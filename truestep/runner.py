@@ -240,18 +240,19 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         "dt_kind": "tolerance" if adaptive else "step",
     }
     if isinstance(outcome, str):
-        row.update(status="crashed", message=outcome)
+        row.update(status="crashed", message=outcome[:MESSAGE_CHARS])
         return row
     if isinstance(outcome, Outcome):
-        row.update(status=outcome.status, message=outcome.message)
+        row.update(status=outcome.status, message=with_output(outcome.message, outcome.output))
         return row
-    traj = checked(outcome, case.model.n if case.model is not None else None)
+    traj = checked(outcome, case.model.n if case.model is not None else None,
+                   duration=case.duration)
     if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
         row.update(status="crashed", message=traj)
         return row
     row.update(nfev=traj.nfev, steps=traj.steps, wall_s=traj.wall_s,
                wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
-               repeats=int(traj.extra.get("repeats", 0)), path=traj.path)
+               repeats=int(traj.extra.get("repeats", 0)), path=str(traj.path)[:MESSAGE_CHARS])
     timed_out = _MEASURE_TIMED_OUT.get(case.file)
     try:
         if timed_out:
@@ -260,7 +261,8 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
             if traj.status == "ok" and (failed := _motion_failure(case, traj)) is not None:
                 traj.status, traj.t_fail = "unstable", failed.t
                 traj.message = "; ".join(m for m in (traj.message, failed.reason) if m)
-            row.update(status=traj.status, t_fail=traj.t_fail, message=traj.message)
+            row.update(status=traj.status, t_fail=traj.t_fail,
+                       message=str(traj.message)[:MESSAGE_CHARS])
             row.update(measure(case, traj))
     except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
         _MEASURE_TIMED_OUT[case.file] = str(err)
@@ -283,6 +285,22 @@ def _motion_failure(case: Case, traj: Trajectory):
     return motion_failure(case, traj, energy_scale(case))
 
 
+MESSAGE_CHARS = 2000
+"""The most characters of a row's message (an adapter's, an exception's, its output)."""
+OUTPUT_CHARS = 500
+"""The most characters of an engine process's own output a failed row shows."""
+
+
+def with_output(message: str, output: str) -> str:
+    """A failed row's message, with the end of what its engine process wrote (captured by
+    :mod:`truestep.isolation`, never shown on truestep's own output)."""
+    output = " ".join(output.split())
+    if output:
+        shown = output if len(output) <= OUTPUT_CHARS else "..." + output[-OUTPUT_CHARS:]
+        message = f"{message}; engine output: {shown}" if message else f"engine output: {shown}"
+    return message[:MESSAGE_CHARS]
+
+
 SWEEP_SLACK = 1.25
 """The sweep process's own limit over the sum of its steps' limits: each step stops at its
 ``timeout`` inside the process (:func:`simulate_sweep`); the process limit is the backstop
@@ -296,8 +314,11 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
             timing: Timing, traces: dict | None = None) -> dict:
     """One row of ``results.csv``: run one step in its own process, then measure."""
     outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
-    return row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
-                    outcome=outcome.value if outcome.status == "ok" else outcome)
+    row = row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
+                   outcome=outcome.value if outcome.status == "ok" else outcome)
+    if outcome.status == "ok" and row["status"] in ("crashed", "timeout"):
+        row["message"] = with_output(row.get("message", ""), outcome.output)
+    return row
 
 
 def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptive: bool,
@@ -314,8 +335,12 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
     if outcome.status != "ok":
         return [run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
                         traces=traces) for dt in dts]
-    return [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
+    rows = [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
             for dt, o in zip(dts, outcome.value, strict=True)]
+    for row in rows:
+        if row["status"] in ("crashed", "timeout"):
+            row["message"] = with_output(row.get("message", ""), outcome.output)
+    return rows
 
 
 def preload() -> None:
