@@ -298,9 +298,12 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
     rel_tol = max(spec.rel_tol, 1e-2) if quick else spec.rel_tol
     scale = energy_scale(case)
 
+    made = [0]
+
     def stable_at(dt: float) -> bool:
         n = max(min_steps, math.ceil(spec.horizon / dt))
         trial = dataclasses.replace(case, duration=n * dt, max_records=n)
+        made[0] += 1
         traj = simulate(trial, dt)
         if traj.status == "solver-failed":
             raise _SolverFailedAt(dt, traj.message)
@@ -330,7 +333,7 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
                     "which every step tried was stable") if n))
                 break
     except _SolverFailedAt as err:
-        return SearchResult(float("nan"), float("nan"), 0,
+        return SearchResult(float("nan"), float("nan"), made[0],
                             f"the solver failed at dt {err.dt:.4g} s ({str(err)[:160]}): a "
                             "solver failure is not a stability limit", status="solver-failed")
     return result
