@@ -87,6 +87,9 @@ class Trajectory:
     extremes : EnergyExtremes or None
         The lowest and highest energy over every step, for a run watched at every step
         (``simulate(..., monitor=True)``); ``None`` when only the records were seen.
+    step_t, step_energy : ndarray, shape (S,), or None
+        Times (s) and total energies (J) at every step of a run watched at every step,
+        where the records keep fewer (the stability verdicts read these).
     """
 
     t: np.ndarray
@@ -103,6 +106,15 @@ class Trajectory:
     path: str = ""
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     extremes: EnergyExtremes | None = None
+    step_t: np.ndarray | None = None
+    step_energy: np.ndarray | None = None
+
+    def watched(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """Times and energies at the finest the run was seen: every step where it was
+        watched at every step, else its records."""
+        if self.step_energy is not None and self.step_t is not None:
+            return self.step_t, self.step_energy
+        return self.t, self.energy
 
 
 
@@ -195,10 +207,20 @@ MONITOR_BYTES = 512 * 2**20
 velocities, float64)."""
 
 
+def unwatched_note(size: int) -> str:
+    """The note of a run too large to record at every step (``size`` bytes of states)."""
+    return (f"watched at its records only: its every step would take {size / 2**20:.0f} MiB "
+            f"(over {MONITOR_BYTES / 2**20:.0f} MiB)")
+
+
 def thin_records(traj: Trajectory, n_steps: int, max_records: int) -> Trajectory:
     """A run recorded at every step cut back to the records a run of ``max_records`` keeps
     (:func:`~truestep.reference_impl.integrate.record_indices`), and its last state where
-    it stopped early."""
+    it stopped early; its energy at every step is kept (``step_t``, ``step_energy``), and
+    its extremes."""
+    if traj.energy is not None:
+        traj.step_t, traj.step_energy = traj.t.copy(), traj.energy.copy()
+        traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
     keep = record_indices(n_steps, max_records)
     keep = keep[keep < len(traj.t)]
     if keep[-1] != len(traj.t) - 1:
@@ -395,6 +417,10 @@ class FixedStepAdapter(abc.ABC):
         n_steps, h = case.steps_for(dt)
         every = monitor and n_steps > case.max_records and (
             n_steps * case.model.n * 48 <= MONITOR_BYTES)
+        if monitor and n_steps > case.max_records and not every:
+            notes_first = [unwatched_note(n_steps * case.model.n * 48)]
+        else:
+            notes_first = []
         run_case = replace(case, max_records=n_steps) if every else case
         scene = self.build(case, method, h)
         try:
@@ -402,10 +428,12 @@ class FixedStepAdapter(abc.ABC):
             notes = self.notes(case, method, scene)
         finally:
             self.close(scene)
-        traj = self.trajectory(case, method, rec, notes)
+        traj = self.trajectory(case, method, rec, notes_first + notes)
+        if every:
+            return thin_records(traj, n_steps, case.max_records)
         if monitor and traj.energy is not None:
             traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
-        return thin_records(traj, n_steps, case.max_records) if every else traj
+        return traj
 
     def trajectory(self, case: Case, method: str, rec: Recording, notes: list[str]) -> Trajectory:
         """The Trajectory of a recording: status, energy, evaluations."""

@@ -7,7 +7,13 @@ from types import MappingProxyType
 
 import numpy as np
 
-from truestep.adapters.base import MONITOR_BYTES, EnergyExtremes, Trajectory, thin_records
+from truestep.adapters.base import (
+    MONITOR_BYTES,
+    EnergyExtremes,
+    Trajectory,
+    thin_records,
+    unwatched_note,
+)
 from truestep.cases.case import Case
 from truestep.cases.plugins import ode_system
 from truestep.reference_impl.compiled import compiled_reason, run_compiled
@@ -74,17 +80,20 @@ class ReferenceAdapter:
         (``extremes``): the run records every step (an adaptive run records every
         accepted step anyway) and keeps the records it would have kept. A run whose every
         state would exceed :data:`MONITOR_BYTES` is watched at its records only."""
+        unwatched = ""
         if monitor and not get_solver(method).adaptive:
             n_steps = case.steps_for(dt)[0]
             size = n_steps * (case.model.n if case.model is not None else 1) * 48
             if n_steps > case.max_records and size <= MONITOR_BYTES:
                 traj = self._simulate(replace(case, max_records=n_steps), method, dt)
-                if traj.energy is not None:
-                    traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
                 return thin_records(traj, n_steps, case.max_records)
+            if n_steps > case.max_records:
+                unwatched = unwatched_note(size)
         traj = self._simulate(case, method, dt)
         if monitor and traj.energy is not None:
             traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
+        if unwatched:
+            traj.message = "; ".join(m for m in (traj.message, unwatched) if m)
         return traj
 
     def _simulate(self, case: Case, method: str, dt: float) -> Trajectory:
@@ -122,6 +131,7 @@ class ReferenceAdapter:
                                  max_records=case.max_records)
         with np.errstate(all="ignore"):
             energy = total_energy(case.model, run.x, run.v)
+        message = "non-finite or runaway state (beyond 1e12)" if run.status == "unstable" else ""
         return Trajectory(t=run.t, x=run.x, v=run.v, energy=energy, status=run.status,
                           t_fail=run.t_fail, nfev=run.nfev, steps=run.steps, wall_s=wall,
-                          path="compiled")
+                          path="compiled", message=message)

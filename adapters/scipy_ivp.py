@@ -88,7 +88,9 @@ class ScipyAdapter:
             return _unstable_at(case, system, x0, bad, calls[0], time.perf_counter() - start)
         wall = time.perf_counter() - start
         t, states = sol.t, sol.y.T
-        extremes = _extremes(case, system, t, states) if monitor else None
+        step_t, step_energy = (_step_energies(case, system, getattr(sol, "step_t", sol.t),
+                                              getattr(sol, "step_y", sol.y).T)
+                               if monitor else (None, None))
         if len(t) > case.max_records + 1:
             keep = np.unique(np.linspace(0, len(t) - 1, case.max_records + 1).round().astype(int))
             t, states = t[keep], states[keep]
@@ -105,7 +107,8 @@ class ScipyAdapter:
         return Trajectory(
             t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail,
             nfev=int(sol.nfev), steps=int(getattr(sol, "steps", len(sol.t) - 1)), wall_s=wall,
-            message=message, extremes=extremes,
+            message=message, step_t=step_t, step_energy=step_energy,
+            extremes=None if step_energy is None else EnergyExtremes.of(step_t, step_energy),
         )
 
 
@@ -117,7 +120,8 @@ event fires; the collision pass takes the particle from there."""
 @dataclass
 class _Pieces:
     """solve_ivp's answer for a run cut at its impacts, in the fields the adapter reads:
-    ``t`` (T,), ``y`` (dim, T), ``nfev``, ``success``, ``message``, ``steps``."""
+    ``t`` (T,), ``y`` (dim, T), ``nfev``, ``success``, ``message``, ``steps``, and the
+    accepted steps of every piece, ``step_t`` (S,) and ``step_y`` (dim, S)."""
 
     t: np.ndarray
     y: np.ndarray
@@ -125,6 +129,8 @@ class _Pieces:
     success: bool
     message: str
     steps: int
+    step_t: np.ndarray
+    step_y: np.ndarray
 
 
 def _with_impacts(case: Case, system, derivative, method: str, tol: float,
@@ -141,6 +147,7 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float,
     grid = np.linspace(0.0, case.duration, case.max_records + 1)
     t, x = 0.0, system.get_state()
     ts, ys, nfev, steps, ok, message = [], [], 0, 0, True, ""
+    step_ts, step_ys = [np.array([t])], [x[:, None]]
     slack = 1e-12 * max(1.0, case.duration)
     while case.duration - t > slack:
         watch = system.event_watch()
@@ -158,6 +165,8 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float,
                         events=event, dense_output=True, **options)
         nfev += int(sol.nfev)
         steps += len(sol.t) - 1
+        step_ts.append(sol.t[1:])
+        step_ys.append(sol.y[:, 1:])
         end = float(sol.t[-1])
         inside = grid[(grid >= t - slack) & (grid <= end + slack)]
         if len(inside):
@@ -178,7 +187,8 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float,
     if not ts or abs(ts[-1][-1] - t) > slack:
         ts.append(np.array([t]))
         ys.append(system.get_state()[:, None])
-    return _Pieces(np.concatenate(ts), np.concatenate(ys, axis=1), nfev, ok, message, steps)
+    return _Pieces(np.concatenate(ts), np.concatenate(ys, axis=1), nfev, ok, message, steps,
+                   np.concatenate(step_ts), np.concatenate(step_ys, axis=1))
 
 
 def _just_past(sol, event, t_event: float, t_end: float) -> tuple[float, np.ndarray]:
@@ -196,14 +206,15 @@ def _just_past(sol, event, t_event: float, t_end: float) -> tuple[float, np.ndar
     return t_event, sol.y[:, -1]
 
 
-def _extremes(case: Case, system, t: np.ndarray, states: np.ndarray) -> EnergyExtremes | None:
-    """The energy's extremes over every accepted step."""
+def _step_energies(case: Case, system, t: np.ndarray, states: np.ndarray
+                   ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Times and total energies at every accepted step (``None`` for an ODE without one)."""
     x, v = trajectory_from_states(case, t, states)
     if case.kind == "ode":
         e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
-        return None if e[0] is None else EnergyExtremes.of(t, np.array(e, dtype=float))
+        return (None, None) if e[0] is None else (t, np.array(e, dtype=float))
     with np.errstate(all="ignore"):
-        return EnergyExtremes.of(t, total_energy(case.model, x, v))
+        return t, np.asarray(total_energy(case.model, x, v), float)
 
 
 class _NonFinite(Exception):

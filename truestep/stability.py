@@ -9,7 +9,9 @@ lies), over every step where the run was watched at every step:
   orbit's is 0) reaches it and stays there to the end (a symplectic method's energy
   error spikes through a close encounter and comes back: no escape);
 - **gain**: a dissipative scene (damping, drag, inelastic or frictional contact, no energy
-  source) rises above its start by more than :data:`RISE_TOL` of ``S``, anywhere in the run;
+  source) keeps its energy more than :data:`RISE_TOL` of ``S`` above its start through the
+  late half of the run (its median), wherever in the run the rise began (a stable
+  method's overshoot that it then gives off is no gain);
 - **left for good**: a conservative scene's energy rises above its start by more than
   :data:`LEAVE_TOL` of ``S`` and never comes back within it in the late half of the run
   (a jump to another energy that then stays, as an orbit taken with too large a step
@@ -118,9 +120,11 @@ def energy_keeps_growing(t: np.ndarray, energy: np.ndarray, *, tol: float | None
 
 RISE_TOL = 0.1
 """How far above its start, as a fraction of the energy scale, a dissipative scene's energy
-may rise anywhere in a run (its exact energy never rises: a stable method's error on a
-damped cloth or a bounce stays within a few percent; methods near their limit pump the
-energy to several times the scale)."""
+may stay through the late half of a run (its median there). A stable method may overshoot
+for a while and then give the energy off: symplectic Euler on the damped oscillator at 0.47
+of its limit peaks 0.16 of the scale above the start, at 0.99 of it 24 scales, and both
+decay to nothing; methods that pump a damped cloth near their limit keep it 0.5 to 12
+scales above the start through the late half."""
 LEAVE_TOL = 0.5
 """How far above its start, as a fraction of the energy scale, a conservative scene's energy
 may stay through the late half of a run. A bounded energy error comes back to the start in
@@ -140,17 +144,16 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
     """How a finite run's motion broke what the scene allows, or ``None``.
 
     ``scale``: the case's energy scale, J (:func:`truestep.energy_scale.energy_scale`).
-    Reads the recorded energies and, where the run was watched at every step
-    (``traj.extremes``), the highest energy of any step. See the module docstring for
-    the four failures: escape, gain, left for good, growth.
+    Reads the energy at every step where the run was watched at every step
+    (:meth:`Trajectory.watched`), else at its records. See the module docstring for the
+    four failures: escape, gain, left for good, growth.
     """
     from truestep.metrics import energy_behaviour
 
-    e = traj.energy
+    t, e = traj.watched()
     if e is None or len(e) < 2 or not np.isfinite(scale):
         return None
-    t, e = np.asarray(traj.t, float), np.asarray(e, float)
-    top = traj.extremes
+    t, e = np.asarray(t, float), np.asarray(e, float)
     e0 = float(e[0])
     escape = case.escape_energy
     if escape is not None and e[-1] >= escape:
@@ -167,19 +170,16 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
         first = int(np.argmax(far))
         return Failure(float(t[first]), f"finite, but its energy grew from {e0:.4g} J to "
                        f"{e[-1]:.4g} J and was still rising")
+    half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
+    late = rise[half:]
     if behaviour == "dissipative":
-        over = np.nonzero(rise > RISE_TOL * scale)[0]
-        if len(over):
-            return Failure(float(t[over[0]]), f"a dissipative scene gained energy: "
-                           f"{rise[over[0]] / scale:.3g} of its scale ({scale:.4g} J) above "
-                           "its start")
-        if top is not None and top.e_max - e0 > RISE_TOL * scale:
-            return Failure(top.t_max, f"a dissipative scene gained energy between records: "
-                           f"{(top.e_max - e0) / scale:.3g} of its scale ({scale:.4g} J) above "
-                           "its start")
+        if len(late) and float(np.median(late)) > RISE_TOL * scale:
+            first = int(np.argmax(rise > RISE_TOL * scale))
+            return Failure(float(t[first]), f"a dissipative scene gained energy and kept it: "
+                           f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above its "
+                           f"start from here, {float(np.median(late)) / scale:.3g} through the "
+                           "late half (median)")
     else:
-        half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
-        late = rise[half:]
         if len(late) and float(np.min(late)) > LEAVE_TOL * scale:
             first = int(np.argmax(rise > LEAVE_TOL * scale))
             return Failure(float(t[first]), f"its energy left its start for good: "
