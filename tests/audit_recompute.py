@@ -684,3 +684,32 @@ def oscillator_run(scheme: str, m: float, k: float, c: float, h: float, u0: floa
             break
         out[i] = y
     return out[:, 0], out[:, 1]
+
+
+def backward_euler_has_no_solution(model, x: np.ndarray, v: np.ndarray, h: float) -> tuple[bool, str]:
+    """Whether backward Euler's step ``x' = x + h v'``, ``v' = v + h a(x')`` from ``x``, ``v``
+    (n, 3) has no solution, for point masses under unsoftened gravitation alone.
+
+    The closest pair's separation ``r' = x'_j - x'_i`` solves
+    ``r' (1 + h^2 mu / |r'|^3) = c + h^2 d`` with ``mu = G (m_i + m_j)``, ``c = r + h w``
+    (``w`` their relative velocity) and ``d`` the other bodies' pull on the pair's
+    separation: ``r'`` is parallel to the right-hand side, and ``s + h^2 mu / s^2`` has
+    its least value ``1.5 (2 h^2 mu)^(1/3)`` over ``s > 0``. So there is no solution when
+    ``|c| + h^2 |d|_max`` is below that value; ``|d|_max`` from the other bodies at no less
+    than half their present distance from the pair (each step moves a body by ``h |v'|``,
+    a small part of it, which the caller checks). For two bodies ``d = 0``: exact.
+    Returns the verdict and the numbers."""
+    G = model.gravitation.G
+    n = len(model.mass)
+    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2) + np.diag(np.full(n, np.inf))
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    mu = G * (model.mass[i] + model.mass[j])
+    c = float(np.linalg.norm(x[j] - x[i] + h * (v[j] - v[i])))
+    pull = 0.0
+    for k in range(n):
+        if k not in (i, j):
+            near = 0.5 * min(d[i, k], d[j, k])
+            pull += 2 * G * model.mass[k] / near**2
+    least = 1.5 * (2 * h * h * mu) ** (1 / 3)
+    return c + h * h * pull < least, (f"pair {i}-{j}: |r + h w| = {c:.6g}, other bodies' pull "
+                                      f"h^2 |d| <= {h * h * pull:.3g}, least reachable {least:.6g}")

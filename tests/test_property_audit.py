@@ -207,14 +207,18 @@ def adapter_of(engine: str):
         pytest.skip(str(err))
 
 
-def case_of(name: str, duration: float | None = None, particles: int | None = None):
+def case_of(name: str, duration: float | None = None, particles: int | None = None,
+            records: int | None = None):
     """A case of the library, shortened to ``duration`` s and, for a block of particles,
-    cut to its first ``particles`` (the runs must stay short)."""
-    key = (name, duration, particles)
+    cut to its first ``particles`` (the runs must stay short); ``records``: its
+    ``max_records``."""
+    key = (name, duration, particles, records)
     if key not in _CASES:
         case = load_case(CASE_DIR / f"{name}.toml")
         if duration is not None:
             case = dataclasses.replace(case, duration=duration)
+        if records is not None:
+            case = dataclasses.replace(case, max_records=records)
         if particles is not None:
             m = case.model
             keep = slice(0, particles)
@@ -782,6 +786,75 @@ def test_status_of_the_motion(name, duration, particles, engine, method, dt):
         # monitored run's extreme), which comes at or after the first step that shows it
         assert when * (1 - 1e-12) <= float(r.row["t_fail"]) <= r.case.duration * (1 + 1e-9), (
             f"{engine}/{method}: t_fail {r.row['t_fail']}, the motion failed first at {when:.6g} s")
+
+
+@pytest.mark.engine
+@pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"),
+                         [p for p in ERROR_PARAMS if p.values[4] == "implicit-euler"])
+def test_solver_failed_where_backward_euler_has_no_solution(name, duration, particles, engine, method, dt):
+    """``solver-failed`` (implicit Euler's damped Newton finding no solution) only where
+    backward Euler's equation itself has none: at the state the failing step started from
+    (the run's last record, at ``t_fail``), for gravitating bodies, the closest pair's
+    separation cannot reach the least value ``s + h^2 mu / s^2`` takes
+    (``ar.backward_euler_has_no_solution``)."""
+    r = _run_from(name, duration, particles, engine, method, dt)
+    if r.row["status"] != "solver-failed":
+        return
+    m = r.case.model
+    if m is None or m.gravitation is None or m.gravitation.softening or np.any(m.gravity) or len(
+            m.springs.i) or len(m.anchors.i) or m.planes:
+        pytest.skip("no route here to whether backward Euler has a solution in this scene")
+    traj = r.traj
+    assert traj.t[-1] == pytest.approx(float(r.row["t_fail"]), rel=1e-12), "the failing step's start is recorded"
+    x, v = traj.x[-1], traj.v[-1]
+    h = r.case.steps_for(r.dt)[1]
+    gap = np.linalg.norm(x[:, None] - x[None, :], axis=2) + np.diag(np.full(len(x), np.inf))
+    # the half-distance bound on the other bodies: each moves h |v| << its distance
+    assert h * float(np.max(np.linalg.norm(v, axis=1))) < 0.1 * float(np.min(gap[gap > 2 * gap.min()], initial=np.inf))
+    none, numbers = ar.backward_euler_has_no_solution(m, x, v, h)
+    assert none, f"{engine}/{method}: published solver-failed at t = {r.row['t_fail']}, but a solution exists ({numbers})"
+
+
+THINNED_RUNS = [
+    # (case, shortened duration (s), max_records, step (s)): records far apart
+    ("harmonic-oscillator", 0.5, 7, 2e-3),
+    ("damped-oscillator", None, 4, 0.125),
+]
+"""Runs recorded far more sparsely than they step (250 and 16 steps, 7 and 4 records):
+between records a symplectic method's energy swings through most of its band, and on the
+damped oscillator at 0.125 s (omega h = 1.25) the staggered energy of symplectic Euler's
+family rises up to 0.88 of the scale above its start at steps that are none of them a
+record (it is at or below its start at steps 4, 8, 12, 16). Their drift and status must
+still be read over every step."""
+THINNED_PARAMS = [
+    pytest.param(name, duration, records, engine, method, dt, id=f"{name}-{records}-records-{engine}-{method}")
+    for name, duration, records, dt in THINNED_RUNS
+    for engine, method in methods_for(case_of(name, duration, None, records), adaptive=False)]
+
+
+@pytest.mark.engine
+@pytest.mark.parametrize(("name", "duration", "records", "engine", "method", "dt"), THINNED_PARAMS)
+def test_energy_and_status_between_records(name, duration, records, engine, method, dt):
+    """``status``, ``energy_drift`` and ``energy_drift_final`` of runs whose records are far
+    apart: as test_status_of_the_motion and test_energy_drift, from every step of a run of
+    the engine made here (the records alone would miss what happens between them)."""
+    r = run(case_of(name, duration, None, records), engine, method, dt)
+    assert r.engine_status != "ok" or len(r.traj.t) == records + 1
+    mine, when = my_verdict(r)
+    assert r.row["status"] == mine, (
+        f"{engine}/{method}: published {r.row['status']!r} ({r.row.get('message')}), the motion "
+        f"says {mine!r}" + (f" at t = {when:.6g} s" if when is not None else ""))
+    if mine != "ok":
+        if when is not None:
+            # found between records, a failure is published at the energy's peak over
+            # every step, which comes at or after the first step that shows it
+            assert when * (1 - 1e-12) <= float(r.row["t_fail"]) <= r.case.duration * (1 + 1e-9)
+        return
+    drift, final = _my_energy(r)
+    rel = ROUNDOFF_REL + scale_slack(r.case)
+    assert _close(float(r.row["energy_drift"]), drift, rel=rel), (
+        f"{engine}/{method} energy_drift published {r.row['energy_drift']:.10g}, recomputed {drift:.10g}")
+    assert _close(float(r.row["energy_drift_final"]), final, rel=rel)
 
 
 MUJOCO_EVALUATIONS = {"Euler": 1, "implicit": 1, "implicitfast": 1, "RK4": 4}
