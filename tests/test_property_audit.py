@@ -963,6 +963,8 @@ def test_nfev_and_steps(name, duration, particles, engine, method, dt):
         assert r.timed.steps == r.counted_steps, "the timed run takes the same steps"
     else:
         assert row["steps"] == n_steps, f"{engine}/{method}: {row['steps']} steps published, {n_steps} taken"
+        # the row's step is the step taken: the duration is a whole number of them
+        assert abs(n_steps * r.dt - r.case.duration) <= 1e-9 * r.case.duration
     if engine in ("reference", "scipy"):
         if traj.path == "compiled":
             # the compiled loop calls no Python derivative: count the numpy path's calls
@@ -988,12 +990,53 @@ def test_nfev_and_steps(name, duration, particles, engine, method, dt):
 
 
 @pytest.mark.engine
+@pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"),
+                         [p for p in ERROR_PARAMS if p.values[4] in ("dopri5", "RK45", "DOP853", "Radau")])
+def test_adaptive_records(name, duration, particles, engine, method, dt):
+    """Where an adaptive run is recorded (README "Contact and adaptive steps"): the
+    reference's Dormand-Prince on the case's grid of ``max_records + 1`` evenly spaced
+    times (its continuous extension) besides its step ends; scipy on that grid when the
+    scene has planes (impacts located by its events), else at its step ends (every one,
+    or evenly thinned to ``max_records``). Records increase strictly, from 0 to the end."""
+    r = _run_from(name, duration, particles, engine, method, dt)
+    if r.engine_status != "ok":
+        pytest.skip(f"run {r.engine_status}")
+    t, case = r.traj.t, r.case
+    assert t[0] == 0.0 and np.all(np.diff(t) > 0)
+    assert t[-1] == pytest.approx(case.duration, rel=1e-12)
+    grid = np.linspace(0.0, case.duration, case.max_records + 1)
+    on_grid = np.min(np.abs(t[:, None] - grid[None, :]), axis=0) <= 1e-12 * max(1.0, case.duration)
+    planes = case.model is not None and bool(case.model.planes)
+    if engine == "reference":
+        assert on_grid.all(), f"{np.sum(~on_grid)} of the grid's times are not recorded"
+        assert len(t) <= len(grid) + r.counted_steps
+    elif planes:
+        assert on_grid.all() and len(t) == len(grid), "scipy with planes: the grid alone"
+    else:
+        assert len(t) == min(r.counted_steps, case.max_records) + 1, "scipy: its step ends"
+
+
+@pytest.mark.engine
 @pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"), ERROR_PARAMS)
 def test_wall_time(name, duration, particles, engine, method, dt):
     """``wall_s`` times the stepping of the timed run only: positive, and within the seconds
     measured here around that whole ``simulate`` call (scene building included)."""
     r = _run_from(name, duration, particles, engine, method, dt)
     assert 0.0 < float(r.row["wall_s"]) <= r.wall
+
+
+@pytest.mark.parametrize("path", sorted(CASE_DIR.glob("*.toml")), ids=lambda p: p.stem)
+def test_every_swept_step_is_the_step_taken(path):
+    """Every ``dt`` a case sweeps (full and quick; a case that names step counts, their
+    ``duration / steps``) is a whole number of steps into its duration, so that a row's
+    ``dt`` is the step its run took (README "Writing a case"): the steps a run takes,
+    ``round(duration / dt)``, times ``dt`` is the duration to round-off."""
+    case = load_case(path)
+    for dt in list(case.dts) + list(case.quick_dts):
+        n, h = case.steps_for(dt)
+        assert abs(n * dt - case.duration) <= 1e-9 * case.duration, (
+            f"{path.stem}: dt {dt!r} s is {case.duration / dt:.6f} steps of its {case.duration} s")
+        assert h == pytest.approx(dt, rel=1e-9)
 
 
 # -- the case's properties --------------------------------------------------------------------
