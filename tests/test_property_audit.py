@@ -830,6 +830,32 @@ def test_solver_failed_where_backward_euler_has_no_solution(name, duration, part
     assert none, f"{engine}/{method}: published solver-failed at t = {r.row['t_fail']}, but a solution exists ({numbers})"
 
 
+@pytest.mark.engine
+@pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"),
+                         [p for p in ERROR_PARAMS if p.values[4] == "implicit-euler"
+                          and p.values[0] in ("harmonic-oscillator", "damped-oscillator", "stiff-spring")])
+def test_implicit_euler_solves_its_step(name, duration, particles, engine, method, dt):
+    """The damped Newton solve of implicit Euler lands on backward Euler's own step: on a
+    linear oscillator the step is one linear solve (``ar.step_matrix``), iterated here from
+    the start; the recorded positions and velocities agree with it to Newton's tolerance
+    (1e-10 of the state's size per step, at most ~1e-7 of the amplitude over these 100-250
+    steps)."""
+    r = _run_from(name, duration, particles, engine, method, dt)
+    assert r.row["status"] == "ok"
+    m, a = r.case.model, r.case.model.anchors
+    d0 = m.x0[0] - a.point[0]
+    axis = d0 / np.linalg.norm(d0)
+    n, h = r.case.steps_for(dt)
+    u, w = ar.oscillator_run("implicit-euler", float(m.mass[0]), float(a.stiffness[0]),
+                             float(a.damping[0]), h, float(np.linalg.norm(d0) - a.rest[0]),
+                             float(m.v0[0] @ axis), n)
+    k = np.rint(r.traj.t / h).astype(int)
+    amplitude = float(np.linalg.norm(d0))
+    np.testing.assert_allclose((r.traj.x[:, 0] - a.point[0]) @ axis, u[k] + a.rest[0], rtol=0, atol=1e-11 * amplitude)
+    speed = amplitude * math.sqrt(float(a.stiffness[0] / m.mass[0]))
+    np.testing.assert_allclose(r.traj.v[:, 0] @ axis, w[k], rtol=0, atol=1e-11 * speed)
+
+
 THINNED_RUNS = [
     # (case, shortened duration (s), max_records, step (s)): records far apart
     ("harmonic-oscillator", 0.5, 7, 2e-3),
