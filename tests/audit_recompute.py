@@ -10,6 +10,7 @@ case's scene parameters (masses, springs, planes ...) and a run's raw arrays
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -520,7 +521,7 @@ def grows_every_quarter(t, e, scale) -> bool:
     parts = [p for p in np.split(e - e[0], cuts) if len(p)]
     if len(parts) < 4:
         return rises_past_its_band(t, e, scale)
-    for before, now in zip(parts, parts[1:], strict=False):
+    for before, now in itertools.pairwise(parts):
         hi, lo = max(float(before.max()), 0.0), min(float(before.min()), 0.0)
         if not float(now.max()) > hi + BAND * (hi - lo) + FLOOR * scale:
             return False

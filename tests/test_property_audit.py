@@ -820,14 +820,17 @@ def test_solver_failed_where_backward_euler_has_no_solution(name, duration, part
             m.springs.i) or len(m.anchors.i) or m.planes:
         pytest.skip("no route here to whether backward Euler has a solution in this scene")
     traj = r.traj
-    assert traj.t[-1] == pytest.approx(float(r.row["t_fail"]), rel=1e-12), "the failing step's start is recorded"
+    assert traj.t[-1] == pytest.approx(float(r.row["t_fail"]), rel=1e-12), (
+        "the failing step's start is recorded")
     x, v = traj.x[-1], traj.v[-1]
     h = r.case.steps_for(r.dt)[1]
     gap = np.linalg.norm(x[:, None] - x[None, :], axis=2) + np.diag(np.full(len(x), np.inf))
     # the half-distance bound on the other bodies: each moves h |v| << its distance
-    assert h * float(np.max(np.linalg.norm(v, axis=1))) < 0.1 * float(np.min(gap[gap > 2 * gap.min()], initial=np.inf))
+    others = float(np.min(gap[gap > 2 * gap.min()], initial=np.inf))
+    assert h * float(np.max(np.linalg.norm(v, axis=1))) < 0.1 * others
     none, numbers = ar.backward_euler_has_no_solution(m, x, v, h)
-    assert none, f"{engine}/{method}: published solver-failed at t = {r.row['t_fail']}, but a solution exists ({numbers})"
+    assert none, (f"{engine}/{method}: published solver-failed at t = {r.row['t_fail']}, but a "
+                  f"solution exists ({numbers})")
 
 
 @pytest.mark.engine
@@ -851,7 +854,8 @@ def test_implicit_euler_solves_its_step(name, duration, particles, engine, metho
                              float(m.v0[0] @ axis), n)
     k = np.rint(r.traj.t / h).astype(int)
     amplitude = float(np.linalg.norm(d0))
-    np.testing.assert_allclose((r.traj.x[:, 0] - a.point[0]) @ axis, u[k] + a.rest[0], rtol=0, atol=1e-11 * amplitude)
+    np.testing.assert_allclose((r.traj.x[:, 0] - a.point[0]) @ axis, u[k] + a.rest[0], rtol=0,
+                               atol=1e-11 * amplitude)
     speed = amplitude * math.sqrt(float(a.stiffness[0] / m.mass[0]))
     np.testing.assert_allclose(r.traj.v[:, 0] @ axis, w[k], rtol=0, atol=1e-11 * speed)
 
@@ -868,7 +872,8 @@ family rises up to 0.88 of the scale above its start at steps that are none of t
 record (it is at or below its start at steps 4, 8, 12, 16). Their drift and status must
 still be read over every step."""
 THINNED_PARAMS = [
-    pytest.param(name, duration, records, engine, method, dt, id=f"{name}-{records}-records-{engine}-{method}")
+    pytest.param(name, duration, records, engine, method, dt,
+                 id=f"{name}-{records}-records-{engine}-{method}")
     for name, duration, records, dt in THINNED_RUNS
     for engine, method in methods_for(case_of(name, duration, None, records), adaptive=False)]
 
@@ -930,10 +935,11 @@ def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
         # this file's scale needs a motion to read: the same cloth's DOP853 run (lifted
         # or not, the exchange is the same)
         t = np.linspace(0.0, base.duration, SCALE_GRID)
-        _SCALES[id(_CASES[key])] = _exchanged_along(_CASES[key], *ar.particle_reference(model, base.duration, 1e-9)(t))
+        motion = ar.particle_reference(model, base.duration, 1e-9)(t)
+        _SCALES[id(_CASES[key])] = _exchanged_along(_CASES[key], *motion)
     case = _CASES[key]
     r = run(case, "reference", "heun", 4e-3)
-    mine, when = my_verdict(r)
+    mine, _ = my_verdict(r)
     assert mine == "unstable" and r.row["status"] == mine, (
         f"lift {lift} m: published {r.row['status']!r} ({r.row.get('message')}), the motion says {mine!r}")
     assert float(r.row["t_fail"]) == pytest.approx(r.cache["at_records"], rel=1e-12), (
@@ -1531,7 +1537,8 @@ def _check_search(row, case, engine, method, *, min_steps: int, rel_tol: float) 
         return my_stable(case, engine, method, dt, min_steps)
 
     if row.dt_limit == 0.0:
-        assert not stable(spec.dt_lo), f"{label}: published unstable at every step, stable here at {spec.dt_lo}"
+        assert not stable(spec.dt_lo), (
+            f"{label}: published unstable at every step, stable here at {spec.dt_lo}")
         return
     assert stable(row.dt_limit), f"{label}: dt_limit {row.dt_limit:.6g} s is unstable here"
     if row.dt_limit == spec.dt_hi:
@@ -1761,7 +1768,8 @@ def test_fit_order(engine, method):
     known = KNOWN_ORDER.get(SCHEME[(engine, method)])
     if known is not None:
         # 0.1: the next Taylor term moves a local order by ~ (omega dt) = 0.02 at these steps
-        assert abs(slope - known) <= 0.1, f"{engine}/{method}: converges at order {slope:.3f}, its step is of order {known}"
+        assert abs(slope - known) <= 0.1, (
+            f"{engine}/{method}: converges at order {slope:.3f}, its step is of order {known}")
 
 
 # -- restitution.csv --------------------------------------------------------------------------
@@ -1867,7 +1875,8 @@ def test_restitution_rows(engine, method, e, dt):
             f"bounce {k}: e_measured {row['e_measured']:.5f}, here {e_here:.5f}")
         # the highest sample of the flight: the same sample, by two detectors
         apex = contact["apex"]
-        assert _close(row["apex"], apex), f"bounce {k}: apex {row['apex']:.6f} m, highest sample here {apex:.6f} m"
+        assert _close(row["apex"], apex), (
+            f"bounce {k}: apex {row['apex']:.6f} m, highest sample here {apex:.6f} m")
         e_apex = math.sqrt(apex / apex_prev) if apex_prev > 0 else math.nan
         assert _close(row["e_apex"], e_apex), f"bounce {k}: e_apex {row['e_apex']:.6f}, here {e_apex:.6f}"
         apex_prev = apex
