@@ -1211,6 +1211,27 @@ def test_bounce_time_error(name, duration, engine, method, dt):
         f"{np.round(times, 5).tolist()})")
 
 
+SPARSE_BOUNCE_PARAMS = [
+    pytest.param(engine, method, id=f"bouncing-ball-100-records-{engine}-{method}")
+    for engine, method in methods_for(case_of("bouncing-ball", None, None, 100), adaptive=False,
+                                      only=(("reference", "lecture"), ("pymunk", "default"),
+                                            ("pybullet", "default"), ("mujoco", "Euler")))]
+
+
+@pytest.mark.engine
+@pytest.mark.parametrize(("engine", "method"), SPARSE_BOUNCE_PARAMS)
+def test_apexes_need_every_step(engine, method):
+    """``apex_height_error`` and ``bounce_time_error`` of a bouncing-ball run recorded at 100
+    of its 625 steps: NaN (a flight's highest sample and a contact's lowest are read from
+    a run recorded at every step, never guessed between records), while its error and
+    status are still published."""
+    case = case_of("bouncing-ball", None, None, 100)
+    r = run(case, engine, method, case.quick_dts[0])
+    assert len(r.traj.t) == 101 and r.traj.steps == 625
+    assert np.isnan(float(r.row["apex_height_error"])) and np.isnan(float(r.row["bounce_time_error"]))
+    assert r.row["status"] == "ok" and np.isfinite(float(r.row["error"]))
+
+
 PENETRATION_PARAMS = (BOUNCE_PARAMS + _prop_params("sliding-contact")
                       + _prop_params("particle-fountain", only=("lecture", "symplectic-euler")))
 
