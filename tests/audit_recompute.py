@@ -714,3 +714,29 @@ def backward_euler_has_no_solution(model, x: np.ndarray, v: np.ndarray, h: float
     least = 1.5 * (2 * h * h * mu) ** (1 / 3)
     return c + h * h * pull < least, (f"pair {i}-{j}: |r + h w| = {c:.6g}, other bodies' pull "
                                       f"h^2 |d| <= {h * h * pull:.3g}, least reachable {least:.6g}")
+
+
+def kepler_backward_euler(mu: float, q0, w0, h: float, t_end: float):
+    """Backward Euler on ``q'' = -mu q / |q|^3`` from ``q0``, ``w0`` (2,), solved here in
+    closed form: ``q' (1 + h^2 mu / |q'|^3) = c = q + h w`` makes ``q' = s c / |c|`` with
+    ``s + h^2 mu / s^2 = |c|``, whose larger root (the one that tends to ``|c|`` as
+    ``h -> 0``) is found by bisection above the least point ``(2 h^2 mu)^(1/3)``, and
+    ``w' = (q' - q) / h``. Stops at the first step whose ``|c|`` is below the least value
+    ``1.5 (2 h^2 mu)^(1/3)``: there the step has no solution. Returns the states after
+    each step taken, (k + 1, 4), and the index of that step (None if none)."""
+    q, w = np.array(q0, float), np.array(w0, float)
+    floor = (2 * h * h * mu) ** (1 / 3)
+    states = [np.concatenate([q, w])]
+    for k in range(round(t_end / h)):
+        c = q + h * w
+        size = float(np.linalg.norm(c))
+        if size < 1.5 * floor:
+            return np.array(states), k
+        lo, hi = floor, size
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if mid + h * h * mu / mid**2 > size else (mid, hi)
+        q1 = 0.5 * (lo + hi) * c / size
+        w, q = (q1 - q) / h, q1
+        states.append(np.concatenate([q, w]))
+    return np.array(states), None
