@@ -532,7 +532,9 @@ def motion_verdict(t, e, scale: float, behaviour: str, escape: float | None = No
                    t_all=None, e_all=None) -> tuple[str, float | None]:
     """``("ok", None)`` or ``("unstable", when)`` for a finite run, from its energy:
     ``t``, ``e`` at the records, ``t_all``, ``e_all`` at every step it took (the records
-    when not given). Unstable: the escape energy reached at any step; a passive scene's
+    when not given). Unstable: the escape energy reached and kept to the end (a spike
+    through a close encounter that comes back below it is no escape; ``when``: the step
+    after the last one below it); a passive scene's
     energy more than ``scale`` from its start and still growing in every quarter; a
     dissipative scene more than :data:`GAIN` of its scale above its start at any step; a
     conservative one more than :data:`LEFT` of it above its start at every record of the
@@ -540,10 +542,9 @@ def motion_verdict(t, e, scale: float, behaviour: str, escape: float | None = No
     t, e = np.asarray(t, float), np.asarray(e, float)
     t_all = t if t_all is None else np.asarray(t_all, float)
     e_all = e if e_all is None else np.asarray(e_all, float)
-    if escape is not None:
-        hit = np.flatnonzero(e_all >= escape)
-        if len(hit):
-            return "unstable", float(t_all[hit[0]])
+    if escape is not None and e_all[-1] >= escape:
+        below = np.flatnonzero(e_all < escape)
+        return "unstable", float(t_all[below[-1] + 1 if len(below) else 0])
     if behaviour == "source":
         return "ok", None
     rise = e - e[0]
