@@ -434,31 +434,36 @@ ERROR_RUNS = [
     ("kepler-orbit", 6.285, None, 0.005),
     ("circle-field", None, None, 0.0125),
     ("close-encounter", None, None, 1e-3),
+    ("close-encounter", None, None, 5e-4),
     ("rope-pendulum", 0.5, None, 2e-3),
     ("hanging-cloth", 0.5, None, 4e-3),
     ("stiff-cloth", 0.05, None, 2.5e-4),
     ("arenstorf-orbit", None, None, None),
 ]
 """The runs of the results.csv audit, each step dividing its (shortened) duration: the
-row's step is the step taken. ``kepler-orbit`` runs one period and a little (1257 steps
-of 5 ms); ``rope-pendulum`` and the cloths (no closed form) are measured against this
+row's step is the step taken. ``close-encounter`` at 0.5 ms too (fixed steps): symplectic
+Euler's energy spikes from -2.37 J to +8.1 J through the encounter and comes back (no
+escape), and 6000 steps are recorded at 2000 records. ``kepler-orbit`` runs one period
+and a little (1257 steps of 5 ms); ``rope-pendulum`` and the cloths (no closed form) are measured against this
 file's DOP853 run; the damped cloth at 4 ms is where heun and midpoint gain energy;
 ``arenstorf-orbit`` with its adaptive methods only (its exact solution is known at whole
 periods; 17 000 fixed steps per method would not fit the time budget)."""
 
 
 def _error_params():
-    out = []
+    out, seen = [], set()
     for name, duration, particles, dt in ERROR_RUNS:
         case = case_of(name, duration, particles)
+        again = (name, duration, particles) in seen  # another step of a case: fixed steps only
+        seen.add((name, duration, particles))
         if dt is not None:
             steps = case.duration / dt
             assert abs(steps - round(steps)) <= 1e-9 * steps, f"{name}: {dt} s does not divide the run"
-        for engine, method in methods_for(case):
+        for engine, method in methods_for(case, adaptive=not again):
             if dt is None and method not in get_adapter(engine).adaptive_methods:
                 continue
             out.append(pytest.param(name, duration, particles, engine, method, dt,
-                                    id=f"{name}-{engine}-{method}"))
+                                    id=f"{name}-{engine}-{method}" + (f"-{dt:g}" if again else "")))
     return out
 
 
