@@ -481,7 +481,8 @@ def energy_behaviour(model) -> str:
 
 
 GAIN = 0.1
-"""A dissipative scene may rise at most this fraction of its energy scale above its start."""
+"""A dissipative scene may stay at most this fraction of its energy scale above its start
+through the late half of a run (the median there)."""
 LEFT = 0.5
 """A conservative scene above its start by more than this fraction of its scale through the
 whole late half of the run has left its energy for good."""
@@ -530,35 +531,33 @@ def grows_every_quarter(t, e, scale) -> bool:
 
 def motion_verdict(t, e, scale: float, behaviour: str, escape: float | None = None,
                    t_all=None, e_all=None) -> tuple[str, float | None]:
-    """``("ok", None)`` or ``("unstable", when)`` for a finite run, from its energy:
-    ``t``, ``e`` at the records, ``t_all``, ``e_all`` at every step it took (the records
-    when not given). Unstable: the escape energy reached and kept to the end (a spike
-    through a close encounter that comes back below it is no escape; ``when``: the step
-    after the last one below it); a passive scene's
-    energy more than ``scale`` from its start and still growing in every quarter; a
-    dissipative scene more than :data:`GAIN` of its scale above its start at any step; a
-    conservative one more than :data:`LEFT` of it above its start at every record of the
-    late half. ``when``: the first step (or record) that shows it."""
-    t, e = np.asarray(t, float), np.asarray(e, float)
-    t_all = t if t_all is None else np.asarray(t_all, float)
-    e_all = e if e_all is None else np.asarray(e_all, float)
+    """``("ok", None)`` or ``("unstable", when)`` for a finite run, from its energy at every
+    step it took (``t_all``, ``e_all``; its records ``t``, ``e`` when those are not given).
+    Unstable: the escape energy reached and kept to the end (a spike through a close
+    encounter that comes back below it is no escape; ``when``: the step after the last one
+    below it); a passive scene's energy more than ``scale`` from its start and still
+    growing in every quarter; a dissipative scene more than :data:`GAIN` of its scale
+    above its start through the late half (its median: an overshoot that a stable method
+    then gives off is no gain); a conservative one more than :data:`LEFT` of it above its
+    start at every step of the late half. ``when``: the first step that shows it."""
+    t_all = np.asarray(t if t_all is None else t_all, float)
+    e_all = np.asarray(e if e_all is None else e_all, float)
     if escape is not None and e_all[-1] >= escape:
         below = np.flatnonzero(e_all < escape)
         return "unstable", float(t_all[below[-1] + 1 if len(below) else 0])
     if behaviour == "source":
         return "ok", None
-    rise = e - e[0]
+    rise = e_all - e_all[0]
     far = np.abs(rise) > scale
-    if far.any() and grows_every_quarter(t, e, scale):
-        return "unstable", float(t[np.argmax(far)])
+    if far.any() and grows_every_quarter(t_all, e_all, scale):
+        return "unstable", float(t_all[np.argmax(far)])
+    late = rise[_halves(t_all):]
     if behaviour == "dissipative":
-        over = np.flatnonzero(e_all - e[0] > GAIN * scale)
-        if len(over):
-            return "unstable", float(t_all[over[0]])
+        if len(late) and float(np.median(late)) > GAIN * scale:
+            return "unstable", float(t_all[np.argmax(rise > GAIN * scale)])
         return "ok", None
-    late = rise[_halves(t):]
     if len(late) and late.min() > LEFT * scale:
-        return "unstable", float(t[np.argmax(rise > LEFT * scale)])
+        return "unstable", float(t_all[np.argmax(rise > LEFT * scale)])
     return "ok", None
 
 

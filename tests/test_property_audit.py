@@ -40,10 +40,10 @@ none of the code under test (``tests/audit_recompute.py``):
   highest samples of the flights found here.
 
 Tolerances sit beside each comparison with their reason (STYLE point 9). A failing test
-names the engine whose published number disagrees with the physics. Harness bugs found by
-the audit are held as strict xfails whose reason names the bug (``SCALE_ORIGIN_BUG``,
-``T_FAIL_BUG``, ``SEARCH_RUNS_BUG``): fixing one turns its test into a failure that asks
-for the mark to go.
+names the engine whose published number disagrees with the physics. The audit found three
+harness bugs (an energy scale that moved with the potential's zero for a scene without a
+reference, an escape dated from the records rather than its step, a search ended by a
+solver failure that published no runs); they are fixed, and their tests stand.
 """
 
 from __future__ import annotations
@@ -935,21 +935,9 @@ def test_energy_and_status_between_records(name, duration, records, engine, meth
 
 # -- verdicts that may depend neither on the origin nor on how far apart the records are ------
 
-SCALE_ORIGIN_BUG = (
-    "harness bug: truestep/energy_scale.py _initial_scale: a passive scene without an exact "
-    "solution or reference run, starting at rest, gets S = |E(0)|, which moves with the "
-    "potential's zero. hanging-cloth (1 s) without its reference, heun at 4 ms, whose energy "
-    "rises 26 S above its start (S = 0.698 J along the motion): S = 1.901 J as placed, NaN "
-    "with the anchors at y = 0 (published ok), 30.41 J lifted 15 m (published t_fail 0.684 s, "
-    "the first record past 0.1 S is at 0.656 s)")
-
 
 @pytest.mark.engine
-@pytest.mark.parametrize("lift", [
-    0.0,  # as placed: |E(0)| = 1.9 J is not the scale, but the gain crosses both within a record
-    pytest.param(-1.0, marks=pytest.mark.xfail(strict=True, reason=SCALE_ORIGIN_BUG)),
-    pytest.param(15.0, marks=pytest.mark.xfail(strict=True, reason=SCALE_ORIGIN_BUG)),
-])
+@pytest.mark.parametrize("lift", [0.0, -1.0, 15.0])
 def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
     """hanging-cloth with no exact solution or reference run (as a user's case may come),
     lifted by ``lift`` m (anchors and all; -1 m puts the potential's zero at the
@@ -972,24 +960,16 @@ def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
         _SCALES[id(_CASES[key])] = _exchanged_along(_CASES[key], *motion)
     case = _CASES[key]
     r = run(case, "reference", "heun", 4e-3)
-    mine, _ = my_verdict(r)
+    mine, when = my_verdict(r)
     assert mine == "unstable" and r.row["status"] == mine, (
         f"lift {lift} m: published {r.row['status']!r} ({r.row.get('message')}), the motion says {mine!r}")
-    assert float(r.row["t_fail"]) == pytest.approx(r.cache["at_records"], rel=1e-12), (
-        f"lift {lift} m: t_fail {r.row['t_fail']} s, the first record past 0.1 of the scale is at "
-        f"{r.cache['at_records']} s")
+    assert float(r.row["t_fail"]) == pytest.approx(when, rel=1e-12), (
+        f"lift {lift} m: t_fail {r.row['t_fail']} s, the first step past 0.1 of the scale is at "
+        f"{when} s")
 
-
-T_FAIL_BUG = (
-    "harness bug: truestep/stability.py motion_failure dates an escape from the records "
-    "alone (the first record after the last one below the escape energy), not from the "
-    "steps the monitored run saw: kepler-orbit rk4 at dt 1 s over 20 s with max_records 2 "
-    "is at +1.28 J (escape energy 0 J) from its first step, t = 1 s, to the end; published "
-    "t_fail 10 s, the first record")
 
 
 @pytest.mark.engine
-@pytest.mark.xfail(strict=True, reason=T_FAIL_BUG)
 def test_an_escape_is_dated_at_its_step():
     """``t_fail`` of an escape ("an escape or a jump is unstable with its time"): the run
     is watched at every step, so its time is the first step at or above the escape
@@ -1749,15 +1729,8 @@ def test_a_search_that_meets_a_solver_failure(kepler_implicit_search):
     np.testing.assert_allclose(traj.x[:, 0], mine, rtol=0, atol=1e-7)
 
 
-SEARCH_RUNS_BUG = (
-    "harness bug: truestep/stability.py search_case: a search ended by a solver failure "
-    "returns SearchResult(nan, nan, 0, ...): stability.csv publishes runs = 0 for the "
-    "simulations it made (kepler-orbit, reference implicit-euler: 3 runs, at 1e-3, 1 and "
-    "0.03162 s; published 0)")
-
 
 @pytest.mark.engine
-@pytest.mark.xfail(strict=True, reason=SEARCH_RUNS_BUG)
 def test_a_failed_search_counts_its_runs(kepler_implicit_search):
     """``runs`` of a search that ended in a solver failure: the simulations it made."""
     row, calls, _ = kepler_implicit_search
