@@ -163,9 +163,16 @@ def test_motion_failures_read_the_energy_against_its_scale():
     assert motion_failure(damped, small, 1.0) is None
     gain = motion_failure(damped, swing, 1.0)
     assert gain.t == t[np.argmax(swing.energy - 1.0 > 0.1)] and "gained" in gain.reason
-    # ... and a gain between records, seen at every step
-    seen = Trajectory(t=t, x=x, v=None, energy=np.ones(81), extremes=EnergyExtremes(0, 1, 2.5, 1.2))
-    assert motion_failure(damped, seen, 1.0).t == 2.5
+    # an overshoot that a stable method then gives off is no gain
+    overshoot = Trajectory(t=t, x=x, v=None, energy=np.where(t < 0.5, 30.0, 0.01))
+    assert motion_failure(damped, overshoot, 1.0) is None
+    # ... and a gain kept between the records, seen at every step
+    fine = np.linspace(0.0, 4.0, 801)
+    seen = Trajectory(t=t, x=x, v=None, energy=np.ones(81), step_t=fine,
+                      step_energy=np.where((fine > 2.5) & (np.round(fine * 200) % 2 == 1), 1.5, 1.0))
+    assert motion_failure(damped, seen, 1.0) is None  # half the steps up: the median is not
+    seen.step_energy = np.where(fine > 2.0125, 1.5, 1.0)
+    assert motion_failure(damped, seen, 1.0).t == fine[np.argmax(fine > 2.0125)]
     bound = case(conservative=True)
     bound.escape_energy = 0.0
     orbit = Trajectory(t=t, x=x, v=None, energy=np.where(t < 2.0, -0.5, 0.02))
