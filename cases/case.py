@@ -81,8 +81,9 @@ class StabilitySpec:
     rel_tol : relative width at which bisection stops;
     quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses);
     min_steps : every run of the search takes at least this many steps;
-    budget_s : seconds of simulation after which the bisection stops where it is (the
-    note says so), so that no search holds the whole run up.
+    budget_s : a safety valve, s: a search still running after this long is a ``timeout``
+    row with no limit (searches are bounded by ``max_runs`` and ``rel_tol``, never by time,
+    so that every machine finds the same limit).
     """
 
     horizon: float
@@ -92,7 +93,7 @@ class StabilitySpec:
     rel_tol: float = 1e-3
     quick: bool = False
     min_steps: int = 5000  # truestep.stability.MIN_STEPS
-    budget_s: float = 10.0
+    budget_s: float = 300.0
 
 
 @dataclass
@@ -108,6 +109,8 @@ class Case:
     properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
     skip : ``(engine, method, reason)`` pairs that are not run (rows say why)
     in_quick : whether ``--quick`` runs this case at all (long cases say no)
+    escape_energy : J, an energy the motion the case describes never reaches (a bound
+    orbit's: 0); a run that reaches it has escaped and is unstable (``[reference]``)
     family : the kind of scene the report groups it under (:data:`FAMILIES`, or ``other``)
     """
 
@@ -125,7 +128,7 @@ class Case:
     ode: OdeSpec | None = None
     exact: str | None = None
     exact_params: dict[str, Any] = field(default_factory=dict)
-    error_norm: str = "final"
+    error_norm: str = "max"
     error_scale: float = 1.0
     conservative: bool = False
     max_records: int = 2000
@@ -138,6 +141,7 @@ class Case:
     family: str = "other"
     timeout_s: float = 120.0
     in_quick: bool = True
+    escape_energy: float | None = None
 
     @property
     def features(self) -> set[str]:

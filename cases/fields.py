@@ -185,7 +185,7 @@ class Fields:
         if isinstance(value, np.ndarray):
             arr = value.astype(float)
         else:
-            if not _nested_numbers(value, len(shape)):
+            if not _nested_numbers(value, shape):
                 reason = f"expected numbers of shape {_fmt(shape)}, got {short(value)}"
                 raise self.error(name, reason)
             try:
@@ -211,7 +211,7 @@ class Fields:
                 default: Any = _MISSING) -> np.ndarray:
         """An integer array of the given shape whose entries number particles ``0..n-1``."""
         value = self.raw(name, default)
-        if not _nested_integers(value, len(shape)):
+        if not _nested_integers(value, shape):
             raise self.error(name, f"expected integers of shape {_fmt(shape)}, got {short(value)}")
         try:
             arr = np.asarray(value, dtype=np.int64) if _fits_int64(value) else None
@@ -241,17 +241,23 @@ class Fields:
             raise self.error(short(unknown[0]).strip("'"), "unknown field")
 
 
-def _nested_numbers(value: Any, depth: int) -> bool:
-    """Whether ``value`` is lists nested ``depth`` deep of numbers (no bools, strings)."""
-    if depth == 0:
+def _nested_numbers(value: Any, shape: tuple[int | None, ...]) -> bool:
+    """Whether ``value`` is lists nested as ``shape`` says (a fixed length where it gives
+    one, checked before anything inside is looked at) of numbers (no bools, strings)."""
+    if not shape:
         return _is_number(value)
-    return isinstance(value, list) and all(_nested_numbers(v, depth - 1) for v in value)
+    if not isinstance(value, list) or shape[0] not in (None, len(value)):
+        return False
+    return all(_nested_numbers(v, shape[1:]) for v in value)
 
 
-def _nested_integers(value: Any, depth: int) -> bool:
-    if depth == 0:
+def _nested_integers(value: Any, shape: tuple[int | None, ...]) -> bool:
+    """As :func:`_nested_numbers`, of integers."""
+    if not shape:
         return isinstance(value, int) and not isinstance(value, bool)
-    return isinstance(value, list) and all(_nested_integers(v, depth - 1) for v in value)
+    if not isinstance(value, list) or shape[0] not in (None, len(value)):
+        return False
+    return all(_nested_integers(v, shape[1:]) for v in value)
 
 
 def _fits_int64(value: Any) -> bool:

@@ -7,9 +7,10 @@ spring updates over the finest run) and the memory its records need. A case over
 limit is refused at load with the numbers (:class:`~truestep.cases.errors.CaseError`).
 
 The defaults (:data:`DEFAULT`) hold every shipped case with room to spare; a case file
-raises its own with a ``[limits]`` table (same keys), and ``truestep run --limit
-KEY=VALUE`` (or :func:`override`) raises or lowers them for a whole run, over the case
-files' own.
+raises its own with a ``[limits]`` table (same keys), up to a :data:`CEILING` it cannot
+raise, and ``truestep run --limit KEY=VALUE`` (or :func:`override`) raises or lowers them
+for a whole run, over the case files' own (beyond the ceiling only with
+``--trust-limits``). Every time step a case names is at least :data:`MIN_STEP_S`.
 """
 
 from __future__ import annotations
@@ -43,26 +44,54 @@ class Limits:
 
 
 DEFAULT = Limits()
+CEILING = Limits(particles=10_000_000, springs=50_000_000, steps=200_000_000, records=1_000_000,
+                 work=2e11, memory_mb=16384.0, timeout_s=21600.0)
+"""The most a case file's ``[limits]`` may raise each limit to (ten times the default; the
+timeout to the default budget of a whole run, 6 h). Only the command line goes beyond,
+with ``truestep run --trust-limits --limit KEY=VALUE``: a case file is data from
+anywhere, and cannot ask for a run of days or an array of terabytes."""
+MIN_STEP_S = 1e-9
+"""The smallest time step (or emitter frame, or stability bracket, or reference step) a
+case may name, s, and the shortest duration: below it a step count is meaningless for an
+animation and a float time cannot advance by it over a run of seconds."""
 KEYS = tuple(f.name for f in dataclasses.fields(Limits))
 _FLOATS = {"work", "memory_mb", "timeout_s"}
+TRUST_FLAG = "--trust-limits"
 
 
 def read_limits(f: Fields, base: Limits) -> Limits:
-    """A case file's ``[limits]`` table over ``base`` (every key optional, positive)."""
+    """A case file's ``[limits]`` table over ``base`` (every key optional, positive, at
+    most its :data:`CEILING`)."""
     if not f.has("limits"):
         return base
     t = f.sub("limits")
     values = {}
     for key in KEYS:
         if t.has(key):
+            ceiling = getattr(CEILING, key)
             values[key] = (t.number(key, positive=True) if key in _FLOATS
                            else t.integer(key, minimum=1))
+            if values[key] > ceiling:
+                raise t.error(key, f"{values[key]:.3g} is over the ceiling of {ceiling:.3g} a case "
+                              f"file may raise it to (only truestep run {TRUST_FLAG} --limit "
+                              f"{key}=N goes beyond it)")
     t.done()
     return dataclasses.replace(base, **values)
 
 
-def parse_override(items: list[str]) -> dict[str, float]:
-    """``["steps=1e8", "particles=2e6"]`` -> ``{"steps": 1e8, ...}``; ValueError says why."""
+def check_ceilings(values: dict[str, float], *, trusted: bool, where: str = "--limit") -> None:
+    """Refuse (ValueError, one line) a limit in ``values`` over its :data:`CEILING`
+    unless the inputs are ``trusted`` (``--trust-limits``)."""
+    for key, value in values.items():
+        ceiling = getattr(CEILING, key)
+        if not trusted and value > ceiling:
+            raise ValueError(f"{where} {key}={value:.3g} is over the ceiling of {ceiling:.3g}; "
+                             f"add {TRUST_FLAG} if the cases of this run are trusted")
+
+
+def parse_override(items: list[str], *, trusted: bool = False) -> dict[str, float]:
+    """``["steps=1e8", "particles=2e6"]`` -> ``{"steps": 1e8, ...}``; ValueError says why
+    (a value over its :data:`CEILING` needs ``trusted``)."""
     out: dict[str, float] = {}
     for item in items:
         key, sep, raw = item.partition("=")
@@ -77,6 +106,7 @@ def parse_override(items: list[str]) -> dict[str, float]:
         if not 0 < value < float("inf"):
             raise ValueError(f"--limit {key}: must be a positive finite number, got {raw[:40]!r}")
         out[key] = value
+    check_ceilings(out, trusted=trusted)
     return out
 
 

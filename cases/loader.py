@@ -8,6 +8,7 @@ path: :func:`case_files` takes names, globs, files and directories.
 from __future__ import annotations
 
 import fnmatch
+import os
 import re
 import tomllib
 from collections.abc import Iterable
@@ -19,7 +20,16 @@ from truestep.cases import plugins
 from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, StabilitySpec
 from truestep.cases.errors import CaseError, SelectionError
 from truestep.cases.fields import Fields, short
-from truestep.cases.limits import DEFAULT, Budget, Limits, override, read_limits
+from truestep.cases.files import FileRefused, read_regular
+from truestep.cases.limits import (
+    DEFAULT,
+    MIN_STEP_S,
+    Budget,
+    Limits,
+    check_ceilings,
+    override,
+    read_limits,
+)
 from truestep.cases.scene import read_scene
 from truestep.reference_impl.system import SecondOrderSystem
 from truestep.time_limit import TimeLimitExceeded, time_limit
@@ -40,7 +50,7 @@ MAX_SWEEP = 50
 """The most steps (or tolerances) one sweep lists: each is a row per engine and method."""
 EXACT_CHECK_S = 30.0
 """How long checking that an exact solution fits its case may take, s."""
-REFERENCE_KEYS = {"exact", "error", "scale", "conservative"}
+REFERENCE_KEYS = {"exact", "error", "scale", "conservative", "escape_energy"}
 PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
 """``[reference]`` parameters that properties read (:mod:`truestep.properties`)."""
 
@@ -79,10 +89,10 @@ def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
             files = sorted(path.glob("*.toml"))
             if not files:
                 raise SelectionError(f"--cases: {item!r} is a directory with no *.toml case file")
-        elif path.is_file() or item.endswith(".toml"):
-            if not path.is_file():
+        elif item.endswith(".toml") or os.path.lexists(path):
+            if not os.path.lexists(path):
                 raise SelectionError(f"--cases: {item!r}: no such case file")
-            files = [path]
+            files = [path]  # anything but a regular file is refused when it is read
         else:
             lib = library() if lib is None else lib
             files = [p for name, p in lib.items() if fnmatch.fnmatchcase(name, item)]
@@ -95,11 +105,14 @@ def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
 
 
 def load_cases(selection: str | Iterable[str] = "*", *,
-               limits: dict[str, float] | None = None) -> list[Case]:
+               limits: dict[str, float] | None = None, trust_limits: bool = False,
+               engines: Iterable[str] | None = None) -> list[Case]:
     """Load every case a selection names (:func:`case_files`); raises :class:`CaseError`
     on the first bad file and :class:`SelectionError` when an item matches nothing or
-    two cases share a name. ``limits`` overrides the cost limits (:func:`load_case`)."""
-    cases = [load_case(p, limits=limits) for p in case_files(selection)]
+    two cases share a name. ``limits``, ``trust_limits`` and ``engines`` as
+    :func:`load_case`."""
+    cases = [load_case(p, limits=limits, trust_limits=trust_limits, engines=engines)
+             for p in case_files(selection)]
     seen: dict[str, str] = {}
     for c in cases:
         if c.name in seen:
@@ -108,22 +121,32 @@ def load_cases(selection: str | Iterable[str] = "*", *,
     return cases
 
 
-def load_case(path: str | Path, *, limits: dict[str, float] | None = None) -> Case:
-    """Load one case file, validating every field and its cost.
+def load_case(path: str | Path, *, limits: dict[str, float] | None = None,
+              trust_limits: bool = False, engines: Iterable[str] | None = None) -> Case:
+    """Load one case file, validating every field, its cost and its gates.
 
     The cost limits are :data:`truestep.cases.limits.DEFAULT`, raised or lowered by the
-    file's ``[limits]`` table, then by ``limits`` (``{"steps": 1e8, ...}``, the command
-    line's ``--limit``). Raises :class:`CaseError` for anything that cannot be used.
+    file's ``[limits]`` table (at most to :data:`~truestep.cases.limits.CEILING`), then by
+    ``limits`` (``{"steps": 1e8, ...}``, the command line's ``--limit``; beyond the
+    ceiling only with ``trust_limits``). The gates are checked as ``truestep run`` and
+    ``truestep gate`` check them: known kinds and numbers, steps the sweep runs, property
+    gates naming the case's properties, and engines among ``engines`` (default: every
+    registered engine) or ``*``. Raises :class:`CaseError` for anything that cannot be
+    used.
     """
     path = Path(path)
     try:
-        return _load_case(path, limits or {})
+        check_ceilings(limits or {}, trusted=trust_limits, where="limits:")
+    except ValueError as err:
+        raise CaseError(str(path), "<limits>", str(err)) from None
+    try:
+        return _load_case(path, limits or {}, engines)
     except (MemoryError, RecursionError, OverflowError) as err:
         raise CaseError(str(path), "<file>", f"cannot be loaded: {type(err).__name__}: "
                         f"{str(err)[:80]}") from None
 
 
-def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
+def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str] | None) -> Case:
     file = str(path)
     f = _read_toml(path)
     limits = override(read_limits(f, DEFAULT), limit_values)
@@ -135,8 +158,14 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
     kind = f.string("kind", choices={"ode", "particles"})
     run = f.sub("run")
     duration = run.number("duration", positive=True)
-    dts = run.numbers("dt", positive=True, max_length=MAX_SWEEP)
-    quick_dts = run.numbers("quick_dt", dts[:2], positive=True, max_length=MAX_SWEEP)
+    if duration < MIN_STEP_S:
+        raise run.error("duration", f"{duration:g} s is shorter than the smallest step a case "
+                        f"may name, {MIN_STEP_S:g} s")
+    dts, quick_dts = _read_steps(run, duration)
+    for where, values in (("dt", dts), ("quick_dt", quick_dts)):
+        if min(values) < MIN_STEP_S:
+            raise run.error(where, f"a step of {min(values):g} s is below the smallest a case "
+                            f"may name, {MIN_STEP_S:g} s")
     tolerances = run.numbers("tolerances", [1e-4, 1e-6, 1e-8], positive=True, max_length=MAX_SWEEP)
     quick_tolerances = run.numbers("quick_tolerances", tolerances[:2], positive=True,
                                    max_length=MAX_SWEEP)
@@ -162,7 +191,7 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
 
     ode = model = None
     if kind == "ode":
-        ode = _read_ode(f.sub("ode"))
+        ode = _read_ode(f.sub("ode"), limits)
         if f.has("scene"):
             raise f.error("scene", "an ode case has no scene (kind = \"ode\")")
     else:
@@ -170,17 +199,20 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
         if model.n == 0:
             raise f.error("scene", "the scene has no particles")
     _check_cost(f, limits, steps, max_records, model)
+    _check_emitters(f, limits, duration, model)
 
     ref = f.sub("reference", {})
     exact = ref.string("exact", None)
-    error_norm = ref.string("error", "final", choices={"final", "max"})
+    error_norm = ref.string("error", "max", choices={"final", "max"})
     error_scale = ref.number("scale", 1.0, positive=True)
     conservative = ref.boolean("conservative", False)
+    escape_energy = ref.number("escape_energy", None)
     fn = _exact_fn(ref, exact) if exact is not None else None
     if exact is not None and fn is None:
         raise ref.error("exact", f"no exact solution named {short(exact)}; known: "
                         f"{', '.join(plugins.exact_names())}")
     exact_params = _exact_params(ref, fn)
+    _check_reference_cost(ref, limits, duration, exact, exact_params, model)
     ref.done()
 
     stability = _read_stability(f, limits)
@@ -203,6 +235,7 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
         error_norm=error_norm,
         error_scale=error_scale,
         conservative=conservative,
+        escape_energy=escape_energy,
         max_records=max_records,
         gates=_read_gates(f),
         stability=stability,
@@ -217,15 +250,66 @@ def _load_case(path: Path, limit_values: dict[str, float]) -> Case:
     f.raw("limits", None)
     f.done()
     _check_gate_steps(f, case)
+    check_case_gates(case, set(_engine_names() if engines is None else engines))
     if exact is not None:
         _check_exact(case)
     return case
+
+
+def _engine_names() -> list[str]:
+    """Every engine registered in this process (gates may name these or ``*``)."""
+    from truestep.adapters import registered
+
+    return list(registered())
+
+
+def check_case_gates(case: Case, engines: set[str]) -> None:
+    """A case's gates must name engines of ``engines`` (or ``*``), and a property gate a
+    property of the case: :class:`CaseError` naming the gate's field otherwise."""
+    for g in case.gates:
+        if g.kind == "property" and g.params["name"] not in case.properties:
+            raise CaseError(case.file, f"{g.where}.name",
+                            f"{short(g.params['name'])} is not in this case's properties")
+        if g.engine != "*" and g.engine not in engines:
+            raise CaseError(case.file, f"{g.where}.engine", f"unknown engine {short(g.engine)}")
 
 
 def _property_names() -> set[str]:
     from truestep.properties import PROPERTIES
 
     return set(PROPERTIES)
+
+
+def _check_emitters(f: Fields, limits: Limits, duration: float, model) -> None:
+    """An emitter's frames count as steps: ``duration / frame_dt`` within the step limit."""
+    for i, e in enumerate(model.emitters if model is not None else []):
+        frames = duration / e.frame_dt
+        if frames > limits.steps:
+            raise f.error(f"scene.emitters[{i}].frame_dt", f"duration / frame_dt = {frames:.3g} "
+                          f"frames, over the step limit of {limits.steps:.3g} (raise it with "
+                          "[limits] steps or --limit steps=N)")
+
+
+def _check_reference_cost(ref: Fields, limits: Limits, duration: float, exact: str | None,
+                          params: dict[str, object], model) -> None:
+    """A fixed-step reference run is a run too: its step is at least
+    :data:`~truestep.cases.limits.MIN_STEP_S`, its steps and work within the limits."""
+    dt = params.get("dt")
+    if exact != "reference-run" or not isinstance(dt, float | int) or isinstance(dt, bool):
+        return
+    if dt < MIN_STEP_S:
+        raise ref.error("dt", f"a step of {dt:g} s is below the smallest a case may name, "
+                        f"{MIN_STEP_S:g} s")
+    steps = duration / dt
+    if steps > limits.steps:
+        raise ref.error("dt", f"duration / dt = {steps:.3g} steps, over the limit of "
+                        f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)")
+    n = model.n if model is not None else 1
+    springs = (len(model.springs) + len(model.anchors.i)) if model is not None else 0
+    if (n + springs) * steps > limits.work:
+        raise ref.error("dt", f"the reference run does ({n} + {springs}) x {steps:.3g} = "
+                        f"{(n + springs) * steps:.3g} updates, over the limit of "
+                        f"{limits.work:.3g} (raise it with [limits] work or --limit work=N)")
 
 
 def _check_cost(f: Fields, limits: Limits, steps: float, records: int, model) -> None:
@@ -250,14 +334,14 @@ def _read_stability(f: Fields, limits: Limits) -> StabilitySpec | None:
         return None
     s = f.sub("stability")
     spec = StabilitySpec(
-        horizon=s.number("horizon", positive=True),
-        dt_lo=s.number("dt_lo", positive=True),
+        horizon=s.number("horizon", at_least=MIN_STEP_S),
+        dt_lo=s.number("dt_lo", at_least=MIN_STEP_S),
         dt_hi=s.number("dt_hi", positive=True),
         max_runs=s.integer("max_runs", 30, minimum=3, maximum=1000),
         rel_tol=s.number("rel_tol", 1e-3, positive=True, below=1.0),
         quick=s.boolean("quick", False),
         min_steps=s.integer("min_steps", 5000, minimum=10, maximum=limits.steps),
-        budget_s=s.number("budget_s", 10.0, positive=True, at_most=limits.timeout_s),
+        budget_s=s.number("budget_s", 300.0, positive=True, at_most=limits.timeout_s),
     )
     if spec.dt_lo >= spec.dt_hi:
         raise s.error("dt_hi", f"must exceed dt_lo ({spec.dt_lo:g})")
@@ -301,13 +385,53 @@ def _exact_params(ref: Fields, fn) -> dict[str, object]:
     return out
 
 
+STEP_FIT = 1e-9
+"""How close ``duration / dt`` must be to a whole number (relative): a run takes exactly the
+step its row is labelled with."""
+
+
+def _read_steps(run: Fields, duration: float) -> tuple[list[float], list[float]]:
+    """The fixed-step sweep of ``[run]``: ``dt`` and ``quick_dt`` (s), each a whole number
+    of steps into the duration, or ``steps`` and ``quick_steps`` (step counts, for a
+    duration such as a period that no round step divides; dt = duration / steps)."""
+    if run.has("steps"):
+        for key in ("dt", "quick_dt"):
+            if run.has(key):
+                raise run.error(key, "give the sweep as dt or as steps, not both")
+        counts = run.numbers("steps", positive=True, max_length=MAX_SWEEP)
+        quick = run.numbers("quick_steps", counts[:2], positive=True, max_length=MAX_SWEEP)
+        for key, values in (("steps", counts), ("quick_steps", quick)):
+            if any(v != round(v) or v > 1e15 for v in values):
+                raise run.error(key, f"step counts are whole numbers, got {short(values)}")
+        return [duration / n for n in counts], [duration / n for n in quick]
+    dts = run.numbers("dt", positive=True, max_length=MAX_SWEEP)
+    quick_dts = run.numbers("quick_dt", dts[:2], positive=True, max_length=MAX_SWEEP)
+    for key, values in (("dt", dts), ("quick_dt", quick_dts)):
+        for dt in values:
+            n = duration / dt
+            if n >= 1 and abs(n - round(n)) > STEP_FIT * n:
+                raise run.error(key, f"{dt:g} s does not divide the duration {duration:.10g} s "
+                                f"({n:.6g} steps): the run would take steps of "
+                                f"{duration / max(round(n), 1):.6g} s; choose a duration of "
+                                "whole steps, or give the sweep as `steps`")
+    return dts, quick_dts
+
+
 def _check_gate_steps(f: Fields, case: Case) -> None:
-    """A case's gate that reads one step (or tolerance) must name one its sweep runs."""
-    swept = set(case.dts) | set(case.quick_dts) | set(case.tolerances) | set(case.quick_tolerances)
+    """A case's gate that reads one step (or tolerance) must name one that its sweep runs,
+    and, for a case that ``--quick`` runs, one that its quick sweep runs too: a CI smoke run
+    (``truestep run --quick`` then ``truestep gate``) then finds a row for every gate."""
+    sweeps = [("sweep", set(case.dts) | set(case.tolerances))]
+    if case.in_quick:
+        sweeps.append(("quick sweep", set(case.quick_dts) | set(case.quick_tolerances)))
     for g in case.gates:
-        if g.dt is not None and not any(abs(g.dt - s) <= 1e-9 * s for s in swept):
-            raise CaseError(case.file, f"{g.where}.dt", f"{g.dt:g} is not a step or tolerance "
-                            f"of this case's sweep ({', '.join(f'{s:g}' for s in sorted(swept))})")
+        if g.dt is None:
+            continue
+        for which, swept in sweeps:
+            if not any(abs(g.dt - s) <= 1e-9 * s for s in swept):
+                raise CaseError(case.file, f"{g.where}.dt", f"{g.dt:g} is not a step or "
+                                f"tolerance of this case's {which} "
+                                f"({', '.join(f'{s:g}' for s in sorted(swept))})")
 
 
 def _exact_fn(ref: Fields, name: str):
@@ -317,9 +441,10 @@ def _exact_fn(ref: Fields, name: str):
         raise ref.error("exact", str(err)) from None
 
 
-def _read_ode(o: Fields) -> OdeSpec:
-    """``[ode]``: a registered system, its start ``y0`` and its keyword parameters,
-    checked by building the system and evaluating its derivative at the start."""
+def _read_ode(o: Fields, limits: Limits) -> OdeSpec:
+    """``[ode]``: a registered system, its start ``y0`` (at most six numbers per particle
+    the limits allow) and its keyword parameters, checked by building the system and
+    evaluating its derivative at the start."""
     name = o.string("system")
     try:
         cls = plugins.ode_system(name)
@@ -327,6 +452,10 @@ def _read_ode(o: Fields) -> OdeSpec:
         raise o.error("system", str(err)) from None
     if cls is None:
         raise o.error("system", f"no ODE system named {name!r}; known: {', '.join(plugins.system_names())}")
+    raw = o.raw("y0")
+    if isinstance(raw, list) and len(raw) > 6 * limits.particles:
+        raise o.error("y0", f"{len(raw)} numbers, over six per particle of the limit of "
+                      f"{limits.particles:.3g} (raise it with [limits] particles)")
     y0 = o.array("y0", shape=(ODE_DIMENSIONS[name],) if name in ODE_DIMENSIONS else (None,))
     params = {k: o.number(k) for k in o.table if k not in ("system", "y0")}
     o.done()
@@ -491,17 +620,9 @@ def _read_toml(path: Path) -> Fields:
     :data:`MAX_NESTING` deep; anything else is one :class:`CaseError`."""
     file = str(path)
     try:
-        if path.is_dir():
-            raise CaseError(file, "<file>", "is a directory, not a case file")
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise CaseError(file, "<file>", f"{size / 2**20:.1f} MiB, over the {MAX_FILE_BYTES >> 20} "
-                            "MiB a case file may have")
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise CaseError(file, "<file>", "no such file") from None
-    except OSError as err:
-        raise CaseError(file, "<file>", f"cannot be read: {err.strerror or err}") from None
+        raw = read_regular(path, MAX_FILE_BYTES)
+    except FileRefused as err:
+        raise CaseError(file, "<file>", err.reason) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:

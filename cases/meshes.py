@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from truestep.cases.fields import Fields
-from truestep.cases.limits import Budget
+from truestep.cases.fields import Fields, short
+from truestep.cases.limits import MIN_STEP_S, Budget
 from truestep.reference_impl import meshes
 from truestep.reference_impl.emitters import spawn_mean
 from truestep.reference_impl.model import EmitterSpec, Springs
@@ -90,12 +90,12 @@ def read_mesh(f: Fields, budget: Budget) -> MeshPart:
     velocity = f.vec3("velocity", [0.0, 0.0, 0.0])
     radius = f.number("radius", 0.0, nonnegative=True)
     pinned = f.raw("pinned", [])
+    if isinstance(pinned, list) and len(pinned) > n:
+        raise f.error("pinned", f"{len(pinned)} vertex numbers for a {kind} of {n} vertices")
     if not isinstance(pinned, list) or not all(isinstance(i, int) and not isinstance(i, bool)
                                                for i in pinned):
-        raise f.error("pinned", f"expected a list of vertex numbers, got {pinned!r}")
+        raise f.error("pinned", f"expected a list of vertex numbers, got {short(pinned)}")
     bad = [i for i in pinned if not 0 <= i < n]
-    if len(pinned) > n:
-        raise f.error("pinned", f"{len(pinned)} vertex numbers for a {kind} of {n} vertices")
     if bad:
         raise f.error("pinned", f"vertex {bad[0]} out of range 0..{n - 1} of this {kind}")
     fixed = np.zeros(n, bool)
@@ -170,7 +170,7 @@ def read_emitter(f: Fields) -> EmitterSpec:
         spread=f.number("spread", 0.0, nonnegative=True, at_most=math.pi),
         lifetime=lifetime,
         lifetime_jitter=jitter,
-        frame_dt=f.number("frame_dt", 1.0 / 30.0, positive=True),
+        frame_dt=f.number("frame_dt", 1.0 / 30.0, at_least=MIN_STEP_S),
         capacity=f.integer("capacity", minimum=1),
         per_area=f.boolean("per_area", False),
         normal=normal,

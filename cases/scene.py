@@ -101,11 +101,14 @@ def read_scene(f: Fields, budget: Budget | None = None) -> ParticleModel:
 
 
 def _read_particles(f: Fields, budget: Budget) -> MeshPart:
+    listed = f.raw("position")
+    if isinstance(listed, list | np.ndarray):  # charged before any array is built
+        budget.take(f, "position", particles=len(listed))
     x0 = f.array("position", shape=(None, 3))
     n = len(x0)
     if n == 0:
         raise f.error("position", "a particle group needs at least one position")
-    budget.take(f, "position", particles=n)
+    _same_length(f, "velocity", n)
     v0 = f.array("velocity", np.zeros((n, 3)), shape=(n, 3))
     mass = _per_particle(f, "mass", n, positive=True)
     radius = _per_particle(f, "radius", n, default=0.0)
@@ -140,9 +143,17 @@ def _read_block(f: Fields, dimension: int, budget: Budget) -> MeshPart:
     return MeshPart(mass, x0, v0, radius, np.zeros(count, bool), Springs.empty())
 
 
+def _same_length(f: Fields, name: str, n: int) -> None:
+    """A per-particle list must be ``n`` long: checked before its array is built."""
+    raw = f.raw(name, None)
+    if isinstance(raw, list | np.ndarray) and len(raw) != n:
+        raise f.error(name, f"expected {n} entries (one per particle), got {len(raw)}")
+
+
 def _per_particle(f: Fields, name: str, n: int, *, default=None, positive=False) -> np.ndarray:
     raw = f.raw(name, default) if default is not None else f.raw(name)
     if isinstance(raw, list):
+        _same_length(f, name, n)
         arr = f.array(name, shape=(n,))
     else:
         arr = np.full(n, f.number(name, default, nonnegative=True, positive=positive))
@@ -154,10 +165,12 @@ def _per_particle(f: Fields, name: str, n: int, *, default=None, positive=False)
 
 
 def _read_springs(f: Fields, x0: np.ndarray, n: int, budget: Budget) -> Springs:
+    listed = f.raw("pairs")
+    if isinstance(listed, list | np.ndarray):  # charged before any array is built
+        budget.take(f, "pairs", springs=len(listed))
     pairs = f.indices("pairs", n, shape=(None, 2))
     if len(pairs) == 0:
         raise f.error("pairs", "a spring set needs at least one pair")
-    budget.take(f, "pairs", springs=len(pairs))
     if np.any(pairs[:, 0] == pairs[:, 1]):
         raise f.error("pairs", "a spring needs two different particles")
     m = len(pairs)

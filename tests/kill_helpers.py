@@ -9,8 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
-TIMING_COLUMNS = ("wall_s", "repeats")
-"""The columns of the tables that depend on wall time (results.csv only has them)."""
+from truestep.runner import MACHINE_COLUMNS as TIMING_COLUMNS
 
 
 def snapshot(root: Path) -> dict[str, bytes]:
@@ -20,9 +19,10 @@ def snapshot(root: Path) -> dict[str, bytes]:
 
 
 def scratch_left(out: Path) -> list[str]:
-    """Staging and old folders of ``out`` beside it (the journal does not count)."""
+    """Staging and old folders of ``out`` beside it (the journal does not count, nor the
+    lock file a killed run leaves for the next run to take over)."""
     return sorted(n for n in os.listdir(out.parent)
-                  if n.startswith(f".{out.name}.") and not n.endswith(".partial"))
+                  if n.startswith(f".{out.name}.") and not n.endswith((".partial", ".lock")))
 
 
 def _running(pid: int) -> bool:

@@ -51,7 +51,7 @@ def test_gate_fails_naming_measured_and_required(quick_report, tmp_path, capsys)
     assert main(["gate", "--results", str(path), "--cases", "circle-field"]) == 1
     out = capsys.readouterr().out
     assert "FAIL circle-field gates[2] order reference/rk4" in out
-    assert "measured order 1.99" in out and "required 4 +- 0.2" in out
+    assert "measured order 2.0" in out and "required 4 +- 0.2" in out
 
 
 def test_bad_input_exits_2_with_one_line_and_loses_nothing(quick_report, tmp_path, capsys):
@@ -98,10 +98,11 @@ def test_a_finite_run_whose_energy_explodes_is_an_unstable_row():
     from truestep.runner import Timing, run_one
 
     case = load_case(CASE_DIR / "stiff-spring.toml")
-    timing = Timing(budget_s=0.0, max_repeats=1)
+    timing = Timing(long_run_s=0.0)
     bad = run_one(case, "reference", "euler", 1e-3, adaptive=False, timing=timing)
     assert bad["status"] == "unstable"
     assert 0 < bad["t_fail"] < case.duration and bad["energy_drift"] > 1
     assert "energy grew" in bad["message"]
     good = run_one(case, "reference", "symplectic-euler", 1e-3, adaptive=False, timing=timing)
-    assert good["status"] == "ok" and 0.5 < good["energy_drift"] <= 1.0 + 1e-9
+    # over every step, the swing reaches its start's size to within a step's sampling
+    assert good["status"] == "ok" and 0.5 < good["energy_drift"] <= 1.0 + 1e-4

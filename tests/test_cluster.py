@@ -22,9 +22,11 @@ import pytest
 
 from truestep.cli import main
 from truestep.cluster import KILL_WORKER
+from truestep.report_folder import MARKER, MARKER_TEXT
+from truestep.runner import MACHINE_COLUMNS
 
 CASES = "free-fall,harmonic-oscillator"
-TIMING = {"wall_s", "repeats", "host"}
+TIMING = set(MACHINE_COLUMNS)
 """The columns a cluster run may differ in: wall times, how often they were taken, where."""
 
 
@@ -130,6 +132,7 @@ def test_the_scheduler_going_away_ends_the_run_with_one_error_and_keeps_the_swee
                               stderr=subprocess.DEVNULL)
     out = tmp_path / "out"
     out.mkdir()
+    (out / MARKER).write_text(MARKER_TEXT)
     (out / "index.md").write_text("the previous report")
     try:
         run = subprocess.Popen([bin_dir / "truestep", "run", "--quick", "--cases",
@@ -139,9 +142,9 @@ def test_the_scheduler_going_away_ends_the_run_with_one_error_and_keeps_the_swee
                                stderr=subprocess.PIPE, text=True)
         journal = tmp_path / ".out.partial"
         deadline = time.monotonic() + 120
-        while not list(journal.glob("sweep-*.pkl")) and time.monotonic() < deadline:
+        while not list(journal.glob("sweep-*.json")) and time.monotonic() < deadline:
             time.sleep(0.2)
-        assert list(journal.glob("sweep-*.pkl")), "no sweep finished on the cluster"
+        assert list(journal.glob("sweep-*.json")), "no sweep finished on the cluster"
         scheduler.send_signal(signal.SIGKILL)
         _, stderr = run.communicate(timeout=120)
     finally:
@@ -153,4 +156,4 @@ def test_the_scheduler_going_away_ends_the_run_with_one_error_and_keeps_the_swee
     assert "Traceback" not in stderr and len(lines) == 1, stderr[-2000:]
     assert "lost the scheduler" in lines[0] and "--resume" in lines[0]
     assert (out / "index.md").read_text() == "the previous report"
-    assert list(journal.glob("sweep-*.pkl"))  # nothing already finished is lost
+    assert list(journal.glob("sweep-*.json"))  # nothing already finished is lost

@@ -14,6 +14,8 @@ Three routes to the claim:
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -94,7 +96,10 @@ the code before the speed-up rounds as it did on the recording machine."""
 
 class TextbookDopri5(DormandPrince54):
     """The dopri5 step as written before its speed-up, kept as the oracle: each stage's
-    argument ``x + sum_j (h a_ij) k_j`` summed row by row, the RMS norm by ``np.mean``."""
+    argument ``x + sum_j (h a_ij) k_j`` summed row by row, the RMS norm by ``np.mean``. It
+    keeps no continuous extension, so it steps through impacts as dopri5 did then."""
+
+    dense = None
 
     def _initial_step(self, x: np.ndarray, t: float, f0: np.ndarray, h_max: float) -> float:
         scale = self.atol + np.abs(x) * self.rtol
@@ -173,6 +178,17 @@ def final_state(case, run: Run) -> np.ndarray:
     return np.concatenate([q[0], v[0], q[-1], v[-1]])
 
 
+RECORDED_DURATIONS = {"kepler-orbit": 18.84955592153876, "circle-field": 6.283185307179586}
+"""Scenes whose run was longer when :data:`BEFORE` was recorded (three periods and one
+turn, before every step had to divide the duration): they are run as they were."""
+
+
+def recorded_case(case):
+    """The case as it was when :data:`BEFORE` was recorded."""
+    duration = RECORDED_DURATIONS.get(case.name)
+    return case if duration is None else dataclasses.replace(case, duration=duration)
+
+
 @pytest.fixture(scope="module")
 def runs(case_named):
     """Each recorded (case, tolerance) run by the solver and by the oracle, once."""
@@ -180,7 +196,7 @@ def runs(case_named):
 
     def get(name: str, tol: float) -> tuple[Run, Run]:
         if (name, tol) not in cache:
-            case = case_named(name)
+            case = recorded_case(case_named(name))
             cache[name, tol] = (run_case(case, DormandPrince54, tol),
                                 run_case(case, TextbookDopri5, tol))
         return cache[name, tol]
@@ -188,7 +204,12 @@ def runs(case_named):
     return get
 
 
-@pytest.mark.parametrize(("name", "tol"), list(BEFORE), ids=[f"{n}-{t:g}" for n, t in BEFORE])
+SMOOTH = [key for key in BEFORE if key[0] not in ("bouncing-ball", "particle-fountain")]
+"""The recorded scenes without planes: on the others dopri5 now stops its steps at impacts,
+which the textbook step (and the code before) did not."""
+
+
+@pytest.mark.parametrize(("name", "tol"), SMOOTH, ids=[f"{n}-{t:g}" for n, t in SMOOTH])
 def test_the_same_run_as_the_textbook_step_to_the_last_bit(runs, name, tol):
     new, old = runs(name, tol)
     assert (new.status, new.steps, new.nfev) == (old.status, old.steps, old.nfev)
@@ -215,7 +236,7 @@ def test_the_steps_evaluations_and_states_recorded_before(case_named, runs, name
                     f"({old.steps} steps, {old.nfev} evaluations)")
     assert new.status == "ok"
     assert (new.steps, new.nfev) == (steps, nfev)
-    np.testing.assert_allclose(final_state(case_named(name), new), state, rtol=0,
+    np.testing.assert_allclose(final_state(recorded_case(case_named(name)), new), state, rtol=0,
                                atol=ROUND_OFF.get(name, ROUND_OFF_DEFAULT))
 
 
@@ -267,7 +288,7 @@ or emitters; on the cloth the two round apart, :data:`ROUNDED_STEPS`)."""
 @pytest.mark.parametrize(("name", "tol"), AGREED_WITH_SCIPY,
                          ids=[f"{n}-{t:g}" for n, t in AGREED_WITH_SCIPY])
 def test_the_steps_evaluations_and_states_of_scipys_rk45(case_named, runs, name, tol):
-    case = case_named(name)
+    case = recorded_case(case_named(name))
     theirs = get_adapter("scipy").simulate(case, "RK45", tol)
     new, _ = runs(name, tol)
     assert (new.steps, new.nfev) == (theirs.steps, theirs.nfev)

@@ -48,7 +48,9 @@ HOSTILE = {
                                 "run.tolerances", "1e-14"),
     "non-finite quick_dt": (_sub(FREE_FALL, r"^quick_dt = .*$", "quick_dt = [-inf]"),
                             "run.quick_dt", "finite"),
-    "1e12 steps": (_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-12]"), "run.dt", "steps, over the limit"),
+    "1e8 steps": (_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8]"), "run.dt", "steps, over the limit"),
+    "a step of 1e-12 s": (_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-12]"), "run.dt",
+                          "below the smallest"),
     "timeout 1e300": (_sub(FREE_FALL, r"^duration = .*$", "duration = 1.0\ntimeout = 1e300"),
                       "run.timeout", "at most"),
     "huge integer": (_sub(FREE_FALL, r"^duration = .*$", "duration = 1.0\nmax_records = " + "9" * 400),
@@ -143,11 +145,12 @@ def test_a_directory_or_a_huge_file_is_refused_before_it_is_read(tmp_path: Path)
 
 def test_a_case_raises_its_own_limits_and_the_command_line_sets_them_for_a_run(tmp_path: Path) -> None:
     path = tmp_path / "fine-steps.toml"
-    path.write_text(_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8]"))  # 1e8 steps
+    path.write_text(_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8, 0.1, 0.05, 0.02, 0.01]"))  # 1e8 steps
     with pytest.raises(CaseError, match=r"1e\+08 steps, over the limit of 2e\+07"):
         load_case(path)
-    path.write_text(_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8]") + "\n[limits]\nsteps = 200000000\n")
-    assert load_case(path).dts == [1e-8]
+    path.write_text(_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8, 0.1, 0.05, 0.02, 0.01]")
+                    + "\n[limits]\nsteps = 200000000\n")
+    assert min(load_case(path).dts) == 1e-8
     with pytest.raises(CaseError, match=r"over the limit of 1e\+07"):
         load_case(path, limits={"steps": 1e7})  # the run's --limit has the last word
     path.write_text(FREE_FALL + "\n[limits]\nstesp = 3\n")

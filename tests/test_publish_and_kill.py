@@ -27,6 +27,7 @@ from truestep import publish
 from truestep.cli import main
 from truestep.faults import CHILD_PIDS, KILL_AT, parse
 from truestep.oscalls import exchange
+from truestep.report_folder import MARKER, MARKER_TEXT
 from truestep.runner import preload
 
 RUN = ["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", "rep"]
@@ -82,14 +83,15 @@ def forked_all(jobs: dict[str, tuple[Path, dict[str, str], Callable[[], None] | 
 
 
 def _old_report(where: Path) -> Path:
-    """A previous report that shares no bytes with the new one, with a file of the
-    user's (kept by a new report) and a scaling table (dropped by one that has none)."""
+    """A previous report truestep wrote (its marker in it) that shares no bytes with the
+    new one, with a scaling table and a figure that a quick run does not write (both
+    gone once it is replaced)."""
     where.mkdir(parents=True)
     (where / "figures").mkdir()
     for name in ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
                  "index.html", "figures/free-fall-work-precision.png", "figures/old.png"):
         (where / name).write_text(f"old {name}\n")
-    (where / "notes.txt").write_text("the user's own\n")
+    (where / MARKER).write_text(MARKER_TEXT)
     return where
 
 
@@ -105,7 +107,7 @@ def journal(tmp_path_factory) -> dict:
     first.mkdir()
     code, log = forked(RUN, first, {KILL_AT: "report-csv"})
     assert code == -signal.SIGKILL, log
-    assert (first / ".rep.partial" / "analyses.pkl").is_file()
+    assert (first / ".rep.partial" / "analyses.json").is_file()
     old = _old_report(base / "old")
     ref = base / "ref"
     shutil.copytree(old, ref / "rep")
@@ -114,7 +116,7 @@ def journal(tmp_path_factory) -> dict:
     assert code == 0, log
     assert not (ref / ".rep.partial").exists() and scratch_left(ref / "rep") == []
     new = snapshot(ref / "rep")
-    assert "notes.txt" in new and "scaling.csv" not in new and "figures/old.png" not in new
+    assert MARKER in new and "scaling.csv" not in new and "figures/old.png" not in new
     jobs = {}
     for name, env, before in [*((f"{p}:{s}", {KILL_AT: f"{p}:{s}"}, None)
                                 for p in POINTS for s in ("KILL", "TERM")),
@@ -152,7 +154,7 @@ def test_a_kill_while_writing_the_report_leaves_the_old_or_the_new_one(journal, 
         assert ("the new report is in" in lines[-1]) == published
     assert scratch_left(out) == []
     assert snapshot(out) == journal["new" if published else "old"]
-    assert (out.parent / ".rep.partial" / "analyses.pkl").is_file()  # kept for --resume
+    assert (out.parent / ".rep.partial" / "analyses.json").is_file()  # kept for --resume
 
 
 def test_without_exchange_a_kill_between_the_renames_is_undone_by_the_next_run(journal):

@@ -62,7 +62,7 @@ def test_killed_in_the_sweep_then_in_the_analyses_then_resumed(tmp_path, uninter
     run = truestep(tmp_path, "--out", "rep", env={KILL_AT: "sweep:5", CHILD_PIDS: str(pids)})
     assert run.returncode == -signal.SIGKILL, run.stderr
     assert snapshot(out) == before and still_running(pids_in(pids)) == []
-    kept = len(list(journal.glob("sweep-*.pkl")))  # whole sweeps before the fifth row's
+    kept = len(list(journal.glob("sweep-*.json")))  # whole sweeps before the fifth row's
     assert kept >= 1
 
     run = truestep(tmp_path, "--out", "rep", "--resume",
@@ -72,7 +72,7 @@ def test_killed_in_the_sweep_then_in_the_analyses_then_resumed(tmp_path, uninter
     assert "Traceback" not in run.stderr and len(said) == 1 and "SIGTERM" in said[0]
     assert f"resuming: {kept} finished sweeps" in run.stderr
     assert snapshot(out) == before and still_running(pids_in(pids)) == []
-    assert scratch_left(out) == [] and not (journal / "analyses.pkl").exists()
+    assert scratch_left(out) == [] and not (journal / "analyses.json").exists()
 
     run = truestep(tmp_path, "--resume", "rep")
     assert run.returncode == 0, run.stderr

@@ -86,3 +86,98 @@ def test_a_malformed_baseline_is_exit_2_and_one_line_and_an_api_error(run_dir, t
         truestep.compare(base, run_dir)
     with pytest.raises(TableError, match="not a directory"):
         truestep.compare(base / table, run_dir)
+
+
+def _edit(path: Path, change) -> None:
+    """Rewrite the CSV table at ``path`` through ``change(rows) -> rows``."""
+    import csv
+    import io
+
+    rows = list(csv.reader(io.StringIO(path.read_text())))
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(change(rows))
+    path.write_text(buf.getvalue())
+
+
+def _first_ok(rows: list[list[str]]) -> int:
+    k = rows[0].index("status")
+    return next(i for i, r in enumerate(rows) if i and r[k] == "ok")
+
+
+def _set(name: str, value: str):
+    def change(rows):
+        rows[_first_ok(rows)][rows[0].index(name)] = value
+        return rows
+
+    return change
+
+
+def _blank_numbers(rows):
+    for r in rows[1:]:
+        for name in ("error", "energy_drift", "energy_drift_final", "nfev", "steps", "wall_s"):
+            r[rows[0].index(name)] = ""
+    return rows
+
+
+DAMAGED = {
+    "a repeated row": ("results.csv", lambda rows: [*rows, rows[_first_ok(rows)]], "same case"),
+    "dt 0": ("results.csv", _set("dt", "0"), "positive and finite"),
+    "dt < 0": ("results.csv", _set("dt", "-0.01"), "positive and finite"),
+    "dt inf": ("results.csv", _set("dt", "inf"), "positive and finite"),
+    "an error of 1e999": ("results.csv", _set("error", "1e999"), "not a value a run writes"),
+    "a negative count": ("results.csv", _set("nfev", "-4"), "not a value a run writes"),
+    "a wall time of 0": ("results.csv", _set("wall_s", "0"), "positive and finite"),
+    "every number gone": ("results.csv", _blank_numbers, "nfev"),
+    "a field of 30,000 characters": ("results.csv", _set("message", "x" * 30_000), "30000 characters"),
+    "a column twice": ("results.csv", lambda rows: [[*r, r[6]] for r in rows], "twice"),
+    "an empty engine": ("results.csv", _set("engine", ""), "empty"),
+    "a repeated stability search": ("stability.csv", lambda rows: [*rows, rows[1]], "same case"),
+    "a bounce of 1.5": ("restitution.csv", _set("bounce", "1.5"), "bounce"),
+    "e_set 2": ("restitution.csv", _set("e_set", "2"), "e_set"),
+}
+
+
+@pytest.mark.parametrize("label", list(DAMAGED))
+def test_tables_no_run_writes_are_refused_in_one_line(run_dir, tmp_path, capsys, label):
+    import truestep
+    from truestep.tables_io import TableError
+
+    table, change, reason = DAMAGED[label]
+    _edit(run_dir / table, change)
+    code, err = _gate(run_dir, capsys)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1 and reason in lines[0] and table in lines[0], err
+    with pytest.raises(TableError, match=reason):
+        truestep.compare(run_dir, REPORTS)
+
+
+def test_an_all_nan_baseline_is_refused(run_dir, tmp_path, capsys):
+    base = tmp_path / "base"
+    shutil.copytree(run_dir, base)
+    _edit(base / "results.csv", _blank_numbers)
+    assert main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(base),
+                 "-q"]) == 2
+    assert "column nfev: empty in an ok row" in capsys.readouterr().err
+
+
+def test_a_method_named_nan_is_a_name(run_dir, tmp_path, capsys):
+    from truestep.tables_io import REQUIRED, read_table
+
+    def rename(rows):
+        e, m, c = (rows[0].index(k) for k in ("engine", "method", "case"))
+        for r in rows[1:]:
+            if (r[e], r[m], r[c]) == ("reference", "rk4", "free-fall"):
+                r[m] = "nan"
+        return rows
+
+    _edit(run_dir / "results.csv", rename)
+    table = read_table(run_dir / "results.csv", "results", set(REQUIRED["results"]))
+    assert (table["method"] == "nan").sum() > 0 and table["method"].notna().all()
+    dt = table.loc[(table["method"] == "nan") & (table["status"] == "ok"), "dt"].iloc[0]
+    gates = tmp_path / "gates.toml"
+    gates.write_text(f'[[gates]]\ncases = "free-fall"\nkind = "status"\nmethod = "nan"\n'
+                     f'dt = {float(dt)!r}\nexpect = "ok"\n')
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--cases", "free-fall",
+                 "--gates", str(gates), "-v"])
+    out = capsys.readouterr().out
+    assert code == 0 and "ok   free-fall gates[0] status reference/nan" in out, out

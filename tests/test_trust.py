@@ -56,3 +56,20 @@ def test_a_non_finite_state_is_unstable_at_its_time_whatever_the_adapter_said(go
     x[400:, 0, 1] = np.nan
     row = _row(case, dataclasses.replace(traj, x=x, status="ok"))
     assert row["status"] == "unstable" and row["t_fail"] == traj.t[400]
+
+
+@pytest.mark.parametrize(("change", "reason"), [
+    (lambda t: {"t": t.t - 10.0}, "not from the case's start"),
+    (lambda t: {"t": np.zeros_like(t.t)}, "do not increase"),
+    (lambda t: {"t": t.t[::-1].copy()}, "not from the case's start"),
+    (lambda t: {"t": t.t * 1e6}, "past the case's"),
+    (lambda t: {"wall_s": -5.0}, "wall time of -5 s"),
+    (lambda t: {"wall_s": float("nan")}, "wall time of nan"),
+    (lambda t: {"wall_s": float("inf")}, "wall time of inf"),
+    (lambda t: {"wall_s": 0.0}, "wall time of 0"),
+    (lambda t: {"nfev": -3}, "nfev = -3"),
+])
+def test_clocks_that_do_not_start_at_the_start_and_advance_are_crashed_rows(good, change, reason):
+    case, traj = good
+    row = _row(case, dataclasses.replace(traj, **change(traj)))
+    assert row["status"] == "crashed" and reason in row["message"], row["message"]

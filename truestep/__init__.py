@@ -22,6 +22,10 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from truestep import numerics as _numerics
+
+_numerics.set_environment()  # before numpy loads: one thread, the same kernels everywhere
+
 __version__ = "0.2.0"
 
 _EXPORTS: dict[str, str] = {

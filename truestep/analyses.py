@@ -17,7 +17,7 @@ from truestep.isolation import run_untimed, untimed_workers
 from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
-from truestep.stability import search_case
+from truestep.stability import SearchTimeout, search_case
 
 STABILITY_COLUMNS = ["case", "engine", "method", "dt_limit", "dt_limit_exact", "dt_unstable",
                      "runs", "status", "note"]
@@ -44,14 +44,20 @@ SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
 
 
 def _search(engine: str, case: Case, method: str, quick: bool):
+    """``(SearchResult or the safety valve's message, seconds)`` of one search."""
     adapter = get_adapter(engine)
     start = time.perf_counter()
-    result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    try:
+        result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    except SearchTimeout as err:
+        return str(err), time.perf_counter() - start
     return result, time.perf_counter() - start
 
 
 def _say(msg: str) -> None:
-    print(msg, file=sys.stderr)
+    from truestep.visible import visible
+
+    print(visible(msg), file=sys.stderr)
 
 
 def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
@@ -94,8 +100,12 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
             _say(f"stability {row['case']} {row['engine']}/{row['method']}: {out.status}")
             return
         r, seconds = out.value
-        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status="ok",
-                   note=r.note)
+        if isinstance(r, str):  # the safety valve fired: no limit from this machine's speed
+            row.update(status="timeout", note=r)
+            _say(f"stability {row['case']} {row['engine']}/{row['method']}: timeout ({r})")
+            return
+        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs,
+                   status=r.status, note=r.note)
         _say(f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
              f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
              f"{seconds:.1f} s")
@@ -138,7 +148,8 @@ def bounce_case(e: float, dt: float) -> Case:
         dimension=2,
     )
     t_first = np.sqrt(2 * DROP_HEIGHT / GRAVITY)
-    duration = t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25
+    steps = int(np.ceil((t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25) / dt))
+    duration = steps * dt  # whole steps: the run steps exactly the dt its rows are labelled with
     return Case(
         name=f"bounce-e{e:g}", file="<restitution sweep>", title="restitution sweep",
         description="", kind="particles", duration=duration, dts=[dt], quick_dts=[dt],

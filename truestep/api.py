@@ -21,7 +21,8 @@ from pathlib import Path
 import pandas as pd
 
 from truestep.adapters import adapter_class, engine_status, registered, resolve_engine
-from truestep.cases import Case, load_cases
+from truestep.cases import Case, CaseError, load_cases
+from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.gates import GateResult, check_gates, verdict_table
 
@@ -85,17 +86,31 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
         progress: Callable[[str], None] | None = None) -> Tables:
     """Run the matrix (and, with ``analyses``, the stability searches and the restitution
     sweep) and return the tables; with ``out``, also write the report there as
-    ``truestep run --out`` does.
+    ``truestep run --out`` does (a folder truestep may replace, locked for the run, else
+    :class:`~truestep.report_folder.OutRefused` or :class:`~truestep.run_lock.LockBusy`).
 
     ``cases``: a selection as ``--cases`` takes it (names, globs, files, directories) or
     loaded :class:`Case` objects; ``engines``: as :func:`select_engines`.
     """
-    from truestep.analyses import run_analyses
-    from truestep.runner import run_matrix
-
     say = progress or (lambda msg: print(msg, file=sys.stderr))
     chosen = _cases(cases)
     names = select_engines(engines, say=say)
+    if out is None:
+        return _run(chosen, names, quick=quick, analyses=analyses, out=None, say=say)
+    from truestep.report_folder import check_out
+    from truestep.run_lock import RunLock
+
+    check_out(Path(out))
+    with RunLock(Path(out)):
+        return _run(chosen, names, quick=quick, analyses=analyses, out=Path(out), say=say)
+
+
+def _run(chosen: list[Case], names: list[str], *, quick: bool, analyses: bool,
+         out: Path | None, say: Callable[[str], None]) -> Tables:
+    """:func:`run` once its cases and engines are chosen (and ``out``, if any, locked)."""
+    from truestep.analyses import run_analyses
+    from truestep.runner import run_matrix
+
     traces: dict = {}
     results = run_matrix(chosen, names, quick=quick, progress=say, traces=traces)
     tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame(),
@@ -105,7 +120,7 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
     if out is not None:
         from truestep.report import write_report
 
-        write_report(Path(out), chosen, results, tables, quick=quick, argv=["run"],
+        write_report(out, chosen, results, tables, quick=quick, argv=["run"],
                      traces=None if quick else traces, with_lecture_figures=False)
     return Tables(results, tables["stability"], tables["restitution"], chosen, tables["scaling"])
 
@@ -115,7 +130,9 @@ def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
     """Every gate's verdict (:class:`~truestep.gates.GateResult`) on ``tables``.
 
     ``gates``: a gates file, several, or gate dictionaries (the keys of a ``[[gates]]``
-    table, with ``cases``); ``case_gates``: also check the gates in the case files.
+    table, with ``cases``); ``case_gates``: also check the gates in the case files. A
+    gate naming an engine that is neither registered nor in the results is refused
+    (:class:`~truestep.cases.CaseError`), as ``truestep gate`` refuses it.
     """
     extra = []
     for g in ([] if gates is None else [gates] if isinstance(gates, str | Path | dict) else gates):
@@ -128,6 +145,11 @@ def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
                           read_gate(Fields("<gate>", table), f"gates[{len(extra)}]")))
         else:
             extra += load_gates_file(g)
+    engines = set(registered()) | set(tables.results["engine"].astype(str))
+    for _, g in extra:
+        if g.engine != "*" and g.engine not in engines:
+            raise CaseError(g.file, f"{g.where}.engine", f"unknown engine {short(g.engine)} "
+                            "(not registered, not in the results)")
     cases = tables.cases if case_gates else [dataclasses.replace(c, gates=[]) for c in tables.cases]
     return check_gates(cases, tables.results, tables.stability, tables.restitution, extra=extra)
 

@@ -6,10 +6,11 @@ fitted orders: case, engine, method). A quantity got **worse** when it moved the
 way by more than its tolerance, **better** when it moved the right way by as much.
 Rows present on one side only are listed as **appeared** or **vanished**.
 
-The accuracy quantities are deterministic: the same code, case and step give the same
-numbers on any machine up to floating-point round-off, so their default tolerances are
-tight. Wall time is never compared across runs directly: only its ratio to one named
-engine and method of the same case and step measured in the same run, with a wide band.
+The same revision and package versions give the same numbers on any machine, bit for
+bit (:mod:`truestep.numerics`); :func:`identical` checks that promise cell by cell. The
+tolerances are for what a change of code or versions may move without being worse. Wall
+time is never compared across runs directly: only its ratio to one named engine and method
+of the same case and step measured in the same run, with a wide band.
 """
 
 from __future__ import annotations
@@ -35,16 +36,17 @@ TOLERANCES: dict[str, float] = {
 """Default tolerances, with why:
 
 - ``error``, ``energy_drift``: relative, 1e-3 (plus an absolute floor of 1e-12 of the
-  quantity's scale, :data:`FLOORS`). Round-off between machines and library versions
-  moves these by parts in 1e9 on smooth scenes and by far less than 1e-3 on the chaotic
-  ones at the steps swept; a wrong term in a method changes them by factors.
+  quantity's scale, :data:`FLOORS`). Identical on any machine with the same versions;
+  round-off from other library versions moves them by parts in 1e9 on smooth scenes
+  (adaptive runs more, where an accept/reject flips); a wrong term in a method changes
+  them by factors.
 - ``nfev``: relative, 0.02. A fixed-step method's count is exact; an adaptive method's
   accept/reject decisions can flip on round-off near a tolerance boundary, by a step or
   two in a hundred.
 - ``order``: absolute, 0.05. Fitted from errors that each hold to 1e-3, so the fit
   holds to about 1e-3 / log(dt ratio); a lost order moves it by 1.
-- ``dt_limit``: relative, 0.01: the bisection stops at 0.1% (1% where no exact limit
-  exists, and a search stopped by its budget reports the bracket it reached).
+- ``dt_limit``: relative, 0.01: the bisection stops at 0.1% (1% where the case says so);
+  searches are bounded by their runs, never by time, so a machine's speed never moves it.
 - ``e_error``: absolute, 0.005 in ``|e_measured - e_set|``, the restitution measured from
   velocities against the one set.
 - ``wall_ratio``: relative, 1.0 (a run may take up to twice its former share of the
@@ -56,14 +58,15 @@ RESULT_KEYS = ["case", "engine", "method", "dt_kind", "dt"]
 STABILITY_KEYS = ["case", "engine", "method"]
 RESTITUTION_KEYS = ["engine", "method", "dt", "e_set", "bounce"]
 ORDER_KEYS = ["case", "engine", "method"]
-STATUS_RANK = {"ok": 0, "unstable": 1, "timeout": 2, "crashed": 2}
+STATUS_RANK = {"ok": 0, "unstable": 1, "solver-failed": 1, "timeout": 2, "crashed": 2}
 """Higher is worse: ok -> unstable is a regression, as is anything -> crashed."""
 FINDING_COLUMNS = ["change", "table", "key", "quantity", "baseline", "current", "note"]
 
 
 @dataclass
 class Finding:
-    """One difference: ``change`` is ``worse``, ``better``, ``appeared`` or ``vanished``."""
+    """One difference: ``change`` is ``worse``, ``better``, ``appeared``, ``vanished`` or
+    (a cell of a run that should be identical, :func:`identical`) ``differs``."""
 
     change: str
     table: str
@@ -74,7 +77,8 @@ class Finding:
     note: str = ""
 
     def line(self) -> str:
-        head = {"worse": "WORSE", "better": "better", "appeared": "new", "vanished": "GONE"}[self.change]
+        head = {"worse": "WORSE", "better": "better", "appeared": "new", "vanished": "GONE",
+                "differs": "DIFFERS"}[self.change]
         if self.change in ("appeared", "vanished"):
             return f"{head:6s} {self.table} {self.key}"
         return (f"{head:6s} {self.table} {self.key} {self.quantity}: {_show(self.baseline)} -> "
@@ -95,7 +99,7 @@ class Comparison:
     time_against: str | None = None
 
     def worse(self) -> list[Finding]:
-        return [f for f in self.findings if f.change in ("worse", "vanished")]
+        return [f for f in self.findings if f.change in ("worse", "vanished", "differs")]
 
     def table(self) -> pd.DataFrame:
         return pd.DataFrame([f.__dict__ for f in self.findings], columns=FINDING_COLUMNS)
@@ -240,6 +244,73 @@ def compare(baseline: Mapping[str, pd.DataFrame | None], current: Mapping[str, p
     compared += _compare_rows("restitution", old_e, new_e, RESTITUTION_KEYS,
                               [("e_error", True, False)], tol, findings)
     return Comparison(findings, compared, tol, time_against)
+
+
+TABLE_KEYS = {"results": RESULT_KEYS, "stability": STABILITY_KEYS,
+              "restitution": RESTITUTION_KEYS}
+"""The columns that name a row, per table."""
+
+
+def narrow(tables: Mapping[str, pd.DataFrame | None], *, cases: set[str] | None = None,
+           engines: set[str] | None = None) -> dict[str, pd.DataFrame | None]:
+    """``tables`` with only the rows of ``cases`` and ``engines`` (``None``: all): a run that
+    was asked for fewer cases or engines is compared with the baseline's rows of those
+    only, and the others are not "vanished". ``restitution`` has no case column: it is
+    kept whole where its engines are asked for."""
+    out: dict[str, pd.DataFrame | None] = {}
+    for name, table in tables.items():
+        if table is None or not len(table.columns):
+            out[name] = table
+            continue
+        keep = np.ones(len(table), bool)
+        if cases is not None and "case" in table:
+            keep &= table["case"].astype(str).isin(cases).to_numpy()
+        if engines is not None and "engine" in table:
+            keep &= table["engine"].astype(str).isin(engines).to_numpy()
+        out[name] = table[keep]
+    return out
+
+
+def _same_cell(a: object, b: object) -> bool:
+    fa, fb = _as_float(a), _as_float(b)
+    if isinstance(a, float | int | np.floating | np.integer) or isinstance(
+            b, float | int | np.floating | np.integer):
+        return (np.isnan(fa) and np.isnan(fb)) or fa == fb
+    if pd.isna(a) and pd.isna(b):
+        return True
+    return str(a) == str(b)
+
+
+def identical(baseline: Mapping[str, pd.DataFrame | None],
+              current: Mapping[str, pd.DataFrame | None]) -> tuple[list[Finding], int]:
+    """Every cell of every non-timing column, compared exactly (the promise of
+    :mod:`truestep.numerics`: the same revision and package versions give the same
+    numbers on any machine). Returns a ``differs`` finding per differing cell (and
+    ``vanished``/``appeared`` rows) and the number of cells compared. Rows whose message
+    says their engine is not repeatable are left out."""
+    from truestep.runner import MACHINE_COLUMNS, NOT_REPEATABLE
+
+    findings: list[Finding] = []
+    cells = 0
+    for name, keys in TABLE_KEYS.items():
+        old, new = baseline.get(name), current.get(name)
+        if old is None or new is None:
+            continue
+        a, b = _index(old, keys), _index(new, keys)
+        for k in a.keys() - b.keys():
+            findings.append(Finding("vanished", name, _key(a[k], keys), "", "", ""))
+        for k in b.keys() - a.keys():
+            findings.append(Finding("appeared", name, _key(b[k], keys), "", "", ""))
+        columns = [c for c in old.columns if c in set(new.columns) and c not in MACHINE_COLUMNS]
+        for k in sorted(a.keys() & b.keys(), key=str):
+            ra, rb = a[k], b[k]
+            if any(NOT_REPEATABLE in str(r.get("message", "")) for r in (ra, rb)):
+                continue
+            for c in columns:
+                cells += 1
+                if not _same_cell(ra[c], rb[c]):
+                    findings.append(Finding("differs", name, _key(ra, keys), c, ra[c], rb[c]))
+    return findings, cells
 
 
 def _restitution_error(table: pd.DataFrame | None) -> pd.DataFrame | None:

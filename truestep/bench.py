@@ -421,7 +421,9 @@ def scaling_table(
     budget) and ``warmup_s`` (those of compiling and the warm-up children, within it).
     """
     from truestep.cases.loader import library, load_case
+    from truestep.numerics import pin_threads
 
+    pin_threads()
     case = case or load_case(library()[RAIN_CASE])
     ns = sorted({round(float(s)) for s in sizes})
     if not ns or ns[0] < 1:

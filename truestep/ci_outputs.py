@@ -9,14 +9,19 @@ then tables of the failed gates and of what got worse, for a pull request page (
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import os
 import platform
+import stat
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from truestep.baseline import Comparison
 from truestep.gates import GateResult
+from truestep.report_markdown import text
+from truestep.visible import visible
 
 
 def _counts(verdicts: list[GateResult]) -> dict[str, int]:
@@ -34,13 +39,14 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
                           failures=str(counts["fail"]), skipped=str(counts["skip"]), errors="0",
                           hostname=platform.node())
     for v in verdicts:
-        case = ET.SubElement(gates, "testcase", classname=v.case,
-                             name=f"{v.gate.where} {v.gate.kind} {v.gate.engine}/{v.gate.method}"
+        case = ET.SubElement(gates, "testcase", classname=visible(v.case),
+                             name=visible(f"{v.gate.where} {v.gate.kind} {v.gate.engine}/"
+                                          f"{v.gate.method}")
                              + (f" dt={v.gate.dt:g}" if v.gate.dt is not None else ""),
-                             file=v.gate.file or "")
-        text = f"measured {v.measured}, required {v.required}"
+                             file=visible(v.gate.file or ""))
+        text = visible(f"measured {v.measured}, required {v.required}")
         if v.verdict == "fail":
-            ET.SubElement(case, "failure", message=text, type="GateFailed").text = v.line()
+            ET.SubElement(case, "failure", message=text, type="GateFailed").text = visible(v.line())
         elif v.verdict == "skip":
             ET.SubElement(case, "skipped", message=text)
         else:
@@ -49,7 +55,8 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
         strict = ET.SubElement(suites, "testsuite", name="truestep.strict", tests="1",
                                failures="1", skipped="0", errors="0")
         case = ET.SubElement(strict, "testcase", classname="truestep", name="something was checked")
-        ET.SubElement(case, "failure", message=reasons[0], type="NothingChecked").text = "\n".join(reasons)
+        ET.SubElement(case, "failure", message=visible(reasons[0]),
+                      type="NothingChecked").text = "\n".join(visible(r) for r in reasons)
     if comparison is not None:
         tables = ["results", "orders", "stability", "restitution"] + (
             ["timing"] if comparison.time_against else [])
@@ -61,13 +68,15 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
             bad = [f for f in worse if f.table == table]
             if bad:
                 ET.SubElement(case, "failure", message=f"{len(bad)} row(s) worse or gone",
-                              type="Regression").text = "\n".join(f.line() for f in bad)
+                              type="Regression").text = "\n".join(visible(f.line()) for f in bad)
     ET.indent(suites)
     return ET.tostring(suites, encoding="unicode", xml_declaration=True) + "\n"
 
 
-def _cell(text: object) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
+def _cell(value: object) -> str:
+    """A table cell of the markdown summary: its text shown as written, never as markup
+    (:func:`truestep.report_markdown.text`)."""
+    return text(value)
 
 
 def markdown(verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str],
@@ -76,12 +85,12 @@ def markdown(verdicts: list[GateResult], comparison: Comparison | None, reasons:
     c = _counts(verdicts)
     lines = [f"### truestep gate: {'passed' if passed else 'FAILED'}", "",
              f"{c['pass']} gates held, {c['fail']} failed, {c['skip']} not evaluated."]
-    lines += [f"- **{r}**" for r in reasons]
+    lines += [f"- **{text(r)}**" for r in reasons]
     failed = [v for v in verdicts if v.verdict == "fail"]
     if failed:
         lines += ["", "| case | gate | engine/method | dt | measured | required |",
                   "|---|---|---|---|---|---|"]
-        lines += [f"| {_cell(v.case)} | {v.gate.where} {v.gate.kind} | {_cell(v.gate.engine)}/"
+        lines += [f"| {_cell(v.case)} | {_cell(v.gate.where)} {_cell(v.gate.kind)} | {_cell(v.gate.engine)}/"
                   f"{_cell(v.gate.method)} | {'' if v.gate.dt is None else f'{v.gate.dt:g}'} | "
                   f"{_cell(v.measured)} | {_cell(v.required)} |" for v in failed]
     if comparison is not None:
@@ -92,7 +101,7 @@ def markdown(verdicts: list[GateResult], comparison: Comparison | None, reasons:
         worse = comparison.worse()
         if worse:
             lines += ["", "| change | table | row | quantity | baseline | now |", "|---|---|---|---|---|---|"]
-            lines += [f"| {f.change} | {f.table} | {_cell(f.key)} | {f.quantity} | "
+            lines += [f"| {f.change} | {f.table} | {_cell(f.key)} | {_cell(f.quantity)} | "
                       f"{_cell(_fmt(f.baseline))} | {_cell(_fmt(f.current))} |" for f in worse[:200]]
             if len(worse) > 200:
                 lines.append(f"\n... and {len(worse) - 200} more (see the JSON output).")
@@ -130,13 +139,24 @@ def as_json(verdicts: list[GateResult], comparison: Comparison | None, reasons: 
             "time_against": comparison.time_against,
             "findings": [{k: _clean(val) for k, val in f.__dict__.items()} for f in comparison.findings],
         }
-    return json.dumps(doc, indent=1, default=str) + "\n"
+    return json.dumps(doc, indent=1, default=str, ensure_ascii=True) + "\n"
 
 
 def write(path: str | Path, text: str, *, append: bool = False) -> None:
-    """Write ``text`` to ``path`` (append for ``$GITHUB_STEP_SUMMARY``)."""
+    """Write ``text`` to ``path`` (append for ``$GITHUB_STEP_SUMMARY``): a regular file
+    or a new one; anything else (a FIFO that would block, a device, a directory) raises
+    :class:`OSError` naming it, without writing."""
     path = Path(path)
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a" if append else "w", encoding="utf-8") as fh:
+    flags = (os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_CLOEXEC
+             | (os.O_APPEND if append else 0))
+    if os.path.lexists(path) and not stat.S_ISREG(os.stat(path).st_mode):
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
+    fd = os.open(path, flags, 0o644)
+    with os.fdopen(fd, "a" if append else "w", encoding="utf-8") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        if not append:
+            fh.truncate(0)
         fh.write(text)

@@ -30,9 +30,11 @@ from truestep.adapters import (
 )
 from truestep.cases import CaseError, SelectionError, load_case, load_cases
 from truestep.cases.case import Case
+from truestep.cases.limits import CEILING
 from truestep.cases.limits import KEYS as LIMIT_KEYS
 from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
 from truestep.cases.plugins import PluginError
+from truestep.visible import visible
 
 REPORT_SPACE_MB = 64
 """Room a new report needs beside ``--out`` besides twice the old one's size, MiB (the
@@ -48,35 +50,24 @@ class UsageError(Exception):
 
 
 def _say(msg: str) -> None:
-    print(msg, file=sys.stderr)
+    print(visible(msg), file=sys.stderr)
 
 
-def _check_case_gates(cases: list[Case], engines: set[str]) -> None:
-    """Case-file gates must name known properties and engines (or ``*``)."""
-    from truestep.properties import PROPERTIES
-
-    for c in cases:
-        for p in c.properties:
-            if p not in PROPERTIES:
-                raise CaseError(c.file, "properties", f"unknown property {p!r}")
-        for g in c.gates:
-            if g.kind == "property" and g.params["name"] not in c.properties:
-                raise CaseError(c.file, f"{g.where}.name",
-                                f"{g.params['name']!r} is not in this case's properties")
-            if g.engine != "*" and g.engine not in engines:
-                raise CaseError(c.file, f"{g.where}.engine", f"unknown engine {g.engine!r}")
+def _quoted(value: object) -> str:
+    """``repr`` of a value from outside, cut short and with hidden characters shown."""
+    text = visible(value)
+    return repr(text if len(text) <= 60 else text[:57] + "...")
 
 
-def _load(selection: str, limit_items: list[str] | None = None) -> list[Case]:
+def _load(selection: str, limit_items: list[str] | None = None, *,
+          trust_limits: bool = False) -> list[Case]:
     from truestep.cases.limits import parse_override
 
     try:
-        limits = parse_override(limit_items or [])
+        limits = parse_override(limit_items or [], trusted=trust_limits)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    cases = load_cases(selection, limits=limits)
-    _check_case_gates(cases, set(registered()))
-    return cases
+    return load_cases(selection, limits=limits, trust_limits=trust_limits)
 
 
 def _reproduce(args: argparse.Namespace) -> list[str]:
@@ -101,7 +92,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """
     from truestep.interrupts import Interrupted, handled
     from truestep.isolation import set_run_budget
-    from truestep.journal import journal_dir
+    from truestep.journal import Journal
 
     with handled():
         try:
@@ -110,37 +101,63 @@ def cmd_run(args: argparse.Namespace) -> int:
             out = args.out or args.resume or "reports"
             where = (f"the new report is in {out}/" if err.published
                      else f"{out}/ holds the previous report, untouched")
-            kept = journal_dir(Path(args.resume or out))
-            sweeps = len(list(kept.glob("sweep-*.pkl")))
-            then = (f"; the same command with --resume continues from the {sweeps} finished "
-                    f"sweeps in {kept}" if (kept / "fingerprint.json").exists() else "")
+            kept = Journal(Path(args.resume or out))
+            then = (f"; the same command with --resume continues from the {kept.finished()} "
+                    f"finished sweeps in {kept.dir}" if kept.holds_run() else "")
             _say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}{then}")
             return 128 + err.signum
+        except OSError as err:  # a full disk, a file too large, a folder gone: one line
+            out = args.out or args.resume or "reports"
+            what = visible(err.filename) if err.filename else "the report or its checkpoints"
+            raise UsageError(f"cannot write {what}: {err.strerror or err}; {out}/ holds the "
+                             "previous report, untouched (finished sweeps are kept for "
+                             "--resume)") from None
         finally:
             set_run_budget(None)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from truestep import faults, publish
-    from truestep.analyses import run_analyses
     from truestep.api import select_engines
-    from truestep.isolation import set_run_budget
-    from truestep.journal import Journal, JournalError, fingerprint
-    from truestep.report import write_report
-    from truestep.runner import run_matrix
+    from truestep.run_lock import LockBusy, RunLock
 
     resuming = args.resume is not None
     args.out = args.out or args.resume or "reports"
     if not 0 < args.budget < float("inf"):
         raise UsageError(f"--budget: must be a positive number of seconds, got {args.budget:g}")
-    cases = _load(args.cases, args.limit)
-    if args.quick and args.cases == "*":
-        cases = [c for c in cases if c.in_quick] or cases
     engines = select_engines(args.engines, say=_say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
+    cases = _load(args.cases, args.limit, trust_limits=args.trust_limits)
+    if args.quick and args.cases == "*":
+        cases = [c for c in cases if c.in_quick] or cases
     out = Path(args.out)
     _check_out(out)
+    folders = dict.fromkeys(os.path.realpath(p) for p in (out, args.resume or out))
+    locks = [RunLock(Path(p)) for p in folders]
+    try:
+        for lock in locks:
+            lock.acquire()
+        stale = [f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which "
+                 "is gone" for lock in locks if lock.took_over is not None]
+        return _run_locked(args, cases, engines, out, resuming, said=stale)
+    except LockBusy as err:
+        raise UsageError(str(err)) from None
+    finally:
+        for lock in locks:
+            lock.release()
+
+
+def _run_locked(args: argparse.Namespace, cases: list[Case], engines: list[str], out: Path,
+                resuming: bool, *, said: list[str]) -> int:
+    """The run itself, once it holds the lock of ``out`` (:mod:`truestep.run_lock`);
+    ``said``: lines to print once the run is sure to go ahead."""
+    from truestep import faults, publish
+    from truestep.analyses import run_analyses
+    from truestep.isolation import set_run_budget
+    from truestep.journal import Journal, JournalError, fingerprint
+    from truestep.report import write_report
+    from truestep.runner import run_matrix
+
     for line in publish.recover(out):
         _say(f"{out}: {line} (left by a killed run)")
     journal = Journal(Path(args.resume) if args.resume else out)
@@ -151,8 +168,12 @@ def _run(args: argparse.Namespace) -> int:
         except JournalError as err:
             raise UsageError(f"--resume: {err}") from None
         _say(f"resuming: {kept} finished sweeps in {journal.dir}")
+        if journal.ignored_line():
+            _say(journal.ignored_line())
     else:
         journal.start(fp)
+    for line in said:
+        _say(line)
     set_run_budget(args.budget)
     clock = [time.perf_counter()]
 
@@ -175,7 +196,7 @@ def _run(args: argparse.Namespace) -> int:
                  traces=None if args.quick else traces, with_lecture_figures=not args.quick)
     journal.remove()
     t_report = lap()
-    print(f"wrote {out}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
+    print(f"wrote {visible(out)}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
           f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
     return 0
 
@@ -199,28 +220,31 @@ def _cluster(address: str | None, journal) -> Iterator[object]:
             finally:
                 set_untimed_runner(None)
     except ClusterError as err:
-        kept = len(list(journal.dir.glob("sweep-*.pkl"))) if journal.dir.exists() else 0
-        raise UsageError(f"{err}; {kept} finished sweeps are kept in {journal.dir} "
+        raise UsageError(f"{err}; {journal.finished()} finished sweeps are kept in {journal.dir} "
                          "(the same command with --resume continues from them)") from None
 
 
 def _check_out(out: Path) -> None:
-    """Fail before the sweep if the report cannot be published at ``out``: a file there,
-    a mount point (the report is put in place by renaming a directory), a parent where
-    this process cannot create the staging folder and the journal, or an existing
-    directory whose entries it cannot replace."""
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out: {out} is a file, not a directory")
-    real = Path(os.path.realpath(out))
+    """Fail before the sweep if the report cannot be published at ``out``: a folder that
+    is not a report truestep wrote (:func:`truestep.report_folder.check_out`: a file, a
+    folder of other things, a link elsewhere), a mount point (the report is put in place
+    by renaming a directory), a parent where this process cannot create the staging
+    folder and the journal, or too little space beside it."""
+    from truestep.report_folder import OutRefused, check_out
+
+    try:
+        real = check_out(out)
+    except OutRefused as err:
+        raise UsageError(str(err)) from None
     if real.exists() and os.path.ismount(real):
-        raise UsageError(f"--out: {out} is a mount point; name a directory inside it")
+        raise UsageError(f"--out: {visible(out)} is a mount point; name a directory inside it")
     try:
         real.parent.mkdir(parents=True, exist_ok=True)
         for where in (real.parent, real) if real.exists() else (real.parent,):
             probe = tempfile.NamedTemporaryFile(dir=where, prefix=".truestep-probe-")
             probe.close()
     except OSError as err:
-        raise UsageError(f"--out: cannot write in {out}: {err.strerror or err}") from None
+        raise UsageError(f"--out: cannot write in {visible(out)}: {err.strerror or err}") from None
     old = sum(f.stat().st_size for f in real.rglob("*") if f.is_file()) if real.exists() else 0
     need = 2 * old + REPORT_SPACE_MB * 2**20  # the staged report beside the old one
     free = shutil.disk_usage(real.parent).free
@@ -240,20 +264,20 @@ def _read_csv(path: Path, needs: set[str], kind: str = "results") -> pd.DataFram
 
 def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
     """``results`` and, beside it, ``stability`` and ``restitution`` (``None`` if absent)."""
-    if not results_path.is_file():
+    if not os.path.lexists(results_path):
         raise UsageError(f"{results_path}: no such file (run `truestep run` first)")
     tables = {"results": _read_csv(results_path, RESULTS_NEEDS, "results")}
     from truestep.tables_io import REQUIRED
 
     for name in ("stability", "restitution"):
         path = results_path.parent / f"{name}.csv"
-        tables[name] = _read_csv(path, set(REQUIRED[name]), name) if path.exists() else None
+        tables[name] = _read_csv(path, set(REQUIRED[name]), name) if os.path.lexists(path) else None
     return tables
 
 
-def _cases_of(results: pd.DataFrame, where: Path) -> list[Case]:
+def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Case]:
     """The cases a results table covers: by the file it names (``case_source``), else by
-    name in the case library."""
+    name in the case library; their gates may name ``engines``."""
     lib = library()
     sources = {}
     if "case_source" in results:
@@ -262,12 +286,13 @@ def _cases_of(results: pd.DataFrame, where: Path) -> list[Case]:
     for name in dict.fromkeys(results["case"].astype(str)):
         src = str(sources.get(name, name))
         if src != name and Path(src).is_file():
-            cases.append(load_case(src))
+            cases.append(load_case(src, engines=engines))
         elif name in lib:
-            cases.append(load_case(lib[name]))
+            cases.append(load_case(lib[name], engines=engines))
         else:
-            raise UsageError(f"{where}: case {name!r} is not in the case library and its file "
-                             f"{src!r} is not here; name its file or directory with --cases")
+            raise UsageError(f"{where}: case {_quoted(name)} is not in the case library and its "
+                             f"file {_quoted(src)} is not here; name its file or directory with "
+                             "--cases")
     return cases
 
 
@@ -304,6 +329,58 @@ def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
     return tol
 
 
+def _narrowed(tables: dict, cases: set[str] | None, engines: set[str] | None) -> dict:
+    from truestep.baseline import narrow
+
+    return narrow(tables, cases=cases, engines=engines)
+
+
+def _baseline_scope(run_dir: Path, results: pd.DataFrame, args: argparse.Namespace,
+                    cases: list[Case]) -> tuple[set[str], set[str]]:
+    """The cases and engines a baseline is compared on: those the current run was asked
+    for (its ``run.json``; else those in its results), narrowed by ``--cases`` and
+    ``--engines``. Baseline rows outside them are not "vanished": the run never asked
+    for them."""
+    from truestep.report import read_run_record
+
+    record = read_run_record(run_dir) or {}
+    ran_cases = set(record.get("cases") or results["case"].astype(str))
+    ran_engines = set(record.get("engines") or results["engine"].astype(str))
+    if args.cases:
+        ran_cases &= {c.name for c in cases}
+    if args.engines:
+        ran_engines &= {e.strip() for e in args.engines.split(",") if e.strip()}
+    return ran_cases, ran_engines
+
+
+def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path,
+                     run_dir: Path) -> None:
+    """``--identical``: every non-timing cell equal to the baseline's, when both runs had
+    the same packages and floating-point environment (their ``run.json``); else one line
+    saying why the promise does not apply, and the tolerances alone decide."""
+    from truestep.baseline import identical
+    from truestep.numerics import differences
+    from truestep.report import read_run_record
+
+    old, new = read_run_record(base_dir), read_run_record(run_dir)
+    if old is None or new is None:
+        missing = base_dir if old is None else run_dir
+        print(f"--identical: {missing}/run.json is missing: cannot tell whether both runs "
+              "had the same packages; compared with tolerances only")
+        return
+    diff = differences(old.get("numerics", {}), new.get("numerics", {}))
+    if old.get("truestep") != new.get("truestep"):
+        diff.insert(0, f"truestep {old.get('truestep')} -> {new.get('truestep')}")
+    if diff:
+        print(f"--identical: not comparable bit for bit ({'; '.join(diff)[:300]}); "
+              "compared with tolerances only")
+        return
+    findings, cells = identical(baseline, current)
+    comparison.findings += findings
+    print(f"--identical: {cells} non-timing cells compared, "
+          f"{sum(f.change == 'differs' for f in findings)} differ")
+
+
 def cmd_gate(args: argparse.Namespace) -> int:
     from truestep import ci_outputs
     from truestep.baseline import compare
@@ -311,15 +388,19 @@ def cmd_gate(args: argparse.Namespace) -> int:
 
     results_path = Path(args.results)
     tables = _run_tables(results_path)
+    asked_engines = ({e.strip() for e in args.engines.split(",") if e.strip()}
+                     if args.engines else None)
+    if asked_engines is not None:
+        tables = _narrowed(tables, None, asked_engines)
     results = tables["results"]
-    cases = load_cases(args.cases) if args.cases else _cases_of(results, results_path)
     engines = set(registered()) | set(results["engine"].astype(str))
-    _check_case_gates(cases, engines)
+    cases = (load_cases(args.cases, engines=engines) if args.cases
+             else _cases_of(results, results_path, engines))
     extra = [item for f in args.gates for item in load_gates_file(f)]
     for _, g in extra:
         if g.engine != "*" and g.engine not in engines:
-            raise CaseError(g.file, f"{g.where}.engine",
-                            f"unknown engine {g.engine!r} (not registered, not in {results_path})")
+            raise CaseError(g.file, f"{g.where}.engine", f"unknown engine {_quoted(g.engine)} "
+                            f"(not registered, not in {results_path})")
     if args.declared_orders:
         extra += declared_gates(cases, results)
     verdicts = check_gates(cases, results, tables["stability"], tables["restitution"], extra=extra)
@@ -327,16 +408,22 @@ def cmd_gate(args: argparse.Namespace) -> int:
     comparison = None
     if args.baseline:
         base_dir = Path(args.baseline)
-        if not (base_dir / "results.csv").is_file():
+        if not os.path.lexists(base_dir / "results.csv"):
             raise UsageError(f"--baseline: {base_dir}/results.csv: no such file")
         baseline = _run_tables(base_dir / "results.csv")
         if args.time_against and "/" not in args.time_against:
-            raise UsageError(f"--time-against: expected ENGINE/METHOD, got {args.time_against!r}")
-        comparison = compare(baseline, tables, tolerances=_tolerances(args.tolerance, args.gates),
+            raise UsageError(f"--time-against: expected ENGINE/METHOD, got {_quoted(args.time_against)}")
+        scope_cases, scope_engines = _baseline_scope(results_path.parent, results, args, cases)
+        baseline = _narrowed(baseline, scope_cases, scope_engines)
+        current = _narrowed(tables, scope_cases, scope_engines)
+        comparison = compare(baseline, current, tolerances=_tolerances(args.tolerance, args.gates),
                              time_against=args.time_against,
                              scales={c.name: c.error_scale for c in cases})
-    elif args.tolerance or args.time_against:
-        raise UsageError("--tolerance and --time-against compare against a baseline: add --baseline DIR")
+        if args.identical:
+            _check_identical(comparison, baseline, current, base_dir, results_path.parent)
+    elif args.tolerance or args.time_against or args.identical:
+        raise UsageError("--tolerance, --time-against and --identical compare against a "
+                         "baseline: add --baseline DIR")
 
     failed = [v for v in verdicts if v.verdict == "fail"]
     held = [v for v in verdicts if v.verdict == "pass"]
@@ -348,31 +435,40 @@ def cmd_gate(args: argparse.Namespace) -> int:
                        + f" ({len(skipped)} gates name cases or engines this run left out)")
     for v in verdicts:
         if args.verbose or v.verdict == "fail" or (v.verdict == "skip" and not args.quiet):
-            print(v.line())
+            print(visible(v.line()))
     worse = comparison.worse() if comparison is not None else []
     if comparison is not None:
+        shown = 0
         for f in comparison.findings:
-            if args.verbose or f.change in ("worse", "vanished"):
-                print(f.line())
+            if args.verbose or f.change in ("worse", "vanished") or (
+                    f.change == "differs" and shown < 20):
+                shown += f.change == "differs"
+                print(visible(f.line()))
     passed = not failed and not reasons and not worse
     summary = f"{len(held)} gates held, {len(failed)} failed, {len(skipped)} not evaluated"
     if comparison is not None:
         n = {k: sum(f.change == k for f in comparison.findings)
-             for k in ("worse", "better", "appeared", "vanished")}
+             for k in ("worse", "better", "appeared", "vanished", "differs")}
         summary += (f"; baseline: {comparison.compared} rows compared, {n['worse']} worse, "
-                    f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished")
+                    f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished"
+                    + (f", {n['differs']} cells differ" if args.identical else ""))
     for r in reasons:
-        print(f"FAIL {r}")
+        print(visible(f"FAIL {r}"))
     print(summary)
-    if args.junit:
-        ci_outputs.write(args.junit, ci_outputs.junit(verdicts, comparison, reasons))
     md = ci_outputs.markdown(verdicts, comparison, reasons, passed=passed)
-    if args.markdown:
-        ci_outputs.write(args.markdown, md)
-    if os.environ.get("GITHUB_STEP_SUMMARY"):
-        ci_outputs.write(os.environ["GITHUB_STEP_SUMMARY"], md, append=True)
-    if args.json:
-        ci_outputs.write(args.json, ci_outputs.as_json(verdicts, comparison, reasons, passed=passed))
+    try:
+        if args.junit:
+            ci_outputs.write(args.junit, ci_outputs.junit(verdicts, comparison, reasons))
+        if args.markdown:
+            ci_outputs.write(args.markdown, md)
+        if os.environ.get("GITHUB_STEP_SUMMARY"):
+            ci_outputs.write(os.environ["GITHUB_STEP_SUMMARY"], md, append=True)
+        if args.json:
+            ci_outputs.write(args.json, ci_outputs.as_json(verdicts, comparison, reasons,
+                                                           passed=passed))
+    except OSError as err:
+        raise UsageError(f"cannot write {visible(err.filename or 'an output')}: "
+                         f"{err.strerror or err}") from None
     return 0 if passed else 1
 
 
@@ -386,18 +482,23 @@ def cmd_list(args: argparse.Namespace) -> int:
     for name in names:
         status = engine_status(name) if name in registered() else "unknown engine"
         if status != "installed":
-            print(f"  {name:10s} {status}")
+            print(visible(f"  {name:10s} {status}"))
             continue
         a = get_adapter(name)
-        print(f"  {name:10s} methods: {', '.join(a.methods)}")
-        print(f"  {'':10s} capabilities: {', '.join(sorted(a.capabilities))}")
+        print(visible(f"  {name:10s} methods: {', '.join(map(str, a.methods))}"))
+        print(visible(f"  {'':10s} capabilities: {', '.join(sorted(map(str, a.capabilities)))}"))
     return 0
 
 
 def cmd_figures(args: argparse.Namespace) -> int:
     from truestep.figures import write_lecture_figures
+    from truestep.report_folder import OutRefused, prepare
 
-    for path, caption in write_lecture_figures(Path(args.out) / "figures"):
+    try:
+        out = prepare(Path(args.out))
+    except OutRefused as err:
+        raise UsageError(str(err)) from None
+    for path, caption in write_lecture_figures(out / "figures"):
         print(f"{path}: {caption}")
     return 0
 
@@ -418,17 +519,25 @@ def cmd_bench(args: argparse.Namespace) -> int:
     engines = select_engines(args.engines, say=_say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
-    out = Path(args.out)
+    from truestep.report_folder import OutRefused, check_out, prepare
+
+    try:
+        check_out(Path(args.out))
+    except OutRefused as err:
+        raise UsageError(str(err)) from None
     start = time.perf_counter()
     table = scaling_table(engines, sizes=sizes, budget_s=args.budget)
     bandwidth = table.attrs["bandwidth_bytes_per_s"]
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out = prepare(Path(args.out))
+    except OutRefused as err:
+        raise UsageError(str(err)) from None
     table.to_csv(out / "scaling.csv", index=False, columns=COLUMNS)
     figure = scaling_plot(table, bandwidth, out / "figures" / "scaling.png")
     shown = table.assign(note=table["note"].str.slice(0, 100))
     with pd.option_context("display.width", 250, "display.max_rows", None,
                            "display.max_colwidth", 100, "display.float_format", "{:.4g}".format):
-        print(shown.to_string(index=False))
+        print("\n".join(visible(line) for line in shown.to_string(index=False).splitlines()))
     per_step = table.attrs["bytes_per_particle_step"]
     print(f"copy bandwidth {bandwidth / 1e9:.2f} GB/s (numpy copy, best of 5, measured in this "
           f"run) = {bandwidth / per_step:.3g} particle-steps/s at {per_step} B per particle-step "
@@ -437,6 +546,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'scaling.csv'} and {figure} in {time.perf_counter() - start:.1f} s: "
           f"the table took {table.attrs['elapsed_s']:.1f} s of the {args.budget:g} s budget "
           f"(compiling and warm-ups {warm:.1f} s of it)")
+    return 0
+
+
+def cmd_env(args: argparse.Namespace) -> int:
+    """``truestep env``: the variables that give this machine truestep's numbers, as shell
+    ``export`` lines (for processes truestep does not start itself: Dask workers)."""
+    import shlex
+
+    from truestep.numerics import environment
+
+    for key, value in environment().items():
+        print(f"export {key}={shlex.quote(os.environ.get(key, value))}")
     return 0
 
 
@@ -475,6 +596,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE",
                      help="set a cost limit for every case, over the defaults and the case "
                      "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable")
+    run.add_argument("--trust-limits", action="store_true",
+                     help="the cases of this run are trusted: --limit may raise a limit beyond "
+                     "the ceiling a case file cannot pass (" + ", ".join(
+                         f"{k} {getattr(CEILING, k):.3g}" for k in LIMIT_KEYS) + ")")
     run.add_argument("--scheduler", default=None, metavar="ADDRESS",
                      help="run the sweeps and the untimed analyses on a Dask cluster: "
                      "tcp://HOST:PORT of a running `dask scheduler`, or local:N for a "
@@ -504,6 +629,13 @@ def build_parser() -> argparse.ArgumentParser:
                       "its engine declares, on every smooth case with an exact solution")
     gate.add_argument("--baseline", default=None, metavar="DIR",
                       help="an earlier run's output directory to compare with, row by row")
+    gate.add_argument("--engines", default=None, metavar="NAMES",
+                      help="only the rows of these engines (comma-separated), for the gates and "
+                      "the baseline")
+    gate.add_argument("--identical", action="store_true",
+                      help="with --baseline: also require every non-timing cell to equal the "
+                      "baseline's, bit for bit (when both runs' run.json name the same packages "
+                      "and floating-point environment; else says why not and uses tolerances)")
     gate.add_argument("--tolerance", action="append", default=[], metavar="QUANTITY=X",
                       help="override a baseline tolerance (error, energy_drift, nfev, order, "
                       "dt_limit, e_error, wall_ratio); repeatable")
@@ -531,6 +663,13 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Draw the lecture's figures into DIR/figures.")
     fig.add_argument("--out", default="reports", metavar="DIR", help="output directory (default: reports)")
     fig.set_defaults(func=cmd_figures)
+
+    env = sub.add_parser("env", help="print the environment that gives truestep's numbers",
+                         description="Print, as shell export lines, the variables truestep sets "
+                         "in its own processes so that every machine computes the same numbers "
+                         "(one BLAS thread, the same OpenBLAS kernels, numpy's SIMD dispatch up "
+                         "to AVX2). Start Dask workers after `eval \"$(truestep env)\"`.")
+    env.set_defaults(func=cmd_env)
 
     from truestep.bench import BUDGET_S, SIZES
 
@@ -562,7 +701,7 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except (CaseError, UsageError, SelectionError, UnknownEngine, EngineNotInstalled,
             PluginError) as err:
-        print(f"truestep: error: {err}", file=sys.stderr)
+        print(f"truestep: error: {visible(err)}", file=sys.stderr)
         return 2
 
 

@@ -130,6 +130,15 @@ def _maybe_die(job: SweepJob) -> None:
         os._exit(1)
 
 
+def worker_numerics() -> dict:
+    """This worker's floating-point environment, with its threads pinned as a task's are
+    (:func:`truestep.numerics.fingerprint`)."""
+    from truestep.numerics import fingerprint, pin_threads
+
+    pin_threads()
+    return fingerprint()
+
+
 def untimed_task(call: Call) -> Outcome:
     """One untimed isolated call (a stability search, a bounce drop) on this worker."""
     from truestep.isolation import run_isolated_all
@@ -170,6 +179,32 @@ class Cluster:
             self.close()
             raise ClusterError(f"--scheduler {address}: cannot connect: "
                                f"{type(err).__name__}: {str(err)[:160]}") from None
+        try:
+            self._check_numerics()
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_numerics(self) -> None:
+        """Refuse workers whose floating-point environment differs from this machine's
+        (:func:`truestep.numerics.fingerprint`): their rows would not be the rows a local
+        run gives. The message names the first such worker and what differs."""
+        from truestep.numerics import differences, fingerprint, pin_threads
+
+        pin_threads()
+        here = fingerprint()
+        try:
+            theirs = self.client.run(worker_numerics)
+        except Exception as err:  # a worker that cannot answer is a connection failure
+            raise ClusterError(f"--scheduler {self.address}: cannot ask the workers for their "
+                               f"numerics: {type(err).__name__}: {str(err)[:120]}") from None
+        for worker, fp in sorted(theirs.items()):
+            diff = differences(here, fp)
+            if diff:
+                raise ClusterError(
+                    f"--scheduler {self.address}: worker {worker} would not give this "
+                    f"machine's numbers ({'; '.join(diff)[:200]}); install the same packages "
+                    "there and start its workers after `eval \"$(truestep env)\"`")
 
     def __enter__(self) -> Cluster:
         return self

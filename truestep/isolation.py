@@ -8,16 +8,30 @@ share the CPU with other runs of the harness. :func:`run_isolated_all` keeps up 
 searches, bounce tests).
 
 No child outlives its parent: each one asks the kernel for SIGKILL when its parent dies
-(Linux, :func:`truestep.oscalls.die_with_parent`), ignores SIGINT (a Ctrl-C reaches the
-whole process group; the parent decides) and takes SIGTERM by default; the parent kills
-the live ones when it is interrupted (:func:`kill_children`, :mod:`truestep.interrupts`).
+(Linux, :func:`truestep.oscalls.die_with_parent`), ignores SIGINT (the parent decides)
+and takes SIGTERM by default; the parent kills the live ones when it is interrupted
+(:func:`kill_children`, :mod:`truestep.interrupts`).
+
+What runs in a child is contained: the child leads a process group of its own and
+adopts every orphaned process below it (:func:`truestep.oscalls.become_subreaper`), and
+whatever the adapter started there (helpers, a daemon that left the group with
+``setsid``) is killed when the call ends, after a normal finish, a crash, a timeout or
+an interruption (:func:`truestep.process_tree.kill_tree`). Its standard output and error
+(the file descriptors, so its own subprocesses' too) go to a pipe whose last
+:data:`OUTPUT_TAIL` bytes come back in :attr:`Outcome.output`, never to truestep's own
+output; standard input is ``/dev/null``.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import fcntl
 import multiprocessing as mp
 import os
 import signal
+import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -26,16 +40,26 @@ from multiprocessing.connection import wait
 from typing import Any
 
 from truestep import faults
-from truestep.oscalls import die_with_parent
+from truestep.oscalls import become_subreaper, die_with_parent
+from truestep.process_tree import has_children, kill_group, kill_tree, reap_children
 
 
 @dataclass
 class Outcome:
-    """What became of an isolated call: ``ok`` with its value, or why not."""
+    """What became of an isolated call: ``ok`` with its value, or why not; ``output``:
+    the end of what it wrote to its standard output and error."""
 
     status: str  # ok | crashed | timeout
     value: Any = None
     message: str = ""
+    output: str = ""
+
+
+OUTPUT_TAIL = 4000
+"""The bytes of a child's standard output and error kept (its last ones)."""
+PIPE_BYTES = 2**20
+"""The capture pipe's buffer: what an engine's C code may write in one call while it
+holds the interpreter lock, before the thread that drains the pipe can run."""
 
 
 Call = tuple[Callable[..., Any], tuple, float]
@@ -64,18 +88,98 @@ _LIVE: dict[int, Any] = {}
 """The children started by this process and not yet joined, by pid."""
 
 
+class _Capture:
+    """Standard output and error of this process (file descriptors 1 and 2) into a pipe
+    drained by a thread that keeps the last :data:`OUTPUT_TAIL` bytes; standard input
+    from ``/dev/null``."""
+
+    def __init__(self) -> None:
+        read, write = os.pipe()  # text buffered before the fork is flushed into it too
+        with contextlib.suppress(OSError, AttributeError):  # room for a chatty C library
+            fcntl.fcntl(write, fcntl.F_SETPIPE_SZ, PIPE_BYTES)
+        self.saved = (os.dup(1), os.dup(2))
+        os.dup2(write, 1)
+        os.dup2(write, 2)
+        os.close(write)
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.close(null)
+        self.streams = (sys.stdout, sys.stderr)  # maybe not on fds 1 and 2 (pytest's)
+        sys.stdout = open(1, "w", buffering=1, closefd=False, errors="backslashreplace")
+        sys.stderr = open(2, "w", buffering=1, closefd=False, errors="backslashreplace")
+        self.tail = bytearray()
+        self.thread = threading.Thread(target=self._drain, args=(read,), daemon=True)
+        self.thread.start()
+
+    def _drain(self, fd: int) -> None:
+        try:
+            while chunk := os.read(fd, 65536):
+                self.tail += chunk
+                del self.tail[:-OUTPUT_TAIL]
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+    def stop(self) -> str:
+        """Put standard output and error back, kill what is left below this process
+        (its copies of the pipe), and return what was written."""
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        with contextlib.suppress(OSError, AttributeError):  # C stdio's buffers too
+            ctypes.CDLL(None).fflush(None)
+        sys.stdout, sys.stderr = self.streams
+        os.dup2(self.saved[0], 1)
+        os.dup2(self.saved[1], 2)
+        for fd in self.saved:
+            os.close(fd)
+        _kill_below()
+        self.thread.join(timeout=2.0)
+        return bytes(self.tail).decode("utf-8", "replace")
+
+
+def _kill_below() -> None:
+    """Kill every process below this one, and this process group's other members."""
+    if has_children():
+        kill_tree(os.getpid())
+        reap_children()
+
+
 def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
     die_with_parent(parent)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(OSError):
+        os.setpgid(0, 0)
+    become_subreaper()
+    capture = _Capture()
     try:
-        conn.send(("ok", fn(*args)))
+        reply: tuple = ("ok", fn(*args))
     except BaseException as err:  # everything: the parent turns it into a row
         tb = traceback.extract_tb(err.__traceback__)
         where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
-        conn.send(("crashed", f"{type(err).__name__}: {err}{where}"))
+        reply = ("crashed", f"{type(err).__name__}: {str(err)[:MESSAGE_CHARS]}{where}")
+    output = capture.stop()
+    try:
+        conn.send((*reply, output))
+    except Exception as err:  # a value that cannot be pickled: the call's row says so
+        conn.send(("crashed", f"its result cannot be sent back: {type(err).__name__}: "
+                   f"{str(err)[:200]}", output))
     finally:
         conn.close()
+
+
+MESSAGE_CHARS = 1000
+"""The most characters of an exception's message a crashed row keeps."""
+
+
+def _end(proc: Any) -> None:
+    """Kill a child, everything below it and its process group, and reap it."""
+    kill_tree(proc.pid)
+    proc.kill()
+    proc.join()
+    kill_group(proc.pid)
 
 
 @dataclass
@@ -96,6 +200,8 @@ def _start(index: int, call: Call) -> Running:
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, os.getpid(), fn, args), daemon=True)
     proc.start()
+    with contextlib.suppress(OSError):  # as the child does: no moment outside its group
+        os.setpgid(proc.pid, proc.pid)
     _LIVE[proc.pid] = proc
     faults.note_child(proc.pid)
     child.close()
@@ -110,25 +216,28 @@ def _finish(run: Running, *, timed_out: bool) -> Outcome:
             return Outcome("timeout", message=BUDGET_SPENT if run.by_budget
                            else f"no result within {run.timeout:g} s")
         try:
-            status, value = run.conn.recv()
-        except EOFError:
-            run.proc.join()
+            status, value, output = run.conn.recv()
+        except (EOFError, OSError, ValueError):
+            _end(run.proc)
             return Outcome("crashed",
                            message=f"engine process died (exit code {run.proc.exitcode})")
-        return Outcome("ok", value) if status == "ok" else Outcome("crashed", message=value)
+        return (Outcome("ok", value, output=output) if status == "ok"
+                else Outcome("crashed", message=value, output=output))
     finally:
         run.conn.close()
-        if run.proc.is_alive() and timed_out:
-            run.proc.kill()
+        if timed_out:
+            _end(run.proc)
         run.proc.join()
+        kill_group(run.proc.pid)
         _LIVE.pop(run.proc.pid, None)
 
 
 def kill_children() -> None:
-    """SIGKILL every child this process started and has not joined yet, and reap them."""
+    """SIGKILL every child this process started and has not joined yet, with everything
+    below it, and reap them."""
     for pid, proc in list(_LIVE.items()):
-        proc.kill()
-        proc.join()
+        if proc._parent_pid == os.getpid():  # not a copy inherited through a fork
+            _end(proc)
         _LIVE.pop(pid, None)
 
 
@@ -167,8 +276,7 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
                     faults.child_finished()
     finally:
         for r in running:
-            r.proc.kill()
-            r.proc.join()
+            _end(r.proc)
             r.conn.close()
             _LIVE.pop(r.proc.pid, None)
     return outcomes  # type: ignore[return-value]

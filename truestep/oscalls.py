@@ -1,6 +1,7 @@
-"""Two Linux system calls the standard library lacks, through ctypes: exchanging two
-paths at once (``renameat2`` with ``RENAME_EXCHANGE``) and dying with the parent
-(``prctl(PR_SET_PDEATHSIG)``). Elsewhere both report that they are not available."""
+"""Linux system calls the standard library lacks, through ctypes: exchanging two paths at
+once (``renameat2`` with ``RENAME_EXCHANGE``), dying with the parent
+(``prctl(PR_SET_PDEATHSIG)``) and adopting orphaned descendants
+(``prctl(PR_SET_CHILD_SUBREAPER)``). Elsewhere they report that they are not available."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from functools import cache
 AT_FDCWD = -100
 RENAME_EXCHANGE = 2
 PR_SET_PDEATHSIG = 1
+PR_SET_CHILD_SUBREAPER = 36
 
 
 @cache
@@ -54,3 +56,11 @@ def die_with_parent(parent: int) -> None:
         libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
     if os.getppid() != parent:
         os._exit(1)
+
+
+def become_subreaper() -> bool:
+    """Make this process the parent of every orphaned process below it (a descendant
+    whose own parent exits, a daemon that double-forks) instead of ``init``, so that
+    they stay in its tree to be found and killed; ``False`` where not available."""
+    libc = _libc()
+    return libc is not None and libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0

@@ -23,11 +23,61 @@ SURVIVAL_ENERGY = 1.0
 """... and its relative energy error is at most this: a bound three-body system whose
 energy went from -2.4 J to +525 J has been blown apart, whatever its positions say."""
 PICK_COLUMNS = ["case", "target", "error_needed", "by", "engine", "method", "dt", "dt_kind",
-                "error", "wall_s", "nfev", "runs_reaching"]
+                "error", "wall_s", "nfev", "runs_reaching", "tied"]
+TIE_NOISE = 0.15
+"""The least relative noise of a wall time: two runs of the same revision on one machine
+moved single rows by up to 12% (a shared machine's load, caches, frequency), more than the
+spread of one row's repeats shows. Wall times closer than their noise bands are a tie."""
+TIMER_FLOOR_S = 1e-6
+"""The least absolute noise of a wall time, s (the timer and the call around the stepping)."""
 
 
 def _num(frame: pd.DataFrame, column: str) -> np.ndarray:
     return pd.to_numeric(frame[column], errors="coerce").to_numpy(float)
+
+
+def noise_band(wall: np.ndarray, spread: np.ndarray | None = None) -> np.ndarray:
+    """Half-widths (s) of the intervals wall times (s) are known to: a row's own spread
+    (``wall_s_spread``), at least :data:`TIE_NOISE` of the time and :data:`TIMER_FLOOR_S`."""
+    wall = np.asarray(wall, float)
+    band = np.maximum(TIE_NOISE * wall, TIMER_FLOOR_S)
+    if spread is not None:
+        band = np.fmax(band, np.asarray(spread, float))
+    return band
+
+
+def _bands(frame: pd.DataFrame) -> np.ndarray:
+    spread = _num(frame, "wall_s_spread") if "wall_s_spread" in frame else None
+    return noise_band(_num(frame, "wall_s"), spread)
+
+
+def tied_with_fastest(frame: pd.DataFrame) -> np.ndarray:
+    """Which rows' wall times cannot be told from the fastest's: their intervals
+    (:func:`noise_band`) reach down to the top of the fastest's. Rows without a wall
+    time are not tied."""
+    wall, band = _num(frame, "wall_s"), _bands(frame)
+    if not np.isfinite(wall).any():
+        return np.zeros(len(frame), bool)
+    k = int(np.nanargmin(wall))
+    return np.isfinite(wall) & (wall - band <= wall[k] + band[k])
+
+
+def _label(r: pd.Series) -> str:
+    kind = "tol" if r["dt_kind"] == "tolerance" else "dt"
+    return f"{r['engine']} / {r['method']} ({kind} {float(r['dt']):.3g})"
+
+
+def _pick_by_wall(reach: pd.DataFrame) -> tuple[pd.Series, str]:
+    """The run to name as the fastest of ``reach`` and the others tied with it.
+
+    Among the runs tied with the fastest (:func:`tied_with_fastest`), the one named is
+    the one with the fewest evaluations (then the first in the table's order): timing
+    noise never decides which run is named, only whether a run is in the tie."""
+    tied = reach[tied_with_fastest(reach)]
+    order = np.lexsort((np.arange(len(tied)), np.nan_to_num(_num(tied, "nfev"), nan=np.inf)))
+    named = tied.iloc[int(order[0])]
+    others = [_label(tied.iloc[int(k)]) for k in order[1:]]
+    return named, "; ".join(others)
 
 
 def cheapest(results: pd.DataFrame, cases: list[Case],
@@ -36,7 +86,9 @@ def cheapest(results: pd.DataFrame, cases: list[Case],
     error is at most ``target x scale``, by wall time (``by = wall_s``) and by derivative
     evaluations (``by = nfev``). A target no run reaches is a row with an empty engine
     and ``runs_reaching`` 0. Columns :data:`PICK_COLUMNS`; ``error_needed`` in the
-    case's error units."""
+    case's error units. By wall time, runs within timing noise of the fastest are a tie
+    (:func:`_pick_by_wall`): ``tied`` lists the others, ``engine / method (dt ...)``
+    separated by ``;``."""
     rows = []
     for case in cases:
         d = results[(results["case"] == case.name) & (results["status"] == "ok")]
@@ -48,12 +100,15 @@ def cheapest(results: pd.DataFrame, cases: list[Case],
             reach = d[error <= needed]
             for by in ("wall_s", "nfev"):
                 base = {"case": case.name, "target": target, "error_needed": needed, "by": by,
-                        "runs_reaching": len(reach)}
+                        "runs_reaching": len(reach), "tied": ""}
                 cost = _num(reach, by)
                 if not np.isfinite(cost).any():
                     rows.append({**base, "engine": "", "method": ""})
                     continue
-                r = reach.iloc[int(np.nanargmin(cost))]
+                if by == "wall_s":
+                    r, base["tied"] = _pick_by_wall(reach)
+                else:
+                    r = reach.iloc[int(np.nanargmin(cost))]
                 rows.append({**base, **{k: r[k] for k in ("engine", "method", "dt", "dt_kind",
                                                           "error", "wall_s", "nfev")}})
     return pd.DataFrame(rows, columns=PICK_COLUMNS)
@@ -121,33 +176,39 @@ def scorecard(results: pd.DataFrame, cases: list[Case], stability: pd.DataFrame 
 
     ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
     on, the median of its cheapest wall time there over the cheapest of all runs (1: the
-    fastest); NaN if it reached none. ``cases_run`` / ``cases_reached``: the family's cases
+    fastest, or within timing noise of it, :func:`tied_with_fastest`); NaN if it reached
+    none. ``cases_run`` / ``cases_reached``: the family's cases
     it ran / reached the target on. ``stability_ratio``: over the family's cases with a
     stability search, the median of its largest stable step over the exact limit (or, with
     no exact one, the best any method reached); NaN without searches.
     """
-    picks = cheapest(results, cases, targets=(target,))
-    best = picks[picks["by"] == "wall_s"].set_index("case")["wall_s"]
     family = {c.name: c.family for c in cases}
     scale = {c.name: c.error_scale for c in cases}
     ran = results[~results["status"].isin(["unsupported", "skipped"])
                   & results["case"].isin(list(family))]
     ok = ran[ran["status"] == "ok"].copy()
     ok["reaches"] = _num(ok, "error") <= target * ok["case"].map(scale).to_numpy(float)
+    ok["band"] = _bands(ok) if len(ok) else np.zeros(0)
+    reached = ok[ok["reaches"] & np.isfinite(_num(ok, "wall_s"))]
+    fastest = {case: g.iloc[int(np.argmin(_num(g, "wall_s")))]
+               for case, g in reached.groupby("case", sort=False)}
     stab = None
     if stability is not None and len(stability):
         stab = stability[stability["status"] == "ok"].copy()
         stab["ratio"] = pd.to_numeric(stab["dt_limit"], errors="coerce") / _limit_reference(stab)
     rows = []
     for (engine, method), mine in ran.groupby(["engine", "method"], sort=False):
-        mine_ok = ok[(ok["engine"] == engine) & (ok["method"] == method)]
         for fam in dict.fromkeys(family[c] for c in mine["case"]):
             names = [c for c in dict.fromkeys(mine["case"]) if family[c] == fam]
             ratios = []
             for case in names:
-                hit = mine_ok[(mine_ok["case"] == case) & mine_ok["reaches"]]
-                if len(hit) and np.isfinite(best.get(case, np.nan)):
-                    ratios.append(float(np.nanmin(_num(hit, "wall_s"))) / float(best[case]))
+                hit = reached[(reached["case"] == case) & (reached["engine"] == engine)
+                              & (reached["method"] == method)]
+                if len(hit):
+                    mine_best = hit.iloc[int(np.argmin(_num(hit, "wall_s")))]
+                    top = fastest[case]
+                    tied = mine_best["wall_s"] - mine_best["band"] <= top["wall_s"] + top["band"]
+                    ratios.append(1.0 if tied else float(mine_best["wall_s"] / top["wall_s"]))
             s = stab[(stab["engine"] == engine) & (stab["method"] == method)
                      & stab["case"].isin(names)] if stab is not None else pd.DataFrame()
             s_ratio = _num(s, "ratio") if len(s) else np.array([])

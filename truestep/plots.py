@@ -11,6 +11,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from truestep.visible import visible
+
 ENGINE_COLOURS = {
     "reference": "#1f77b4",
     "scipy": "#7f7f7f",
@@ -38,6 +40,13 @@ def _plain(title: str) -> str:
     """Case text as a plot title: dollar signs shown, never read as mathtext (an
     unbalanced one would stop the figure)."""
     return title.replace("$", r"\$")
+
+
+def _pair(engine: object, method: object) -> str:
+    """``engine / method`` as a plot label: hidden characters shown, dollar signs never
+    read as mathtext, never hidden by a leading underscore."""
+    label = _plain(visible(f"{engine} / {method}"))
+    return " " + label if label.startswith("_") else label
 
 
 def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
@@ -76,7 +85,7 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
     for (engine, method), g in ok.groupby(["engine", "method"], sort=False):
         g = g.sort_values("wall_s")
         style = series_style(engine, method)
-        label = f"{engine} / {method}"
+        label = _pair(engine, method)
         axes[0].plot(g["wall_s"], g["error"], label=label, **style)
         g = g.sort_values("nfev")
         axes[1].plot(g["nfev"], g["error"], label=label, **style)
@@ -100,7 +109,7 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     s = stab[(stab["case"] == case) & (stab["status"] == "ok")]
     if s.empty:
         return None
-    labels = [f"{e} / {m}" for e, m in zip(s["engine"], s["method"], strict=True)]
+    labels = [_pair(e, m) for e, m in zip(s["engine"], s["method"], strict=True)]
     y = np.arange(len(s))
     fig, ax = plt.subplots(figsize=(8, 0.32 * len(s) + 1.4))
     colours = [ENGINE_COLOURS.get(e, "black") for e in s["engine"]]
@@ -133,7 +142,7 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
         d = r[np.isclose(r["dt"].astype(float), dt)]
         for (engine, method), g in d.groupby(["engine", "method"], sort=False):
             g = g.sort_values("e_set")
-            ax.plot(g["e_set"], g["e_measured"], label=f"{engine} / {method}",
+            ax.plot(g["e_set"], g["e_measured"], label=_pair(engine, method),
                     **series_style(engine, method))
         ax.plot([0, 1], [0, 1], color="black", linewidth=0.8, label="requested = measured")
         ax.set_xlabel("requested restitution")
@@ -162,7 +171,7 @@ def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
     for (_, engine, method, kind, dt), (t, e) in chosen.items():
         scale = abs(e[0]) if e[0] != 0 else (np.max(np.abs(e)) or 1.0)
         rel = np.maximum(np.abs(e - e[0]) / scale, 1e-16)
-        label = f"{engine} / {method} ({'tol' if kind == 'tolerance' else 'dt'} {dt:g})"
+        label = f"{_pair(engine, method)} ({'tol' if kind == 'tolerance' else 'dt'} {dt:g})"
         ax.plot(t, rel, label=label, **{**series_style(engine, method), "marker": None})
     ax.set_yscale("log")
     ax.set_xlabel("time (s)")
@@ -228,7 +237,7 @@ def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], t
         ax.set_xticks(range(values.shape[1]),
                       families if values.shape[1] == len(families) else ["sweep"], fontsize=8,
                       rotation=30, ha="right")
-        ax.set_yticks(range(len(rows)), [f"{e} / {m}" for e, m in rows] if ax is axes[0] else [],
+        ax.set_yticks(range(len(rows)), [_pair(e, m) for e, m in rows] if ax is axes[0] else [],
                       fontsize=8)
         ax.set_xticks(np.arange(values.shape[1] + 1) - 0.5, minor=True)
         ax.set_yticks(np.arange(len(rows) + 1) - 0.5, minor=True)

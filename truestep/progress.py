@@ -13,6 +13,8 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
+from truestep.visible import visible
+
 
 class Progress:
     """Counts ``total`` items of work labelled ``label``; :meth:`done` marks one finished.
@@ -44,8 +46,10 @@ class Progress:
         return self.elapsed() / self.count * max(self.total - self.count, 0)
 
     def done(self, line: str = "", n: int = 1) -> None:
-        """``n`` items finished; ``line`` says what the last one gave."""
+        """``n`` items finished; ``line`` says what the last one gave (hidden characters
+        of names in it shown, :func:`truestep.visible.visible`)."""
         self.count += n
+        line = visible(line)
         if self.say is not None:
             if line:
                 self.say(line)

@@ -15,6 +15,7 @@ folders of processes that are gone.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -76,52 +77,44 @@ def recover(out: Path) -> list[str]:
     done = []
     stale = [(kind, pid, path) for kind, pid, path in _scratch_of(out)
              if pid == os.getpid() or not _alive(pid)]
-    olds = sorted((p for kind, _, p in stale if kind == "old"), key=lambda p: -p.stat().st_mtime)
-    if not out.exists() and olds:
+    olds = sorted((p for kind, _, p in stale if kind == "old" and _ours(p)),
+                  key=lambda p: -p.stat().st_mtime)
+    if not os.path.lexists(out) and olds:
         os.rename(olds[0], out)
         done.append(f"put the previous report back from {olds[0].name}")
     for _, _, path in stale:
-        if path.exists():
+        if not os.path.lexists(path):
+            continue
+        if _ours(path):
             shutil.rmtree(path, ignore_errors=True)
-            done.append(f"removed {path.name}")
+        else:  # a link or a file under a scratch folder's name: removed, never followed
+            with contextlib.suppress(OSError):
+                path.unlink()
+        done.append(f"removed {path.name}")
     return done
 
 
+def _ours(path: Path) -> bool:
+    """Whether ``path`` is a directory (not a link) of this process's user, as the
+    scratch folders a run makes are."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid()
+
+
 def new_stage(out: Path) -> Path:
-    """A fresh, empty staging folder for ``out`` (created with ``out``'s permissions)."""
+    """A fresh, empty staging folder for ``out``, made by this process (its owner and
+    mode are this process's and its umask's, never those of the folder it replaces)."""
     stage = scratch(out, "staging")
-    if stage.exists():
+    if os.path.islink(stage) or (os.path.lexists(stage) and not stage.is_dir()):
+        stage.unlink()
+    elif stage.exists():
         shutil.rmtree(stage)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage.mkdir()
-    if out.is_dir():
-        os.chmod(stage, stat.S_IMODE(out.stat().st_mode))
     return stage
-
-
-def _link_or_copy(src: str, dst: str) -> None:
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copy2(src, dst)
-
-
-def carry_over(out: Path, stage: Path, drop: set[str]) -> None:
-    """Give ``stage`` every entry of the current ``out`` that it does not have itself,
-    except those named in ``drop`` (hard links where possible, else copies; symbolic
-    links as links)."""
-    if not out.is_dir():
-        return
-    for entry in os.scandir(out):
-        dst = stage / entry.name
-        if entry.name in drop or os.path.lexists(dst):
-            continue
-        if entry.is_symlink():
-            os.symlink(os.readlink(entry.path), dst)
-        elif entry.is_dir():
-            shutil.copytree(entry.path, dst, symlinks=True, copy_function=_link_or_copy)
-        else:
-            _link_or_copy(entry.path, os.fspath(dst))
 
 
 def swap(stage: Path, out: Path) -> None:

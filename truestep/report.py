@@ -38,6 +38,7 @@ from truestep.report_sections import (
     speed_table,
     summary,
 )
+from truestep.visible import visible
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet",
             "mujoco")
@@ -53,19 +54,33 @@ def footer(argv: list[str]) -> str:
             versions.append(f"{p} {metadata.version(p)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{p} (not installed)")
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
-    except OSError:
-        rev = ""
+    rev = git_revision()
     return (
         "---\n\n"
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.system()} "
         f"{platform.release()}, Python {platform.python_version()}.  \n"
         f"Packages: {', '.join(versions)}.  \n"
+        f"Numerics: {numerics_line()}.  \n"
         f"Revision: {rev or 'unknown'}.  \n"
-        f"Reproduce: `truestep {' '.join(argv) if argv else 'run'}`\n"
+        f"Reproduce: {_command(argv)}\n"
     )
+
+
+def numerics_line() -> str:
+    """The floating-point environment in a few words (:mod:`truestep.numerics`)."""
+    from truestep.numerics import fingerprint
+
+    fp = fingerprint()
+    simd = ", ".join(fp["numpy_simd"]) or "baseline only"
+    return (f"BLAS {'; '.join(fp['blas'])}; numpy SIMD dispatch {simd}"
+            + (" (TRUESTEP_NUMERICS=native)" if fp["native"] else ""))
+
+
+def _command(argv: list[str]) -> str:
+    """``truestep ARGV`` as a code span; an argument that holds a backtick or a hidden
+    character (a ``--cases`` item from outside) is shown as text instead."""
+    line = f"truestep {' '.join(argv) if argv else 'run'}"
+    return f"`{line}`" if "`" not in line and visible(line) == line else text(line)
 
 
 def middle(values: list[float]) -> float | None:
@@ -155,7 +170,7 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
     parts.append(f"Against the orders the engines declare (on smooth cases with an exact "
                  f"solution): {int((fitted['agrees'] == 'yes').sum())} fits agree, "
                  f"{len(disagree)} do not"
-                 + (": " + "; ".join(f"{r.case} {r.engine} / {r.method} {r.order:.2f} "
+                 + (": " + "; ".join(f"{r.case} {text(r.engine)} / {text(r.method)} {r.order:.2f} "
                                      f"(declared {r.declared:g})"
                                      for r in disagree.itertuples(index=False)) if len(disagree)
                     else "") + ".\n")
@@ -250,10 +265,47 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
     return collect
 
 
-REPORT_FILES = ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
-                "index.html", "figures")
-"""What :func:`write_report` writes into ``out``; any other entry of ``out`` is kept."""
+RUN_FILE = "run.json"
+"""What a run was asked for and what decided its numbers besides the code (:func:`run_record`)."""
 
+
+def git_revision() -> str:
+    """The short git revision of truestep's source, or ``""`` outside a checkout."""
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
+    except OSError:
+        return ""
+
+
+def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool,
+               argv: list[str]) -> dict:
+    """``run.json``: the truestep version and revision, the command, whether it was quick,
+    the cases and engines the run was asked for (in order), and the floating-point
+    environment (:func:`truestep.numerics.fingerprint`): with equal ``numerics`` and
+    revision, two runs' non-timing columns are equal bit for bit."""
+    from truestep import __version__
+    from truestep.numerics import fingerprint
+
+    return {"truestep": __version__, "revision": git_revision(),
+            "command": "truestep " + " ".join(argv or ["run"]), "quick": bool(quick),
+            "cases": [c.name for c in cases],
+            "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
+            "numerics": fingerprint()}
+
+
+def read_run_record(directory: Path) -> dict | None:
+    """The ``run.json`` of an output directory, or ``None`` when it has none (a run of an
+    older truestep) or it cannot be read as one."""
+    import json
+
+    from truestep.cases.files import read_regular
+
+    try:
+        record = json.loads(read_regular(Path(directory) / RUN_FILE, 1 << 20).decode("utf-8"))
+    except (OSError, ValueError):  # FileRefused is an OSError
+        return None
+    return record if isinstance(record, dict) else None
 
 def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
                  tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
@@ -264,18 +316,22 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
     The whole new report is written into a staging folder beside ``out`` and put in
     place of the old one as a whole (:mod:`truestep.publish`): at every instant ``out``
     holds either the whole previous report or the whole new one, also when the process
-    is killed. Entries of the previous report that this one does not write are kept,
-    except ``scaling.csv`` (a table of an earlier run) and, when this run draws figures,
-    the old ``figures/``. On failure or interruption the staging folder is removed and
-    the children still drawing are killed.
+    is killed. ``out`` must be a folder truestep may replace
+    (:func:`truestep.report_folder.check_out`: absent, empty, or a report truestep wrote
+    holding nothing else), checked again here, after the run; the new report carries the
+    marker (:data:`truestep.report_folder.MARKER`). On failure or interruption the
+    staging folder is removed and the children still drawing are killed.
     """
     from truestep import faults, publish
     from truestep.isolation import kill_children
+    from truestep.report_folder import check_out, write_marker
 
     out = publish.target(out)
     publish.recover(out)
+    check_out(out)
     stage = publish.new_stage(out)
     try:
+        write_marker(stage)
         results.to_csv(stage / "results.csv", index=False)
         for name in ("stability", "restitution"):
             tables[name].to_csv(stage / f"{name}.csv", index=False)
@@ -284,6 +340,10 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
             from truestep.bench import COLUMNS as SCALING_COLUMNS
 
             scaling.to_csv(stage / "scaling.csv", index=False, columns=SCALING_COLUMNS)
+        import json
+
+        (stage / RUN_FILE).write_text(json.dumps(run_record(cases, results, quick=quick,
+                                                            argv=argv), indent=1) + "\n")
         faults.point("report-csv")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,
@@ -292,7 +352,6 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
         (stage / "index.md").write_text(md)
         faults.point("report-index")
         (stage / "index.html").write_text(markdown_to_html(md, stage))
-        publish.carry_over(out, stage, drop={"scaling.csv"})
         publish.swap(stage, out)
     except BaseException:
         kill_children()

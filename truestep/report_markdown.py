@@ -12,6 +12,8 @@ import re
 import numpy as np
 import pandas as pd
 
+from truestep.visible import visible
+
 
 def fmt(x: object, digits: int = 3) -> str:
     if x is None or (isinstance(x, float) and not np.isfinite(x)):
@@ -29,10 +31,12 @@ _ESCAPE = re.compile("([" + re.escape(ESCAPED) + "])")
 
 def text(value: object) -> str:
     """``value`` as Markdown that shows exactly its characters: whitespace (new lines
-    included) collapsed to single spaces, every markup character backslash-escaped.
-    Everything a case file or an adapter wrote (titles, descriptions, messages, names)
-    goes into the report through it, so it can neither inject markup nor embed a file."""
-    return _ESCAPE.sub(r"\\\1", " ".join(str(value).split()))
+    included) collapsed to single spaces, hidden characters (controls, bidirectional
+    controls, zero-width ones) written as escapes (:func:`truestep.visible.visible`),
+    every markup character backslash-escaped. Everything a case file or an adapter wrote
+    (titles, descriptions, messages, engine and method names) goes into the report
+    through it, so it can neither inject markup nor embed a file nor hide a character."""
+    return _ESCAPE.sub(r"\\\1", visible(" ".join(str(value).split())))
 
 
 def _cell(v: object) -> str:

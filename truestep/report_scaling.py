@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from truestep.report_markdown import fmt, folded, md_table
+from truestep.report_markdown import fmt, folded, md_table, text
 
 TITLE = "How cost grows with work"
 
@@ -66,7 +66,7 @@ def scaling_lines(table: pd.DataFrame) -> list[str]:
     n, shared = at
     best = best_at(table, n)
     top = best.iloc[0]
-    cells = [f"{r.engine} / {r.method} {r.particle_steps_per_s:.3g} "
+    cells = [f"{text(r.engine)} / {text(r.method)} {r.particle_steps_per_s:.3g} "
              f"({percent(r.bandwidth_fraction)} of the bandwidth"
              + ("" if r.engine == top.engine
                 else f", {top.particle_steps_per_s / r.particle_steps_per_s:.1f}x slower") + ")"

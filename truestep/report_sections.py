@@ -43,7 +43,7 @@ def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
                           scale=scales.get(case, 1.0))
         expect = declared.get((case, engine, method), np.nan)
         agrees = "" if not (np.isfinite(expect) and np.isfinite(order)) else (
-            "yes" if abs(order - expect) <= DECLARED_ORDER_TOL else "no")
+            "yes" if order >= expect - DECLARED_ORDER_TOL else "no")
         rows.append({"case": case, "engine": engine, "method": method, "order": order,
                      "declared": expect, "agrees": agrees,
                      "points": int(g["error"].notna().sum())})
@@ -74,6 +74,10 @@ def cheapest_table(cases: list[Case], results: pd.DataFrame) -> pd.DataFrame:
                 row[f"error <= {target:g} scale"] = "none of the runs"
                 continue
             cell = f"{_run_label(wall)}, {_fmt(float(wall['wall_s']))} s"
+            if wall["tied"]:
+                tied = wall["tied"].split("; ")
+                more = f" and {len(tied) - 3} more" if len(tied) > 3 else ""
+                cell += f" (tied within timing noise: {', '.join(tied[:3])}{more})"
             key = ("engine", "method", "dt")
             if [wall[k] for k in key] != [evals[k] for k in key]:
                 cell += f"; fewest evaluations: {_run_label(evals)}, {int(evals['nfev'])}"
@@ -99,7 +103,7 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
             lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
             for w in worst.itertuples(index=False):
-                lines.append(f"- {w.engine} / {w.method}: requested {w.e_set:g}, measured "
+                lines.append(f"- {text(w.engine)} / {text(w.method)}: requested {w.e_set:g}, measured "
                              f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s.")
             lines.append("")
     hard = [c for c in cases if c.hard]
@@ -122,11 +126,12 @@ def hard_case_line(case: Case, results: pd.DataFrame) -> str:
     groups = []
     for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"),
                         key=lambda kv: -kv[0]):
-        names = ", ".join(f"{e}/{m}" for e, m in zip(g["engine"], g["method"], strict=True))
+        names = ", ".join(f"{text(e)}/{text(m)}"
+                          for e, m in zip(g["engine"], g["method"], strict=True))
         groups.append(f"{_fmt(float(dt))} s: {names}")
     never = s[s["dt_survived"].isna()]
     if len(never):
-        names = ", ".join(f"{e}/{m} ({f or 'failed'})"
+        names = ", ".join(f"{text(e)}/{text(m)} ({text(f or 'failed')})"
                           for e, m, f in zip(never["engine"], never["method"], never["failure"],
                                              strict=True))
         groups.append(f"at no step of the sweep: {names}")
@@ -155,6 +160,28 @@ def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> 
                                        "particle_steps_per_s", "error", "slower_by"])
 
 
+def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
+    """How many times as long the fastest engine takes as ``mine`` at the gate's step, with
+    the interval the timings' noise leaves (:func:`truestep.picks.noise_band`); engines
+    tied for fastest are named together."""
+    from truestep.picks import noise_band, tied_with_fastest
+
+    tied = others[tied_with_fastest(others)].sort_values(["engine", "method"])
+    names = " and ".join(f"{text(r.engine)} / {text(r.method)}"
+                         for r in tied.itertuples(index=False))
+    fastest = tied.loc[tied["wall_s"].astype(float).idxmin()]
+    w_e, w_r = float(fastest["wall_s"]), float(mine["wall_s"])
+    b_e = float(noise_band(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))[0])
+    b_r = float(noise_band(np.array([w_r]), np.array([mine.get("wall_s_spread", np.nan)]))[0])
+    low, high = (w_e - b_e) / (w_r + b_r), (w_e + b_e) / max(w_r - b_r, 1e-300)
+    who = (f"the fastest engine, {names}," if len(tied) == 1
+           else f"the fastest engines, {names} (tied within timing noise),")
+    return (f"At dt {_fmt(gate.dt)} s {who} take{'s' if len(tied) == 1 else ''} "
+            f"{low:.0f} to {high:.0f} times as long as {text(gate.engine)} / {text(gate.method)} "
+            f"({w_e / w_r:.0f} times by the median wall times; the interval is each time's "
+            f"noise band; gate: at least {gate.params['min']:g} times).\n")
+
+
 def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
     """For each case with a ``speedup`` gate: what modelling only what the scene needs is
     worth, the gated method against every engine at the same steps."""
@@ -168,19 +195,17 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
             others = at[at["engine"] != g.engine]
             parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
             parts.append(
-                f"{text(case.title)}: {g.engine} / {g.method} runs only what the scene needs (here "
+                f"{text(case.title)}: {text(g.engine)} / {text(g.method)} runs only what the "
+                "scene needs (here "
                 "a compiled loop over independent particles, on one thread like the "
                 "engines), the engines their general machinery (broad phase, contact "
                 "solver, one body per particle). Each row: "
                 "particle-steps per second at the same step and the error against the exact "
                 "bounce solution; `slower_by` is its wall time over "
-                f"{g.engine} / {g.method}'s.\n")
-            if len(others):
-                fastest = others.sort_values("wall_s").iloc[0]
-                parts.append(
-                    f"At dt {_fmt(g.dt)} s the fastest engine, {fastest.engine} / "
-                    f"{fastest.method}, takes {fastest.slower_by:.0f} times as long as "
-                    f"{g.engine} / {g.method} (gate: at least {g.params['min']:g} times).\n")
+                f"{text(g.engine)} / {text(g.method)}'s.\n")
+            mine = at[(at["engine"] == g.engine) & (at["method"] == g.method)]
+            if len(others) and len(mine):
+                parts.append(speedup_sentence(g, others, mine.iloc[0]))
             parts.append(md_table(with_units(table)))
     return parts
 
@@ -188,7 +213,21 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
 
 
 def _pair(r) -> str:
-    return f"{r.engine} / {r.method}"
+    """``engine / method`` of a row, as markdown text (:func:`text`)."""
+    return f"{text(r.engine)} / {text(r.method)}"
+
+
+def _tied_group(ranked: pd.DataFrame) -> pd.DataFrame:
+    """The head of a scorecard ranking (sorted by cases reached, then cost ratio) that
+    cannot be told apart by timing: the same cases reached, and cost ratios within
+    timing noise of the first's (:data:`truestep.picks.TIE_NOISE` on each side)."""
+    from truestep.picks import TIE_NOISE
+
+    top = ranked.iloc[0]
+    ratio = ranked["cost_ratio"].to_numpy(float)
+    same = (ranked["cases_reached"].to_numpy() == top.cases_reached) & (
+        ratio * (1 - TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE))
+    return ranked[same]
 
 
 def family_sentence(family: str, names: list[str], card: pd.DataFrame,
@@ -203,26 +242,31 @@ def family_sentence(family: str, names: list[str], card: pd.DataFrame,
     mine = card[card["family"] == family]
     parts = []
     fast = mine[np.isfinite(mine["cost_ratio"].to_numpy(float))].sort_values(
-        ["cases_reached", "cost_ratio"], ascending=[False, True])
+        ["cases_reached", "cost_ratio", "engine", "method"], ascending=[False, True, True, True])
     if len(fast):
         top = fast.iloc[0]
-        text = (f"for accuracy per second, **{_pair(top)}**: it reaches {SCORECARD_TARGET:g} of "
-                f"the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
-                f"{float(top.cost_ratio):.2f}x the fastest run's time (median)")
-        if len(fast) > 1:
-            nxt = fast.iloc[1]
-            text += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
-                     f"{float(nxt.cost_ratio):.2f}x)")
-        parts.append(text)
+        group = _tied_group(fast)
+        picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
+        tie = " (tied within timing noise)" if len(group) > 1 else ""
+        line = (f"for accuracy per second, {picked}{tie}: "
+                f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
+                f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
+                f"{float(top.cost_ratio):.2g}x the fastest run's time (median)")
+        rest = fast.iloc[len(group):]
+        if len(rest):
+            nxt = rest.iloc[0]
+            line += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
+                     f"{float(nxt.cost_ratio):.2g}x)")
+        parts.append(line)
     else:
         loose = picks[(picks["case"].isin(names)) & (picks["by"] == "wall_s")
                       & (picks["engine"] != "")].sort_values("wall_s")
-        text = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
+        line = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
         if len(loose):
             r = loose.iloc[0]
-            text += (f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
+            line += (f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
                      f"({fmt(float(r.wall_s))} s)")
-        parts.append(text)
+        parts.append(line)
     steady = mine[np.isfinite(mine["stability_ratio"].to_numpy(float))]
     if len(steady):
         best = float(steady["stability_ratio"].max())
@@ -272,39 +316,60 @@ def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict,
 def methods_section(cases: list[Case]) -> list[str]:
     """How the numbers are made, with every number read from the constant that sets it."""
     from truestep.analyses import BALL_RADIUS, DROP_HEIGHT, RESTITUTION_DTS, RESTITUTION_SET
+    from truestep.picks import TIE_NOISE
     from truestep.runner import Timing
-    from truestep.stability import GROWTH_TOL, SETTLE_TOL
+    from truestep.stability import GROWTH_TOL, LEAVE_TOL, RISE_TOL
 
     timing = Timing()
     steps = sorted({c.stability.min_steps for c in cases if c.stability})
     lines = ["## How the numbers are made\n",
              f"- **Timing**: scenes are built outside the timed region; each case, engine and "
-             f"method runs in a process of its own, one at a time, warmed up for "
-             f"{timing.warmup_fraction:.0%} of the run first; runs shorter than "
-             f"{1000 * timing.budget_s / timing.max_repeats:.0f} ms are timed "
-             f"{timing.max_repeats} times (the median), longer ones once.",
+             f"method runs in a process of its own, one at a time, on one thread; each row is "
+             f"first run untimed and watched at every step (its numbers come from that run, "
+             f"which also warms the process up), then timed, each timed run checked to end "
+             f"where it did; runs shorter than "
+             f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
+             f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
+             f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
+             f"longer ones once; the wall time is the median and `wall_s_spread` half the "
+             f"interquartile range. Runs whose times lie within each other's noise "
+             f"(their spread, and at least {100 * TIE_NOISE:.0f}% of the time) are "
+             f"**tied**: a pick names them together.",
+             "- **One answer on every machine**: every column but the timings and the host "
+             "is the same, bit for bit, for the same revision and package versions "
+             "(`run.json` records them, and the floating-point environment).",
              "- **Engines as configured**: engine defaults that would distort a comparison "
              "are switched off (pybullet's linear and angular damping; pymunk's pixel-scale "
              "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "
              "or clamp is added anywhere.",
              f"- **Errors** are distances from the exact solution (or, where none exists, "
-             f"from a fine run of the reference that the case names) in the case's units; "
-             f"the targets {', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of "
-             f"each case's scale.",
-             f"- **Unstable**: the state goes non-finite, or the energy of a scene without "
-             f"energy sources keeps growing through every quarter of the run; in a search, "
-             f"its late half's peak rises above the early half's band by more than "
-             f"{GROWTH_TOL:g} of the band's width, or, in a dissipative scene, its late "
-             f"half's median stays above the start by more than {SETTLE_TOL:g} of the energy "
-             f"it gave off. Searches bisect the step over each case's horizon, with at least "
-             f"{', '.join(str(s) for s in steps)} steps per run.",
+             f"from a fine run of the reference that the case names, known along the whole "
+             f"run) in the case's units, the worst over the run (`error`; `error_final` at "
+             f"the end, `error_v` the velocities'); the targets "
+             f"{', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of each case's "
+             f"scale. **Energy drift** is the energy error over the case's energy scale (the "
+             f"largest kinetic energy, or swing of potential energy, along the exact motion: "
+             f"the same wherever the potential's zero lies), over every step.",
+             f"- **Unstable**: the state goes non-finite; or the motion does what the scene "
+             f"cannot: a bound orbit reaches its escape energy and keeps it, a damped scene "
+             f"stays more than {RISE_TOL:g} of its energy scale above its start through the "
+             f"late half (median), a conservative scene more than {LEAVE_TOL:g} of it through "
+             f"the whole late half, or the energy keeps growing through every quarter of the "
+             f"run, read at every step. A "
+             f"solver that cannot solve a step is `solver-failed`, never unstable. Searches "
+             f"bisect the step over each case's horizon, with at least "
+             f"{', '.join(str(s) for s in steps)} steps per run; there the late half's peak "
+             f"may also not rise above the early half's band by more than {GROWTH_TOL:g} of "
+             f"its width; the limit found is checked below itself for a boundary that is not "
+             f"monotone.",
              f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
              f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
              f"{SURVIVAL_ENERGY:g} of the energy.",
              f"- **Restitution**: a ball of radius {BALL_RADIUS:g} m dropped from "
              f"{DROP_HEIGHT:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
-             f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s; per bounce "
-             f"from the rebound and impact speeds and from apex heights, each read from the "
-             f"first sample outside the contact.",
+             f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s, every step "
+             f"recorded; per bounce from the rebound and impact speeds (the samples either "
+             f"side of the contact) and from apex heights (the highest height each flight "
+             f"reached at a step).",
              ""]
     return lines

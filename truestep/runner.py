@@ -28,51 +28,145 @@ if TYPE_CHECKING:
     from truestep.journal import Journal
 
 RESULT_COLUMNS = [
-    "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
-    "energy_drift_final", "nfev", "steps", "wall_s", "repeats", "t_fail", "missing", "message",
-    "case_source", "path", "host",
+    "case", "engine", "method", "dt", "dt_kind", "status", "error", "error_final", "error_v",
+    "energy_drift", "energy_drift_final", "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail",
+    "missing", "message", "case_source", "path", "host",
 ]
 """The columns of ``results.csv`` (property columns follow, one per named property).
+``error`` is the case's error measure, the worst over the run unless the case says
+``[reference] error = "final"``; ``error_final`` the position error at the end;
+``error_v`` the velocity error, the worst over the run (m/s; for a second-order ODE the
+velocity half of its state);
 ``case_source`` is the case's name when the case library holds it, else its file, so
 that ``truestep gate`` finds the case again; ``path`` is the engine's code path (the
 reference: ``compiled`` or ``numpy``); ``host`` the machine the row was timed on (empty
-for rows that did not run)."""
+for rows that did not run); ``wall_s_spread`` half the interquartile range of the timed
+runs (:func:`spread`)."""
+MACHINE_COLUMNS = ("wall_s", "wall_s_spread", "repeats", "host", "case_source")
+"""The columns of ``results.csv`` that depend on the machine and its load (timings, the
+host) or on where the case file lies (``case_source`` of a file outside the library).
+Every other column is the same, bit for bit, for the same revision and package versions on any
+machine (:mod:`truestep.numerics`), except the message of a row whose engine is not
+deterministic (:data:`NOT_REPEATABLE`)."""
 
 
-@dataclass
+@dataclass(frozen=True)
 class Timing:
     """How runs are timed: a short warm-up, a first timed run (whose trajectory is kept),
-    then more timed repeats while they fit in the budget.
+    then more timed runs until the timing is stable.
 
     The warm-up runs the same scene, engine and method for :attr:`warmup_fraction` of the
-    duration (JIT compilation, caches, lazy imports, first-call costs). Repeats:
-    ``clamp(budget_s / first time, 1, max_repeats)`` timed runs in all; the reported wall
-    time is their median, never including the warm-up or scene building. Runs shorter
-    than ``budget_s / max_repeats`` (17 ms) are the ones scheduling noise distorts most,
-    and they get all the repeats; a run of 50 ms or more is timed once.
+    duration (JIT compilation, caches, lazy imports, first-call costs). A first run
+    shorter than :attr:`min_total_s` is repeated until the timed runs add up to
+    :attr:`min_total_s` and number at least :attr:`min_repeats` (at most
+    :attr:`max_repeats`): short runs are the ones scheduling and timer noise distort most.
+    A run up to :attr:`long_run_s` is timed twice, so that its spread is known; a longer
+    one once (one run of that length is not moved by noise beyond a few percent). The
+    reported wall time is the median of the timed runs, and ``wall_s_spread`` half their
+    interquartile range (:func:`spread`). Neither the warm-up nor scene building is
+    timed. How many runs are timed depends on the machine's speed; nothing else does.
     """
 
-    budget_s: float = 0.05
-    max_repeats: int = 3
+    min_total_s: float = 0.05
+    min_repeats: int = 3
+    max_repeats: int = 25
+    long_run_s: float = 0.5
     warmup_fraction: float = 0.05
+
+    def runs_after(self, first_s: float) -> int:
+        """How many timed runs in all, after a first one of ``first_s`` seconds."""
+        if first_s >= self.long_run_s:
+            return 1
+        if first_s >= self.min_total_s:
+            return 2
+        wanted = int(np.ceil(self.min_total_s / max(first_s, 1e-9)))
+        return int(np.clip(wanted, self.min_repeats, self.max_repeats))
+
+
+QUICK_TIMING = Timing(min_total_s=0.0, min_repeats=1, max_repeats=1, long_run_s=0.0)
+"""``--quick`` runs time each row once: a smoke run (its ties are read against the least
+noise, :data:`truestep.picks.TIE_NOISE`, with no spread of its own)."""
+
+
+def spread(walls: list[float]) -> float:
+    """Half the interquartile range of timed runs' wall times, s (half their range with
+    fewer than four runs; NaN for one run): how far the median may move with noise."""
+    if len(walls) < 2:
+        return float("nan")
+    if len(walls) < 4:
+        return (max(walls) - min(walls)) / 2
+    q25, q75 = np.percentile(walls, [25, 75])
+    return float(q75 - q25) / 2
+
+
+def _same_run(a: Trajectory, b: Trajectory) -> bool:
+    """Whether two runs of the same scene ended in the same state, bit for bit (runs that
+    did not finish are only checked to have failed alike: a run watched at every step
+    finds a blow-up earlier than one checked every few steps)."""
+    if a.status != b.status:
+        return False
+    if a.status != "ok":
+        return True
+    if (a.nfev, a.steps, len(a.t)) != (b.nfev, b.steps, len(b.t)):
+        return False
+    pairs = [(a.t[-1:], b.t[-1:]), (a.x[-1:], b.x[-1:])]
+    if a.v is not None and b.v is not None:
+        pairs.append((a.v[-1:], b.v[-1:]))
+    return all(np.array_equal(p, q, equal_nan=True) for p, q in pairs)
+
+
+NOT_REPEATABLE = "not repeatable: timed runs of the same scene ended in different states"
+"""The note of a row whose engine gave another end state when run again (an engine that is
+not deterministic): its numbers may differ from run to run and machine to machine."""
+
+
+def watches_every_step(adapter) -> bool:
+    """Whether ``adapter.simulate`` takes ``monitor=True`` (Adapter protocol, item 9)."""
+    import inspect
+
+    try:
+        return "monitor" in inspect.signature(adapter.simulate).parameters
+    except (TypeError, ValueError):
+        return False
 
 
 def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing, *,
                    warm_up: bool = True) -> Trajectory:
-    """Warm up (unless this process has just run the same case and method), time, keep
-    the first timed trajectory; runs inside the child process."""
+    """Make the run the row is measured from, then time; runs inside the child process.
+
+    The measured run is watched at every step where the adapter can
+    (``simulate(..., monitor=True)``: the energy's extremes over every step) and is not
+    timed; it also warms the process up (compilation, caches, first-call costs) for the
+    timed runs. An adapter that cannot watch is warmed up instead by a short run
+    (:attr:`Timing.warmup_fraction` of the duration; unless ``warm_up`` is false: this
+    process has just run the same case and method). The timed runs follow
+    (:meth:`Timing.runs_after`), and every one of them is checked to end where the
+    measured run did, bit for bit; one that does not puts :data:`NOT_REPEATABLE` in the
+    row's message.
+    """
     adapter = get_adapter(engine)
-    if warm_up:
+    monitor = watches_every_step(adapter)
+    if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
         short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
                                                        min(dt, case.duration)))
         adapter.simulate(short, method, dt)
-    traj = adapter.simulate(case, method, dt)
-    walls = [traj.wall_s]
-    if traj.status == "ok":
-        n = int(np.clip(timing.budget_s / max(traj.wall_s, 1e-9), 1, timing.max_repeats))
-        walls += [adapter.simulate(case, method, dt).wall_s for _ in range(n - 1)]
-        traj.wall_s = statistics.median(walls)
+    traj = adapter.simulate(case, method, dt, monitor=True) if monitor else None
+    timed = adapter.simulate(case, method, dt)
+    if traj is None:
+        traj = timed
+    walls = [timed.wall_s]
+    repeatable = traj is timed or _same_run(traj, timed)
+    if timed.status == "ok":
+        for _ in range(timing.runs_after(timed.wall_s) - 1):
+            again = adapter.simulate(case, method, dt)
+            walls.append(again.wall_s)
+            repeatable = repeatable and _same_run(traj, again)
+    traj.wall_s = statistics.median(walls)
+    traj.path = timed.path or traj.path
+    if not repeatable:
+        traj.message = "; ".join(m for m in (traj.message, NOT_REPEATABLE) if m)
     traj.extra["repeats"] = np.array(len(walls))
+    traj.extra["wall_s_spread"] = np.array(spread(walls))
     return traj
 
 
@@ -82,7 +176,12 @@ def measure(case: Case, traj: Trajectory) -> dict[str, float]:
 
     out: dict[str, float] = {}
     exact = metrics.exact_for(case, traj.t) if traj.status == "ok" else None
-    out["error"] = metrics.position_error(case, traj, exact) if exact is not None else np.nan
+    if exact is not None:
+        out["error"] = metrics.position_error(case, traj, exact)
+        out["error_final"] = metrics.position_error(case, traj, exact, norm="final")
+        out["error_v"] = metrics.position_error(case, traj, exact, part="v")
+    else:
+        out["error"] = out["error_final"] = out["error_v"] = np.nan
     drift, drift_end = metrics.energy_drift(case, traj, exact)
     out["energy_drift"], out["energy_drift_final"] = drift, drift_end
     for name in case.properties:
@@ -142,34 +241,29 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         "dt_kind": "tolerance" if adaptive else "step",
     }
     if isinstance(outcome, str):
-        row.update(status="crashed", message=outcome)
+        row.update(status="crashed", message=outcome[:MESSAGE_CHARS])
         return row
     if isinstance(outcome, Outcome):
-        row.update(status=outcome.status, message=outcome.message)
+        row.update(status=outcome.status, message=with_output(outcome.message, outcome.output))
         return row
-    traj = checked(outcome, case.model.n if case.model is not None else None)
+    traj = checked(outcome, case.model.n if case.model is not None else None,
+                   duration=case.duration)
     if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
         row.update(status="crashed", message=traj)
         return row
-    if traj.status == "ok" and (t_blow := metrics.energy_blowup(case, traj)) is not None:
-        traj.status, traj.t_fail = "unstable", t_blow
-        traj.message = (f"finite, but its energy grew from {traj.energy[0]:.4g} J to "
-                        f"{traj.energy[-1]:.4g} J and was still rising")
-    row.update(
-        status=traj.status,
-        nfev=traj.nfev,
-        steps=traj.steps,
-        wall_s=traj.wall_s,
-        repeats=int(traj.extra.get("repeats", 0)),
-        t_fail=traj.t_fail,
-        message=traj.message,
-        path=traj.path,
-    )
-    failed = _MEASURE_TIMED_OUT.get(case.file)
+    row.update(nfev=traj.nfev, steps=traj.steps, wall_s=traj.wall_s,
+               wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
+               repeats=int(traj.extra.get("repeats", 0)), path=str(traj.path)[:MESSAGE_CHARS])
+    timed_out = _MEASURE_TIMED_OUT.get(case.file)
     try:
-        if failed:
-            raise TimeLimitExceeded(failed)
+        if timed_out:
+            raise TimeLimitExceeded(timed_out)
         with time_limit(case.timeout_s, "measuring the run (exact solution included)"):
+            if traj.status == "ok" and (failed := _motion_failure(case, traj)) is not None:
+                traj.status, traj.t_fail = "unstable", failed.t
+                traj.message = "; ".join(m for m in (traj.message, failed.reason) if m)
+            row.update(status=traj.status, t_fail=traj.t_fail,
+                       message=str(traj.message)[:MESSAGE_CHARS])
             row.update(measure(case, traj))
     except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
         _MEASURE_TIMED_OUT[case.file] = str(err)
@@ -182,6 +276,30 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         if trace is not None:
             traces[(case.name, engine, method, row["dt_kind"], dt)] = trace
     return row
+
+
+def _motion_failure(case: Case, traj: Trajectory):
+    """:func:`truestep.stability.motion_failure` against the case's energy scale."""
+    from truestep.energy_scale import energy_scale
+    from truestep.stability import motion_failure
+
+    return motion_failure(case, traj, energy_scale(case))
+
+
+MESSAGE_CHARS = 2000
+"""The most characters of a row's message (an adapter's, an exception's, its output)."""
+OUTPUT_CHARS = 500
+"""The most characters of an engine process's own output a failed row shows."""
+
+
+def with_output(message: str, output: str) -> str:
+    """A failed row's message, with the end of what its engine process wrote (captured by
+    :mod:`truestep.isolation`, never shown on truestep's own output)."""
+    output = " ".join(output.split())
+    if output:
+        shown = output if len(output) <= OUTPUT_CHARS else "..." + output[-OUTPUT_CHARS:]
+        message = f"{message}; engine output: {shown}" if message else f"engine output: {shown}"
+    return message[:MESSAGE_CHARS]
 
 
 SWEEP_SLACK = 1.25
@@ -197,8 +315,11 @@ def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
             timing: Timing, traces: dict | None = None) -> dict:
     """One row of ``results.csv``: run one step in its own process, then measure."""
     outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
-    return row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
-                    outcome=outcome.value if outcome.status == "ok" else outcome)
+    row = row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
+                   outcome=outcome.value if outcome.status == "ok" else outcome)
+    if outcome.status == "ok" and row["status"] in ("crashed", "timeout"):
+        row["message"] = with_output(row.get("message", ""), outcome.output)
+    return row
 
 
 def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptive: bool,
@@ -221,17 +342,24 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
     if outcome.status != "ok":
         return [run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
                         traces=traces) for dt in dts]
-    return [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
+    rows = [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
             for dt, o in zip(dts, outcome.value, strict=True)]
+    for row in rows:
+        if row["status"] in ("crashed", "timeout"):
+            row["message"] = with_output(row.get("message", ""), outcome.output)
+    return rows
 
 
 def preload() -> None:
-    """Load in this process what every forked run would otherwise load again: the
-    compiled spring loop and the compiled stepping loop of the reference implementation
-    (the engine modules are imported by :func:`plan`)."""
+    """Prepare this process for runs, once for every forked run: one thread for every BLAS
+    and OpenMP runtime (:func:`truestep.numerics.pin_threads`), the compiled spring loop
+    and the compiled stepping loop of the reference implementation (the engine modules
+    are imported by :func:`plan`)."""
+    from truestep.numerics import pin_threads
     from truestep.reference_impl.compiled import compile_all
     from truestep.reference_impl.forces import compile_springs
 
+    pin_threads()
     compile_springs()
     compile_all()
 
@@ -289,7 +417,7 @@ def run_matrix(
     """
     from truestep.cluster import SweepJob, host_name
 
-    timing = timing or Timing(max_repeats=1 if quick else 3)
+    timing = timing or (QUICK_TIMING if quick else Timing())
     preload()
     planned = [(case, engine, method, list(entries)) for case in cases for engine in engines
                for method, entries in itertools.groupby(plan(case, engine, quick=quick),

@@ -11,7 +11,7 @@ import numpy as np
 
 from truestep.adapters.base import Trajectory
 
-STATUSES = ("ok", "unstable")
+STATUSES = ("ok", "unstable", "solver-failed")
 """Statuses an adapter may return; the harness adds ``crashed``, ``timeout`` and the rest."""
 
 
@@ -19,13 +19,24 @@ def _shape(a: object) -> str:
     return "x".join(map(str, np.shape(a))) or "a scalar"
 
 
-def contract_breach(traj: object, n: int | None = None) -> str | None:
+START_TOLERANCE = 1e-9
+"""How far the first record may lie from the case's start (t = 0), as a fraction of the
+duration: one rounding of a float sum, not a shift of the clock."""
+END_SLACK = 0.01
+"""How far past the case's duration the last record may lie, as a fraction of it (an
+engine's last step may overshoot by part of a step; never by a whole run)."""
+
+
+def contract_breach(traj: object, n: int | None = None, *,
+                    duration: float | None = None) -> str | None:
     """Why ``traj`` breaks the adapter contract, in one short line, or ``None``.
 
-    ``t`` (T,) finite and non-decreasing; ``x`` (T, n, 3) for a particle scene of ``n``
-    particles (``n`` given), else (T, 1, dim) for an ODE case; ``v`` as ``x`` or ``None``;
-    ``energy`` (T,) or ``None``; ``alive`` (T, n) or ``None``; a known status; at least
-    two records when the status is ``ok``.
+    ``t`` (T,) finite and strictly increasing, from the case's start (t = 0) and, with
+    ``duration`` given, no further than its end; ``x`` (T, n, 3) for a particle scene of
+    ``n`` particles (``n`` given), else (T, 1, dim) for an ODE case; ``v`` as ``x`` or
+    ``None``; ``energy`` (T,) or ``None``; ``alive`` (T, n) or ``None``; a known status;
+    at least two records when the status is ``ok``; a wall time that is positive and
+    finite, and counts (``nfev``, ``steps``) that are not negative.
     """
     if not isinstance(traj, Trajectory):
         return f"adapter returned {type(traj).__name__}, not a Trajectory"
@@ -38,8 +49,26 @@ def contract_breach(traj: object, n: int | None = None) -> str | None:
         return f"adapter returned non-numeric t or x ({str(err)[:60]})"
     if t.ndim != 1 or len(t) == 0:
         return f"adapter returned t of shape {_shape(t)}, expected (T,) with T >= 1"
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
-        return "adapter returned record times that are not finite and non-decreasing"
+    if not np.all(np.isfinite(t)):
+        return "adapter returned record times that are not finite"
+    scale = max(abs(duration), 1.0) if duration is not None else 1.0
+    if abs(t[0]) > START_TOLERANCE * scale:
+        return (f"adapter returned records from t = {t[0]:.6g} s, not from the case's "
+                "start (t = 0)")
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0))
+        return (f"adapter returned record times that do not increase (t = {t[k]:.6g} s, "
+                f"then {t[k + 1]:.6g} s)")
+    if duration is not None and t[-1] > duration * (1 + END_SLACK) + 1e-12:
+        return (f"adapter returned records to t = {t[-1]:.6g} s, past the case's "
+                f"{duration:g} s")
+    wall = _number(traj.wall_s)
+    if not (np.isfinite(wall) and wall > 0):
+        return f"adapter returned a wall time of {wall:.6g} s (it must be positive and finite)"
+    for name in ("nfev", "steps"):
+        count = _number(getattr(traj, name))
+        if not (np.isfinite(count) and count >= 0):
+            return f"adapter returned {name} = {count:.6g} (a count, at least 0)"
     want = (len(t), n, 3) if n is not None else (len(t), 1, x.shape[-1] if x.ndim else 0)
     if x.shape != want:
         return f"adapter returned x of shape {_shape(x)}, expected {want}"
@@ -52,14 +81,22 @@ def contract_breach(traj: object, n: int | None = None) -> str | None:
     return None
 
 
-def checked(traj: object, n: int | None = None) -> Trajectory | str:
+def _number(value: object) -> float:
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return float("nan")
+
+
+def checked(traj: object, n: int | None = None, *,
+            duration: float | None = None) -> Trajectory | str:
     """``traj`` as the harness trusts it, or the ``crashed`` message of its breach.
 
     A state (``x`` or ``v``) that is non-finite at some record of an ``ok`` run makes it
-    ``unstable`` at the first such record's time, whatever the adapter said. ``n``: as
-    :func:`contract_breach`.
+    ``unstable`` at the first such record's time, whatever the adapter said. ``n`` and
+    ``duration``: as :func:`contract_breach`.
     """
-    why = contract_breach(traj, n)
+    why = contract_breach(traj, n, duration=duration)
     if why is not None:
         return why
     if traj.status == "ok":

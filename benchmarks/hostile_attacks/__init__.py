@@ -1,0 +1,20 @@
+"""The attacks of ``benchmarks/hostile_campaign.py``, one module per finding of issue 20.
+
+Each module's ``ATTACKS`` lists its attacks: functions ``(campaign, folder) -> (held,
+note)`` whose docstring says what they do and what holding means."""
+
+from hostile_attacks import (
+    adapters,
+    ceilings,
+    checkpoints,
+    names,
+    one_run,
+    out_folders,
+    special_files,
+    tables,
+)
+
+BY_GROUP = {1: checkpoints.ATTACKS, 2: out_folders.ATTACKS, 3: special_files.ATTACKS,
+            4: ceilings.ATTACKS, 5: adapters.ATTACKS, 6: one_run.ATTACKS, 7: names.ATTACKS,
+            8: tables.ATTACKS}
+"""Every attack, by the number of the finding it attacks (:data:`common.GROUPS`)."""

@@ -1,0 +1,220 @@
+"""One answer on every machine: the floating-point environment, work-bounded timing, ties,
+and the baseline that compares only what a run was asked for (issue 18)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from truestep import numerics
+from truestep.cli import main
+from truestep.picks import TIE_NOISE, cheapest, tied_with_fastest
+from truestep.runner import MACHINE_COLUMNS, NOT_REPEATABLE, Timing, simulate_timed, spread
+
+
+def _python(code: str, **env: str) -> str:
+    """Run ``code`` in a fresh interpreter with ``env`` added; its standard output."""
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
+                         text=True, env={**os.environ, **env}, check=True, timeout=120)
+    return out.stdout.strip()
+
+
+def test_importing_truestep_first_pins_threads_kernels_and_dispatch():
+    """What a process that imports truestep before numpy computes with: one BLAS thread
+    (the machine has more), the Haswell kernels, no AVX-512 dispatch in numpy."""
+    clean = {k: v for k, v in os.environ.items()
+             if k not in numerics.environment() and k != numerics.OPT_OUT}
+    code = """
+        import json, truestep, numpy, scipy.linalg
+        from threadpoolctl import threadpool_info
+        from numpy._core._multiarray_umath import __cpu_features__ as f
+        print(json.dumps({"threads": sorted({p["num_threads"] for p in threadpool_info()}),
+                          "arch": sorted({p.get("architecture") for p in threadpool_info()}),
+                          "v4": bool(f.get("X86_V4"))}))
+    """
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
+                         text=True, env=clean, check=True, timeout=120)
+    seen = json.loads(out.stdout)
+    assert seen["threads"] == [1]
+    if {"avx2", "fma"} <= numerics._cpu_flags():
+        assert seen["arch"] == [numerics.OPENBLAS_CORE]
+    assert seen["v4"] is False
+
+
+def test_threads_are_pinned_even_when_numpy_came_first():
+    """A library user who imported numpy with two BLAS threads: a run still computes on one."""
+    out = _python("""
+        import numpy
+        from threadpoolctl import threadpool_info
+        before = max(p["num_threads"] for p in threadpool_info())
+        from truestep.runner import preload
+        preload()
+        print(before, max(p["num_threads"] for p in threadpool_info()))
+    """, OPENBLAS_NUM_THREADS="2")
+    assert out.split() == ["2", "1"]
+
+
+def test_radau_gives_the_same_bits_whatever_the_blas_threads_asked(tmp_path):
+    """spring-chain with scipy's Radau (an LU per Newton step) was 1.973156e-10 with two
+    BLAS threads and 1.973537e-10 with one; now the same bits either way."""
+    code = """
+        import truestep
+        t = truestep.run("spring-chain", engines=["scipy"], quick=True, analyses=False,
+                         progress=lambda m: None)
+        r = t.results[t.results["method"] == "Radau"]
+        print(" ".join(float(e).hex() for e in r["error"]))
+    """
+    one = _python(code, OPENBLAS_NUM_THREADS="1")
+    two = _python(code, OPENBLAS_NUM_THREADS="2")
+    assert one == two and "nan" not in one
+
+
+def test_fingerprint_differences_name_what_moved():
+    fp = numerics.fingerprint()
+    assert fp["packages"]["numpy"] == np.__version__ and fp["blas"]
+    other = json.loads(json.dumps(fp))
+    other["packages"]["numpy"] = "0.0"
+    other["numpy_simd"] = ["X86_V3", "X86_V4"]
+    lines = numerics.differences(fp, other)
+    assert f"numpy {np.__version__} -> 0.0" in lines
+    assert any(line.startswith("numpy_simd:") for line in lines)
+    assert numerics.differences(fp, fp) == []
+
+
+def test_timing_repeats_short_runs_and_times_long_ones_once():
+    t = Timing()
+    assert t.runs_after(1e-5) == t.max_repeats
+    assert t.runs_after(0.01) == 5 and t.runs_after(0.02) == t.min_repeats
+    assert t.runs_after(0.1) == 2 and t.runs_after(t.long_run_s) == 1
+    assert np.isnan(spread([1.0])) and spread([1.0, 1.4]) == pytest.approx(0.2)
+    assert spread([1.0, 1.1, 1.2, 1.3, 9.0]) == pytest.approx(0.1)  # an outlier is not noise
+
+
+class Jittery:
+    """An engine whose end state depends on the run: not repeatable."""
+
+    name = "jittery"
+    methods = ("euler",)
+    adaptive_methods = ()
+    capabilities = frozenset({"point-masses", "3d", "uniform-gravity"})
+    runs: ClassVar[list[int]] = [0]
+
+    def missing(self, case, method):
+        return set()
+
+    def simulate(self, case, method, dt):
+        from truestep.adapters.base import Trajectory
+
+        Jittery.runs[0] += 1
+        t = np.array([0.0, case.duration])
+        x = np.zeros((2, 1, 3)) + 1e-12 * Jittery.runs[0]
+        return Trajectory(t=t, x=x, v=np.zeros((2, 1, 3)), energy=np.zeros(2), wall_s=1e-4,
+                          nfev=1, steps=1)
+
+
+def test_an_engine_that_is_not_repeatable_says_so(monkeypatch, case_named):
+    import truestep.runner as runner
+
+    monkeypatch.setattr(runner, "get_adapter", lambda name: Jittery())
+    traj = simulate_timed("jittery", case_named("free-fall"), "euler", 0.01, Timing())
+    assert NOT_REPEATABLE in traj.message and int(traj.extra["repeats"]) > 1
+
+
+def _rows(*runs):
+    cols = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "nfev", "wall_s",
+            "wall_s_spread"]
+    return pd.DataFrame([("harmonic-oscillator", *r) for r in runs], columns=cols)
+
+
+def test_runs_within_noise_are_tied_and_the_fewest_evaluations_is_named(case_named):
+    """rk4 at 1.00 ms and heun at 1.10 ms (within 15% of each other) tie; the one named is
+    heun's, which needs fewer evaluations; euler at 2 ms is not in the tie."""
+    case = case_named("harmonic-oscillator")
+    rows = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 4000, 1.00e-3, 1e-5),
+                 ("reference", "heun", 0.001, "step", "ok", 1e-9, 2000, 1.10e-3, 1e-5),
+                 ("reference", "euler", 1e-5, "step", "ok", 1e-9, 99999, 2.0e-3, 1e-5))
+    assert tied_with_fastest(rows).tolist() == [True, True, False]
+    pick = cheapest(rows, [case], targets=(1e-4,)).set_index("by")
+    assert pick.loc["wall_s", "method"] == "heun"
+    assert pick.loc["wall_s", "tied"] == "reference / rk4 (dt 0.01)"
+    apart = rows.assign(wall_s=[1e-3, 1e-3 * (1 + 2.5 * TIE_NOISE), 2e-3])
+    assert cheapest(apart, [case], targets=(1e-4,)).set_index("by").loc["wall_s", "tied"] == ""
+
+
+def _gateless(tmp_path: Path) -> str:
+    """harmonic-oscillator without its gates: the baseline alone decides these runs."""
+    from truestep.cases.loader import CASE_DIR
+
+    text = (CASE_DIR / "harmonic-oscillator.toml").read_text().split("[[gates]]")[0]
+    path = tmp_path / "cases" / "harmonic-oscillator.toml"
+    path.parent.mkdir()
+    path.write_text(text)
+    return str(path)
+
+
+def _write_run(out: Path, rows: pd.DataFrame, cases: list[str], engines: list[str]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    rows.to_csv(out / "results.csv", index=False)
+    (out / "run.json").write_text(json.dumps({
+        "truestep": "x", "cases": cases, "engines": engines, "numerics": numerics.fingerprint()}))
+
+
+def test_a_narrowed_run_compares_with_only_what_it_asked_for(tmp_path, capsys):
+    """The baseline ran free-fall and harmonic-oscillator with two engines; the run only
+    harmonic-oscillator with the reference: nothing vanished. An edited cell differs."""
+    full = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0),
+                 ("scipy", "RK45", 1e-6, "tolerance", "ok", 1e-7, 90, 1e-3, 0))
+    both = pd.concat([full, full.assign(case="free-fall")])
+    _write_run(tmp_path / "base", both, ["harmonic-oscillator", "free-fall"],
+               ["reference", "scipy"])
+    _write_run(tmp_path / "run", full.iloc[:1], ["harmonic-oscillator"], ["reference"])
+    argv = ["gate", "--results", str(tmp_path / "run" / "results.csv"),
+            "--baseline", str(tmp_path / "base"), "--identical", "--cases", _gateless(tmp_path)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "0 vanished" in out and "0 cells differ" in out
+    (tmp_path / "run" / "results.csv").write_text(
+        full.iloc[:1].assign(error=1.0000000001e-9).to_csv(index=False))
+    assert main(argv) == 1
+    assert "DIFFERS results harmonic-oscillator reference rk4 dt=0.01 error" in capsys.readouterr().out
+
+
+def test_identical_does_not_apply_across_package_versions(tmp_path, capsys):
+    rows = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0))
+    _write_run(tmp_path / "base", rows, ["harmonic-oscillator"], ["reference"])
+    record = json.loads((tmp_path / "base" / "run.json").read_text())
+    record["numerics"]["packages"]["scipy"] = "0.1"
+    (tmp_path / "base" / "run.json").write_text(json.dumps(record))
+    _write_run(tmp_path / "run", rows.assign(error=1.0000001e-9), ["harmonic-oscillator"],
+               ["reference"])
+    assert main(["gate", "--results", str(tmp_path / "run" / "results.csv"), "--cases",
+                 _gateless(tmp_path), "--baseline", str(tmp_path / "base"), "--identical"]) == 0
+    assert "not comparable bit for bit (scipy 0.1 ->" in capsys.readouterr().out
+
+
+def test_machine_columns_are_the_only_ones_left_out():
+    from truestep.runner import RESULT_COLUMNS
+
+    assert set(MACHINE_COLUMNS) <= set(RESULT_COLUMNS)
+    assert {"error", "energy_drift", "nfev", "status", "steps", "t_fail"}.isdisjoint(MACHINE_COLUMNS)
+
+
+def test_a_gate_on_a_step_the_quick_sweep_never_runs_is_refused(tmp_path):
+    from truestep.cases import CaseError, load_case
+    from truestep.cases.loader import CASE_DIR
+
+    text = (CASE_DIR / "triangle-impulse.toml").read_text()
+    assert "quick_dt = [0.01, 0.005, 0.0025]" in text
+    bad = tmp_path / "triangle-impulse.toml"
+    bad.write_text(text.replace("quick_dt = [0.01, 0.005, 0.0025]", "quick_dt = [0.01, 0.005]"))
+    with pytest.raises(CaseError, match=r"gates\[2\]\.dt: 0.0025 is not a step .* quick sweep"):
+        load_case(bad)
