@@ -12,7 +12,7 @@ from __future__ import annotations
 import abc
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -23,7 +23,27 @@ from truestep.reference_impl.integrate import BLOWUP, record_indices
 from truestep.reference_impl.particles import total_energy
 from truestep.reference_impl.solvers import MethodFacts, get_solver
 
-STATUSES = ("ok", "unstable", "crashed", "timeout", "unsupported", "skipped")
+STATUSES = ("ok", "unstable", "solver-failed", "crashed", "timeout", "unsupported", "skipped")
+
+
+@dataclass(frozen=True)
+class EnergyExtremes:
+    """The lowest and highest total energy of a run over every step it took (not only the
+    recorded ones), and when: ``t_min``, ``e_min``, ``t_max``, ``e_max`` (s, J)."""
+
+    t_min: float
+    e_min: float
+    t_max: float
+    e_max: float
+
+    @classmethod
+    def of(cls, t: np.ndarray, energy: np.ndarray) -> EnergyExtremes | None:
+        """The extremes of energies (J) at times ``t`` (s), ``None`` if none is finite."""
+        e = np.asarray(energy, float)
+        if not len(e) or not np.isfinite(e).any():
+            return None
+        lo, hi = int(np.nanargmin(e)), int(np.nanargmax(e))
+        return cls(float(t[lo]), float(e[lo]), float(t[hi]), float(e[hi]))
 
 
 @dataclass
@@ -45,7 +65,10 @@ class Trajectory:
     alive : ndarray of bool, shape (T, n), or None
         Which particles exist at each record (scenes with emitters).
     status : str
-        ``ok``; ``unstable`` (non-finite or runaway state, at ``t_fail``); ``crashed``;
+        ``ok``; ``unstable`` (non-finite or runaway state, at ``t_fail``);
+        ``solver-failed`` (a step's equations had no solution the method found: an
+        implicit method's Newton iteration, an adaptive step that underflows; never a
+        blow-up, at ``t_fail``, the solver's words in ``message``); ``crashed``;
         ``timeout``.
     t_fail : float or None
         Time at which a run became unstable, s.
@@ -61,6 +84,12 @@ class Trajectory:
     path : str
         Which code path of the engine ran, where it has several (the reference:
         ``compiled`` or ``numpy``), for the table's ``path`` column.
+    extremes : EnergyExtremes or None
+        The lowest and highest energy over every step, for a run watched at every step
+        (``simulate(..., monitor=True)``); ``None`` when only the records were seen.
+    step_t, step_energy : ndarray, shape (S,), or None
+        Times (s) and total energies (J) at every step of a run watched at every step,
+        where the records keep fewer (the stability verdicts read these).
     """
 
     t: np.ndarray
@@ -76,6 +105,16 @@ class Trajectory:
     alive: np.ndarray | None = None
     path: str = ""
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+    extremes: EnergyExtremes | None = None
+    step_t: np.ndarray | None = None
+    step_energy: np.ndarray | None = None
+
+    def watched(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """Times and energies at the finest the run was seen: every step where it was
+        watched at every step, else its records."""
+        if self.step_energy is not None and self.step_t is not None:
+            return self.step_t, self.step_energy
+        return self.t, self.energy
 
 
 
@@ -109,9 +148,13 @@ class Adapter(Protocol):
        ``nfev``: ``method_facts``, a mapping from a method to its ``MethodFacts`` or to
        the name of the reference method whose facts it shares (``"verlet"``,
        ``"symplectic-euler"``, ``"rk4"`` ...); ``schemes``, a mapping to such names only,
-       is read too (:func:`facts_of`).
+       is read too (:func:`facts_of`);
+    9. optionally, accept ``simulate(case, method, dt, monitor=True)``: the run a row is
+       measured from (untimed), watched at every step, its ``Trajectory.extremes`` the
+       lowest and highest energy over every step; the harness then times plain runs and
+       checks they end in the same state.
 
-    :class:`FixedStepAdapter` does 2 to 4 for an engine that steps a particle scene.
+    :class:`FixedStepAdapter` does 2 to 4 and 9 for an engine that steps a particle scene.
     """
 
     name: str
@@ -159,6 +202,36 @@ def facts_of(adapter: Any, method: str) -> MethodFacts | None:
     return None
 
 
+MONITOR_BYTES = 512 * 2**20
+"""The most memory a run watched at every step may take for its states (positions and
+velocities, float64)."""
+
+
+def unwatched_note(size: int) -> str:
+    """The note of a run too large to record at every step (``size`` bytes of states)."""
+    return (f"watched at its records only: its every step would take {size / 2**20:.0f} MiB "
+            f"(over {MONITOR_BYTES / 2**20:.0f} MiB)")
+
+
+def thin_records(traj: Trajectory, n_steps: int, max_records: int) -> Trajectory:
+    """A run recorded at every step cut back to the records a run of ``max_records`` keeps
+    (:func:`~truestep.reference_impl.integrate.record_indices`), and its last state where
+    it stopped early; its energy at every step is kept (``step_t``, ``step_energy``), and
+    its extremes."""
+    if traj.energy is not None:
+        traj.step_t, traj.step_energy = traj.t.copy(), traj.energy.copy()
+        traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
+    keep = record_indices(n_steps, max_records)
+    keep = keep[keep < len(traj.t)]
+    if keep[-1] != len(traj.t) - 1:
+        keep = np.append(keep, len(traj.t) - 1)
+    for name in ("t", "x", "v", "energy", "alive"):
+        value = getattr(traj, name)
+        if value is not None:
+            setattr(traj, name, value[keep])
+    return traj
+
+
 def finite_until(x: np.ndarray, t: np.ndarray, limit: float = BLOWUP) -> tuple[str, float | None]:
     """Status of recorded states ``x`` (T, ...): ``ok`` or ``unstable`` at the first bad time."""
     flat = np.abs(x.reshape(len(x), -1))
@@ -194,6 +267,7 @@ class Recording:
     steps: int
     wall_s: float
     stopped: str = ""
+    extremes: EnergyExtremes | None = None
 
 
 class FixedStepAdapter(abc.ABC):
@@ -330,17 +404,36 @@ class FixedStepAdapter(abc.ABC):
         x, v = self.unpack(scene, snaps)
         return Recording(recorded * h, x, v, k, wall, stopped)
 
-    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
-        """Run ``case`` with ``method`` at step ``dt`` (s); see the class docstring."""
+    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False
+                 ) -> Trajectory:
+        """Run ``case`` with ``method`` at step ``dt`` (s); see the class docstring.
+
+        ``monitor``: for the run a row is measured from (timed runs leave it off): record
+        every step (the engine's own :meth:`step_and_record`), find the energy's lowest
+        and highest over all of them (``extremes``) and the first bad state, then keep the
+        records a plain run keeps. A run whose every state would exceed
+        :data:`MONITOR_BYTES` is watched at its records only."""
         self.require(case, method)
         n_steps, h = case.steps_for(dt)
+        every = monitor and n_steps > case.max_records and (
+            n_steps * case.model.n * 48 <= MONITOR_BYTES)
+        if monitor and n_steps > case.max_records and not every:
+            notes_first = [unwatched_note(n_steps * case.model.n * 48)]
+        else:
+            notes_first = []
+        run_case = replace(case, max_records=n_steps) if every else case
         scene = self.build(case, method, h)
         try:
-            rec = self.step_and_record(case, scene, n_steps, h)
+            rec = self.step_and_record(run_case, scene, n_steps, h)
             notes = self.notes(case, method, scene)
         finally:
             self.close(scene)
-        return self.trajectory(case, method, rec, notes)
+        traj = self.trajectory(case, method, rec, notes_first + notes)
+        if every:
+            return thin_records(traj, n_steps, case.max_records)
+        if monitor and traj.energy is not None:
+            traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
+        return traj
 
     def trajectory(self, case: Case, method: str, rec: Recording, notes: list[str]) -> Trajectory:
         """The Trajectory of a recording: status, energy, evaluations."""
@@ -354,5 +447,5 @@ class FixedStepAdapter(abc.ABC):
         return Trajectory(
             t=rec.t, x=rec.x, v=rec.v, energy=energy, status=status, t_fail=t_fail,
             nfev=rec.steps * self.evaluations(method), steps=rec.steps,
-            wall_s=rec.wall_s, message="; ".join(notes),
+            wall_s=rec.wall_s, message="; ".join(notes), extremes=rec.extremes,
         )

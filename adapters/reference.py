@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import MappingProxyType
 
 import numpy as np
 
-from truestep.adapters.base import Trajectory
+from truestep.adapters.base import (
+    MONITOR_BYTES,
+    EnergyExtremes,
+    Trajectory,
+    thin_records,
+    unwatched_note,
+)
 from truestep.cases.case import Case
 from truestep.cases.plugins import ode_system
 from truestep.reference_impl.compiled import compiled_reason, run_compiled
@@ -62,24 +69,50 @@ class ReferenceAdapter:
     def __init__(self, *, compiled: bool = True) -> None:
         self.compiled = compiled
 
-    def simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False
+                 ) -> Trajectory:
         """Run ``case`` with ``method``: through the compiled loop where it applies
         (:func:`~truestep.reference_impl.compiled.compiled_reason`; not with
         ``compiled=False``), else through the numpy system and solver classes; the
-        Trajectory's ``path`` says which."""
+        Trajectory's ``path`` says which.
+
+        ``monitor``: also find the lowest and highest energy over every step
+        (``extremes``): the run records every step (an adaptive run records every
+        accepted step anyway) and keeps the records it would have kept. A run whose every
+        state would exceed :data:`MONITOR_BYTES` is watched at its records only."""
+        unwatched = ""
+        if monitor and not get_solver(method).adaptive:
+            n_steps = case.steps_for(dt)[0]
+            size = n_steps * (case.model.n if case.model is not None else 1) * 48
+            if n_steps > case.max_records and size <= MONITOR_BYTES:
+                traj = self._simulate(replace(case, max_records=n_steps), method, dt)
+                return thin_records(traj, n_steps, case.max_records)
+            if n_steps > case.max_records:
+                unwatched = unwatched_note(size)
+        traj = self._simulate(case, method, dt)
+        if monitor and traj.energy is not None:
+            traj.extremes = EnergyExtremes.of(traj.t, traj.energy)
+        if unwatched:
+            traj.message = "; ".join(m for m in (traj.message, unwatched) if m)
+        return traj
+
+    def _simulate(self, case: Case, method: str, dt: float) -> Trajectory:
         if self.compiled and compiled_reason(case.model, method) is None:
             return self._simulate_compiled(case, method, dt)
         system = build_system(case)
         cls = get_solver(method)
         if cls.needs_second_order and not isinstance(system, SecondOrderSystem):
             raise TypeError(f"{method} needs a position/velocity split, {case.name} has none")
+        samples = None
         if cls.adaptive:
             solver = cls(system, rtol=dt, atol=dt)
             step = case.duration
+            samples = np.linspace(0.0, case.duration, case.max_records + 1)
         else:
             solver = cls(system)
             step = case.steps_for(dt)[1]
-        run = integrate(solver, case.duration, step, max_records=case.max_records)
+        run = integrate(solver, case.duration, step, max_records=case.max_records,
+                        sample_at=samples)
         x, v = trajectory_from_states(case, run.t, run.x)
         alive = run.extra.get("alive")
         if case.kind == "ode":
@@ -90,6 +123,7 @@ class ReferenceAdapter:
         return Trajectory(
             t=run.t, x=x, v=v, energy=energy, status=run.status, t_fail=run.t_fail,
             nfev=run.nfev, steps=run.steps, wall_s=run.wall_s, alive=alive, path="numpy",
+            message=run.message,
         )
 
     def _simulate_compiled(self, case: Case, method: str, dt: float) -> Trajectory:
@@ -97,6 +131,7 @@ class ReferenceAdapter:
                                  max_records=case.max_records)
         with np.errstate(all="ignore"):
             energy = total_energy(case.model, run.x, run.v)
+        message = "non-finite or runaway state (beyond 1e12)" if run.status == "unstable" else ""
         return Trajectory(t=run.t, x=run.x, v=run.v, energy=energy, status=run.status,
                           t_fail=run.t_fail, nfev=run.nfev, steps=run.steps, wall_s=wall,
-                          path="compiled")
+                          path="compiled", message=message)

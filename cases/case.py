@@ -109,6 +109,8 @@ class Case:
     properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
     skip : ``(engine, method, reason)`` pairs that are not run (rows say why)
     in_quick : whether ``--quick`` runs this case at all (long cases say no)
+    escape_energy : J, an energy the motion the case describes never reaches (a bound
+    orbit's: 0); a run that reaches it has escaped and is unstable (``[reference]``)
     family : the kind of scene the report groups it under (:data:`FAMILIES`, or ``other``)
     """
 
@@ -126,7 +128,7 @@ class Case:
     ode: OdeSpec | None = None
     exact: str | None = None
     exact_params: dict[str, Any] = field(default_factory=dict)
-    error_norm: str = "final"
+    error_norm: str = "max"
     error_scale: float = 1.0
     conservative: bool = False
     max_records: int = 2000
@@ -139,6 +141,7 @@ class Case:
     family: str = "other"
     timeout_s: float = 120.0
     in_quick: bool = True
+    escape_energy: float | None = None
 
     @property
     def features(self) -> set[str]:

@@ -361,9 +361,6 @@ def _check_reference_run(case: Case) -> None:
     if method not in METHODS:
         raise ValueError(f"[reference] method must be a reference method ({', '.join(METHODS)}), "
                          f"got {method!r}")
-    if case.error_norm != "final":
-        raise ValueError("a reference run is kept at the end of the run only: "
-                         "[reference] error must be \"final\"")
     m = case.model
     if METHODS[method].adaptive:
         if m is not None and (m.planes or m.emitters):
@@ -381,63 +378,172 @@ def _check_reference_run(case: Case) -> None:
                          f"got {dt!r}")
     if case.duration / dt > 1e7:
         raise ValueError(f"[reference] dt {dt:g} s makes {case.duration / dt:.3g} steps (at most 1e7)")
+    n = case.duration / dt
+    if abs(n - round(n)) > 1e-9 * n:
+        raise ValueError(f"[reference] dt {dt:g} s does not divide the duration {case.duration:g} s")
+    for step in case.dts + case.quick_dts:
+        ratio = step / dt
+        if abs(ratio - round(ratio)) > 1e-9 * ratio:
+            raise ValueError(f"[reference] dt {dt:g} s must divide every swept step (not "
+                             f"{step:g} s: {ratio:.6g} of it), so that the run is known at "
+                             "every time a row records")
 
 
 @exact_solution("reference-run", check=_check_reference_run,
                 params={"method": "string", "rtol": "positive", "dt": "positive"})
 def reference_run(case: Case, t: np.ndarray) -> Exact:
     """No closed form: a run of the reference implementation far finer than the sweep,
-    known at the end of the run only. ``[reference] method`` names it: ``dopri5`` (the
-    default) at ``rtol`` (default 1e-12), for smooth scenes; or a fixed-step method at
-    ``dt`` (at most a quarter of the finest swept step), for scenes with contacts or
-    emitters. Particles that are not alive at the end have NaN positions (not compared).
-    Made once per case and kept."""
+    known along the whole run. ``[reference] method`` names it: ``dopri5`` (the default)
+    at ``rtol`` (default 1e-12), for smooth scenes, known at any time by its continuous
+    extension; or a fixed-step method at ``dt`` (dividing every swept step, and at most a
+    quarter of the finest), for scenes with contacts or emitters, known at each of its
+    steps (positions between steps by cubic Hermite interpolation of positions and
+    velocities, velocities linearly). Particles that are not alive have NaN positions
+    (not compared). Made once per case and kept (:class:`ReferencePath`)."""
+    return _reference(case).at(np.asarray(t, float))
+
+
+def reference_path(case: Case) -> tuple[Exact, np.ndarray | None]:
+    """The reference run of a ``reference-run`` case at up to :data:`PATH_RECORDS` + 1
+    evenly spread times (an ODE's states as ``x``), and which particles are alive at each
+    (``None`` without emitters)."""
+    path = _reference(case)
+    t = np.linspace(0.0, case.duration, PATH_RECORDS + 1)
+    return path.at(t), path.alive_at(t)
+
+
+_REFERENCE_RUNS: dict[tuple, tuple[object, ReferencePath]] = {}
+"""Reference runs already made, by case file, name, duration, parameters and scene (the
+entry keeps the scene, so its id cannot be reused): the run does not depend on the
+times asked, and every row of a case asks again."""
+PATH_RECORDS = 2000
+"""Evenly spread records of a reference run (for the case's energy scale)."""
+STORE_BYTES = 1 << 30
+"""The most memory a fixed-step reference run's every step may take; beyond it only the
+steps the case's rows record are kept."""
+
+
+def _reference(case: Case) -> ReferencePath:
     key = (case.file, case.name, case.duration, repr(case.exact_params), repr(case.ode),
            id(case.model))
     hit = _REFERENCE_RUNS.get(key)
     if hit is None or hit[0] is not case.model:
-        hit = _REFERENCE_RUNS[key] = (case.model, _reference_final(case))
+        hit = _REFERENCE_RUNS[key] = (case.model, ReferencePath.of(case))
     return hit[1]
 
 
-_REFERENCE_RUNS: dict[tuple, tuple[object, Exact]] = {}
-"""Reference runs already made, by case file, name, duration, parameters and scene (the
-entry keeps the scene, so its id cannot be reused): the run does not depend on the
-times asked, and every row of a case asks again."""
+@dataclass
+class ReferencePath:
+    """A fine reference run, kept so that its state can be asked at any time of the run.
 
+    t : (K,) s, the stored steps;  states : (K, dim) flat states there;  h : the fixed
+    step (s), or None for an adaptive run, whose ``dense`` steps give any time;
+    alive : (K, n) or None;  n : particles (None for an ODE case)
+    """
 
-def _reference_final(case: Case) -> Exact:
-    from truestep.cases.plugins import ode_system
-    from truestep.reference_impl.integrate import integrate
-    from truestep.reference_impl.particles import ParticleSystem
-    from truestep.reference_impl.passes import passes_for
-    from truestep.reference_impl.solvers import get_solver
+    t: np.ndarray
+    states: np.ndarray
+    h: float | None
+    n: int | None
+    alive: np.ndarray | None = None
+    dense: list | None = None
 
-    cls = get_solver(case.exact_params.get("method", "dopri5"))
-    if case.kind == "ode":
-        system = ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
-    else:
-        system = ParticleSystem(case.model, passes_for(case.model))
-    if cls.adaptive:
-        tol = float(case.exact_params.get("rtol", 1e-12))
-        run = integrate(cls(system, rtol=tol, atol=tol), case.duration, case.duration,
-                        max_records=1)
-    else:
-        n = max(1, round(case.duration / float(case.exact_params["dt"])))
-        run = integrate(cls(system), case.duration, case.duration / n, max_records=1)
-    if run.status != "ok":
-        raise ValueError(f"{case.file}: the reference run went {run.status} at t = {run.t_fail}")
-    final = run.x[-1]
-    if case.kind == "ode":
-        return Exact(np.array([case.duration]), final[None, None, :])
-    n = case.model.n
-    x, v = final[: 3 * n].reshape(1, n, 3), final[3 * n :].reshape(1, n, 3)
-    alive = run.extra.get("alive")
-    if alive is not None:
-        x, v = x.copy(), v.copy()
-        x[:, ~alive[-1]] = np.nan
-        v[:, ~alive[-1]] = np.nan
-    return Exact(np.array([case.duration]), x, v)
+    @classmethod
+    def of(cls, case: Case) -> ReferencePath:
+        """Make the case's reference run (``[reference] method``, ``rtol`` or ``dt``)."""
+        from truestep.cases.plugins import ode_system
+        from truestep.reference_impl.integrate import integrate, record_indices
+        from truestep.reference_impl.particles import ParticleSystem
+        from truestep.reference_impl.passes import passes_for
+        from truestep.reference_impl.solvers import get_solver
+
+        cls_ = get_solver(case.exact_params.get("method", "dopri5"))
+        if case.kind == "ode":
+            system = ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
+            n = None
+        else:
+            system = ParticleSystem(case.model, passes_for(case.model))
+            n = case.model.n
+        if cls_.adaptive:
+            tol = float(case.exact_params.get("rtol", 1e-12))
+            solver = cls_(system, rtol=tol, atol=tol)
+            dense: list = []
+            run = integrate(solver, case.duration, case.duration, on_step=lambda: dense.append(
+                solver.dense()))
+            path = cls(run.t, run.x, None, n, dense=dense)
+        else:
+            steps = max(1, round(case.duration / float(case.exact_params["dt"])))
+            per_state = 8 * (system.dim + (n or 0))
+            keep = steps if steps * per_state <= STORE_BYTES else None
+            if keep is None:  # only the steps the rows record, and the even grid
+                marks = [record_indices(steps, PATH_RECORDS)]
+                for dt in case.dts + case.quick_dts:
+                    ratio = round(dt / (case.duration / steps))
+                    rows = round(case.duration / dt)
+                    marks.append(record_indices(rows, case.max_records) * ratio)
+                keep = np.unique(np.concatenate(marks))
+            run = integrate(cls_(system), case.duration, case.duration / steps,
+                            max_records=steps, record_at=None if isinstance(keep, int) else keep)
+            path = cls(run.t, run.x, case.duration / steps, n, alive=run.extra.get("alive"))
+        if run.status != "ok":
+            raise ValueError(f"{case.file}: the reference run went {run.status} at t = {run.t_fail}")
+        return path
+
+    def _grid(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Index of the stored step at or before each time, and whether it is that time."""
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 1)
+        near = np.clip(k + 1, 0, len(self.t) - 1)
+        k = np.where(np.abs(self.t[near] - t) < np.abs(self.t[k] - t), near, k)
+        on = np.abs(self.t[k] - t) <= 1e-9 * np.maximum(1.0, np.abs(t))
+        return k, on
+
+    def alive_at(self, t: np.ndarray) -> np.ndarray | None:
+        """Which particles are alive at times ``t`` (the stored step at or nearest each)."""
+        if self.alive is None:
+            return None
+        return self.alive[self._grid(t)[0]]
+
+    def states_at(self, t: np.ndarray) -> np.ndarray:
+        """Flat states (T, dim) at times ``t`` (s): stored where a step lies there; else by
+        the continuous extension (adaptive) or Hermite interpolation (fixed steps, between
+        two stored consecutive steps; NaN where the steps between were not stored)."""
+        k, on = self._grid(t)
+        out = self.states[k].copy()
+        for i in np.flatnonzero(~on):
+            out[i] = self._between(float(t[i]))
+        return out
+
+    def _between(self, t: float) -> np.ndarray:
+        if self.dense is not None:
+            j = int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.dense) - 1))
+            return self.dense[j](t)
+        j = int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2))
+        t0, t1 = self.t[j], self.t[j + 1]
+        if self.n is None or not np.isclose(t1 - t0, self.h, rtol=1e-9):
+            return np.full(self.states.shape[1], np.nan)
+        a, b = self.states[j], self.states[j + 1]
+        n3 = 3 * self.n
+        s, h = (t - t0) / (t1 - t0), t1 - t0
+        h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+        h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+        x = h00 * a[:n3] + h10 * h * a[n3:] + h01 * b[:n3] + h11 * h * b[n3:]
+        v = (1 - s) * a[n3:] + s * b[n3:]
+        return np.concatenate([x, v])
+
+    def at(self, t: np.ndarray) -> Exact:
+        """The run at times ``t`` (s) as an :class:`Exact`: particles' positions and
+        velocities (NaN for particles not alive), or an ODE's states as ``x``."""
+        states = self.states_at(t)
+        if self.n is None:
+            return Exact(t, states[:, None, :])
+        n = self.n
+        x, v = states[:, : 3 * n].reshape(-1, n, 3), states[:, 3 * n :].reshape(-1, n, 3)
+        alive = self.alive_at(t)
+        if alive is not None:
+            x, v = x.copy(), v.copy()
+            x[~alive] = np.nan
+            v[~alive] = np.nan
+        return Exact(t, x, v)
 
 
 import truestep.cases.exact_particles  # noqa: F401,E402

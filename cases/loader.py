@@ -50,7 +50,7 @@ MAX_SWEEP = 50
 """The most steps (or tolerances) one sweep lists: each is a row per engine and method."""
 EXACT_CHECK_S = 30.0
 """How long checking that an exact solution fits its case may take, s."""
-REFERENCE_KEYS = {"exact", "error", "scale", "conservative"}
+REFERENCE_KEYS = {"exact", "error", "scale", "conservative", "escape_energy"}
 PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
 """``[reference]`` parameters that properties read (:mod:`truestep.properties`)."""
 
@@ -203,9 +203,10 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
 
     ref = f.sub("reference", {})
     exact = ref.string("exact", None)
-    error_norm = ref.string("error", "final", choices={"final", "max"})
+    error_norm = ref.string("error", "max", choices={"final", "max"})
     error_scale = ref.number("scale", 1.0, positive=True)
     conservative = ref.boolean("conservative", False)
+    escape_energy = ref.number("escape_energy", None)
     fn = _exact_fn(ref, exact) if exact is not None else None
     if exact is not None and fn is None:
         raise ref.error("exact", f"no exact solution named {short(exact)}; known: "
@@ -234,6 +235,7 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
         error_norm=error_norm,
         error_scale=error_scale,
         conservative=conservative,
+        escape_energy=escape_energy,
         max_records=max_records,
         gates=_read_gates(f),
         stability=stability,

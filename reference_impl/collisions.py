@@ -201,6 +201,11 @@ class PlaneCollisions:
         vk = v[idx]
         vn = vk @ n
         an = (f @ n) * self.inv_mass[idx]
+        if getattr(system, "located", False):  # the step stopped at the impact: no step slack
+            dt = 0.0
+            rest = np.sqrt(2.0 * np.maximum(-an, 0.0) * system.rest_height)
+        else:
+            rest = 0.0
         below = d < 0
         vn_new = np.where(below, np.sign(vn) * np.sqrt(np.maximum(vn**2 - 2.0 * an * d, 0.0)), vn)
         x[idx[below]] -= d[below, None] * n
@@ -208,28 +213,32 @@ class PlaneCollisions:
         heading_in = vn_new < 0
         self.collisions += int(heading_in.sum())
         vn_new = np.where(heading_in, -plane.restitution * vn_new, vn_new)  # V' = V_T - k_r V_N
-        tol = self.eps_speed - an * dt
+        tol = np.maximum(self.eps_speed - an * dt, rest)
         on = (np.abs(d) < self.eps_distance) & (an < 0) & (np.abs(vn_new) <= tol)
         vn_new = np.where(on, 0.0, vn_new)
         x[idx[on]] -= d[on, None] * n
         vk += (vn_new - vn)[:, None] * n
         if plane.friction > 0:
-            vk -= self._sticking(plane, on, vk, f, an, dt)[:, None] * (vk - vn_new[:, None] * n)
+            vk -= self._sticking(plane, on, vk, f, an, dt, rest)[:, None] * (
+                vk - vn_new[:, None] * n)
         v[idx] = vk
         return on
 
     def _sticking(
-        self, plane: Plane, on: np.ndarray, v: np.ndarray, f: np.ndarray, an: np.ndarray, dt: float
+        self, plane: Plane, on: np.ndarray, v: np.ndarray, f: np.ndarray, an: np.ndarray,
+        dt: float, rest: np.ndarray | float = 0.0,
     ) -> np.ndarray:
         """Which contact particles friction stops now (1.0) or lets slide (0.0), shape (k,).
 
         A particle stops when friction could take its tangential speed within one step,
         ``|V_T| <= eps_v + mu |a_N| dt``, and static friction can hold it,
-        ``|F_T| <= mu |F_N|``: so friction never reverses a particle inside a step.
+        ``|F_T| <= mu |F_N|``: so friction never reverses a particle inside a step. After
+        a step stopped at the event (located), the speed is within ``rest`` of zero.
         """
         n, mu = plane.normal, plane.friction
         fn = f @ n
         speed = np.linalg.norm(v - (v @ n)[:, None] * n, axis=1)
         ft = np.linalg.norm(f - fn[:, None] * n, axis=1)
-        stop = on & (speed <= self.eps_speed - mu * an * dt) & (ft <= -mu * fn)
+        limit = np.maximum(self.eps_speed - mu * an * dt, mu * rest)
+        stop = on & (speed <= limit) & (ft <= -mu * fn)
         return stop.astype(float)

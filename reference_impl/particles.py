@@ -160,6 +160,22 @@ class ParticleSystem(SecondOrderSystem):
         for p in self.passes:
             p(self, dt)
 
+    located: bool = False
+    """Set by an adaptive integration that stops its steps at impacts
+    (:meth:`event_watch`): the collision pass then reads contact with the precision of a
+    located event, not of a step."""
+    rest_height: float = 0.0
+    """With :attr:`located`: a bounce whose hop would rise less than this (m) is rest (the
+    adaptive method's tolerance: a smaller hop is below what it resolves)."""
+
+    def event_watch(self) -> PlaneEvents | None:
+        """For the coming step, with the contacts as they are now: each free particle's
+        distance above each plane (an impact when it turns negative), and each particle
+        sliding with friction its tangential velocity along its direction now (friction
+        stops it when that turns negative) (:class:`PlaneEvents`); ``None`` without
+        planes."""
+        return PlaneEvents(self) if self.model.planes else None
+
     def observe(self) -> dict[str, np.ndarray]:
         return {"alive": self.alive.copy()} if self.model.emitters else {}
 
@@ -172,6 +188,73 @@ class ParticleSystem(SecondOrderSystem):
         """
         return total_energy(self.model, x[: 3 * self.n].reshape(-1, 3),
                             x[3 * self.n :].reshape(-1, 3), self.alive)
+
+
+class PlaneEvents:
+    """The event functions of a particle system's planes for one step (see
+    :meth:`ParticleSystem.event_watch`): called on a flat state (dim,), the components
+    ``[d_plane0 (n), slide_plane0 (n), d_plane1 (n), ...]``, ``inf`` where a particle is
+    not watched; :meth:`focus` evaluates only some of them, from part of the state."""
+
+    def __init__(self, system: ParticleSystem) -> None:
+        m = system.model
+        self.n, self.planes, self.radius = system.n, m.planes, m.radius
+        free = system.alive & ~m.fixed
+        pos, vel = system.positions, system.velocities
+        self.watched, self.sliding, self.direction = [], [], []
+        for plane, on in zip(m.planes, system.contact, strict=True):
+            watched = free & ~on
+            if plane.thickness > 0:  # a wall: watched only from its front, where it is now
+                d0 = collisions.signed_distances(pos, self.radius, plane)
+                watched &= d0 > -(plane.thickness + 2 * self.radius)
+            vt = vel - (vel @ plane.normal)[:, None] * plane.normal
+            speed = np.linalg.norm(vt, axis=1)
+            moving = on & free & (speed > 0) & (plane.friction > 0)
+            self.watched.append(watched)
+            self.sliding.append(moving)
+            self.direction.append(np.where(moving[:, None],
+                                           vt / np.where(speed > 0, speed, 1.0)[:, None], 0.0))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        n = self.n
+        pos, vel = x[: 3 * n].reshape(n, 3), x[3 * n :].reshape(n, 3)
+        out = []
+        for plane, watched, moving, u in zip(self.planes, self.watched, self.sliding,
+                                             self.direction, strict=True):
+            out.append(np.where(watched, collisions.signed_distances(pos, self.radius, plane),
+                                np.inf))
+            out.append(np.where(moving, np.sum(vel * u, axis=1), np.inf))
+        return np.concatenate(out)
+
+    def focus(self, mask: np.ndarray) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+        """The state indices the components ``mask`` (bool, like a call's result) read, and
+        a function of the state at those indices giving those components (vectorised per
+        plane and kind)."""
+        n = self.n
+        groups = mask.reshape(-1, n)
+        index, parts, at = [], [], 0
+        for k, plane in enumerate(self.planes):
+            for slide, chosen in ((False, groups[2 * k]), (True, groups[2 * k + 1])):
+                i = np.flatnonzero(chosen)
+                if not len(i):
+                    continue
+                base = 3 * i + (3 * n if slide else 0)
+                index.append((base[:, None] + np.arange(3)).ravel())
+                parts.append((slide, plane, i, k, at, at + 3 * len(i)))
+                at += 3 * len(i)
+        index_arr = np.concatenate(index) if index else np.zeros(0, int)
+
+        def values(sub: np.ndarray) -> np.ndarray:
+            out = []
+            for slide, plane, i, k, a, b in parts:
+                triples = sub[a:b].reshape(-1, 3)
+                if slide:
+                    out.append(np.sum(triples * self.direction[k][i], axis=1))
+                else:
+                    out.append((triples - plane.point) @ plane.normal - self.radius[i])
+            return np.concatenate(out) if out else np.zeros(0)
+
+        return index_arr, values
 
 
 def total_energy(

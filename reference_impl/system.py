@@ -8,6 +8,7 @@ talks to a system through this interface and nothing else.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 
 import numpy as np
 
@@ -73,6 +74,14 @@ class System(ABC):
     def observe(self) -> dict[str, np.ndarray]:
         """Per-record observables beyond the state (e.g. which particles are alive)."""
         return {}
+
+    def event_watch(self) -> Callable[[np.ndarray], np.ndarray] | None:
+        """The events an adaptive step must stop at, for the step about to be taken: a
+        function of a state (dim,) whose components change sign from ``>= 0`` to ``< 0``
+        where an event happens (a particle reaching a plane), or ``None`` (default: no
+        events). An adaptive solver with a continuous extension stops its step at the
+        first such change and :meth:`between_steps` acts there (``located = True``)."""
+        return None
 
 
 class SecondOrderSystem(System):

@@ -10,6 +10,7 @@ case's scene parameters (masses, springs, planes ...) and a run's raw arrays
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -198,16 +199,18 @@ def bounce_times(h0: float, g: float, e: float, count: int) -> tuple[np.ndarray,
 
 def bounce_height(h0: float, g: float, e: float, t):
     """Height above the floor and normal velocity of that point, (T,) each: a chain of
-    parabolas, at rest after the last bounce (``e < 1``) at ``T_1 (1 + 2 e / (1 - e))``."""
+    parabolas, at rest after the last bounce (``e < 1``) at ``T_1 (1 + 2 e / (1 - e))``.
+    Each time lies in the flight begun by the last bounce before it (``searchsorted`` on
+    the bounce times; before the first, the drop)."""
     t = np.asarray(t, float)
     times, launches = bounce_times(h0, g, e, 400)
-    u = np.where(t < times[0], h0 - 0.5 * g * t**2, 0.0)
-    w = np.where(t < times[0], -g * t, 0.0)
-    for k in range(len(times) - 1):
-        s = t - times[k]
-        inside = (s >= 0) & (t < times[k + 1])
-        u = np.where(inside, launches[k] * s - 0.5 * g * s**2, u)
-        w = np.where(inside, launches[k] - g * s, w)
+    k = np.searchsorted(times, t, side="right")  # bounces at or before t
+    s = t - times[np.maximum(k - 1, 0)]
+    speed = launches[np.maximum(k - 1, 0)]
+    u = np.where(k == 0, h0 - 0.5 * g * t**2, speed * s - 0.5 * g * s**2)
+    w = np.where(k == 0, -g * t, speed - g * s)
+    beyond = k >= len(times)
+    u, w = np.where(beyond, 0.0, u), np.where(beyond, 0.0, w)
     if e < 1:
         rest = t >= times[0] * (1 + 2 * e / (1 - e))
         u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
@@ -444,3 +447,296 @@ def population_null(sampled_frames: np.ndarray, n: float, r: float, lifetimes: n
         seen = cum[np.minimum(i + draws, len(cum) - 1)] - cum[i]  # frames i .. i + L - 1
         totals += np.sum(np.where(mask, seen, 0), axis=1)
     return totals
+
+
+# -- the energy scale and the motion's verdicts -----------------------------------------------
+
+
+def kinetic_energy(model, v: np.ndarray, alive: np.ndarray | None = None) -> np.ndarray:
+    """``sum m |v|^2 / 2`` over free (and alive) particles, (T,) for ``v`` (T, n, 3)."""
+    weight = np.where(model.fixed, 0.0, model.mass)[None, :] * np.ones(v.shape[:2])
+    if alive is not None:
+        weight = weight * alive
+    return 0.5 * np.sum(weight * np.sum(np.asarray(v, float) ** 2, axis=2), axis=1)
+
+
+def exchanged(kinetic: np.ndarray, potential: np.ndarray) -> float:
+    """The energy a motion exchanges: ``max(KE_max, PE_max - PE_min)`` along it (J). A
+    shift of the potential's zero (translating the scene, lifting it) changes neither."""
+    ok = np.isfinite(kinetic) & np.isfinite(potential)
+    return max(float(np.max(kinetic[ok])), float(np.max(potential[ok]) - np.min(potential[ok])))
+
+
+def energy_behaviour(model) -> str:
+    """What a scene's exact energy may do, from its features: ``source`` (force fields,
+    emitters, impulses may put energy in), ``dissipative`` (damping, drag, inelastic or
+    frictional planes take it out, nothing puts it in) or ``conservative``."""
+    if model is None:
+        return "conservative"
+    if len(model.fields) or len(model.emitters) or len(model.impulses):
+        return "source"
+    lossy = (model.drag > 0 or np.any(model.springs.damping > 0) or np.any(model.anchors.damping > 0)
+             or any(p.restitution < 1 or p.friction > 0 for p in model.planes))
+    return "dissipative" if lossy else "conservative"
+
+
+GAIN = 0.1
+"""A dissipative scene may stay at most this fraction of its energy scale above its start
+through the late half of a run (the median there)."""
+LEFT = 0.5
+"""A conservative scene above its start by more than this fraction of its scale through the
+whole late half of the run has left its energy for good."""
+BAND = 0.25
+"""Growth: a peak above the band before it by more than a quarter of the band's width."""
+FLOOR = 1e-9
+"""Rises below this fraction of the energy scale are round-off, not growth."""
+
+
+def _halves(t: np.ndarray) -> int:
+    """Index of the first record of the late half (time at or after the run's middle)."""
+    return max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
+
+
+def rises_past_its_band(t, e, scale) -> bool:
+    """The late half's highest energy above the early half's band of ``E - E(0)`` (0
+    included) by more than a quarter of the band's width and round-off: a run whose
+    energy grows exponentially from its start doubles its rise from the middle on."""
+    e = np.asarray(e, float)
+    if not np.all(np.isfinite(e)):
+        return True
+    d = e - e[0]
+    k = _halves(np.asarray(t, float))
+    early, late = d[:k], d[k:]
+    if not len(late):
+        return False
+    return float(late.max()) > early.max() + BAND * (early.max() - early.min()) + FLOOR * scale
+
+
+def grows_every_quarter(t, e, scale) -> bool:
+    """Each quarter's highest ``E - E(0)`` above the band of the quarter before it (0
+    included) by a quarter of its width and round-off: growth that does not stop."""
+    t, e = np.asarray(t, float), np.asarray(e, float)
+    if not np.all(np.isfinite(e)):
+        return True
+    cuts = np.searchsorted(t, t[0] + (t[-1] - t[0]) * np.array([0.25, 0.5, 0.75]))
+    parts = [p for p in np.split(e - e[0], cuts) if len(p)]
+    if len(parts) < 4:
+        return rises_past_its_band(t, e, scale)
+    for before, now in itertools.pairwise(parts):
+        hi, lo = max(float(before.max()), 0.0), min(float(before.min()), 0.0)
+        if not float(now.max()) > hi + BAND * (hi - lo) + FLOOR * scale:
+            return False
+    return True
+
+
+def motion_verdict(t, e, scale: float, behaviour: str, escape: float | None = None,
+                   t_all=None, e_all=None) -> tuple[str, float | None]:
+    """``("ok", None)`` or ``("unstable", when)`` for a finite run, from its energy at every
+    step it took (``t_all``, ``e_all``; its records ``t``, ``e`` when those are not given).
+    Unstable: the escape energy reached and kept to the end (a spike through a close
+    encounter that comes back below it is no escape; ``when``: the step after the last one
+    below it); a passive scene's energy more than ``scale`` from its start and still
+    growing in every quarter; a dissipative scene more than :data:`GAIN` of its scale
+    above its start through the late half (its median: an overshoot that a stable method
+    then gives off is no gain); a conservative one more than :data:`LEFT` of it above its
+    start at every step of the late half. ``when``: the first step that shows it."""
+    t_all = np.asarray(t if t_all is None else t_all, float)
+    e_all = np.asarray(e if e_all is None else e_all, float)
+    if escape is not None and e_all[-1] >= escape:
+        below = np.flatnonzero(e_all < escape)
+        return "unstable", float(t_all[below[-1] + 1 if len(below) else 0])
+    if behaviour == "source":
+        return "ok", None
+    rise = e_all - e_all[0]
+    far = np.abs(rise) > scale
+    if far.any() and grows_every_quarter(t_all, e_all, scale):
+        return "unstable", float(t_all[np.argmax(far)])
+    late = rise[_halves(t_all):]
+    if behaviour == "dissipative":
+        if len(late) and float(np.median(late)) > GAIN * scale:
+            return "unstable", float(t_all[np.argmax(rise > GAIN * scale)])
+        return "ok", None
+    if len(late) and late.min() > LEFT * scale:
+        return "unstable", float(t_all[np.argmax(rise > LEFT * scale)])
+    return "ok", None
+
+
+# -- references of my own, known along the whole run -------------------------------------------
+
+
+def particle_rhs(model):
+    """``y' = f(y)`` of point masses (``y = [x, v]``, (6n,)) under uniform gravity, drag,
+    springs and anchors (Hooke along the line, dampers on the relative velocity along it)
+    and universal gravitation; pinned particles stay where they are."""
+    n = len(model.mass)
+    mass = np.asarray(model.mass, float)
+    free = ~np.asarray(model.fixed)
+    s, a = model.springs, model.anchors
+    grav = model.gravitation
+
+    def rhs(_t, y):
+        x, v = y[: 3 * n].reshape(n, 3), y[3 * n :].reshape(n, 3)
+        f = mass[:, None] * model.gravity - model.drag * v
+        if len(s.i):
+            d = x[s.j] - x[s.i]
+            length = np.sqrt(np.sum(d * d, axis=1))
+            u = d / length[:, None]
+            pull = s.stiffness * (length - s.rest) + s.damping * np.sum((v[s.j] - v[s.i]) * u, axis=1)
+            np.add.at(f, s.i, pull[:, None] * u)
+            np.add.at(f, s.j, -pull[:, None] * u)
+        if len(a.i):
+            d = x[a.i] - a.point
+            length = np.sqrt(np.sum(d * d, axis=1))
+            u = d / np.where(length > 0, length, 1.0)[:, None]
+            pull = a.stiffness * (length - a.rest) + a.damping * np.sum(v[a.i] * u, axis=1)
+            np.add.at(f, a.i, -pull[:, None] * u)
+        if grav is not None:
+            d = x[None, :, :] - x[:, None, :]
+            r2 = np.sum(d * d, axis=2) + grav.softening**2
+            np.fill_diagonal(r2, np.inf)
+            f += grav.G * mass[:, None] * np.sum(mass[None, :, None] * d / r2[:, :, None] ** 1.5, axis=1)
+        acc = np.where(free[:, None], f / mass[:, None], 0.0)
+        return np.concatenate([np.where(free[:, None], v, 0.0).ravel(), acc.ravel()])
+
+    return rhs
+
+
+def particle_reference(model, t_end: float, tol: float = 1e-12):
+    """``t -> (x, v)`` (T, n, 3) each: ``solve_ivp`` (DOP853, rtol = atol = ``tol``) on
+    :func:`particle_rhs`, read between its steps by its own continuous extension."""
+    n = len(model.mass)
+    y0 = np.concatenate([model.x0.ravel(), model.v0.ravel()])
+    sol = solve_ivp(particle_rhs(model), (0.0, t_end), y0, method="DOP853", rtol=tol, atol=tol,
+                    dense_output=True)
+    assert sol.success, sol.message
+
+    def at(t):
+        y = sol.sol(np.asarray(t, float)).T
+        return y[:, : 3 * n].reshape(-1, n, 3), y[:, 3 * n :].reshape(-1, n, 3)
+
+    return at
+
+
+def rk4_states(rhs, y0: np.ndarray, h: float, steps: int) -> np.ndarray:
+    """Classical RK4 at fixed step ``h``: the state after every step, (steps + 1, dim)."""
+    out = np.empty((steps + 1, len(y0)))
+    out[0] = y = np.asarray(y0, float)
+    for k in range(steps):
+        t = k * h
+        k1 = rhs(t, y)
+        k2 = rhs(t + h / 2, y + h / 2 * k1)
+        k3 = rhs(t + h / 2, y + h / 2 * k2)
+        k4 = rhs(t + h, y + h * k3)
+        y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        out[k + 1] = y
+    return out
+
+
+# -- contacts and flights read from the samples alone -------------------------------------------
+
+
+def arcs(t, u, w, g: float):
+    """The flights of a ball over a plane and the contacts between them, read from its
+    samples: height ``u`` of its lowest point (m), normal velocity ``w`` (m/s), gravity
+    ``g`` toward the plane.
+
+    Flights are the runs of :func:`flights` (free-fall kicks, above the plane). Returns
+    ``(drop, found)``: ``drop`` the highest sample before the first contact (m), and per
+    contact after a flight a dict: ``before`` and ``after`` (the last flight sample
+    before it, the first after it; ``after`` None when no flight follows), ``low`` (the
+    contact's lowest sample), ``apex`` (the highest sample of the flight after it, NaN
+    when the run ends while that flight still rises).
+    """
+    t, u, w = map(np.asarray, (t, u, w))
+    runs = flights(t, u, w, g)
+    if not runs:
+        return float(np.max(u)), []
+    drop = float(np.max(u[: runs[0][-1] + 1]))
+    found = []
+    for k, run in enumerate(runs):
+        before = int(run[-1])
+        if before >= len(t) - 1:
+            break  # the run ends in flight
+        nxt = runs[k + 1] if k + 1 < len(runs) else None
+        after = None if nxt is None else int(nxt[0])
+        end = len(t) - 1 if after is None else after
+        low = before + int(np.argmin(u[before : end + 1]))
+        apex = np.nan
+        if nxt is not None:
+            top = int(nxt[0]) + int(np.argmax(u[nxt]))
+            still_rising = top == len(t) - 1 and w[top] > 0
+            apex = np.nan if still_rising else float(u[top])
+        found.append({"before": before, "after": after, "low": low, "apex": apex})
+    return drop, found
+
+
+def oscillator_run(scheme: str, m: float, k: float, c: float, h: float, u0: float, w0: float,
+                   steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``steps`` steps of ``scheme`` (see :func:`_one_step`) on ``m u'' = -k u - c u'`` from
+    ``u0``, ``w0``: displacements and velocities after every step, (steps + 1,) each
+    (NaN from the first step beyond 1e12: a blow-up)."""
+    matrix = step_matrix(scheme, m, k, c, h)
+    y = np.array([u0, w0] if scheme != "verlet" else [u0, w0, (-k * u0 - c * w0) / m], float)
+    out = np.full((steps + 1, len(y)), np.nan)
+    out[0] = y
+    for i in range(1, steps + 1):
+        y = matrix @ y
+        if not np.all(np.abs(y) < 1e12):
+            break
+        out[i] = y
+    return out[:, 0], out[:, 1]
+
+
+def backward_euler_has_no_solution(model, x: np.ndarray, v: np.ndarray, h: float) -> tuple[bool, str]:
+    """Whether backward Euler's step ``x' = x + h v'``, ``v' = v + h a(x')`` from ``x``, ``v``
+    (n, 3) has no solution, for point masses under unsoftened gravitation alone.
+
+    The closest pair's separation ``r' = x'_j - x'_i`` solves
+    ``r' (1 + h^2 mu / |r'|^3) = c + h^2 d`` with ``mu = G (m_i + m_j)``, ``c = r + h w``
+    (``w`` their relative velocity) and ``d`` the other bodies' pull on the pair's
+    separation: ``r'`` is parallel to the right-hand side, and ``s + h^2 mu / s^2`` has
+    its least value ``1.5 (2 h^2 mu)^(1/3)`` over ``s > 0``. So there is no solution when
+    ``|c| + h^2 |d|_max`` is below that value; ``|d|_max`` from the other bodies at no less
+    than half their present distance from the pair (each step moves a body by ``h |v'|``,
+    a small part of it, which the caller checks). For two bodies ``d = 0``: exact.
+    Returns the verdict and the numbers."""
+    G = model.gravitation.G
+    n = len(model.mass)
+    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2) + np.diag(np.full(n, np.inf))
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    mu = G * (model.mass[i] + model.mass[j])
+    c = float(np.linalg.norm(x[j] - x[i] + h * (v[j] - v[i])))
+    pull = 0.0
+    for k in range(n):
+        if k not in (i, j):
+            near = 0.5 * min(d[i, k], d[j, k])
+            pull += 2 * G * model.mass[k] / near**2
+    least = 1.5 * (2 * h * h * mu) ** (1 / 3)
+    return c + h * h * pull < least, (f"pair {i}-{j}: |r + h w| = {c:.6g}, other bodies' pull "
+                                      f"h^2 |d| <= {h * h * pull:.3g}, least reachable {least:.6g}")
+
+
+def kepler_backward_euler(mu: float, q0, w0, h: float, t_end: float):
+    """Backward Euler on ``q'' = -mu q / |q|^3`` from ``q0``, ``w0`` (2,), solved here in
+    closed form: ``q' (1 + h^2 mu / |q'|^3) = c = q + h w`` makes ``q' = s c / |c|`` with
+    ``s + h^2 mu / s^2 = |c|``, whose larger root (the one that tends to ``|c|`` as
+    ``h -> 0``) is found by bisection above the least point ``(2 h^2 mu)^(1/3)``, and
+    ``w' = (q' - q) / h``. Stops at the first step whose ``|c|`` is below the least value
+    ``1.5 (2 h^2 mu)^(1/3)``: there the step has no solution. Returns the states after
+    each step taken, (k + 1, 4), and the index of that step (None if none)."""
+    q, w = np.array(q0, float), np.array(w0, float)
+    floor = (2 * h * h * mu) ** (1 / 3)
+    states = [np.concatenate([q, w])]
+    for k in range(round(t_end / h)):
+        c = q + h * w
+        size = float(np.linalg.norm(c))
+        if size < 1.5 * floor:
+            return np.array(states), k
+        lo, hi = floor, size
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if mid + h * h * mu / mid**2 > size else (mid, hi)
+        q1 = 0.5 * (lo + hi) * c / size
+        w, q = (q1 - q) / h, q1
+        states.append(np.concatenate([q, w]))
+    return np.array(states), None

@@ -104,4 +104,5 @@ def test_a_finite_run_whose_energy_explodes_is_an_unstable_row():
     assert 0 < bad["t_fail"] < case.duration and bad["energy_drift"] > 1
     assert "energy grew" in bad["message"]
     good = run_one(case, "reference", "symplectic-euler", 1e-3, adaptive=False, timing=timing)
-    assert good["status"] == "ok" and 0.5 < good["energy_drift"] <= 1.0 + 1e-9
+    # over every step, the swing reaches its start's size to within a step's sampling
+    assert good["status"] == "ok" and 0.5 < good["energy_drift"] <= 1.0 + 1e-4

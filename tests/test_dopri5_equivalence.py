@@ -96,7 +96,10 @@ the code before the speed-up rounds as it did on the recording machine."""
 
 class TextbookDopri5(DormandPrince54):
     """The dopri5 step as written before its speed-up, kept as the oracle: each stage's
-    argument ``x + sum_j (h a_ij) k_j`` summed row by row, the RMS norm by ``np.mean``."""
+    argument ``x + sum_j (h a_ij) k_j`` summed row by row, the RMS norm by ``np.mean``. It
+    keeps no continuous extension, so it steps through impacts as dopri5 did then."""
+
+    dense = None
 
     def _initial_step(self, x: np.ndarray, t: float, f0: np.ndarray, h_max: float) -> float:
         scale = self.atol + np.abs(x) * self.rtol
@@ -201,7 +204,12 @@ def runs(case_named):
     return get
 
 
-@pytest.mark.parametrize(("name", "tol"), list(BEFORE), ids=[f"{n}-{t:g}" for n, t in BEFORE])
+SMOOTH = [key for key in BEFORE if key[0] not in ("bouncing-ball", "particle-fountain")]
+"""The recorded scenes without planes: on the others dopri5 now stops its steps at impacts,
+which the textbook step (and the code before) did not."""
+
+
+@pytest.mark.parametrize(("name", "tol"), SMOOTH, ids=[f"{n}-{t:g}" for n, t in SMOOTH])
 def test_the_same_run_as_the_textbook_step_to_the_last_bit(runs, name, tol):
     new, old = runs(name, tol)
     assert (new.status, new.steps, new.nfev) == (old.status, old.steps, old.nfev)

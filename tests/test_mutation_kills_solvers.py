@@ -32,6 +32,7 @@ from truestep.reference_impl.solvers import (
     stability_polynomial,
     tableau_stability,
 )
+from truestep.reference_impl.solvers.base import SolverFailed
 from truestep.reference_impl.solvers.explicit_rk import polynomial_step_matrix, stages_of
 from truestep.reference_impl.solvers.facts import first_growth, spectral_radius
 from truestep.reference_impl.solvers.implicit import implicit_euler_step
@@ -247,7 +248,7 @@ def test_dopri5_reuses_its_last_stage_unless_the_state_changed():
     assert solver.nfev - n == 7
 
 
-def test_dopri5_reports_underflow():
+def test_dopri5_reports_a_non_finite_derivative_as_unstable():
     class Blowup(System):
         def derivative(self, x, t):
             return np.array([np.nan])
@@ -256,8 +257,20 @@ def test_dopri5_reports_underflow():
     solver._f0 = np.array([1.0])
     solver._x_end = np.array([1.0])
     solver._h = 1e-3
-    with pytest.raises(FloatingPointError, match="underflow"):
+    with pytest.raises(FloatingPointError, match="non-finite"):
         solver.step(1.0)
+
+
+def test_dopri5_reports_an_underflow_of_finite_errors_as_a_solver_failure():
+    class Stiffer(System):  # an error estimate that no step size brings below 1
+        def derivative(self, x, t):
+            return np.array([1e300 * np.sign(t - 0.5 + 1e-300) if t > 0.5 else 1.0])
+
+    solver = DormandPrince54(Stiffer(np.array([0.0])), rtol=1e-12, atol=1e-12)
+    with pytest.raises(SolverFailed, match="underflow"):
+        t = 0.0
+        while t < 1.0:
+            t += solver.step(1.0 - t)
 
 
 @pytest.mark.parametrize("jac", [True, False])
@@ -300,8 +313,14 @@ def test_implicit_euler_refactorises_when_newton_is_slow_and_fails_when_it_must(
     assert solver.n_jac >= 2
     assert system.get_state()[0] == pytest.approx((-1 + math.sqrt(1 + 20 * h)) / (2 * h), rel=1e-9)
 
-    with pytest.raises(FloatingPointError, match="Newton failed"):
-        ImplicitEuler(Riccati(2.0, jac=True), max_iter=1).step(0.1)
+    # one fast Newton iteration is not enough from 2: the damped iteration finds the root
+    # of y = 2 - 0.1 y^2 all the same
+    robust = Riccati(2.0, jac=True)
+    ImplicitEuler(robust, max_iter=1).step(0.1)
+    assert robust.get_state()[0] == pytest.approx((-1 + math.sqrt(1.8)) / 0.2, rel=1e-9)
+    # from -3, y = -3 - 0.1 y^2 has no real root: the solver fails, and says so
+    with pytest.raises(SolverFailed, match="no solution"):
+        ImplicitEuler(Riccati(-3.0, jac=True)).step(0.1)
 
 
 def test_step_matrices_are_the_one_step_maps():

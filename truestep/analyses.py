@@ -104,8 +104,8 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
             row.update(status="timeout", note=r)
             _say(f"stability {row['case']} {row['engine']}/{row['method']}: timeout ({r})")
             return
-        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status="ok",
-                   note=r.note)
+        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs,
+                   status=r.status, note=r.note)
         _say(f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
              f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
              f"{seconds:.1f} s")

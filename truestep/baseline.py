@@ -58,7 +58,7 @@ RESULT_KEYS = ["case", "engine", "method", "dt_kind", "dt"]
 STABILITY_KEYS = ["case", "engine", "method"]
 RESTITUTION_KEYS = ["engine", "method", "dt", "e_set", "bounce"]
 ORDER_KEYS = ["case", "engine", "method"]
-STATUS_RANK = {"ok": 0, "unstable": 1, "timeout": 2, "crashed": 2}
+STATUS_RANK = {"ok": 0, "unstable": 1, "solver-failed": 1, "timeout": 2, "crashed": 2}
 """Higher is worse: ok -> unstable is a regression, as is anything -> crashed."""
 FINDING_COLUMNS = ["change", "table", "key", "quantity", "baseline", "current", "note"]
 

@@ -12,7 +12,9 @@ with ``PE = E - KE``: the largest kinetic energy, or the largest swing of potent
 where that is larger (a cloth falling from rest). An oscillator's ``S`` is its energy; a
 Kepler orbit's, its kinetic energy at pericentre. Neither moves when the scene is
 translated or its potential shifted. A plain first-order ODE (no kinetic part) keeps
-``max |E|`` along the path, the energy of its own definition.
+``max |E|`` along the path, the energy of its own definition. A particle scene without
+an exact solution or reference run is read along a run of the reference (RK4 at its finest
+step).
 """
 
 from __future__ import annotations
@@ -42,10 +44,15 @@ def energy_scale(case: Case) -> float:
 def _scale(case: Case) -> float:
     path = reference_path(case)
     if path is None:
-        return _initial_scale(case)
+        return _run_scale(case)
     t, x, v, alive = path
     if case.kind == "ode":
         return _ode_scale(case, t, x)
+    return _particle_scale(case, x, v, alive)
+
+
+def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None
+                    ) -> float:
     from truestep.reference_impl.particles import total_energy
 
     m = np.where(case.model.fixed, 0.0, case.model.mass)
@@ -84,19 +91,24 @@ def _ode_scale(case: Case, t: np.ndarray, states: np.ndarray) -> float:
     return scale if scale > 0 else float("nan")
 
 
-def _initial_scale(case: Case) -> float:
-    """Without a reference path: the start's kinetic energy, or ``|E(0)|`` at rest."""
+RUN_METHOD = "rk4"
+"""The reference method that runs a case without an exact solution for its energy scale."""
+
+
+def _run_scale(case: Case) -> float:
+    """Without an exact solution or reference run: the scale along a run of the reference
+    implementation (:data:`RUN_METHOD` at the case's finest step), NaN if that run fails or
+    the scene is an ODE without one."""
     if case.kind == "ode" or case.model is None:
         return float("nan")
-    from truestep.reference_impl.particles import total_energy
+    from truestep.adapters.reference import ReferenceAdapter
 
-    m = case.model
-    mass = np.where(m.fixed, 0.0, m.mass)
-    kinetic = 0.5 * float(np.sum(mass * np.sum(m.v0 * m.v0, axis=1)))
-    if kinetic > 0:
-        return kinetic
-    e0 = abs(float(total_energy(m, m.x0, m.v0)))
-    return e0 if e0 > 0 else float("nan")
+    if ReferenceAdapter().missing(case, RUN_METHOD):
+        return float("nan")
+    run = ReferenceAdapter().simulate(case, RUN_METHOD, min(case.dts))
+    if run.status != "ok" or run.v is None:
+        return float("nan")
+    return _particle_scale(case, run.x, run.v, run.alive)
 
 
 def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,

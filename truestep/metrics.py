@@ -44,50 +44,91 @@ def _matching(t: np.ndarray, t_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return k[ok], np.nonzero(ok)[0]
 
 
-def position_error(case: Case, traj: Trajectory, exact: Exact) -> float:
-    """Distance between computed and exact positions, m (or state units for an ODE).
-
-    ``final``: at the last time both share (which must be the end of the run);
-    ``max``: the largest over every shared time. Per record, the largest distance over
-    particles (Euclidean; for an ODE state, the largest component). Particles that are
-    not alive in the run, or whose exact position is not known (NaN: not alive in a
-    reference run), are not compared.
-    """
+def _parts(case: Case, traj: Trajectory, exact: Exact, part: str
+           ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The run's and the exact solution's positions (``part = "x"``) or velocities
+    (``"v"``) at their shared times: particles (T, n, 3); an ODE's state (T, 1, dim), of
+    which a second-order system's half (its positions or its velocities) is kept, a
+    first-order system's whole (its state is its position; it has no velocity)."""
     k, j = _matching(traj.t, exact.t)
     if len(k) == 0:
+        return None
+    if case.kind == "ode":
+        mine, theirs = traj.x[k], exact.x[j]
+        half = mine.shape[-1] // 2
+        if case.ode is not None and case.ode.is_second_order:
+            cut = slice(0, half) if part == "x" else slice(half, None)
+            return mine[..., cut], theirs[..., cut]
+        return (mine, theirs) if part == "x" else None
+    if part == "x":
+        return traj.x[k], exact.x[j]
+    if traj.v is None or exact.v is None:
+        return None
+    return traj.v[k], exact.v[j]
+
+
+def position_error(case: Case, traj: Trajectory, exact: Exact, *, norm: str | None = None,
+                   part: str = "x") -> float:
+    """Distance between computed and exact positions, m (or state units for an ODE).
+
+    ``norm`` (default the case's ``error_norm``): ``max``, the largest over every shared
+    time (the worst of the run); ``final``, at the last time both share (which must be
+    the end of the run). Per record, the largest distance over particles (Euclidean; for
+    an ODE, the largest component of its positions: the first half of a second-order
+    system's state, a first-order system's whole state). ``part = "v"``: velocities
+    instead (m/s; NaN where the exact solution gives none). Particles that are not alive
+    in the run, or whose exact position is not known (NaN: not alive in a reference
+    run), are not compared.
+    """
+    pair = _parts(case, traj, exact, part)
+    if pair is None:
         return float("nan")
-    d = traj.x[k] - exact.x[j]
+    mine, theirs = pair
+    k, _ = _matching(traj.t, exact.t)
+    d = mine - theirs
     if traj.alive is not None and case.kind != "ode":
         d = np.where(traj.alive[k][..., None], d, np.nan)
-    d = np.where(np.isnan(exact.x[j]), 0.0, np.nan_to_num(d, nan=0.0)) if np.isnan(d).any() else d
+    d = np.where(np.isnan(theirs), 0.0, np.nan_to_num(d, nan=0.0)) if np.isnan(d).any() else d
     per_record = np.max(np.abs(d), axis=(1, 2)) if case.kind == "ode" else np.max(
         np.linalg.norm(d, axis=2), axis=1
     )
-    if case.error_norm == "final":
+    if (norm or case.error_norm) == "final":
         if abs(traj.t[k[-1]] - case.duration) > 1e-9 * max(1.0, case.duration):
             return float("nan")
         return float(per_record[-1])
     return float(np.max(per_record))
 
 
-def energy_drift(case: Case, traj: Trajectory, exact: Exact | None) -> tuple[float, float]:
-    """Relative energy error: (largest over the run, at the end).
+def energy_drift(case: Case, traj: Trajectory, exact: Exact | None, *,
+                 scale: float | None = None) -> tuple[float, float]:
+    """Energy error over the case's energy scale: (largest over the run, at the end).
 
-    Conservative scenes: ``|E(t) - E(0)| / |E(0)|``. Scenes whose exact solution gives the
-    energy curve (damped oscillators): ``|E(t) - E_exact(t)| / |E_exact(0)|``. Otherwise NaN.
+    ``S`` is the case's energy scale (:func:`truestep.energy_scale.energy_scale`: the
+    energy the motion exchanges, the same wherever the potential's zero lies).
+    Conservative scenes: ``|E(t) - E(0)| / S``, over every step where the run was watched
+    at every step (``traj.extremes``), else over the records. Scenes whose exact solution
+    gives the energy curve (damped oscillators): ``|E(t) - E_exact(t)| / S`` at the
+    records. Otherwise NaN. ``scale`` overrides the case's (J).
     """
+    from truestep.energy_scale import energy_scale
+
     e = traj.energy
     if e is None or len(e) == 0:
         return float("nan"), float("nan")
+    scale = energy_scale(case) if scale is None else scale
+    if not np.isfinite(scale):
+        return float("nan"), float("nan")
     if case.conservative:
-        scale = abs(e[0]) if e[0] != 0 else float(np.max(np.abs(e))) or 1.0
         dev = np.abs(e - e[0]) / scale
-        return float(np.max(dev)), float(dev[-1])
+        worst = float(np.max(dev))
+        top = traj.extremes
+        if top is not None:
+            worst = max(worst, abs(top.e_max - e[0]) / scale, abs(top.e_min - e[0]) / scale)
+        return worst, float(dev[-1])
     if exact is not None and exact.energy is not None and len(exact.t) == len(exact.energy):
         k, j = _matching(traj.t, exact.t)
         if len(k) == 0:
             return float("nan"), float("nan")
-        scale = abs(exact.energy[0]) or 1.0
         dev = np.abs(e[k] - exact.energy[j]) / scale
         return float(np.max(dev)), float(dev[-1])
     return float("nan"), float("nan")
@@ -111,45 +152,47 @@ def energy_behaviour(case: Case) -> str:
     return "dissipative" if damped else "conservative"
 
 
-def energy_blowup(case: Case, traj: Trajectory) -> float | None:
-    """When a finite run blew up by its energy, or ``None``.
+PRE_ASYMPTOTIC = 0.5
+"""Errors above this fraction of the case's scale are not fitted: the run is wrong
+altogether there, not converging."""
+ROUND_OFF = 1e-11
+"""Errors below this fraction of the case's scale are round-off, which has no order."""
+AGREE = 0.3
+"""Local orders within this of the finest one belong to the asymptotic range (a method whose
+error is ``C dt^p (1 + c dt)`` changes its local order by less, once converging; one that
+is not yet converging, or whose error term changes, by more)."""
 
-    Only in a scene without energy sources (:func:`energy_behaviour`), whose exact energy
-    cannot rise, and with the run's energy moved by more than its start
-    (``|E - E(0)| > |E(0)|``: a stable method can be that inaccurate only at steps near
-    its limit): unstable when the energy keeps growing through every quarter of the run
-    (:func:`truestep.stability.energy_keeps_growing`), or, in a dissipative scene, when it
-    stays above its start (:func:`truestep.stability.energy_stays_up`), wherever in the
-    run the rise happened. Returns the first time (s) the energy was that far from its
-    start.
-    """
-    from truestep.stability import energy_keeps_growing, energy_stays_up
 
-    e = traj.energy
-    behaviour = energy_behaviour(case)
-    if e is None or len(e) < 2 or behaviour == "source":
-        return None
-    if not (case.conservative or case.kind == "particles"):
-        return None
-    far = np.abs(e - e[0]) > (abs(e[0]) or float(np.max(np.abs(e))) or 1.0)
-    if not far.any():
-        return None
-    if not energy_keeps_growing(traj.t, e) and not (
-            behaviour == "dissipative" and energy_stays_up(traj.t, e)):
-        return None
-    return float(traj.t[np.argmax(far)])
+def local_orders(dts: np.ndarray, errors: np.ndarray) -> np.ndarray:
+    """``log(e_i / e_(i+1)) / log(dt_i / dt_(i+1))`` between successive steps, the steps
+    sorted from the largest; shape (len - 1,)."""
+    order = np.argsort(-np.asarray(dts, float))
+    d, e = np.log(np.asarray(dts, float)[order]), np.log(np.asarray(errors, float)[order])
+    return np.diff(e) / np.diff(d)
 
 
 def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0) -> float:
-    """Order of convergence: the least-squares slope of log(error) against log(dt).
+    """Order of convergence, fitted where the asymptotic regime holds.
 
-    Points outside the asymptotic range are left out: errors above ``0.1 * scale``
-    (the method has not converged yet) and below ``1e-11 * scale`` (round-off).
-    Returns NaN with fewer than two usable points.
+    Points whose error is above :data:`PRE_ASYMPTOTIC` of ``scale`` (not converging) or
+    below :data:`ROUND_OFF` of it (round-off) are left out. Of the rest, sorted by step,
+    the local orders between successive steps (:func:`local_orders`) are read from the
+    finest pair up: the range extends to a coarser step while its local order is within
+    :data:`AGREE` of the finest pair's. The order is the least-squares slope of log(error)
+    against log(dt) over that range. NaN with fewer than two usable points.
     """
     dts, errors = np.asarray(dts, float), np.asarray(errors, float)
-    ok = np.isfinite(errors) & (errors > 1e-11 * scale) & (errors < 0.1 * scale)
-    if np.count_nonzero(ok) < 2:
+    ok = (np.isfinite(errors) & np.isfinite(dts) & (dts > 0) & (errors > ROUND_OFF * scale)
+          & (errors < PRE_ASYMPTOTIC * scale))
+    dts, errors = dts[ok], errors[ok]
+    if len(dts) < 2:
         return float("nan")
-    slope, _ = np.polyfit(np.log(dts[ok]), np.log(errors[ok]), 1)
+    order = np.argsort(-dts)
+    dts, errors = dts[order], errors[order]
+    local = local_orders(dts, errors)
+    start = len(local) - 1  # the finest pair
+    while start > 0 and abs(local[start - 1] - local[-1]) <= AGREE:
+        start -= 1
+    keep = slice(start, None)
+    slope, _ = np.polyfit(np.log(dts[keep]), np.log(errors[keep]), 1)
     return float(slope)

@@ -139,20 +139,23 @@ def stopping_distance_error(case: Case, traj: Trajectory) -> float:
 
 
 def _arcs(case: Case, traj: Trajectory) -> tuple[np.ndarray, np.ndarray, float]:
-    """Apex heights (m) and launch times (s) of the recorded flights of particle 0 off
-    plane 0, and the normal gravity g (m/s^2).
+    """Apex heights (m) and bounce times (s) of the flights of particle 0 off plane 0, as
+    the run shows them, and the normal gravity g (m/s^2).
 
     The bounces are the contacts that :func:`truestep.restitution.bounces` finds (for
-    every engine the same detector as the restitution table's): each flight is read from
-    its first sample after the contact, apex ``u + w^2 / (2 g)`` and launch from the plane
-    at ``t - (sqrt(w^2 + 2 g u) - w) / g``.
+    every engine the same detector as the restitution table's): each flight's apex is the
+    highest height it reached at a recorded step, each bounce's time that of the
+    contact's lowest sample. Both need every step recorded (the case's ``max_records`` at
+    least its steps): a run recorded more sparsely gives NaN, not a guess.
     """
     m = case.model
     plane = m.planes[0]
     g = float(-(m.gravity @ plane.normal))
+    if traj.steps and len(traj.t) < traj.steps + 1:
+        return np.full(0, np.nan), np.full(0, np.nan), float("nan")
     h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, float(m.radius[0]))
     flights = [b for b in bounces(traj.t, h, vn, g) if b.v_out > 0]
-    return (np.array([b.apex for b in flights]), np.array([b.launch for b in flights]), g)
+    return (np.array([b.apex for b in flights]), np.array([b.t_low for b in flights]), g)
 
 
 def _bounces(case: Case) -> int:
@@ -161,12 +164,15 @@ def _bounces(case: Case) -> int:
 
 @register
 def apex_height_error(case: Case, traj: Trajectory) -> float:
-    """Largest relative error of the first ``bounces`` apex heights against ``e^(2n) h_0``.
+    """Largest relative error of the first ``bounces`` apex heights the run reached against
+    the exact ``e^(2n) h_0``.
 
     ``bounces`` comes from the case's ``[reference]`` table (default 3); ``inf`` when the
-    run shows fewer bounces.
+    run shows fewer bounces; NaN when it was not recorded at every step.
     """
     apex, _, g = _arcs(case, traj)
+    if not np.isfinite(g):
+        return float("nan")
     k = _bounces(case)
     if len(apex) < k:
         return float("inf")
@@ -181,17 +187,21 @@ def apex_height_error(case: Case, traj: Trajectory) -> float:
 
 @register
 def bounce_time_error(case: Case, traj: Trajectory) -> float:
-    """Largest error of the first ``bounces`` bounce times, s (``inf`` if fewer were seen)."""
-    _, launch, g = _arcs(case, traj)
+    """Largest error of the first ``bounces`` bounce times (each contact's lowest sample)
+    against the exact impacts, s (``inf`` if fewer were seen; NaN when the run was not
+    recorded at every step)."""
+    _, when, g = _arcs(case, traj)
+    if not np.isfinite(g):
+        return float("nan")
     k = _bounces(case)
-    if len(launch) < k:
+    if len(when) < k:
         return float("inf")
     m = case.model
     plane = m.planes[0]
     u0 = float((m.x0[0] - plane.point) @ plane.normal - m.radius[0])
     times, _ = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution,
                                float(traj.t[-1]))
-    return float(np.max(np.abs(launch[:k] - times[:k])))
+    return float(np.max(np.abs(when[:k] - times[:k])))
 
 
 def _frames(spec, t: np.ndarray) -> np.ndarray:

@@ -1,20 +1,29 @@
-"""Effective restitution per bounce, from rebound velocities and from apex heights.
+"""Effective restitution per bounce, from rebound velocities and from apex heights, every
+quantity read from the motion itself.
 
 A ball falls onto a plane under the normal component of gravity ``g_n`` (m/s^2, toward
 the plane). A contact is the run of steps during which the plane pushes the ball (or the
-ball is within :data:`CONTACT_BAND` of it). Two estimates per bounce:
+ball is within :data:`CONTACT_BAND` of it). Per bounce:
 
 * **from velocities**: the normal speed at the first sample after the contact over the
   speed at the last sample before it. This is the quantity an engine's restitution law
   acts on (``V' = V_T - k_r V_N`` on the velocity at the start of the contact step), so
   a hard-contact engine that honours ``k_r`` reads exactly ``k_r`` at any step; the
   samples miss the true impact and release by less than a step, which shows up as an
-  error of at most about ``g_n dt / v`` when the flight itself is exact.
-* **from apex heights**: ``sqrt(H_n / H_(n-1))``, each apex computed from the first flight
-  sample after a contact as ``h + v_n^2 / (2 g_n)`` (exact for ballistic flight, whatever
-  the step), with ``H_0`` the drop height. An integrator's flight is not exactly
-  ballistic (symplectic Euler conserves ``v^2 + 2 g x - g dt v`` instead), so this
-  estimate carries an ``O(dt)`` error of its own that vanishes as the step shrinks.
+  error of at most about ``g_n dt / v``.
+* **apex**: the highest height the ball reaches in the flight after the contact, the
+  largest of the flight's samples (a run recorded at every step: the height it reached
+  at a step), with ``H_0`` the highest point before the first contact; and the
+  restitution from apexes, ``sqrt(H_n / H_(n-1))``. Nothing is extrapolated: an
+  integrator whose flight is not ballistic (symplectic Euler's, a soft contact that
+  launches late) is measured by the heights it actually reaches. A flight sampled every
+  ``dt`` reads its apex low by at most ``g_n dt^2 / 8``.
+* **when**: the time of the contact's lowest sample (its deepest point: the impact of a
+  hard contact to within a step, the middle of a soft one).
+
+Every quantity is read the same way for every engine, and none from a sample inside the
+contact but the lowest: a soft contact (an engine's spring-damper, lasting several steps
+and penetrating) is one contact, however its velocity turns while it lasts.
 """
 
 from __future__ import annotations
@@ -32,14 +41,10 @@ scenes. Bounces whose flight never leaves the band are not detected."""
 @dataclass
 class Bounce:
     """One impact: number (from 1), time of the last sample before it (s), speeds in and
-    out (m/s), restitution from velocities, apex height after it (m, above contact),
-    restitution from apex heights, the deepest penetration during the contact (m, >= 0),
-    and the launch: when the flight after the contact left the plane (s), its first
-    sample's ballistic arc followed back to height 0 (NaN when the ball came to rest).
-
-    Every flight quantity is read from the first sample *after* the contact, never from
-    one inside it: a soft contact (an engine's spring-damper, lasting several steps and
-    penetrating) is one contact, however its velocity turns while it lasts."""
+    out (m/s), restitution from velocities, apex height after it (m above contact, the
+    highest sample of the flight; 0 once the ball rests), restitution from apex heights,
+    the deepest penetration during the contact (m, >= 0) and the time of the contact's
+    lowest sample (s)."""
 
     bounce: int
     t: float
@@ -49,7 +54,7 @@ class Bounce:
     apex: float
     e_apex: float
     penetration: float
-    launch: float = float("nan")
+    t_low: float = float("nan")
 
 
 def contact_intervals(
@@ -79,8 +84,10 @@ def bounces(
 
     A contact is a run of contact intervals (:func:`contact_intervals`); it is measured
     from the sample before the run (``v_in``, the speed toward the plane) and the sample
-    after it (``v_out``). A contact that lasts to the end of the run (the ball came to
-    rest) has ``v_out = 0``.
+    after it (``v_out``); the flight after it runs to the next contact (or the end), and
+    its apex is its highest sample (NaN for a flight the end of the run cuts while it
+    still rises). A contact that lasts to the end of the run (the ball came to rest) has
+    ``v_out = 0`` and apex 0.
     """
     if g_n < 0:
         raise ValueError(f"g_n must not be negative (gravity toward the plane or along it), got {g_n}")
@@ -88,27 +95,31 @@ def bounces(
     edges = np.diff(np.concatenate([[0], touching.astype(np.int8), [0]]))
     starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
     out: list[Bounce] = []
-    apex_prev = float(h[0] + max(vn[0], 0.0) ** 2 / (2 * g_n)) if g_n > 0 else np.nan
-    for a, b in zip(starts, ends, strict=True):
+    first = int(starts[0]) if len(starts) else len(t) - 1
+    apex_prev = float(np.max(h[: first + 1])) if g_n > 0 else np.nan
+    for k, (a, b) in enumerate(zip(starts, ends, strict=True)):
         # intervals a..b-1 touch: samples a (before) .. b (after)
         if a == 0:
             continue
         v_in = float(-vn[a])
-        penetration = max(0.0, float(-np.min(h[a : b + 1])))
+        low = a + int(np.argmin(h[a : b + 1]))
+        penetration = max(0.0, float(-h[low]))
         resting = b >= len(t) - 1 or vn[b] <= 0
         v_out = 0.0 if resting else float(vn[b])
-        u = max(float(h[b]), 0.0)
         if resting:
-            apex, launch = 0.0, np.nan
+            apex = 0.0
         elif g_n > 0:
-            apex = u + v_out**2 / (2 * g_n)
-            launch = float(t[b]) - (np.sqrt(v_out**2 + 2 * g_n * u) - v_out) / g_n
+            until = int(starts[k + 1]) if k + 1 < len(starts) else len(t) - 1
+            top = b + int(np.argmax(h[b : until + 1]))
+            # a flight the end of the run cuts while it still rises has no apex yet
+            cut = k + 1 >= len(starts) and top == len(t) - 1 and vn[top] > 0
+            apex = np.nan if cut else max(float(h[top]), 0.0)
         else:  # a wall along gravity: straight flight off it, no apex
-            apex, launch = np.nan, float(t[b]) - u / v_out
+            apex = np.nan
         out.append(Bounce(
             len(out) + 1, float(t[a]), v_in, v_out, v_out / v_in if v_in > 0 else np.nan,
             apex, float(np.sqrt(apex / apex_prev)) if apex_prev > 0 else np.nan, penetration,
-            launch,
+            float(t[low]),
         ))
         if resting:
             break

@@ -28,11 +28,15 @@ if TYPE_CHECKING:
     from truestep.journal import Journal
 
 RESULT_COLUMNS = [
-    "case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
-    "energy_drift_final", "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail",
+    "case", "engine", "method", "dt", "dt_kind", "status", "error", "error_final", "error_v",
+    "energy_drift", "energy_drift_final", "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail",
     "missing", "message", "case_source", "path", "host",
 ]
 """The columns of ``results.csv`` (property columns follow, one per named property).
+``error`` is the case's error measure, the worst over the run unless the case says
+``[reference] error = "final"``; ``error_final`` the position error at the end;
+``error_v`` the velocity error, the worst over the run (m/s; for a second-order ODE the
+velocity half of its state);
 ``case_source`` is the case's name when the case library holds it, else its file, so
 that ``truestep gate`` finds the case again; ``path`` is the engine's code path (the
 reference: ``compiled`` or ``numpy``); ``host`` the machine the row was timed on (empty
@@ -79,8 +83,9 @@ class Timing:
         return int(np.clip(wanted, self.min_repeats, self.max_repeats))
 
 
-QUICK_TIMING = Timing(min_total_s=0.005, min_repeats=2, max_repeats=5, long_run_s=0.05)
-"""``--quick`` runs time less: a smoke run, whose picks are still called with their spread."""
+QUICK_TIMING = Timing(min_total_s=0.0, min_repeats=1, max_repeats=1, long_run_s=0.0)
+"""``--quick`` runs time each row once: a smoke run (its ties are read against the least
+noise, :data:`truestep.picks.TIE_NOISE`, with no spread of its own)."""
 
 
 def spread(walls: list[float]) -> float:
@@ -95,8 +100,14 @@ def spread(walls: list[float]) -> float:
 
 
 def _same_run(a: Trajectory, b: Trajectory) -> bool:
-    """Whether two runs of the same scene ended in the same state, bit for bit."""
-    if (a.status, a.nfev, a.steps, len(a.t)) != (b.status, b.nfev, b.steps, len(b.t)):
+    """Whether two runs of the same scene ended in the same state, bit for bit (runs that
+    did not finish are only checked to have failed alike: a run watched at every step
+    finds a blow-up earlier than one checked every few steps)."""
+    if a.status != b.status:
+        return False
+    if a.status != "ok":
+        return True
+    if (a.nfev, a.steps, len(a.t)) != (b.nfev, b.steps, len(b.t)):
         return False
     pairs = [(a.t[-1:], b.t[-1:]), (a.x[-1:], b.x[-1:])]
     if a.v is not None and b.v is not None:
@@ -109,30 +120,51 @@ NOT_REPEATABLE = "not repeatable: timed runs of the same scene ended in differen
 not deterministic): its numbers may differ from run to run and machine to machine."""
 
 
+def watches_every_step(adapter) -> bool:
+    """Whether ``adapter.simulate`` takes ``monitor=True`` (Adapter protocol, item 9)."""
+    import inspect
+
+    try:
+        return "monitor" in inspect.signature(adapter.simulate).parameters
+    except (TypeError, ValueError):
+        return False
+
+
 def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing, *,
                    warm_up: bool = True) -> Trajectory:
-    """Warm up (unless this process has just run the same case and method), time, keep
-    the first timed trajectory; runs inside the child process.
+    """Make the run the row is measured from, then time; runs inside the child process.
 
-    Every further timed run is checked to end where the first did, bit for bit; a run
-    that does not puts :data:`NOT_REPEATABLE` in the row's message.
+    The measured run is watched at every step where the adapter can
+    (``simulate(..., monitor=True)``: the energy's extremes over every step) and is not
+    timed; it also warms the process up (compilation, caches, first-call costs) for the
+    timed runs. An adapter that cannot watch is warmed up instead by a short run
+    (:attr:`Timing.warmup_fraction` of the duration; unless ``warm_up`` is false: this
+    process has just run the same case and method). The timed runs follow
+    (:meth:`Timing.runs_after`), and every one of them is checked to end where the
+    measured run did, bit for bit; one that does not puts :data:`NOT_REPEATABLE` in the
+    row's message.
     """
     adapter = get_adapter(engine)
-    if warm_up:
+    monitor = watches_every_step(adapter)
+    if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
         short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
                                                        min(dt, case.duration)))
         adapter.simulate(short, method, dt)
-    traj = adapter.simulate(case, method, dt)
-    walls = [traj.wall_s]
-    if traj.status == "ok":
-        repeatable = True
-        for _ in range(timing.runs_after(traj.wall_s) - 1):
+    traj = adapter.simulate(case, method, dt, monitor=True) if monitor else None
+    timed = adapter.simulate(case, method, dt)
+    if traj is None:
+        traj = timed
+    walls = [timed.wall_s]
+    repeatable = traj is timed or _same_run(traj, timed)
+    if timed.status == "ok":
+        for _ in range(timing.runs_after(timed.wall_s) - 1):
             again = adapter.simulate(case, method, dt)
             walls.append(again.wall_s)
             repeatable = repeatable and _same_run(traj, again)
-        traj.wall_s = statistics.median(walls)
-        if not repeatable:
-            traj.message = "; ".join(m for m in (traj.message, NOT_REPEATABLE) if m)
+    traj.wall_s = statistics.median(walls)
+    traj.path = timed.path or traj.path
+    if not repeatable:
+        traj.message = "; ".join(m for m in (traj.message, NOT_REPEATABLE) if m)
     traj.extra["repeats"] = np.array(len(walls))
     traj.extra["wall_s_spread"] = np.array(spread(walls))
     return traj
@@ -144,7 +176,12 @@ def measure(case: Case, traj: Trajectory) -> dict[str, float]:
 
     out: dict[str, float] = {}
     exact = metrics.exact_for(case, traj.t) if traj.status == "ok" else None
-    out["error"] = metrics.position_error(case, traj, exact) if exact is not None else np.nan
+    if exact is not None:
+        out["error"] = metrics.position_error(case, traj, exact)
+        out["error_final"] = metrics.position_error(case, traj, exact, norm="final")
+        out["error_v"] = metrics.position_error(case, traj, exact, part="v")
+    else:
+        out["error"] = out["error_final"] = out["error_v"] = np.nan
     drift, drift_end = metrics.energy_drift(case, traj, exact)
     out["energy_drift"], out["energy_drift_final"] = drift, drift_end
     for name in case.properties:
@@ -214,26 +251,19 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
     if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
         row.update(status="crashed", message=traj)
         return row
-    if traj.status == "ok" and (t_blow := metrics.energy_blowup(case, traj)) is not None:
-        traj.status, traj.t_fail = "unstable", t_blow
-        traj.message = (f"finite, but its energy grew from {traj.energy[0]:.4g} J to "
-                        f"{traj.energy[-1]:.4g} J and was still rising")
-    row.update(
-        status=traj.status,
-        nfev=traj.nfev,
-        steps=traj.steps,
-        wall_s=traj.wall_s,
-        wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
-        repeats=int(traj.extra.get("repeats", 0)),
-        t_fail=traj.t_fail,
-        message=str(traj.message)[:MESSAGE_CHARS],
-        path=str(traj.path)[:MESSAGE_CHARS],
-    )
-    failed = _MEASURE_TIMED_OUT.get(case.file)
+    row.update(nfev=traj.nfev, steps=traj.steps, wall_s=traj.wall_s,
+               wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
+               repeats=int(traj.extra.get("repeats", 0)), path=str(traj.path)[:MESSAGE_CHARS])
+    timed_out = _MEASURE_TIMED_OUT.get(case.file)
     try:
-        if failed:
-            raise TimeLimitExceeded(failed)
+        if timed_out:
+            raise TimeLimitExceeded(timed_out)
         with time_limit(case.timeout_s, "measuring the run (exact solution included)"):
+            if traj.status == "ok" and (failed := _motion_failure(case, traj)) is not None:
+                traj.status, traj.t_fail = "unstable", failed.t
+                traj.message = "; ".join(m for m in (traj.message, failed.reason) if m)
+            row.update(status=traj.status, t_fail=traj.t_fail,
+                       message=str(traj.message)[:MESSAGE_CHARS])
             row.update(measure(case, traj))
     except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
         _MEASURE_TIMED_OUT[case.file] = str(err)
@@ -246,6 +276,14 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
         if trace is not None:
             traces[(case.name, engine, method, row["dt_kind"], dt)] = trace
     return row
+
+
+def _motion_failure(case: Case, traj: Trajectory):
+    """:func:`truestep.stability.motion_failure` against the case's energy scale."""
+    from truestep.energy_scale import energy_scale
+    from truestep.stability import motion_failure
+
+    return motion_failure(case, traj, energy_scale(case))
 
 
 MESSAGE_CHARS = 2000

@@ -12,12 +12,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-STATUSES = frozenset({"ok", "unstable", "crashed", "timeout", "unsupported", "skipped"})
+STATUSES = frozenset({"ok", "unstable", "solver-failed", "crashed", "timeout", "unsupported",
+                      "skipped"})
 """Values of a ``status`` column."""
 
 NUMERIC = {
-    "results": ("dt", "error", "energy_drift", "energy_drift_final", "nfev", "steps", "wall_s",
-                "wall_s_spread", "repeats", "t_fail"),
+    "results": ("dt", "error", "error_final", "error_v", "energy_drift", "energy_drift_final",
+                "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail"),
     "stability": ("dt_limit", "dt_limit_exact", "dt_unstable", "runs"),
     "restitution": ("dt", "e_set", "bounce", "e_measured", "e_apex", "v_in", "v_out", "apex",
                     "penetration"),

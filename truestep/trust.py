@@ -11,7 +11,7 @@ import numpy as np
 
 from truestep.adapters.base import Trajectory
 
-STATUSES = ("ok", "unstable")
+STATUSES = ("ok", "unstable", "solver-failed")
 """Statuses an adapter may return; the harness adds ``crashed``, ``timeout`` and the rest."""
 
 

@@ -11,6 +11,12 @@ from truestep.reference_impl.solvers.facts import MethodFacts
 from truestep.reference_impl.system import SecondOrderSystem, System
 
 
+class SolverFailed(Exception):
+    """A step whose equations the solver could not solve (an implicit method's Newton
+    iteration found no solution): not a blow-up of the motion, and never read as one.
+    The run stops with status ``solver-failed`` and this message."""
+
+
 class Solver(ABC):
     """A one-step solver written only against :class:`~truestep.reference_impl.system.System`.
 

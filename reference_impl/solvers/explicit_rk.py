@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from numpy.polynomial import Polynomial
 
-from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.base import Solver, SolverFailed
 from truestep.reference_impl.solvers.facts import MethodFacts, Stability, StepMatrix
 from truestep.reference_impl.system import System
 
@@ -287,6 +288,19 @@ class DormandPrince54(Solver):
     )
     facts = MethodFacts(order=5, evaluations_per_step=6, symplectic=False,
                         stability=tableau_stability(A[:6, :6], B[:6], order=5))
+    # The continuous extension of order 4 (Hairer, Norsett & Wanner, II.6, "dense output
+    # of DOPRI5"): the last term's weights on the seven stages.
+    D = np.array([-12715105075 / 11282082432, 0, 87487479700 / 32700410799,
+                  -10690763975 / 1880347072, 701980252875 / 199316789632,
+                  -1453857185 / 822651844, 69997945 / 29380423])
+
+    def dense(self) -> DenseStep:
+        """The last accepted step's continuous extension: the state at any time within it
+        (order 4, exact at both ends, matching the derivative there)."""
+        if self._step is None:
+            raise ValueError("dopri5: no step taken yet")
+        t0, h, x0, x1, k = self._step
+        return DenseStep(t0, h, x0, x1, h * k[0], h * k[6], h * (self.D @ k))
 
     def __init__(self, system: System, *, rtol: float = 1e-6, atol: float = 1e-6) -> None:
         super().__init__(system)
@@ -298,6 +312,7 @@ class DormandPrince54(Solver):
         self._f0: np.ndarray | None = None
         self._x_end: np.ndarray | None = None  # the state the last step ended at
         self._h: float | None = None
+        self._step: tuple[float, float, np.ndarray, np.ndarray, np.ndarray] | None = None
         self.n_rejected = 0
 
     def _initial_step(self, x: np.ndarray, t: float, f0: np.ndarray, h_max: float) -> float:
@@ -332,7 +347,7 @@ class DormandPrince54(Solver):
         if self._h is None:
             self._h = self._initial_step(x, t, self._f0, dt)
         if not 0.0 < self._h < math.inf:
-            raise FloatingPointError(f"dopri5: no usable step size at t={t:.6g}")
+            raise SolverFailed(f"dopri5: no usable step size at t={t:.6g}")
         h = min(self._h, dt)
         k = self._k
         abs_x = np.abs(x)
@@ -359,11 +374,50 @@ class DormandPrince54(Solver):
             rejected = True
             self.n_rejected += 1
             if h < 1e-14 * max(1.0, abs(t)):
-                raise FloatingPointError(f"dopri5: step size underflow at t={t:.6g}")
+                if not np.isfinite(err):
+                    raise FloatingPointError(f"dopri5: non-finite state or derivative at "
+                                             f"t={t:.6g}")
+                raise SolverFailed(f"dopri5: step size underflow at t={t:.6g}: the error "
+                                   "estimate stays above the tolerance at every step size")
         self._f0 = f_new  # a new array (System.derivative's contract): kept, not copied
         self._x_end = x_new
+        self._step = (t, h, x, x_new, k.copy())
         self.system.set_state(x_new, t + h)
         return h
+
+
+@dataclass(frozen=True)
+class DenseStep:
+    """One accepted step's continuous extension (Hairer's ``CONTD5`` form): the state at
+    ``t0 + theta h`` for ``0 <= theta <= 1`` is
+
+    ``x0 + theta (r2 + (1 - theta) (r3 + theta (r4 + (1 - theta) r5)))``
+
+    with ``r2 = x1 - x0``, ``r3 = h k1 - r2``, ``r4 = r2 - h k7 - r3`` and ``r5 = h D . k``.
+    t0, h : s;  x0, x1, hk1, hk7, hdk : ndarray, shape (dim,)
+    """
+
+    t0: float
+    h: float
+    x0: np.ndarray
+    x1: np.ndarray
+    hk1: np.ndarray
+    hk7: np.ndarray
+    hdk: np.ndarray
+
+    def __call__(self, t: float, index: np.ndarray | None = None) -> np.ndarray:
+        """The state at time ``t`` (s) within the step, shape (dim,); or only its
+        components ``index``."""
+        theta = (t - self.t0) / self.h
+        if index is None:
+            x0, x1, hk1, hk7, hdk = self.x0, self.x1, self.hk1, self.hk7, self.hdk
+        else:
+            x0, x1, hk1, hk7, hdk = (a[index] for a in (self.x0, self.x1, self.hk1, self.hk7,
+                                                        self.hdk))
+        r2 = x1 - x0
+        r3 = hk1 - r2
+        r4 = r2 - hk7 - r3
+        return x0 + theta * (r2 + (1 - theta) * (r3 + theta * (r4 + (1 - theta) * hdk)))
 
 
 def _rms(a: np.ndarray) -> float:

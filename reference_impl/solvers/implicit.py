@@ -9,7 +9,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from truestep.reference_impl.solvers.base import Solver
+from truestep.reference_impl.solvers.base import Solver, SolverFailed
 from truestep.reference_impl.solvers.facts import MethodFacts, Stability
 from truestep.reference_impl.system import System
 
@@ -32,9 +32,19 @@ class ImplicitEuler(Solver):
     kept from step to step while Newton converges fast with it (each update at most
     half the previous one) and rebuilt at the current iterate when it does not, or when
     the step size changes. Iterations stop when the update is below ``tol`` in the RMS
-    norm scaled by ``1 + |y|``. Order 1, A-stable and L-stable: on an undamped
-    oscillator it loses energy at every step size. Its evaluations per step vary with
-    the Newton iterations (the solver counts them).
+    norm scaled by ``1 + |y|``.
+
+    A step whose fast Newton iteration does not converge (large steps on stiff,
+    nonlinear scenes: the explicit predictor lands far away) is solved again from the
+    current state by damped Newton: a fresh Jacobian at every iterate and a backtracking
+    line search on the residual ``|y - x - h f(y)|``, which converges wherever the
+    step's equation has a solution the iteration can reach. Only when that fails too
+    does the step raise :class:`~truestep.reference_impl.solvers.base.SolverFailed`
+    (status ``solver-failed``, never ``unstable``).
+
+    Order 1, A-stable and L-stable: on an undamped oscillator it loses energy at every
+    step size. Its evaluations per step vary with the Newton iterations (the solver
+    counts them).
     """
 
     name = "implicit-euler"
@@ -42,10 +52,12 @@ class ImplicitEuler(Solver):
                         stability=Stability(imaginary=float("inf"), real=float("inf"),
                                             a_stable=True, step_matrix=implicit_euler_step))
 
-    def __init__(self, system: System, *, tol: float = 1e-10, max_iter: int = 20) -> None:
+    def __init__(self, system: System, *, tol: float = 1e-10, max_iter: int = 20,
+                 max_damped_iter: int = 200) -> None:
         super().__init__(system)
-        self.tol, self.max_iter = tol, max_iter
+        self.tol, self.max_iter, self.max_damped_iter = tol, max_iter, max_damped_iter
         self.n_jac = 0
+        self.damped_steps = 0
         self._solve: Callable[[np.ndarray], np.ndarray] | None = None
         self._solve_dt: float | None = None
 
@@ -72,35 +84,89 @@ class ImplicitEuler(Solver):
             self._solve = lambda b: la.lu_solve(lu_piv, b)
         self._solve_dt = dt
 
-    def step(self, dt: float) -> float:
-        x, t = self.system.get_state(), self.system.get_time()
+    def _size(self, delta: np.ndarray, y: np.ndarray) -> float:
+        return float(np.sqrt(np.mean((delta / (1.0 + np.abs(y))) ** 2)))
+
+    def _fast_newton(self, x: np.ndarray, fx: np.ndarray, t: float, dt: float
+                     ) -> np.ndarray | None:
+        """Newton from the explicit predictor ``x + h f(x)`` with the kept matrix (rebuilt
+        once at an iterate when it converges slowly); ``None`` when it does not converge."""
         t1 = t + dt
-        y = x + dt * self.fun(x, t)
+        y = x + dt * fx
         fy = self.fun(y, t1)
         if not (np.isfinite(y).all() and np.isfinite(fy).all()):
-            raise FloatingPointError(f"implicit-euler: non-finite state or derivative at t={t:.6g}")
+            return None
         if self._solve is None or self._solve_dt != dt:
             self._factorise(y, t1, fy, dt)
         rebuilt = False  # at an iterate of this step (a matrix of the predictor does not count)
         prev = np.inf
-        it = 0
-        while True:
+        for _ in range(self.max_iter):
             residual = y - x - dt * fy
             if not np.isfinite(residual).all():
-                raise FloatingPointError(f"implicit-euler: non-finite state or derivative at "
-                                         f"t={t:.6g}")
+                return None
             delta = self._solve(-residual)
             y = y + delta
             fy = self.fun(y, t1)
-            it += 1
-            size = float(np.sqrt(np.mean((delta / (1.0 + np.abs(y))) ** 2)))
+            size = self._size(delta, y)
             if size < self.tol:
-                break
-            if not np.isfinite(size) or it >= self.max_iter:
-                raise FloatingPointError(f"implicit-euler: Newton failed at t={t:.6g}")
+                return y if np.isfinite(fy).all() else None
+            if not np.isfinite(size):
+                return None
             if size > 0.5 * prev and not rebuilt:
                 self._factorise(y, t1, fy, dt)
                 rebuilt = True
             prev = size
-        self.system.set_state(y, t1)
+        return None
+
+    def _damped_newton(self, x: np.ndarray, t: float, dt: float) -> np.ndarray:
+        """Newton from the current state with a fresh Jacobian at every iterate and a
+        backtracking line search on the residual norm; raises
+        :class:`~truestep.reference_impl.solvers.base.SolverFailed` when it finds no
+        solution."""
+        t1 = t + dt
+        y = x.copy()
+        fy = self.fun(y, t1)
+        residual = y - x - dt * fy
+        norm = float(np.linalg.norm(residual))
+        for _ in range(self.max_damped_iter):
+            if not np.isfinite(norm):
+                break
+            self._factorise(y, t1, fy, dt)
+            delta = self._solve(-residual)
+            if self._size(delta, y) < self.tol:  # converged: the residual is round-off
+                y = y + delta
+                if np.isfinite(self.fun(y, t1)).all():
+                    self._solve_dt = None
+                    return y
+                break
+            lam = 1.0
+            while lam >= 1e-6:
+                trial = y + lam * delta
+                f_trial = self.fun(trial, t1)
+                r_trial = trial - x - dt * f_trial
+                n_trial = float(np.linalg.norm(r_trial))
+                if np.isfinite(n_trial) and n_trial <= (1.0 - 1e-4 * lam) * norm:
+                    break
+                lam *= 0.5
+            else:
+                break
+            y, fy, residual, norm = trial, f_trial, r_trial, n_trial
+            if self._size(lam * delta, y) < self.tol:
+                self._solve_dt = None  # the matrix of this iterate is not the fast path's
+                return y
+        self._solve_dt = None
+        raise SolverFailed(f"implicit-euler: Newton found no solution of the step's equation "
+                           f"at t = {t:.6g} s with h = {dt:.4g} s (residual {norm:.3g}, damped "
+                           "and with a fresh Jacobian at every iterate)")
+
+    def step(self, dt: float) -> float:
+        x, t = self.system.get_state(), self.system.get_time()
+        fx = self.fun(x, t)
+        if not np.isfinite(fx).all():
+            raise FloatingPointError(f"implicit-euler: non-finite state or derivative at t={t:.6g}")
+        y = self._fast_newton(x, fx, t, dt)
+        if y is None:
+            self.damped_steps += 1
+            y = self._damped_newton(x, t, dt)
+        self.system.set_state(y, t + dt)
         return dt
