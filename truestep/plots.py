@@ -104,27 +104,48 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
     return save(fig, path)
 
 
+SEARCH_FAILED = {"solver-failed": "solver failed", "timeout": "search timed out",
+                 "crashed": "crashed"}
+"""Stability rows without a limit that the figure still shows, and how it labels them."""
+
+
 def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
-    """Measured largest stable step per engine/method, the exact limit marked beside it."""
-    s = stab[(stab["case"] == case) & (stab["status"] == "ok")]
-    if s.empty:
+    """Measured largest stable step per engine/method, the exact limit marked beside it.
+
+    A method stable at every step tried has a hatched bar ending at the largest step tried
+    (a lower bound); one whose search found no limit (:data:`SEARCH_FAILED`) has a row
+    that says so instead of a bar."""
+    s = stab[(stab["case"] == case) & stab["status"].isin(["ok", *SEARCH_FAILED])]
+    if s.empty or not (s["status"] == "ok").any():
         return None
     labels = [_pair(e, m) for e, m in zip(s["engine"], s["method"], strict=True)]
     y = np.arange(len(s))
     fig, ax = plt.subplots(figsize=(8, 0.32 * len(s) + 1.4))
     colours = [ENGINE_COLOURS.get(e, "black") for e in s["engine"]]
-    limits = s["dt_limit"].astype(float).to_numpy()
+    ok = (s["status"] == "ok").to_numpy()
+    limits = np.where(ok, pd.to_numeric(s["dt_limit"], errors="coerce"), np.nan)
     floor = np.nanmin(np.where(limits > 0, limits, np.nan)) / 10 if np.any(limits > 0) else 1e-4
-    ax.barh(y, np.where(limits > 0, limits, floor), color=colours, alpha=0.8)
+    bound = ok & np.isinf(pd.to_numeric(s["dt_unstable"], errors="coerce").to_numpy())
+    widths = np.where(ok, np.where(limits > 0, limits, floor), 0.0)
+    bars = ax.barh(y, widths, color=colours, alpha=0.8)
+    for bar, is_bound in zip(bars, bound, strict=True):
+        if is_bound:
+            bar.set_hatch("//")
+            bar.set_edgecolor("white")
     exact = s["dt_limit_exact"].astype(float).to_numpy()
     for yi, ex in zip(y, exact, strict=True):
         if np.isfinite(ex) and ex > 0:
             ax.plot([ex, ex], [yi - 0.4, yi + 0.4], color="black", linewidth=2)
+    for yi, status in zip(y, s["status"], strict=True):
+        if status in SEARCH_FAILED:
+            ax.text(floor, yi, f" {SEARCH_FAILED[status]}: no limit", va="center",
+                    fontsize=8, color="#b2182b")
     ax.set_yticks(y, labels, fontsize=8)
     ax.set_xscale("log")
+    ax.set_xlim(left=floor / 2)
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("largest stable step (s); black tick: exact limit;\n"
-                  "a stub at the left edge: unstable at every step tried")
+    ax.set_xlabel("largest stable step (s); black tick: exact limit; hatched: stable at every\n"
+                  "step tried (a lower bound); a stub at the left edge: unstable at every step tried")
     ax.set_title(f"{case}: largest stable step")
     ax.invert_yaxis()
     fig.tight_layout()

@@ -1,0 +1,43 @@
+"""The report's plots: what each one shows for rows that are not plain numbers."""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib.pyplot as plt
+import pandas as pd
+
+from truestep import plots
+
+
+def _stability_rows() -> pd.DataFrame:
+    rows = [("ok", 0.1, 0.2, 0.1001, ""), ("ok", 0.5, math.nan, math.inf, "stable at every step tried"),
+            ("ok", 0.0, math.nan, 0.001, "unstable at every step tried"),
+            ("solver-failed", math.nan, math.nan, math.nan, "the solver failed at dt 0.03 s"),
+            ("timeout", math.nan, math.nan, math.nan, "still searching"),
+            ("unsupported", math.nan, math.nan, math.nan, "3d")]
+    return pd.DataFrame([{"case": "c", "engine": "reference", "method": f"m{i}", "status": st,
+                          "dt_limit": lim, "dt_limit_exact": ex, "dt_unstable": un, "note": note}
+                         for i, (st, lim, ex, un, note) in enumerate(rows)])
+
+
+def test_a_search_without_a_limit_keeps_its_row_and_a_lower_bound_is_hatched(tmp_path,
+                                                                              monkeypatch):
+    shown = {}
+
+    def keep(fig, path, dpi=plots.REPORT_DPI):
+        ax = fig.axes[0]
+        shown["labels"] = [t.get_text() for t in ax.get_yticklabels()]
+        shown["texts"] = [t.get_text() for t in ax.texts]
+        shown["hatches"] = [bar.get_hatch() for bar in ax.patches]
+        shown["widths"] = [bar.get_width() for bar in ax.patches]
+        plt.close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "save", keep)
+    plots.stability_bars(_stability_rows(), "c", tmp_path / "s.png")
+    assert shown["labels"] == [f"reference / m{i}" for i in range(5)]  # unsupported: no row
+    assert shown["texts"] == [" solver failed: no limit", " search timed out: no limit"]
+    assert shown["hatches"] == [None, "//", None, None, None]
+    assert shown["widths"][:2] == [0.1, 0.5] and shown["widths"][3:] == [0.0, 0.0]
+    assert 0 < shown["widths"][2] < 0.1  # the stub of a method unstable at every step
