@@ -41,3 +41,12 @@ def test_a_search_without_a_limit_keeps_its_row_and_a_lower_bound_is_hatched(tmp
     assert shown["hatches"] == [None, "//", None, None, None]
     assert shown["widths"][:2] == [0.1, 0.5] and shown["widths"][3:] == [0.0, 0.0]
     assert 0 < shown["widths"][2] < 0.1  # the stub of a method unstable at every step
+
+
+def test_a_run_whose_cases_are_in_no_family_draws_no_scorecard(tmp_path, recwarn):
+    card = pd.DataFrame([{"engine": "reference", "method": "euler", "family": "orbits",
+                          "cost_ratio": 1.0, "cases_run": 1, "stability_ratio": 1.0}])
+    fidelity = pd.DataFrame(columns=["engine", "method", "median"])
+    assert plots.scorecard(card, fidelity, [], 1e-4, tmp_path / "card.png") is None
+    assert not (tmp_path / "card.png").exists()
+    assert not [w for w in recwarn if issubclass(w.category, UserWarning)]

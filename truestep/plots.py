@@ -218,9 +218,10 @@ def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], t
     exact limit (or the best any method reached), per family. Right: the restitution
     error ``|e_measured - e_set|`` (median over every bounce of the sweep).
     ``card`` is :func:`truestep.picks.scorecard`, ``fidelity``
-    :func:`truestep.picks.restitution_fidelity`.
+    :func:`truestep.picks.restitution_fidelity`. No figure (``None``) without a row or
+    without a family (a run of cases outside every family has nothing to tabulate).
     """
-    if card.empty:
+    if card.empty or not families:
         return None
     rows = list(dict.fromkeys(zip(card["engine"], card["method"], strict=True)))
     index = {r: k for k, r in enumerate(rows)}

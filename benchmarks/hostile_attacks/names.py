@@ -48,24 +48,24 @@ def raw_in(text: str, *, markdown: bool) -> list[str]:
     return found
 
 
-def attack_names_in_index_md(c: Campaign, where: Path) -> tuple[bool, str]:
-    """Engine, method, message, title and description in ``index.md``."""
+def _names_in_page(c: Campaign, name: str) -> tuple[bool, str]:
+    """Whether a hostile run's report page ``name`` shows every hostile name escaped."""
     run, result = hostile_run(c)
-    page = run / "rep" / "index.md"
+    page = run / "rep" / name
     if not page.is_file():
         return False, f"no report: {result.why()}"
-    found = raw_in(page.read_text(), markdown=True)
-    return not found, f"raw in index.md: {found}"
+    found = raw_in(page.read_text(), markdown=name.endswith(".md"))
+    return not found, f"raw in {name}: {found}"
+
+
+def attack_names_in_index_md(c: Campaign, where: Path) -> tuple[bool, str]:
+    """Engine, method, message, title and description in ``index.md``."""
+    return _names_in_page(c, "index.md")
 
 
 def attack_names_in_index_html(c: Campaign, where: Path) -> tuple[bool, str]:
     """The same in ``index.html``."""
-    run, result = hostile_run(c)
-    page = run / "rep" / "index.html"
-    if not page.is_file():
-        return False, f"no report: {result.why()}"
-    found = raw_in(page.read_text(), markdown=False)
-    return not found, f"raw in index.html: {found}"
+    return _names_in_page(c, "index.html")
 
 
 def attack_names_on_the_console_of_run(c: Campaign, where: Path) -> tuple[bool, str]:
