@@ -47,6 +47,7 @@ from truestep.checkpoint_data import (
     traces_from,
     traces_to,
 )
+from truestep.publish import beside
 
 SweepKey = tuple[str, str, str]
 """(case, engine, method)."""
@@ -70,8 +71,7 @@ class JournalError(Exception):
 
 def journal_dir(out: Path) -> Path:
     """``.<name>.partial`` beside ``out`` (symbolic links resolved)."""
-    out = Path(os.path.realpath(out))
-    return out.parent / f".{out.name}.partial"
+    return beside(out, "partial")
 
 
 def _case_digest(case: Case) -> str:

@@ -39,6 +39,13 @@ def target(out: Path) -> Path:
     return Path(os.path.realpath(out))
 
 
+def beside(out: Path, suffix: str) -> Path:
+    """``.<name>.<suffix>`` beside ``out`` with symbolic links resolved: where every file
+    truestep keeps across runs for an output folder lives (the journal, the lock)."""
+    real = target(out)
+    return real.parent / f".{real.name}.{suffix}"
+
+
 def scratch(out: Path, kind: str, pid: int | None = None) -> Path:
     """``.<name>.<kind>-<pid>`` beside ``out``."""
     return out.parent / f".{out.name}.{kind}-{os.getpid() if pid is None else pid}"

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from truestep.cases.files import FileRefused, read_regular
+from truestep.publish import beside
 
 MAX_LOCK_BYTES = 4096
 """The most read of a lock file, for the line that names the run holding it."""
@@ -32,8 +33,7 @@ class LockBusy(Exception):
 
 def lock_path(out: Path) -> Path:
     """``.<name>.lock`` beside ``out`` (symbolic links resolved)."""
-    real = Path(os.path.realpath(out))
-    return real.parent / f".{real.name}.lock"
+    return beside(out, "lock")
 
 
 def _holder(path: Path) -> str:
