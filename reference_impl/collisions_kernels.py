@@ -16,7 +16,7 @@ from typing import NamedTuple
 from numba import njit
 
 from truestep.reference_impl.collisions import EPS_DISTANCE, EPS_SPEED
-from truestep.reference_impl.forces_kernels import KERNEL, LEAF
+from truestep.reference_impl.forces_kernels import LEAF
 
 
 class Plane(NamedTuple):
@@ -37,7 +37,7 @@ def dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def signed_distance(x, radius, plane):
     """``d = (X - P) . N - r`` (m) of a particle at ``x`` with ``radius``:
     :func:`collisions.signed_distances`."""

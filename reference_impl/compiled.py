@@ -25,6 +25,7 @@ implicit Euler (a Newton solve per step) and dopri5 (adaptive) stay there too.
 
 from __future__ import annotations
 
+import functools
 import sys
 import threading
 import time
@@ -44,9 +45,10 @@ from truestep.reference_impl.forces_kernels import (
     Impulses,
     Springs,
 )
-from truestep.reference_impl.integrate_kernels import DrivenRun, EnergyMonitor, run
+from truestep.reference_impl.integrate_kernels import DrivenRun, run, unwatched
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.particles_kernels import Particles, Scene
+from truestep.reference_impl.solvers.any_method import AnyMethod, fused_kinds, pattern
 from truestep.reference_impl.solvers.explicit_rk_kernels import Tableau
 from truestep.reference_impl.solvers.splitting_kernels import KickDrift, KickDriftKick
 from truestep.reference_impl.step_slots import loop_for
@@ -75,7 +77,8 @@ def method_kind(method: str | type):
     s = getattr(cls, "splitting", None)
     if s is None:
         return None
-    return KickDrift(s.old, s.new, 1) if s.kick == 1.0 else KickDriftKick(s.kick, s.old, s.new)
+    return (KickDrift(float(s.old), float(s.new), 1) if s.kick == 1.0
+            else KickDriftKick(float(s.kick), float(s.old), float(s.new)))
 
 
 def compiled_reason(model: ParticleModel | None, method: str) -> str | None:
@@ -160,39 +163,71 @@ def pack(m: ParticleModel) -> Scene:
     return Scene(particles, forces_of(m), impulses_of(m), planes or None)
 
 
+def pointwise(scene: Scene) -> bool:
+    """Whether every force kind of ``scene`` is pointwise (its particles independent)."""
+    return all(type(k).pointwise for k in scene.forces)
+
+
 def layout_for(kind, scene: Scene):
     """Fused tiles of :data:`BLOCK` particles where every force is pointwise and the method
     carries nothing from step to step over the whole scene; else passes over one tile."""
     n = len(scene.particles.mass)
-    if not kind.carries_state and all(type(k).pointwise for k in scene.forces):
+    if not kind.carries_state and pointwise(scene):
         return Fused(BLOCK)
     return Passes(max(n, 1))
 
 
+@functools.cache
+def _fused_methods() -> tuple:
+    """The compiled steps of the built-in methods that may run fused."""
+    from truestep.reference_impl.solvers import METHODS
+
+    kinds = (method_kind(m) for m in METHODS)
+    return tuple(k for k in kinds if k is not None and not k.carries_state)
+
+
+def loop_kind(kind, layout, scene: Scene) -> tuple:
+    """(the record a loop is called with for ``kind``, what the loop holds): an
+    :class:`AnyMethod`, and, fused, the fused steps of every built-in method and ``kind``
+    (:func:`fused_kinds`), in passes, every shape of step. One loop a scene and layout
+    runs every method."""
+    if isinstance(layout, Fused):
+        patterns, tableaux, kick_drift = fused_kinds((*_fused_methods(), kind))
+        return AnyMethod.of(kind, patterns), (tableaux, kick_drift)
+    return AnyMethod.of(kind), AnyMethod.of(kind)
+
+
+def stages(kind) -> int:
+    """The stages a compiled step of ``kind`` keeps in its scratch (0 for a splitting)."""
+    return kind.stages if isinstance(kind, (Tableau, AnyMethod)) else 0
+
+
 _PREPARED: dict[tuple, object] = {}
-"""The compiled loops of this process, by :func:`composition` (and energy watching)."""
+"""The compiled loops of this process, by :func:`composition`."""
 
 
-def composition(kind, layout, scene: Scene) -> tuple:
+def composition(held, layout, scene: Scene) -> tuple:
     """What a compiled loop depends on, in short: the classes of the scene's force kinds,
-    whether it has impulses, its number of planes, the method's step (a tableau's pattern
-    of non-zero entries) and the layout. Runs that agree on it share one loop."""
-    pattern = (tuple(tuple(kind.cols[s, :kind.terms[s]]) for s in range(len(kind.b)))
-               if isinstance(kind, Tableau) else ())
+    whether it has impulses, its number of planes, the layout and the steps the loop holds
+    (``held``, :func:`loop_kind`; fused, its tableaux' patterns of non-zero entries). Runs
+    that agree on it share one loop."""
     planes = len(scene.planes) if scene.planes is not None else 0
-    return (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes,
-            type(kind), pattern, type(layout))
+    kinds = (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes,
+             type(layout))
+    if isinstance(layout, Fused):
+        tableaux, kick_drift = held
+        return (*kinds, tuple(pattern(k) for k in tableaux), kick_drift is not None)
+    return (*kinds, type(held))
 
 
-def describe(kind, layout, scene: Scene) -> str:
-    """What a compiled loop is for, in words: its force kinds, planes, step and layout."""
+def describe(held, layout, scene: Scene) -> str:
+    """What a compiled loop is for, in words: its force kinds, planes, steps and layout."""
     parts = [type(k).__name__.lower() for k in scene.forces]
     if scene.impulses is not None:
         parts.append("impulses")
     if scene.planes is not None:
         parts.append(f"{len(scene.planes)} plane(s)")
-    step = "tableau" if isinstance(kind, Tableau) else type(kind).__name__
-    return f"{', '.join(parts) or 'no forces'} / {step} / {type(layout).__name__.lower()}"
+    return f"{', '.join(parts) or 'no forces'} / every method / {type(layout).__name__.lower()}"
 
 
 def _stderr(line: str) -> None:
@@ -219,7 +254,7 @@ def _shown_if_slow(label: str, say: Callable[[str], None]):
             say(f"compiled reference kernels for {label} in {time.perf_counter() - began:.1f} s")
 
 
-def prepared(model: ParticleModel, method: str, *, track_energy: bool = False,
+def prepared(model: ParticleModel, method: str, *,
              progress: Callable[[str], None] | None = None) -> tuple:
     """The packed run of ``method`` on ``model``: (loop, kind, layout, scene), the loop
     compiled or loaded from the cache (shown through ``progress``, stderr by default,
@@ -229,23 +264,22 @@ def prepared(model: ParticleModel, method: str, *, track_energy: bool = False,
     reason = compiled_reason(model, method)
     if reason is not None:
         raise ValueError(f"the compiled path cannot run {method} here: {reason}")
-    kind = method_kind(method)
     scene = pack(model)
-    layout = layout_for(kind, scene)
-    key = (composition(kind, layout, scene), track_energy)
+    layout = layout_for(method_kind(method), scene)
+    kind, held = loop_kind(method_kind(method), layout, scene)
+    key = composition(held, layout, scene)
     if key in _PREPARED:
         return _PREPARED[key], kind, layout, scene
-    loop = loop_for(kind, layout, scene, track_energy=track_energy)
+    loop = loop_for(held, layout, scene)
     if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
         _PREPARED[key] = loop
         return loop, kind, layout, scene
-    stages = len(kind.b) if isinstance(kind, Tableau) else 0
     sig = tuple(typeof(a) for a in (
         kind, 1, scene, np.zeros((3, 1)), np.zeros((3, 1)), 1.0, 1, np.zeros(1, bool),
-        tiles.scratch(1, stages, len(model.planes)), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)),
-        np.zeros(1), EnergyMonitor(np.zeros(2)) if track_energy else None))
+        tiles.scratch(1, stages(kind), len(model.planes)), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)),
+        np.zeros(1), unwatched()))
     if sig not in loop.overloads:
-        with _shown_if_slow(describe(kind, layout, scene), progress or _stderr):
+        with _shown_if_slow(describe(held, layout, scene), progress or _stderr):
             loop.compile(sig)
     _PREPARED[key] = loop.get_overload(sig)
     return _PREPARED[key], kind, layout, scene
@@ -258,11 +292,9 @@ def run_compiled(model: ParticleModel, method: str, duration: float, h: float, *
     run and the wall time of the stepping (s, the compiled loop only: packing the scene,
     compiling and allocating the records happen before it). With ``track_energy`` the
     run's ``extra`` holds ``energy_min`` and ``energy_max`` (J) over every step."""
-    loop, kind, layout, scene = prepared(model, method, track_energy=track_energy,
-                                         progress=progress)
-    stages = len(kind.b) if isinstance(kind, Tableau) else 0
+    loop, kind, layout, scene = prepared(model, method, progress=progress)
     result = run(loop, kind, layout.size, scene, model.x0, model.v0, h, round(duration / h),
-                 stages=stages, planes=len(model.planes), max_records=max_records,
+                 stages=stages(kind), planes=len(model.planes), max_records=max_records,
                  track_energy=track_energy)
     return result, result.wall_s
 

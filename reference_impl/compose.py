@@ -45,6 +45,7 @@ that passing arrays between the functions it is made of costs nothing."""
 
 KERNEL_MODULES = ("forces_kernels", "collisions_kernels", "particles_kernels", "tiles",
                   "solvers/explicit_rk_kernels", "solvers/splitting_kernels",
+                  "solvers/any_method",
                   "integrate_kernels", "compose", "step_slots", "collisions", "integrate")
 """The modules whose source a compiled loop is made of (beside this one's folder)."""
 
@@ -94,18 +95,19 @@ def nothing(s: Slot, value: str = "None") -> Dispatcher:
     return glue(s, [f"return {value}"], {})
 
 
-def _py(fn):
+def python_function(fn):
+    """The Python function of a kernel, compiled or plain."""
     return fn.py_func if isinstance(fn, Dispatcher) else fn
 
 
 def name_of(fn) -> str:
     """The name of a kernel, compiled or plain."""
-    return _py(fn).__name__
+    return python_function(fn).__name__
 
 
 def source_of(filling) -> str:
     """The source of a glue filling (:func:`glue`)."""
-    return _py(filling).__doc__ or ""
+    return python_function(filling).__doc__ or ""
 
 
 def _function(value) -> bool:
@@ -116,7 +118,7 @@ def _function(value) -> bool:
 
 def _reaches(fn, slots: dict, memo: dict) -> bool:
     """Whether ``fn``'s code names a slot, or a function that does."""
-    py = _py(fn)
+    py = python_function(fn)
     if py in memo:
         return memo[py]
     memo[py] = False
@@ -135,7 +137,7 @@ def instantiate(fn, slots: dict, *, options: dict | None = None, name: str | Non
     tagged with the fillings: :func:`copy_name`)."""
     memo = {} if _memo is None else _memo
     tag = fillings_tag(slots) if _tag is None else _tag
-    py = _py(fn)
+    py = python_function(fn)
     if py in memo:
         return memo[py]
     g = dict(py.__globals__)
@@ -185,7 +187,7 @@ def copy_name(qualname: str, tag: str) -> str:
 
 
 def _label(filling) -> str:
-    py = _py(filling)
+    py = python_function(filling)
     if py.__code__.co_filename.startswith("<"):  # glue: its source
         return py.__doc__ or ""
     return f"{py.__module__}.{py.__qualname__}"

@@ -65,7 +65,7 @@ def no_energy(kind, X, particles):
     return 0.0
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def gravity_at(kind, f, x, v, t, particles, p):
     """Uniform gravity ``f += m g`` on particle ``p``: :func:`forces.add_gravity`."""
     m = particles.mass[p]
@@ -103,7 +103,7 @@ class Gravity(NamedTuple):
     cut = uncut
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def drag_at(kind, f, x, v, t, particles, p):
     """Viscous drag ``f -= k v`` on particle ``p``: :func:`forces.add_drag`."""
     k = kind.k
@@ -129,7 +129,7 @@ class Drag(NamedTuple):
     cut = uncut
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def spring_force(d, u, stiffness, damping, rest):
     """The lecture's damped spring (:func:`forces.spring_forces`) for one spring: the
     force (N, 3-tuple) on its first end, from ``d = x_1 - x_2`` (m) and ``u = v_1 - v_2``

@@ -7,8 +7,7 @@ what every run needs besides the physics: the records at the steps
 :func:`~truestep.reference_impl.integrate.record_indices` picks, the blow-up check every
 :data:`~truestep.reference_impl.integrate.CHECK_EVERY` steps against
 :data:`~truestep.reference_impl.integrate.BLOWUP` with ``integrate``'s stop policy, the
-timing, and, when asked, the energy at every step (a separate compiled specialisation, so
-that timed runs do not pay for it).
+timing, and, when asked, the energy at every step (:func:`watch_energy`).
 
 A scene cut into tiles takes each tile through all its steps before the next. A blow-up
 found in one tile of several is run again as one tile from the start, so that the records
@@ -34,7 +33,8 @@ from truestep.reference_impl.tiles import load, scratch, store, tile_view
 
 class EnergyMonitor(NamedTuple):
     """The running ``bounds`` (float64, (2,): min and max, J) of the total energy of every
-    state of a run, the first included; non-finite energies are left out."""
+    state of a run, the first included; non-finite energies are left out. A run that does
+    not track the energy passes empty ``bounds`` (:data:`UNWATCHED`)."""
 
     bounds: np.ndarray
 
@@ -52,19 +52,22 @@ def start(scene, tile, t):
 
 
 @slot
-def watch(monitor, scene, tile):
-    """Fold the tile's total energy into ``monitor`` (:func:`watch_energy`); nothing when
-    the run does not track it."""
-
-
-@slot
 def cut(scene, lo, hi):
     """``scene`` for its particles ``lo`` to ``hi`` (:func:`particles_kernels.tile_scene`)."""
 
 
+def unwatched() -> EnergyMonitor:
+    """The monitor of a run that does not track the energy: no bounds, nothing computed."""
+    return EnergyMonitor(np.empty(0))
+
+
 @njit(**KERNEL)
 def watch_energy(monitor, scene, tile):
-    """:func:`watch` of a run that tracks the energy: the tile is the whole scene."""
+    """Fold the tile's total energy into ``monitor`` (the tile is then the whole scene), or
+    nothing when its ``bounds`` are empty: one loop serves runs that track the energy and
+    runs that do not, at the cost of a test a step (timed runs track nothing)."""
+    if monitor.bounds.shape[0] == 0:
+        return
     e = total_energy(scene, tile.X, tile.V)
     if e < monitor.bounds[0]:
         monitor.bounds[0] = e
@@ -133,7 +136,7 @@ def run_tile(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts,
     t = 0.0
     start(scene, tile, t)
     write(xs, vs, ts, 0, tile, lo, t)
-    watch(monitor, scene, tile)
+    watch_energy(monitor, scene, tile)
     kept, checked, nfev = 1, 1, 0
     for i in range(1, n_steps + 1):
         nfev += step(method, scene, tile, t, h)
@@ -141,7 +144,7 @@ def run_tile(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts,
         if record[i]:
             write(xs, vs, ts, kept, tile, lo, t)
             kept += 1
-        watch(monitor, scene, tile)
+        watch_energy(monitor, scene, tile)
         if i % CHECK_EVERY == 0 or i == n_steps:
             if finite(tile.X, tile.V):
                 checked = kept
@@ -204,7 +207,7 @@ def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float
     slots = len(marks) + 1  # the state a failed check finds between records
     xs, vs, ts = np.empty((slots, n, 3)), np.empty((slots, n, 3)), np.empty(slots)
     X0, V0 = np.ascontiguousarray(x0.T, dtype=float), np.ascontiguousarray(v0.T, dtype=float)
-    monitor = EnergyMonitor(np.array([math.inf, -math.inf])) if track_energy else None
+    monitor = EnergyMonitor(np.array([math.inf, -math.inf])) if track_energy else unwatched()
     buffers = scratch(max(1, min(size, n)), stages, planes)
     args = (scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor)
     start = time.perf_counter()
@@ -217,7 +220,7 @@ def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float
         kept, steps, nfev, unstable, split = loop(method, max(n, 1), *args)
     wall = time.perf_counter() - start
     extra = ({"energy_min": float(monitor.bounds[0]), "energy_max": float(monitor.bounds[1])}
-             if monitor is not None else {})
+             if track_energy else {})
     return DrivenRun(ts[:kept].copy(), xs[:kept].copy(), vs[:kept].copy(), int(nfev), int(steps),
                      "unstable" if unstable else "ok",
                      float(ts[kept - 1]) if unstable else None, wall, extra, rerun)

@@ -151,7 +151,7 @@ def resting_force(scene, f, v, contact, p):
     return f
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def scaled(f, w):
     """``f * w`` of a 3-tuple: a force times an inverse mass."""
     return (f[0] * w, f[1] * w, f[2] * w)

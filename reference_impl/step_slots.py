@@ -12,9 +12,16 @@ the driver compiled with them.
 from __future__ import annotations
 
 from truestep.reference_impl import compose, integrate_kernels, particles_kernels, tiles
-from truestep.reference_impl.compose import cache_name, glue, instantiate, name_of, nothing
+from truestep.reference_impl.compose import (
+    cache_name,
+    glue,
+    instantiate,
+    name_of,
+    nothing,
+)
 from truestep.reference_impl.forces_kernels import impulse_at, impulses_add
 from truestep.reference_impl.particles_kernels import Scene
+from truestep.reference_impl.solvers.any_method import KICK_DRIFT, TABLEAU
 from truestep.reference_impl.tiles import Passes
 
 
@@ -105,26 +112,46 @@ def plane_slots(layout, scene: Scene) -> dict:
     }
 
 
-def slots_for(kind, layout, scene: Scene, *, track_energy: bool = False) -> dict:
-    """Every slot of the driver (:mod:`compose`) filled for ``scene`` stepped by the method
-    ``kind`` in ``layout``: in passes, the method's own step over a tile; fused, the
-    fused step (:func:`tiles.fused_step`) with the method's step of one particle, once
-    with the smooth acceleration and once with the whole one for special particles."""
-    slots = {
-        **force_slots(scene), **plane_slots(layout, scene),
-        "start": type(layout).start,
-        "watch": (integrate_kernels.watch_energy if track_energy
-                  else nothing(integrate_kernels.watch)),
-    }
+def slots_for(kind, layout, scene: Scene) -> dict:
+    """Every slot of the driver (:mod:`compose`) filled for ``scene`` stepped in
+    ``layout`` by ``kind``: in passes, its own step over a tile (every method's, for an
+    :class:`AnyMethod`); fused, the fused step (:func:`tiles.fused_step`) of each of the
+    loop's fused steps (``kind``, a tuple: :func:`fused_kinds`), picked once a step."""
+    slots = {**force_slots(scene), **plane_slots(layout, scene), "start": type(layout).start}
     if isinstance(layout, Passes):
         slots["step"] = type(kind).passes
         return slots
-    slots.update(step=tiles.fused_step,
-                 point_step=instantiate(kind.point_step(),
-                                        {**slots, "point_accel": tiles.smooth_accel}, _memo={}),
-                 special_step=instantiate(kind.special_step(),
-                                          {**slots, "point_accel": tiles.special_accel},
-                                          _memo={}, options=compose.COPY_COLD))
+    return fused_slots(slots, *kind)
+
+
+def fused_slots(slots: dict, tableaux: tuple, kick_drift) -> dict:
+    """``slots`` with the step of a fused loop (:func:`tiles.fused_step`), its particles
+    stepped by :func:`tiles.fused_particles` made once for each of ``tableaux`` (with its
+    own step of one particle, unrolled) and ``kick_drift`` (if not ``None``), picked once
+    a step by the :class:`AnyMethod` the loop is given; the special particles' steps (a
+    tableau's in a loop, the kick and drift) alike."""
+    smooth = {**slots, "point_accel": tiles.smooth_accel}
+    special = {**slots, "point_accel": tiles.special_accel}
+    shapes = [(kind, "tableau", f"method.shape == TABLEAU and method.pattern == {i}")
+              for i, kind in enumerate(tableaux)]
+    if kick_drift is not None:
+        shapes.append((kick_drift, "kick_drift", "method.shape == KICK_DRIFT"))
+    names = {"TABLEAU": TABLEAU, "KICK_DRIFT": KICK_DRIFT}
+    steps, specials = [], []
+    for i, (kind, field, test) in enumerate(shapes):
+        point = instantiate(kind.point_step(), smooth, _memo={})
+        slots[f"point_step_{i}"] = point
+        names[f"particles_{i}"] = instantiate(tiles.fused_particles,
+                                              {**slots, "point_step": point}, _memo={})
+        steps += [f"if {test}:", f"    return particles_{i}(method.{field}, scene, tile, t, h)"]
+        if f"special_{field}" not in names:
+            names[f"special_{field}"] = instantiate(kind.special_step(), special, _memo={},
+                                                    options=compose.COPY_COLD)
+            specials += [f"if {test.split(' and ')[0]}:",
+                         f"    return special_{field}(method.{field}, scene, tile, x, v, t, h, p)"]
+    slots["step_particles"] = glue(tiles.step_particles, [*steps, "return -1"], names)
+    slots["special_step"] = glue(tiles.special_step, [*specials, "return x, v"], names)
+    slots["step"] = tiles.fused_step
     return slots
 
 
@@ -132,10 +159,10 @@ _LOOPS: dict[str, object] = {}
 """The loops composed in this process, by :func:`compose.cache_name`."""
 
 
-def loop_for(kind, layout, scene: Scene, *, track_energy: bool = False):
+def loop_for(kind, layout, scene: Scene):
     """The driver composed for ``scene`` and ``kind`` in ``layout`` (not yet compiled:
     numba compiles it, or loads it from its cache, when it is first called)."""
-    slots = slots_for(kind, layout, scene, track_energy=track_energy)
+    slots = slots_for(kind, layout, scene)
     name = cache_name("drive", slots)
     if name not in _LOOPS:
         _LOOPS[name] = instantiate(integrate_kernels.drive, slots, name=name,

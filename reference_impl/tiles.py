@@ -138,19 +138,19 @@ def point_contact(scene, tile, f, v, p):
     (:func:`particles_kernels.resting_force`); ``f`` without planes."""
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def axpy(y, a, x):
     """``y + a x`` of 3-tuples (``a`` a float), component by component."""
     return (y[0] + a * x[0], y[1] + a * x[1], y[2] + a * x[2])
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def load(A, p):
     """Column ``p`` of a (3, m) array as a 3-tuple."""
     return (A[0, p], A[1, p], A[2, p])
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def store(A, p, a):
     """Set column ``p`` of a (3, m) array to the 3-tuple ``a``."""
     A[0, p], A[1, p], A[2, p] = a
@@ -170,7 +170,7 @@ def moved(x, v, y, u):
                 and same_bits(v[0], u[0]) and same_bits(v[1], u[1]) and same_bits(v[2], u[2]))
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def near_plane(plane, x, radius):
     """Whether a particle at ``x`` of ``radius`` is within eps of ``plane`` or its
     distance is NaN: it is one the collision pass must see."""
@@ -354,8 +354,14 @@ def point_step(method, scene, tile, x, v, t, h, p):
 
 
 @slot
+def step_particles(method, scene, tile, t, h):
+    """Every particle of the tile through one step of ``method`` (an ``AnyMethod``): the
+    loop's :func:`fused_particles` for the method's step; returns the evaluations."""
+
+
+@slot
 def special_step(method, scene, tile, x, v, t, h, p):
-    """:func:`point_step` with :func:`special_accel`."""
+    """:func:`point_step` of ``method`` (an ``AnyMethod``) with :func:`special_accel`."""
 
 
 @njit(**KERNEL)
@@ -374,24 +380,32 @@ def special_accel(scene, tile, x, v, t, p):
 
 
 @njit(**KERNEL)
-def fused_step(method, scene, tile, t, h):
-    """One step of ``method`` over a tile of independent particles: each particle's whole
-    step (:func:`point_step`) in one loop that also marks those near a plane; the special
-    particles' again (:func:`special_step`) from their state at the step's start, saved
-    first; then the collision pass on the marked ones and the special ones listed anew.
-    Returns the evaluations the step made."""
-    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
+def fused_particles(method, scene, tile, t, h):
+    """Each particle's whole step (:func:`point_step` of ``method``, a compiled step of one
+    shape) in one loop that also marks those near a plane; returns the evaluations."""
+    X, V = tile.X, tile.V
     radius = scene.particles.radius
-    special = tile.special
-    for q in range(tile.count[SPECIAL]):
-        p = special[q]
-        store(XS, p, load(X, p))
-        store(VS, p, load(V, p))
     for j in range(X.shape[1]):
         x, v = point_step(method, scene, tile, load(X, j), load(V, j), t, h, j)
         store(X, j, x)
         store(V, j, v)
         tile.flags[j] = near_planes(scene, x, radius[j])
+    return method.evaluations
+
+
+@njit(**KERNEL)
+def fused_step(method, scene, tile, t, h):
+    """One step of ``method`` over a tile of independent particles: each particle's whole
+    step (:func:`step_particles`); the special particles' again (:func:`special_step`) from
+    their state at the step's start, saved first; then the collision pass on the marked
+    ones and the special ones listed anew. Returns the evaluations the step made."""
+    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
+    special = tile.special
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        store(XS, p, load(X, p))
+        store(VS, p, load(V, p))
+    evaluations = step_particles(method, scene, tile, t, h)
     for q in range(tile.count[SPECIAL]):
         p = special[q]
         x, v = special_step(method, scene, tile, load(XS, p), load(VS, p), t, h, p)
@@ -400,4 +414,4 @@ def fused_step(method, scene, tile, t, h):
     mark_special(scene, tile)
     collisions(scene, tile, t + h, h)
     list_special(scene, tile)
-    return method.evaluations
+    return evaluations

@@ -177,16 +177,21 @@ def test_compiling_is_shown_as_progress(case_named, monkeypatch):
     said: list[str] = []
     case = case_named("free-fall")
     run_compiled(case.model, "heun", 0.01, 0.001, progress=said.append)
-    assert said[0] == "compiling reference kernels for gravity / tableau / fused ..."
-    assert said[1].startswith("compiled reference kernels for gravity / tableau / fused in ")
+    assert said[0] == "compiling reference kernels for gravity / every method / fused ..."
+    assert said[1].startswith("compiled reference kernels for gravity / every method / fused in ")
+
+
+def held(scene, method: str) -> tuple:
+    """What the loop that runs ``method`` on ``scene`` holds, its layout and the scene."""
+    kind = compiled.method_kind(method)
+    layout = compiled.layout_for(kind, scene)
+    return compiled.loop_kind(kind, layout, scene)[1], layout, scene
 
 
 def test_a_step_is_composed_of_only_what_its_scene_declares(case_named):
-    kind = compiled.method_kind("lecture")
     harmonic, ball = compiled.pack(case_named("harmonic-oscillator").model), compiled.pack(
         case_named("bouncing-ball").model)
-    plain = step_slots.slots_for(kind, compiled.layout_for(kind, harmonic), harmonic)
-    planes = step_slots.slots_for(kind, compiled.layout_for(kind, ball), ball)
+    plain, planes = (step_slots.slots_for(*held(scene, "lecture")) for scene in (harmonic, ball))
     # no planes: the collision slots are filled with nothing; with them, the kernels
     assert "return False" in compose.source_of(plain["collisions"])
     assert compose.source_of(plain["near_planes"]).endswith("return False\n")
@@ -202,9 +207,8 @@ def test_a_step_is_composed_of_only_what_its_scene_declares(case_named):
 
 def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named,
                                                                       monkeypatch):
-    scene = compiled.pack(case_named("bouncing-ball").model)
-    kind = compiled.method_kind("lecture")
-    slots = step_slots.slots_for(kind, compiled.layout_for(kind, scene), scene)
+    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model),
+                                      "lecture"))
     before = compose.cache_name("drive", slots)
     monkeypatch.setattr(compose, "FINGERPRINT", "another source")
     assert compose.cache_name("drive", slots) != before
@@ -275,9 +279,19 @@ def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_na
                                                                          monkeypatch):
     monkeypatch.setattr(compiled, "_PREPARED", {})
     compiled.compile_all([case_named("free-fall").model], progress=lambda line: None)
-    # euler, midpoint and heun, rk4 (three patterns of a tableau), a kick and drift, and
-    # velocity Verlet; the adaptive and implicit methods run on the numpy path
-    assert len(compiled._PREPARED) == 5
+    # one loop a layout: fused, euler, midpoint and heun, rk4 (three patterns of a
+    # tableau) and a kick and drift; in passes, velocity Verlet (which carries state from
+    # step to step); the adaptive and implicit methods run on the numpy path
+    assert len(compiled._PREPARED) == 2
+    loops = {m: compiled.prepared(case_named("free-fall").model, m)[0]
+             for m in ("euler", "heun", "rk4", "lecture", "verlet")}
+    assert len({id(loop) for loop in loops.values()}) == 2
+    assert loops["verlet"] is not loops["rk4"]
+
+
+def test_one_loop_runs_every_method_in_passes(case_named):
+    loops = {m: compiled.prepared(case_named("spring-chain").model, m)[0] for m in FIXED}
+    assert len({id(loop) for loop in loops.values()}) == 1
 
 
 def test_method_facts_choose_the_step():

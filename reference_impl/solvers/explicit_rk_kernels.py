@@ -5,9 +5,10 @@ as :func:`~truestep.reference_impl.solvers.explicit_rk.rk_stages` steps them (st
 at ``x + sum_r (h a_sr) k_r``, the terms added one at a time in the order of ``r``, zero
 weights left out) and the step ends with ``x + h sum_s b_s k_s``, the sum from ``0.0`` in
 the order of the stages. The tableau is data: every explicit method shares one compiled
-step in passes (:func:`tableau_passes`); a fused step (:func:`tiles.fused_step`) takes the
-step of one particle unrolled for the tableau's pattern of non-zero entries
-(:meth:`Tableau.point_step`). Twin:
+step in passes (:func:`stage_input` and :func:`tableau_finish` around each evaluation,
+:func:`~truestep.reference_impl.solvers.any_method.any_passes`); a fused step
+(:func:`tiles.fused_step`) takes the step of one particle unrolled for the tableau's
+pattern of non-zero entries (:meth:`Tableau.point_step`). Twin:
 :meth:`~truestep.reference_impl.solvers.explicit_rk.ExplicitRungeKutta.step`.
 """
 
@@ -21,8 +22,7 @@ from numba import njit
 from truestep.reference_impl import tiles
 from truestep.reference_impl.compose import glue
 from truestep.reference_impl.forces_kernels import KERNEL
-from truestep.reference_impl.particles_kernels import accelerations
-from truestep.reference_impl.tiles import CONTACT, axpy, collisions, load, point_accel, store
+from truestep.reference_impl.tiles import axpy, load, point_accel, store
 
 
 @njit(**KERNEL)
@@ -41,28 +41,23 @@ def add_terms(method, s, Y, K, out, h, last, V, starts_in_v):
 
 
 @njit(**KERNEL)
-def stage_passes(method, s, scene, tile, t, h):
-    """Stage ``s`` over a tile in passes: its positions into ``XS`` and its velocities
-    (the derivative of the positions) into ``KX[s]``, then its accelerations into
-    ``KV[s]`` at ``t + c_s h``. A stage without terms is the step's start: its state is
-    read where it is."""
+def stage_input(method, s, tile, t, h):
+    """What stage ``s`` of a step in passes evaluates: (where its accelerations go,
+    positions, velocities, time). Its positions go into ``XS`` and its velocities (the
+    derivative of the positions) into ``KX[s]``, its accelerations into ``KV[s]``, at
+    ``t + c_s h``; a stage without terms is the step's start, read where it is."""
     n = method.terms[s]
     X, V, XS, KX, KV = tile.X, tile.V, tile.XS, tile.KX, tile.KV
-    PX, PV = X, V
     if n > 0:
         add_terms(method, s, X, KX, XS, h, n, V, True)
         add_terms(method, s, V, KV, KX[s], h, n, V, False)
-        PX, PV = XS, KX[s]
-    accelerations(scene, KV[s], tile.F, PX, PV, t + method.c[s] * h, tile.contact,
-                  tile.count[CONTACT] > 0)
+        return KV[s], XS, KX[s], t + method.c[s] * h
+    return KV[s], X, V, t + method.c[s] * h
 
 
 @njit(**KERNEL)
-def tableau_passes(method, scene, tile, t, h):
-    """One step of the tableau over a tile in passes, then the collision pass; returns the
-    evaluations it made (its stages)."""
-    for s in range(method.b.shape[0]):
-        stage_passes(method, s, scene, tile, t, h)
+def tableau_finish(method, tile, h):
+    """The end of a step in passes, its stages evaluated: ``x + h sum_s b_s k_s``."""
     X, V = tile.X, tile.V
     KX, KV, b, terms = tile.KX, tile.KV, method.b, method.terms
     for j in range(X.shape[1]):
@@ -73,8 +68,6 @@ def tableau_passes(method, scene, tile, t, h):
             dv = axpy(dv, b[s], load(KV[s], j))
         store(X, j, axpy(load(X, j), h, dx))
         store(V, j, axpy(v, h, dv))
-    collisions(scene, tile, t + h, h)
-    return method.b.shape[0]
 
 
 @njit(**KERNEL)
@@ -129,7 +122,6 @@ class Tableau(NamedTuple):
     cols: np.ndarray
     weights: np.ndarray
     evaluations: int
-    passes = tableau_passes
     carries_state = False
 
     def point_step(self):

@@ -14,18 +14,17 @@ from typing import NamedTuple
 
 from numba import njit
 
-from truestep.reference_impl.forces_kernels import KERNEL
-from truestep.reference_impl.particles_kernels import accelerations
-from truestep.reference_impl.tiles import CONTACT, FRESH, axpy, collisions, load, point_accel, store
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF
+from truestep.reference_impl.tiles import axpy, load, point_accel, store
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def drift(method, x, v, u, h):
     """``x + h (old v + new u)`` of one component (m)."""
     return x + h * (method.old * v + method.new * u)
 
 
-@njit(**KERNEL)
+@njit(**LEAF)
 def kick_drift_point(method, x, v, a, h):
     """A particle's kick ``v' = v + h a`` and drift, on 3-tuples: ``(x', v')``."""
     u = (v[0] + h * a[0], v[1] + h * a[1], v[2] + h * a[2])
@@ -34,17 +33,14 @@ def kick_drift_point(method, x, v, a, h):
 
 
 @njit(**KERNEL)
-def kick_drift_passes(method, scene, tile, t, h):
-    """One kick and drift over a tile, the acceleration in passes at the step's start;
-    then the collision pass. Returns the evaluations it made (1)."""
+def kick_drift_finish(method, tile, h):
+    """A kick and drift over a tile in passes, its acceleration ``A`` evaluated at the
+    step's start."""
     X, V, A = tile.X, tile.V, tile.A
-    accelerations(scene, A, tile.F, X, V, t, tile.contact, tile.count[CONTACT] > 0)
     for j in range(X.shape[1]):
         x, v = kick_drift_point(method, load(X, j), load(V, j), load(A, j), h)
         store(X, j, x)
         store(V, j, v)
-    collisions(scene, tile, t + h, h)
-    return 1
 
 
 @njit(**KERNEL)
@@ -62,7 +58,6 @@ class KickDrift(NamedTuple):
     old: float
     new: float
     evaluations: int
-    passes = kick_drift_passes
     carries_state = False
 
     def point_step(self):
@@ -75,30 +70,32 @@ class KickDrift(NamedTuple):
 
 
 @njit(**KERNEL)
-def kick_drift_kick_passes(method, scene, tile, t, h):
-    """Half a kick with the acceleration kept from the last step (evaluated afresh on the
-    first step and after a collision pass that changed the state), the drift, the closing
-    half kick at the new positions and the half-step velocities; then the collision pass.
-    Returns the evaluations it made (1, or 2 afresh)."""
+def kick_drift_kick_input(method, e, tile, t, h):
+    """What evaluation ``e`` of velocity Verlet's step in passes evaluates: (where its
+    accelerations go, positions, velocities, time). ``e = 0``, the acceleration at the
+    step's start (evaluated afresh on the first step and after a collision pass that
+    changed the state; else the last step's is kept); ``e = 1``, at the new positions
+    after the half kick (into ``VS``) and the drift, and the half-step velocities."""
     X, V, VS, A = tile.X, tile.V, tile.VS, tile.A
-    count = tile.count
+    if e == 0:
+        return A, X, V, t
     kick = method.kick * h
-    first = 0 if count[FRESH] else 1
-    for e in range(first, 2):  # e = 0: the fresh evaluation; e = 1: the closing one
-        if e == 1:
-            for j in range(X.shape[1]):
-                x, v = load(X, j), load(V, j)
-                u = axpy(v, kick, load(A, j))
-                store(VS, j, u)
-                store(X, j, (drift(method, x[0], v[0], u[0], h),
-                             drift(method, x[1], v[1], u[1], h),
-                             drift(method, x[2], v[2], u[2], h)))
-        accelerations(scene, A, tile.F, X, V if e == 0 else VS, t + e * h, tile.contact,
-                      count[CONTACT] > 0)
+    for j in range(X.shape[1]):
+        x, v = load(X, j), load(V, j)
+        u = axpy(v, kick, load(A, j))
+        store(VS, j, u)
+        store(X, j, (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
+                     drift(method, x[2], v[2], u[2], h)))
+    return A, X, VS, t + h
+
+
+@njit(**KERNEL)
+def kick_drift_kick_finish(method, tile, h):
+    """The closing half kick of velocity Verlet's step from the half-step velocities."""
+    X, V, VS, A = tile.X, tile.V, tile.VS, tile.A
+    kick = method.kick * h
     for j in range(X.shape[1]):
         store(V, j, axpy(load(VS, j), kick, load(A, j)))
-    count[FRESH] = collisions(scene, tile, t + h, h)
-    return 2 - first
 
 
 class KickDriftKick(NamedTuple):
@@ -110,5 +107,4 @@ class KickDriftKick(NamedTuple):
     kick: float
     old: float
     new: float
-    passes = kick_drift_kick_passes
     carries_state = True
