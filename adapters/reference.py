@@ -20,6 +20,7 @@ from truestep.reference_impl.compiled import compiled_reason, prepared, run_comp
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.particles import ParticleSystem, total_energy
 from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.precompile import compile_all
 from truestep.reference_impl.solvers import METHODS, get_solver
 from truestep.reference_impl.system import SecondOrderSystem, System
 
@@ -72,6 +73,12 @@ class ReferenceAdapter:
         the parent before it forks a sweep's runs, so that they find it ready."""
         if self.compiled and compiled_reason(case.model, method) is None:
             prepared(case.model, method)
+
+    def prepare_all(self, pairs: list[tuple[Case, str]], *, workers: int = 1) -> None:
+        """:meth:`prepare` every (case, method) of ``pairs``, the loops they need compiled
+        on ``workers`` cores at once (:func:`~truestep.reference_impl.precompile.compile_all`)."""
+        if self.compiled:
+            compile_all(pairs=[(case.model, method) for case, method in pairs], workers=workers)
 
     def __init__(self, *, compiled: bool = True) -> None:
         self.compiled = compiled

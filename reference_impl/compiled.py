@@ -29,7 +29,7 @@ import functools
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from contextlib import contextmanager
 
 import numpy as np
@@ -297,16 +297,3 @@ def run_compiled(model: ParticleModel, method: str, duration: float, h: float, *
                  stages=stages(kind), planes=len(model.planes), max_records=max_records,
                  track_energy=track_energy)
     return result, result.wall_s
-
-
-def compile_all(models: Iterable[ParticleModel] = (), methods: Iterable[str] | None = None,
-                *, progress: Callable[[str], None] | None = None) -> None:
-    """Compile (or load from numba's cache) the loops that ``methods`` (default: every
-    fixed-step method) need on ``models``, so that forked runs find them ready."""
-    from truestep.reference_impl.solvers import METHODS
-
-    names = list(methods) if methods is not None else list(METHODS)
-    for model in models:
-        for method in names:
-            if compiled_reason(model, method) is None:
-                prepared(model, method, progress=progress)

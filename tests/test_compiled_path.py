@@ -25,7 +25,7 @@ import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import load_cases
-from truestep.reference_impl import compiled, compose, step_slots, tiles
+from truestep.reference_impl import compiled, compose, precompile, step_slots, tiles
 from truestep.reference_impl.compiled import compiled_reason, independent, run_compiled
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel, Plane
@@ -278,7 +278,7 @@ def test_loops_from_the_cache_made_in_other_processes_keep_their_own_copies(tmp_
 def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named,
                                                                          monkeypatch):
     monkeypatch.setattr(compiled, "_PREPARED", {})
-    compiled.compile_all([case_named("free-fall").model], progress=lambda line: None)
+    precompile.compile_all([case_named("free-fall").model], progress=lambda line: None)
     # one loop a layout: fused, euler, midpoint and heun, rk4 (three patterns of a
     # tableau) and a kick and drift; in passes, velocity Verlet (which carries state from
     # step to step); the adaptive and implicit methods run on the numpy path
