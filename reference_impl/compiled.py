@@ -169,21 +169,21 @@ def pointwise(scene: Scene) -> bool:
 
 
 def layout_for(kind, scene: Scene):
-    """Fused tiles of :data:`BLOCK` particles where every force is pointwise and the method
-    carries nothing from step to step over the whole scene; else passes over one tile."""
+    """Fused tiles of :data:`BLOCK` particles where every force is pointwise (one tile of
+    the whole scene for a method that carries state from step to step over it); else
+    passes over one tile."""
     n = len(scene.particles.mass)
-    if not kind.carries_state and pointwise(scene):
-        return Fused(BLOCK)
+    if pointwise(scene):
+        return Fused(max(n, 1) if kind.carries_state else BLOCK)
     return Passes(max(n, 1))
 
 
 @functools.cache
 def _fused_methods() -> tuple:
-    """The compiled steps of the built-in methods that may run fused."""
+    """The compiled steps of the built-in methods."""
     from truestep.reference_impl.solvers import METHODS
 
-    kinds = (method_kind(m) for m in METHODS)
-    return tuple(k for k in kinds if k is not None and not k.carries_state)
+    return tuple(k for k in (method_kind(m) for m in METHODS) if k is not None)
 
 
 def loop_kind(kind, layout, scene: Scene) -> tuple:
@@ -192,8 +192,8 @@ def loop_kind(kind, layout, scene: Scene) -> tuple:
     (:func:`fused_kinds`), in passes, every shape of step. One loop a scene and layout
     runs every method."""
     if isinstance(layout, Fused):
-        patterns, tableaux, kick_drift = fused_kinds((*_fused_methods(), kind))
-        return AnyMethod.of(kind, patterns), (tableaux, kick_drift)
+        patterns, steps = fused_kinds((*_fused_methods(), kind))
+        return AnyMethod.of(kind, patterns), steps
     return AnyMethod.of(kind), AnyMethod.of(kind)
 
 
@@ -215,8 +215,8 @@ def composition(held, layout, scene: Scene) -> tuple:
     kinds = (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes,
              type(layout))
     if isinstance(layout, Fused):
-        tableaux, kick_drift = held
-        return (*kinds, tuple(pattern(k) for k in tableaux), kick_drift is not None)
+        return (*kinds, tuple((field, pattern(k) if field == "tableau" else ())
+                              for field, k in held))
     return (*kinds, type(held))
 
 

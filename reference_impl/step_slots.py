@@ -21,7 +21,7 @@ from truestep.reference_impl.compose import (
 )
 from truestep.reference_impl.forces_kernels import impulse_at, impulses_add
 from truestep.reference_impl.particles_kernels import Scene
-from truestep.reference_impl.solvers.any_method import KICK_DRIFT, TABLEAU
+from truestep.reference_impl.solvers.any_method import KICK_DRIFT, KICK_DRIFT_KICK, TABLEAU
 from truestep.reference_impl.tiles import Passes
 
 
@@ -121,35 +121,37 @@ def slots_for(kind, layout, scene: Scene) -> dict:
     if isinstance(layout, Passes):
         slots["step"] = type(kind).passes
         return slots
-    return fused_slots(slots, *kind)
+    return fused_slots(slots, kind)
 
 
-def fused_slots(slots: dict, tableaux: tuple, kick_drift) -> dict:
+def fused_slots(slots: dict, steps: tuple) -> dict:
     """``slots`` with the step of a fused loop (:func:`tiles.fused_step`), its particles
-    stepped by :func:`tiles.fused_particles` made once for each of ``tableaux`` (with its
-    own step of one particle, unrolled) and ``kick_drift`` (if not ``None``), picked once
-    a step by the :class:`AnyMethod` the loop is given; the special particles' steps (a
-    tableau's in a loop, the kick and drift) alike."""
+    stepped by :func:`tiles.fused_particles` made once for each of ``steps`` ((field of
+    :class:`AnyMethod`, step) each: :func:`fused_kinds`) with its own step of one particle
+    (a tableau's unrolled), picked once a step by the :class:`AnyMethod` the loop is
+    given; the special particles' steps (a tableau's in a loop, a splitting's) alike."""
     smooth = {**slots, "point_accel": tiles.smooth_accel}
     special = {**slots, "point_accel": tiles.special_accel}
-    shapes = [(kind, "tableau", f"method.shape == TABLEAU and method.pattern == {i}")
-              for i, kind in enumerate(tableaux)]
-    if kick_drift is not None:
-        shapes.append((kick_drift, "kick_drift", "method.shape == KICK_DRIFT"))
-    names = {"TABLEAU": TABLEAU, "KICK_DRIFT": KICK_DRIFT}
-    steps, specials = [], []
-    for i, (kind, field, test) in enumerate(shapes):
+    names = {"TABLEAU": TABLEAU, "KICK_DRIFT": KICK_DRIFT, "FRESH": tiles.FRESH}
+    lines, specials = [], []
+    for i, (field, kind) in enumerate(steps):
+        shape = f"method.shape == {field.upper()}"
+        test = f"{shape} and method.pattern == {i}" if field == "tableau" else shape
         point = instantiate(kind.point_step(), smooth, _memo={})
         slots[f"point_step_{i}"] = point
         names[f"particles_{i}"] = instantiate(tiles.fused_particles,
                                               {**slots, "point_step": point}, _memo={})
-        steps += [f"if {test}:", f"    return particles_{i}(method.{field}, scene, tile, t, h)"]
+        made = ("2 if tile.count[FRESH] else 1" if field == "kick_drift_kick"
+                else f"method.{field}.evaluations")
+        lines += [f"if {test}:", f"    n = {made}",
+                  f"    particles_{i}(method.{field}, scene, tile, t, h)", "    return n"]
         if f"special_{field}" not in names:
             names[f"special_{field}"] = instantiate(kind.special_step(), special, _memo={},
                                                     options=compose.COPY_COLD)
-            specials += [f"if {test.split(' and ')[0]}:",
+            specials += [f"if {shape}:",
                          f"    return special_{field}(method.{field}, scene, tile, x, v, t, h, p)"]
-    slots["step_particles"] = glue(tiles.step_particles, [*steps, "return -1"], names)
+    names["KICK_DRIFT_KICK"] = KICK_DRIFT_KICK
+    slots["step_particles"] = glue(tiles.step_particles, [*lines, "return -1"], names)
     slots["special_step"] = glue(tiles.special_step, [*specials, "return x, v"], names)
     slots["step"] = tiles.fused_step
     return slots

@@ -292,9 +292,11 @@ def list_special(scene, tile):
 def fused_collisions(scene, tile, t, dt):
     """The collision pass of a fused step: on the particles ``flags`` marks (near a plane,
     or special), each alone (:func:`collide_particle`), the flags cleared and the visited
-    ones listed. The flags are read eight at a time: most runs of eight have none."""
+    ones listed. The flags are read eight at a time: most runs of eight have none.
+    Returns whether it changed any particle's state."""
     flags = tile.flags
     seen = 0
+    changed = False
     for k in range(flags.shape[0] // 8):
         b = 8 * k
         if (flags[b] | flags[b + 1] | flags[b + 2] | flags[b + 3] | flags[b + 4] | flags[b + 5]
@@ -303,17 +305,19 @@ def fused_collisions(scene, tile, t, dt):
         for p in range(8 * k, 8 * k + 8):
             if flags[p]:
                 flags[p] = 0
+                x, v = load(tile.X, p), load(tile.V, p)
                 tile.resting[p] = collide_particle(scene, tile, p, t, dt)
+                changed = changed or moved(x, v, load(tile.X, p), load(tile.V, p))
                 tile.visited[seen] = p
                 seen += 1
     tile.count[VISITED] = seen
-    return False
+    return changed
 
 
 @njit(**COLD)
 def fused_start(scene, tile, t):
     """The collision pass on the first state, every particle visited (with planes), then
-    the special particles listed."""
+    the special particles listed; the first step evaluates afresh."""
     flags = tile.flags
     for p in range(tile.X.shape[1]):
         flags[p] = 1
@@ -321,6 +325,7 @@ def fused_start(scene, tile, t):
     for p in range(flags.shape[0]):
         flags[p] = 0
     list_special(scene, tile)
+    tile.count[FRESH] = 1
 
 
 class Fused(NamedTuple):
@@ -382,7 +387,7 @@ def special_accel(scene, tile, x, v, t, p):
 @njit(**KERNEL)
 def fused_particles(method, scene, tile, t, h):
     """Each particle's whole step (:func:`point_step` of ``method``, a compiled step of one
-    shape) in one loop that also marks those near a plane; returns the evaluations."""
+    shape) in one loop that also marks those near a plane."""
     X, V = tile.X, tile.V
     radius = scene.particles.radius
     for j in range(X.shape[1]):
@@ -390,21 +395,23 @@ def fused_particles(method, scene, tile, t, h):
         store(X, j, x)
         store(V, j, v)
         tile.flags[j] = near_planes(scene, x, radius[j])
-    return method.evaluations
 
 
 @njit(**KERNEL)
 def fused_step(method, scene, tile, t, h):
     """One step of ``method`` over a tile of independent particles: each particle's whole
     step (:func:`step_particles`); the special particles' again (:func:`special_step`) from
-    their state at the step's start, saved first; then the collision pass on the marked
-    ones and the special ones listed anew. Returns the evaluations the step made."""
+    their state at the step's start, saved first (with the acceleration a method that
+    carries it keeps, into ``F``); then the collision pass on the marked ones, which says
+    whether the next step evaluates afresh, and the special ones listed anew. Returns the
+    evaluations the step made."""
     X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
     special = tile.special
     for q in range(tile.count[SPECIAL]):
         p = special[q]
         store(XS, p, load(X, p))
         store(VS, p, load(V, p))
+        store(tile.F, p, load(tile.A, p))
     evaluations = step_particles(method, scene, tile, t, h)
     for q in range(tile.count[SPECIAL]):
         p = special[q]
@@ -412,6 +419,6 @@ def fused_step(method, scene, tile, t, h):
         store(X, p, x)
         store(V, p, v)
     mark_special(scene, tile)
-    collisions(scene, tile, t + h, h)
+    tile.count[FRESH] = collisions(scene, tile, t + h, h)
     list_special(scene, tile)
     return evaluations

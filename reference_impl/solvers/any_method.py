@@ -9,9 +9,10 @@ step of every method that runs in that layout, picked once a step by the record
   a tableau's stages in a loop, a kick and drift, velocity Verlet's kicks around a drift,
   each written as what comes before each evaluation and after the last, so that the
   evaluation, the scene's forces, is at one place in the loop (:func:`any_passes`);
-- fused (:class:`~truestep.reference_impl.tiles.Fused`), the kick and drift and a step
-  for each *pattern* of non-zero tableau entries among the methods (its stages unrolled
-  for speed: :meth:`Tableau.point_step`); Heun and the midpoint method share a pattern.
+- fused (:class:`~truestep.reference_impl.tiles.Fused`), a step for each *pattern* of
+  non-zero tableau entries among the methods (its stages unrolled for speed:
+  :meth:`Tableau.point_step`; Heun and the midpoint method share a pattern), the kick and
+  drift, and velocity Verlet's (whose tile is the whole scene: it carries state over it).
 """
 
 from __future__ import annotations
@@ -134,16 +135,18 @@ class AnyMethod(NamedTuple):
         return self.tableau.stages if self.shape == TABLEAU else 0
 
 
-def fused_kinds(kinds) -> tuple[tuple, tuple, KickDrift | None]:
-    """The fused steps a loop holds for ``kinds`` (the compiled steps of the methods that
-    may run fused): one tableau for each pattern, in order of first appearance, and the
-    kick and drift if any method has it. Returns (patterns, their tableaux, kick-drift or
-    ``None``)."""
-    patterns, tableaux, kick_drift = [], [], None
+def fused_kinds(kinds) -> tuple[tuple, tuple]:
+    """The fused steps a loop holds for ``kinds`` (the compiled steps of the methods):
+    one tableau for each pattern, in order of first appearance, then the kick and drift
+    and velocity Verlet's step if any method has them. Returns (the tableaux' patterns,
+    the steps: (field of :class:`AnyMethod`, a step of that shape) each)."""
+    patterns, tableaux, splittings = [], [], {}
     for kind in kinds:
         if isinstance(kind, Tableau) and pattern(kind) not in patterns:
             patterns.append(pattern(kind))
-            tableaux.append(kind)
-        elif isinstance(kind, KickDrift) and kick_drift is None:
-            kick_drift = kind
-    return tuple(patterns), tuple(tableaux), kick_drift
+            tableaux.append(("tableau", kind))
+        elif isinstance(kind, KickDrift):
+            splittings.setdefault("kick_drift", kind)
+        elif isinstance(kind, KickDriftKick):
+            splittings.setdefault("kick_drift_kick", kind)
+    return tuple(patterns), (*tableaux, *splittings.items())

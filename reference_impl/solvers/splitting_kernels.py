@@ -15,7 +15,7 @@ from typing import NamedTuple
 from numba import njit
 
 from truestep.reference_impl.forces_kernels import KERNEL, LEAF
-from truestep.reference_impl.tiles import axpy, load, point_accel, store
+from truestep.reference_impl.tiles import FRESH, axpy, load, point_accel, store
 
 
 @njit(**LEAF)
@@ -98,6 +98,41 @@ def kick_drift_kick_finish(method, tile, h):
         store(V, j, axpy(load(VS, j), kick, load(A, j)))
 
 
+@njit(**KERNEL)
+def kick_drift_kick_point(method, scene, tile, x, v, t, h, p, a):
+    """Velocity Verlet's step of particle ``p`` alone from ``x``, ``v`` with ``a``, the
+    acceleration at the step's start: the half kick, the drift, the closing acceleration
+    (kept in column ``p`` of ``A`` for the next step) and the closing half kick."""
+    kick = method.kick * h
+    u = axpy(v, kick, a)
+    y = (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
+         drift(method, x[2], v[2], u[2], h))
+    closing = point_accel(scene, tile, y, u, t + h, p)
+    store(tile.A, p, closing)
+    return y, axpy(u, kick, closing)
+
+
+@njit(**KERNEL)
+def kick_drift_kick_point_step(method, scene, tile, x, v, t, h, p):
+    """Velocity Verlet's step of particle ``p`` alone (a filling of
+    :func:`tiles.point_step`): the acceleration at the start evaluated afresh when the
+    step is (:data:`tiles.FRESH`), else the one kept in ``A``."""
+    if tile.count[FRESH]:
+        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p,
+                                     point_accel(scene, tile, x, v, t, p))
+    return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.A, p))
+
+
+@njit(**KERNEL)
+def kick_drift_kick_special_step(method, scene, tile, x, v, t, h, p):
+    """:func:`kick_drift_kick_point_step` of a special particle, stepped again from the
+    step's start: its kept acceleration is where the fused step saved it (``F``)."""
+    if tile.count[FRESH]:
+        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p,
+                                     point_accel(scene, tile, x, v, t, p))
+    return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.F, p))
+
+
 class KickDriftKick(NamedTuple):
     """Half kicks of ``kick`` h around the drift with weights ``old`` and ``new``, the
     closing acceleration reused: velocity Verlet. Twin: :meth:`VelocityVerlet.step`. It
@@ -108,3 +143,11 @@ class KickDriftKick(NamedTuple):
     old: float
     new: float
     carries_state = True
+
+    def point_step(self):
+        """The step of one particle (a filling of :func:`tiles.point_step`)."""
+        return kick_drift_kick_point_step
+
+    def special_step(self):
+        """The step of one special particle (a filling of :func:`tiles.special_step`)."""
+        return kick_drift_kick_special_step
