@@ -53,7 +53,8 @@ DESELECT=(--deselect tests/test_models_collisions.py::test_bounce_times_converge
 KERNEL_FILES=(reference_impl/forces_kernels.py reference_impl/collisions_kernels.py
               reference_impl/particles_kernels.py reference_impl/tiles.py
               reference_impl/integrate_kernels.py reference_impl/compose.py
-              reference_impl/step_slots.py reference_impl/compiled.py)
+              reference_impl/step_slots.py reference_impl/compiled.py
+              reference_impl/solvers/any_method.py)
 TARGETS=(reference_impl/solvers/*.py reference_impl/forces.py reference_impl/collisions.py
          truestep/metrics.py "${KERNEL_FILES[@]}")
 
@@ -150,7 +151,8 @@ tests)
     changed="$(sha256sum --quiet -c .pristine.sha256 2>/dev/null | sed -n 's/: FAILED$//p')" || true
     case "$changed" in
         reference_impl/*_kernels.py|reference_impl/solvers/*_kernels.py|reference_impl/tiles.py|\
-        reference_impl/compose.py|reference_impl/step_slots.py|reference_impl/compiled.py)
+        reference_impl/compose.py|reference_impl/step_slots.py|reference_impl/compiled.py|\
+        reference_impl/solvers/any_method.py)
             NUMBA_DISABLE_JIT=1 exec python -m pytest -x -q -p no:cacheprovider "${KERNEL_DESELECT[@]}" \
                 "${KERNEL_TESTS[@]}" ;;
         reference_impl/solvers/*) tests=("${SOLVER_TESTS[@]}") ;;
