@@ -556,6 +556,7 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
     ax.grid(True, which="major", alpha=0.3)
     ax.set_title("Particle rain: particle-steps per second against n, one engine per colour, "
                  "one method per line style", fontsize=10)
-    ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.11, 1.0), frameon=False)
+    if ax.get_legend_handles_labels()[0]:  # none when every row failed
+        ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.11, 1.0), frameon=False)
     fig.tight_layout()
     return save(fig, path)
