@@ -16,10 +16,11 @@ from truestep.adapters.base import (
 )
 from truestep.cases.case import Case
 from truestep.cases.plugins import ode_system
-from truestep.reference_impl.compiled import compiled_reason, run_compiled
+from truestep.reference_impl.compiled import compiled_reason, prepared, run_compiled
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.particles import ParticleSystem, total_energy
 from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.precompile import compile_all
 from truestep.reference_impl.solvers import METHODS, get_solver
 from truestep.reference_impl.system import SecondOrderSystem, System
 
@@ -65,6 +66,19 @@ class ReferenceAdapter:
         if METHODS[method].needs_second_order and case.kind == "ode" and "second-order" not in case.features:
             missing.add("second-order")
         return missing
+
+    def prepare(self, case: Case, method: str) -> None:
+        """Compile the loop ``method`` runs ``case`` with (or load it from numba's cache;
+        shown on standard error when slow), where the compiled path applies: called in
+        the parent before it forks a sweep's runs, so that they find it ready."""
+        if self.compiled and compiled_reason(case.model, method) is None:
+            prepared(case.model, method)
+
+    def prepare_all(self, pairs: list[tuple[Case, str]], *, workers: int = 1) -> None:
+        """:meth:`prepare` every (case, method) of ``pairs``, the loops they need compiled
+        on ``workers`` cores at once (:func:`~truestep.reference_impl.precompile.compile_all`)."""
+        if self.compiled:
+            compile_all(pairs=[(case.model, method) for case, method in pairs], workers=workers)
 
     def __init__(self, *, compiled: bool = True) -> None:
         self.compiled = compiled

@@ -10,8 +10,12 @@ and adds into ``f`` in place. Potential energies (J) sit beside the forces that 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from truestep.reference_impl.forces_kernels import (
+    TIME_ROUNDOFF,
+    add_anchor_forces,
+    add_spring_forces,
+)
 from truestep.reference_impl.model import Anchors, ForceField, Gravitation, ParticleModel, Springs
 
 EARTH_MASS = 5.972e24
@@ -58,71 +62,21 @@ def spring_forces(
     return -magnitude[:, None] * unit
 
 
-_NO_POINTS = np.zeros((0, 3))
-_NO_PARTICLES = np.zeros(0, dtype=np.int64)
-
-
-@njit(cache=True, error_model="numpy")
-def _add_spring_loop(
-    f: np.ndarray,
-    x: np.ndarray,
-    v: np.ndarray,
-    i: np.ndarray,
-    j: np.ndarray,
-    point: np.ndarray,
-    stiffness: np.ndarray,
-    damping: np.ndarray,
-    rest: np.ndarray,
-) -> None:
-    """:func:`spring_forces` for every spring, scattered into ``f`` as it goes.
-
-    Spring ``s`` joins particle ``i[s]`` to particle ``j[s]``, or, when ``j`` is empty,
-    to the fixed point ``point[s]`` (m, shape (m, 3)). One compiled pass over the springs:
-    a small scene costs a microsecond, not the dozen numpy calls of the vectorised form,
-    and a large one reads each particle once per spring.
-    """
-    pairs = j.shape[0] > 0
-    for s in range(i.shape[0]):
-        a = i[s]
-        b = j[s] if pairs else -1
-        dx0, dx1, dx2 = x[a, 0], x[a, 1], x[a, 2]
-        dv0, dv1, dv2 = v[a, 0], v[a, 1], v[a, 2]
-        if b >= 0:
-            dx0 -= x[b, 0]
-            dx1 -= x[b, 1]
-            dx2 -= x[b, 2]
-            dv0 -= v[b, 0]
-            dv1 -= v[b, 1]
-            dv2 -= v[b, 2]
-        else:
-            dx0 -= point[s, 0]
-            dx1 -= point[s, 1]
-            dx2 -= point[s, 2]
-        length = np.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
-        if length == 0.0:  # direction undefined: no force
-            continue
-        u0, u1, u2 = dx0 / length, dx1 / length, dx2 / length
-        magnitude = stiffness[s] * (length - rest[s]) + damping[s] * (dv0 * u0 + dv1 * u1 + dv2 * u2)
-        f[a, 0] -= magnitude * u0
-        f[a, 1] -= magnitude * u1
-        f[a, 2] -= magnitude * u2
-        if b >= 0:
-            f[b, 0] += magnitude * u0
-            f[b, 1] += magnitude * u1
-            f[b, 2] += magnitude * u2
-
-
 def add_springs(f: np.ndarray, x: np.ndarray, v: np.ndarray, s: Springs) -> None:
     """Damped springs between particle pairs ``(s.i, s.j)``: :func:`spring_forces` on the
-    first end of each spring, its opposite on the second, all springs in one pass."""
+    first end of each spring, its opposite on the second, spring after spring, in one
+    compiled pass (:func:`forces_kernels.add_spring_forces`, on the arrays transposed):
+    a small scene costs a microsecond, not the dozen numpy calls of the vectorised form."""
     if len(s):
-        _add_spring_loop(f, x, v, s.i, s.j, _NO_POINTS, s.stiffness, s.damping, s.rest)
+        add_spring_forces(f.T, x.T, v.T, s.i, s.j, s.stiffness, s.damping, s.rest)
 
 
 def add_anchors(f: np.ndarray, x: np.ndarray, v: np.ndarray, a: Anchors) -> None:
-    """Damped springs from particles ``a.i`` to the fixed points ``a.point``."""
+    """Damped springs from particles ``a.i`` to the fixed points ``a.point``
+    (:func:`forces_kernels.add_anchor_forces`)."""
     if len(a):
-        _add_spring_loop(f, x, v, a.i, _NO_PARTICLES, a.point, a.stiffness, a.damping, a.rest)
+        add_anchor_forces(f.T, x.T, v.T, a.i, np.asarray(a.point).T, a.stiffness, a.damping,
+                          a.rest)
 
 
 def compile_springs() -> None:
@@ -302,11 +256,6 @@ def add_model_forces(
         add_fields(f, model.fields, x, v, model.mass, t)
     add_impulses(f, model.impulses, t)
     return f
-
-
-TIME_ROUNDOFF = 1e-9
-"""Relative margin on the ends of an impulse's window: a step time made by repeated
-addition (``4 x 0.0025 = 0.009999999999999998``) counts as the time it stands for."""
 
 
 def impulse_active(t_on: float, t_off: float, t: float) -> bool:

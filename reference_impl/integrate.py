@@ -12,6 +12,9 @@ from truestep.reference_impl.solvers.base import Solver, SolverFailed
 
 BLOWUP = 1e12
 """A state component beyond this magnitude counts as a blow-up (SI units throughout)."""
+CHECK_EVERY = 64
+"""Fixed steps between blow-up checks (and at the last step): a blow-up is found within
+this many steps of the first non-finite state, without a check after every step."""
 
 
 @dataclass
@@ -166,7 +169,7 @@ def integrate(
                 ts.append(system.get_time())
                 xs.append(system.get_state())
                 obs.append(system.observe())
-            if i % 64 == 0 or i == n_steps:  # a blow-up is found within 64 steps
+            if i % CHECK_EVERY == 0 or i == n_steps:
                 x = xs[-1] if marks[i] else system.get_state()
                 if _finite(x):
                     checked = len(xs)

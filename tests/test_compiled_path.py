@@ -3,54 +3,78 @@
 The numpy :class:`~truestep.reference_impl.particles.ParticleSystem`, the solver classes
 and :func:`~truestep.reference_impl.integrate.integrate` are the oracle. Each case runs
 its largest swept step for at most 300 steps both ways: the same status, records, steps
-and evaluations, and the same states to round-off. Tolerance: 1e-12 of the state's size
-(the compiled sums run in another order than numpy's BLAS products, about 1e-16 a step;
-a bounded run cannot build that up beyond 1e-13 in 300 steps), absolute for runs that
-blew up (their states are huge and only the status and the count must agree).
+and evaluations, and the same states: bit for bit, but for RK4, whose numpy step ends
+with the BLAS product ``B @ k`` (fused multiply-adds, in an order of its own) where the
+compiled one sums ``b_s k_s`` in stage order: there, 1e-12 of the state's size (about
+1e-16 a step; a bounded run cannot build that up beyond 1e-13 in 300 steps), absolute
+for runs that blew up (their states are huge and only the status and the count must
+agree).
+
+Then what the compiled path adds: the energy watched at every step, tiles of
+independent particles and the run again as one tile after a blow-up in one of them,
+methods known by their facts alone, and the composition itself.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+import numba
 import numpy as np
 import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import load_cases
-from truestep.reference_impl.compiled import compiled_reason, independent
+from truestep.reference_impl import compiled, compose, precompile, step_slots, tiles
+from truestep.reference_impl.compiled import compiled_reason, independent, run_compiled
+from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.model import ParticleModel, Plane
+from truestep.reference_impl.particles import ParticleSystem, total_energy
+from truestep.reference_impl.passes import passes_for
+from truestep.reference_impl.solvers import METHODS, ExplicitRungeKutta, get_solver
+from truestep.reference_impl.solvers.facts import MethodFacts
 
-METHODS = ["euler", "midpoint", "heun", "rk4", "symplectic-euler", "verlet", "lecture"]
+FIXED = ["euler", "midpoint", "heun", "rk4", "symplectic-euler", "verlet", "lecture"]
 CASES = [c for c in load_cases("*") if compiled_reason(c.model, "rk4") is None]
 ROUND_OFF = 1e-12
+BLAS_ORDERED = {"rk4"}
+"""Methods whose numpy step sums the stages with a BLAS product (see the docstring)."""
 
 
 def test_every_particle_case_but_fields_and_emitters_is_compiled():
     names = {c.name for c in load_cases("*") if c.model is not None}
     assert names - {c.name for c in CASES} == {"hair-strands", "particle-fountain"}
-    assert {c.name for c in CASES if independent(c.model)} >= {"particle-rain", "bouncing-ball"}
+    assert {c.name for c in CASES if independent(c.model)} >= {
+        "particle-rain", "bouncing-ball", "harmonic-oscillator"}
+    assert not independent(next(c for c in CASES if c.name == "spring-chain").model)
+
+
+def short(case):
+    dt = case.dts[0]
+    return dataclasses.replace(case, duration=min(case.duration, 300 * case.steps_for(dt)[1])), dt
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
 def test_compiled_equals_numpy(case):
-    dt = case.dts[0]
-    short = dataclasses.replace(case, duration=min(case.duration, 300 * case.steps_for(dt)[1]))
-    for method in METHODS:
-        fast = ReferenceAdapter().simulate(short, method, dt)
-        slow = ReferenceAdapter(compiled=False).simulate(short, method, dt)
+    case, dt = short(case)
+    for method in FIXED:
+        fast = ReferenceAdapter().simulate(case, method, dt)
+        slow = ReferenceAdapter(compiled=False).simulate(case, method, dt)
         label = f"{case.name}/{method}"
         assert (fast.path, slow.path) == ("compiled", "numpy"), label
         assert fast.status == slow.status, label
         assert (fast.steps, fast.nfev, len(fast.t)) == (slow.steps, slow.nfev, len(slow.t)), label
         np.testing.assert_array_equal(fast.t, slow.t, err_msg=label)
-        if fast.status == "ok":
+        if method not in BLAS_ORDERED:
+            np.testing.assert_array_equal(fast.x, slow.x, err_msg=label)
+            np.testing.assert_array_equal(fast.v, slow.v, err_msg=label)
+        elif fast.status == "ok":
             size = max(1.0, float(np.max(np.abs(slow.x))), float(np.max(np.abs(slow.v))))
             np.testing.assert_allclose(fast.x, slow.x, rtol=0, atol=ROUND_OFF * size, err_msg=label)
             np.testing.assert_allclose(fast.v, slow.v, rtol=0, atol=ROUND_OFF * size, err_msg=label)
             np.testing.assert_allclose(fast.energy, slow.energy, rtol=1e-9, atol=ROUND_OFF * size,
                                        err_msg=label)
-        else:
-            assert fast.t_fail == slow.t_fail, label
+        assert fast.t_fail == slow.t_fail, label
 
 
 def test_fields_and_emitters_run_on_the_numpy_path(case_named):
@@ -60,3 +84,224 @@ def test_fields_and_emitters_run_on_the_numpy_path(case_named):
     assert compiled_reason(None, "rk4").startswith("an ODE case")
     assert "not a fixed-step explicit method" in compiled_reason(case_named("free-fall").model,
                                                                  "implicit-euler")
+
+
+@pytest.mark.parametrize("name, method", [
+    ("harmonic-oscillator", "rk4"), ("bouncing-ball", "lecture"), ("hanging-cloth", "verlet"),
+    ("close-encounter", "heun"), ("particle-rain", "symplectic-euler"),
+    ("triangle-impulse", "euler"), ("sliding-contact", "midpoint")])
+def test_energy_watched_at_every_step_bounds_the_numpy_energy_of_every_record(case_named, name,
+                                                                              method):
+    case = case_named(name)
+    dt = case.dts[0]
+    h = case.steps_for(dt)[1]
+    plain, _ = run_compiled(case.model, method, case.duration, h, max_records=case.max_records)
+    watched, _ = run_compiled(case.model, method, case.duration, h,
+                              max_records=case.max_records, track_energy=True)
+    # watching changes nothing in the run
+    np.testing.assert_array_equal(watched.x, plain.x)
+    np.testing.assert_array_equal(watched.v, plain.v)
+    assert (watched.nfev, watched.steps, watched.status) == (plain.nfev, plain.steps, plain.status)
+    energy = total_energy(case.model, watched.x, watched.v)
+    low, high = watched.extra["energy_min"], watched.extra["energy_max"]
+    scale = max(1.0, float(np.max(np.abs(energy))))
+    # the compiled sums run in another order than numpy's (1e-16 of the energy a term)
+    assert low <= energy.min() + 1e-12 * scale and high >= energy.max() - 1e-12 * scale
+    every, _ = run_compiled(case.model, method, case.duration, h, max_records=plain.steps,
+                            track_energy=True)
+    assert len(every.t) == every.steps + 1  # every state recorded: the bounds are theirs
+    energy = total_energy(case.model, every.x, every.v)
+    assert every.extra["energy_min"] == pytest.approx(energy.min(), rel=1e-12, abs=1e-12 * scale)
+    assert every.extra["energy_max"] == pytest.approx(energy.max(), rel=1e-12, abs=1e-12 * scale)
+    assert "energy_min" not in plain.extra
+
+
+def unstable_in_one_tile(n: int = 3 * tiles.BLOCK) -> ParticleModel:
+    """Independent particles under drag; those of the second tile so light that explicit
+    Euler's factor ``1 - h k / m`` exceeds 1 in size: they blow up, the others do not."""
+    mass = np.ones(n)
+    mass[tiles.BLOCK + 10: tiles.BLOCK + 20] = 1e-4
+    rng = np.random.default_rng(5)
+    return ParticleModel(mass=mass, x0=rng.normal(size=(n, 3)), v0=rng.normal(size=(n, 3)),
+                         radius=np.zeros(n), fixed=np.zeros(n, bool),
+                         gravity=np.array([0.0, -9.81, 0.0]), drag=0.5,
+                         planes=[Plane(np.array([0.0, -5.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.5)])
+
+
+@pytest.mark.parametrize("method", ["euler", "lecture"])
+def test_a_blow_up_in_one_tile_ends_the_run_as_the_whole_scene_does(method):
+    model = unstable_in_one_tile()
+    assert compiled.layout_for(compiled.method_kind(method), compiled.pack(model)).size < model.n
+    fast, _ = run_compiled(model, method, 1.0, 1e-3, max_records=40)
+    assert fast.rerun_whole
+    stable, _ = run_compiled(dataclasses.replace(model, mass=np.ones(model.n)), method, 0.2, 1e-3)
+    assert stable.status == "ok" and not stable.rerun_whole
+    system = ParticleSystem(model, passes_for(model))
+    slow = integrate(get_solver(method)(system), 1.0, 1e-3, max_records=40)
+    assert fast.status == slow.status == "unstable"
+    assert (fast.steps, fast.nfev, fast.t_fail) == (slow.steps, slow.nfev, slow.t_fail)
+    np.testing.assert_array_equal(fast.t, slow.t)
+    n = model.n
+    np.testing.assert_array_equal(fast.x, slow.x[:, :3 * n].reshape(-1, n, 3))
+
+
+class Ralston(ExplicitRungeKutta):
+    """A tableau no step of the compiled path names: Ralston's second-order method."""
+
+    name = "ralston-test"
+    A = np.array([[0.0, 0.0], [2.0 / 3.0, 0.0]])
+    B = np.array([0.25, 0.75])
+    facts = MethodFacts(order=2, evaluations_per_step=2, symplectic=False)
+
+
+def test_a_new_tableau_is_compiled_from_its_facts_alone(case_named, monkeypatch):
+    monkeypatch.setitem(METHODS, Ralston.name, Ralston)
+    for name in ("bouncing-ball", "spring-chain"):
+        case = case_named(name)
+        dt = case.dts[0]
+        h = case.steps_for(dt)[1]
+        fast, _ = run_compiled(case.model, Ralston.name, 0.2, h)
+        system = ParticleSystem(case.model, passes_for(case.model))
+        slow = integrate(Ralston(system), 0.2, h)
+        n = case.model.n
+        np.testing.assert_allclose(fast.x, slow.x[:, :3 * n].reshape(-1, n, 3), rtol=0,
+                                   atol=1e-12 * max(1.0, np.abs(slow.x).max()))
+        assert fast.nfev == slow.nfev == 2 * fast.steps
+
+
+@pytest.mark.skipif(numba.config.DISABLE_JIT, reason="nothing is compiled with NUMBA_DISABLE_JIT=1")
+def test_compiling_is_shown_as_progress(case_named, monkeypatch):
+    monkeypatch.setattr(compiled, "SLOW_S", 0.0)
+    monkeypatch.setattr(step_slots, "_LOOPS", {})
+    monkeypatch.setattr(compiled, "_PREPARED", {})
+    said: list[str] = []
+    case = case_named("free-fall")
+    run_compiled(case.model, "heun", 0.01, 0.001, progress=said.append)
+    assert said[0] == "compiling reference kernels for gravity / every method / fused ..."
+    assert said[1].startswith("compiled reference kernels for gravity / every method / fused in ")
+
+
+def held(scene, method: str) -> tuple:
+    """What the loop that runs ``method`` on ``scene`` holds, its layout and the scene."""
+    kind = compiled.method_kind(method)
+    layout = compiled.layout_for(kind, scene)
+    return compiled.loop_kind(kind, layout, scene)[1], layout, scene
+
+
+def test_a_step_is_composed_of_only_what_its_scene_declares(case_named):
+    harmonic, ball = compiled.pack(case_named("harmonic-oscillator").model), compiled.pack(
+        case_named("bouncing-ball").model)
+    plain, planes = (step_slots.slots_for(*held(scene, "lecture")) for scene in (harmonic, ball))
+    # no planes: the collision slots are filled with nothing; with them, the kernels
+    assert "return False" in compose.source_of(plain["collisions"])
+    assert compose.source_of(plain["near_planes"]).endswith("return False\n")
+    assert planes["collisions"] is tiles.fused_collisions
+    assert "near_plane(scene.planes[0], x, radius)" in compose.source_of(planes["near_planes"])
+    # the forces: the anchor kernels for the one, gravity's for the other, nothing else
+    assert "anchors_add(scene.forces[0]" in compose.source_of(plain["add_forces"])
+    assert "gravity" not in compose.source_of(plain["add_forces"])
+    assert "gravity_at(scene.forces[0]" in compose.source_of(planes["point_force"])
+    names = {compose.cache_name("drive", s) for s in (plain, planes)}
+    assert len(names) == 2
+
+
+def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named,
+                                                                      monkeypatch):
+    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model),
+                                      "lecture"))
+    before = compose.cache_name("drive", slots)
+    monkeypatch.setattr(compose, "FINGERPRINT", "another source")
+    assert compose.cache_name("drive", slots) != before
+
+
+TWO_FILLINGS = '''
+import sys
+import numpy as np
+from numba import njit
+from truestep.reference_impl.compose import COLD, LOOP, glue, instantiate, slot
+
+
+@slot
+def f(x):
+    """A slot."""
+
+
+@njit(**COLD)
+def middle(a):
+    for k in range(a.shape[0]):
+        a[k] = f(a[k])
+        if a[k] > 1e300:
+            a[k] = np.sqrt(a[k]) + np.sin(a[k]) * np.cos(a[k])
+
+
+def loop(a, n):
+    for _ in range(n):
+        middle(a)
+    return a[0]
+
+
+FILLINGS = {"plus": ["return x + 1.0"], "times": ["return x * 10.0"]}
+
+
+def compiled(name):
+    return instantiate(loop, {"f": glue(f, FILLINGS[name], {})}, name=f"loop_{name}",
+                       options=LOOP)
+
+
+if __name__ == "__main__":
+    print(*(compiled(name)(np.ones(3), 1) for name in sys.argv[1:]))
+'''
+
+
+def test_loops_from_the_cache_made_in_other_processes_keep_their_own_copies(tmp_path):
+    """Two loops, each with its own copy of a rarely called part compiled on its own
+    (``middle``, :data:`compose.COLD`, as the collision passes are; filled differently),
+    compiled and cached by two processes that count their functions alike, then both
+    loaded from the cache into a third: each runs its own copy (the copies' names differ
+    by their fillings, :func:`compose.copy_name`; with one name, the linker gave both
+    loops the first copy, and Heun's step ran Euler's)."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "two_fillings.py").write_text(TWO_FILLINGS)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_DISABLE_JIT": "0"}
+
+    def run(*names: str) -> list[str]:
+        return subprocess.run([sys.executable, "two_fillings.py", *names], cwd=tmp_path,
+                              env=env, capture_output=True, text=True, check=True).stdout.split()
+
+    assert run("plus") == ["2.0"] and run("times") == ["10.0"]
+    assert run("plus", "times") == ["2.0", "10.0"]
+
+
+def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named,
+                                                                         monkeypatch):
+    monkeypatch.setattr(compiled, "_PREPARED", {})
+    precompile.compile_all([case_named("free-fall").model], progress=lambda line: None)
+    # one loop: euler, midpoint and heun, rk4 (three patterns of a tableau), a kick and
+    # drift and velocity Verlet (in one tile: it carries state from step to step), fused;
+    # the adaptive and implicit methods run on the numpy path
+    assert len(compiled._PREPARED) == 1
+    model = case_named("free-fall").model
+    assert {compiled.prepared(model, m)[2] for m in ("euler", "rk4", "verlet")} == {
+        tiles.Fused(tiles.BLOCK), tiles.Fused(len(model.mass))}
+
+
+def test_one_loop_runs_every_method_in_passes(case_named):
+    loops = {m: compiled.prepared(case_named("spring-chain").model, m)[0] for m in FIXED}
+    assert len({id(loop) for loop in loops.values()}) == 1
+
+
+def test_method_facts_choose_the_step():
+    from truestep.reference_impl.solvers.explicit_rk_kernels import Tableau
+    from truestep.reference_impl.solvers.splitting_kernels import KickDrift, KickDriftKick
+
+    kinds = {m: compiled.method_kind(m) for m in METHODS}
+    assert {m for m, k in kinds.items() if isinstance(k, Tableau)} == {
+        m for m, cls in METHODS.items() if issubclass(cls, ExplicitRungeKutta)}
+    assert isinstance(kinds["verlet"], KickDriftKick) and kinds["verlet"].carries_state
+    assert kinds["lecture"] == KickDrift(0.5, 0.5, 1)
+    assert kinds["dopri5"] is None and kinds["implicit-euler"] is None
+    rk4 = kinds["rk4"]
+    assert list(rk4.terms) == [0, 1, 1, 1] and list(rk4.cols[1:, 0]) == [0, 1, 2]

@@ -18,11 +18,13 @@ How a run is timed
 - Every call of an adapter happens in a forked child process
   (:func:`truestep.isolation.run_isolated`), one at a time: a crash or a hang is a row
   (``crashed``, ``timeout``), and no run shares the CPU with another.
-- Warm-up: each (engine, method) first runs once at the smallest n (at most
-  :data:`WARMUP_N`) in a child of its own, untimed: first-use costs (imports, compiling,
-  caches an engine keeps on disk) are paid there, and runs of doubling length time a step
-  there until one takes :data:`CALIBRATION_S`. Every timed child then warms up again at
-  that n for 2 steps (first calls in a fresh process) before its one timed run.
+- Warm-up: an engine that compiles what a scene needs (``adapter.prepare(case, method)``,
+  the reference) does so first, in this process, so that every child it forks finds it
+  ready. Then each (engine, method) runs once at the smallest n (at most
+  :data:`WARMUP_N`) in a child of its own, untimed: first-use costs (imports, caches an
+  engine keeps on disk) are paid there, and runs of doubling length time a step there
+  until one takes :data:`CALIBRATION_S`. Every timed child then warms up again at that n
+  for 2 steps (first calls in a fresh process) before its one timed run.
 - Steps per run: about ``target_s`` (0.2 s) of timed stepping, at least
   :data:`MIN_STEPS`, and at most the case's own duration (1 s at ``dt = 1e-3``: the fall
   and the first bounces). A run of ``k`` steps simulates the first ``k * dt`` seconds of
@@ -36,20 +38,21 @@ How a run is timed
   faster than n is not underestimated); where building the scene is cheap (predicted
   under a quarter of the target), the child times a probe run at ``n`` of a tenth of
   those steps first and takes the steps from it.
-- The budget: ``budget_s`` seconds of timed children (each timed run's child, all of
-  it: start, warm-up, building, stepping). The warm-up children come on top (one per
-  pair, normally a fraction of a second; up to :data:`FIRST_TIMEOUT_S` when an engine
-  compiles on first use, a cost paid once, not one of scaling), and so do the bandwidth
-  measurement and loading the case. Each (engine, method) in turn gets an equal share of
-  what is left and spends it from the smallest n up; a size whose predicted cost (the
-  untimed work of its child, building the scene above all, plus the timed stepping,
-  extrapolated from smaller sizes and, for building, from the same engine's other
-  methods) times :data:`MARGIN` does not fit in what is left of the share is
+- The budget: ``budget_s`` seconds for the whole table, from the call to the last row:
+  the bandwidth measurement, compiling, the warm-ups and the timed children. Each
+  (engine, method) in turn gets an equal share of what is left and spends it, its
+  compiling and warm-up first, then from the smallest n up; a size whose predicted cost
+  (the untimed work of its child, building the scene above all, plus the timed stepping:
+  the work, steps times n, at the cost per particle-step measured at smaller n, the
+  larger of an affine and a power-law extrapolation, and for building the same engine's
+  other methods) times :data:`MARGIN` does not fit in what is left of the share is
   ``skipped``, with the numbers in its note, and so is every larger size. A child is
-  killed when it outlasts both what is left of the share and 3 x its predicted cost
-  (``timeout``; an overrun comes out of the later shares). The first size always runs,
-  within :data:`FIRST_TIMEOUT_S` (plus 5 x the target) at least. After a crash or a
-  timeout the larger sizes are skipped, saying why.
+  killed when it outlasts both what is left of the share and 3 x its predicted cost, and
+  always when the budget ends (``timeout``; an overrun comes out of the later shares): a
+  timing surprise costs a row, never the budget. The first size runs whenever any of the
+  budget is left (its warm-up within :data:`FIRST_TIMEOUT_S` at most), since it
+  calibrates the rest. After a crash or a timeout the larger sizes are skipped, saying
+  why.
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ import pandas as pd
 
 from truestep.adapters import get_adapter
 from truestep.cases.case import Case
-from truestep.isolation import run_isolated
+from truestep.isolation import Outcome, run_isolated
 from truestep.progress import Progress
 
 RAIN_CASE = "particle-rain"
@@ -102,10 +105,11 @@ PROBE_BUILD = 0.25
 of the target (building twice costs little)."""
 
 FIRST_TIMEOUT_S = 60.0
-"""(A cold numba cache compiles the reference's loops in about 30 s on this machine.)
-Seconds the warm-up child and the first size of a pair may take at least (plus 5 x
-the target), whatever is left of the share: an engine that compiles on first use (and
-caches what it compiled) may do so once."""
+"""Seconds the warm-up child and the first size of a pair may take at least (plus 5 x
+the target), whatever is left of the share, and at most what is left of the budget."""
+
+RESERVE_S = 0.05
+"""Seconds of the budget kept for assembling the table after the last child."""
 
 MARGIN = 1.2
 """A run is started only if its predicted cost times this fits in what is left."""
@@ -253,6 +257,32 @@ def _extrapolate(points: dict[int, float], n: int) -> float:
     return max(affine, tb * (n / nb) ** exponent)
 
 
+def _prepare_and_warm_up(pair: _Pair, adapter, dt: float, warm: Case, max_steps: int,
+                         first_timeout: float) -> tuple:
+    """Compile what the pair's engine needs in this process (``adapter.prepare``, where it
+    has one), then its warm-up child (:func:`_warm_up`), both out of its share; returns the
+    warm-up's outcome and a note for its first row when they took long."""
+    began = time.perf_counter()
+    prepare = getattr(adapter, "prepare", None)
+    if prepare is not None:
+        prepare(warm, pair.method)
+    left = pair.budget_left()
+    if left <= 0:
+        pair.stop = f"budget: the {pair.budget_s:g} s budget ended before the warm-up"
+        warm_up = Outcome("ok", math.nan)
+    else:
+        warm_up = run_isolated(_warm_up, (pair.engine, pair.method, dt, warm, max_steps),
+                               min(first_timeout, left))
+    pair.spent = time.perf_counter() - began
+    note = ""
+    if warm_up.status == "ok" and not pair.stop:
+        pair.per_step[warm.model.n] = warm_up.value
+        if pair.spent > 1.0:
+            note = (f"compiling and the warm-up (n={_fmt_n(warm.model.n)}, untimed) took "
+                    f"{pair.spent:.2g} s of the pair's share")
+    return warm_up, note
+
+
 def _static_reason(adapter, case: Case, engine: str, method: str) -> tuple[str, str] | None:
     """``(status, note)`` of a pair that is not run at any n, or ``None`` to run it."""
     missing = adapter.missing(case, method)
@@ -277,9 +307,11 @@ def _fmt_n(n: int) -> str:
 class _Pair:
     """What one (engine, method) has measured and spent while its sizes run, smallest first."""
 
-    def __init__(self, engine: str, method: str, share: float, budget_s: float) -> None:
+    def __init__(self, engine: str, method: str, share: float, budget_s: float,
+                 deadline: float) -> None:
         self.engine, self.method, self.share, self.budget_s = engine, method, share, budget_s
-        self.spent = 0.0  # seconds of this pair's children so far
+        self.deadline = deadline  # time.perf_counter() when the budget ends
+        self.spent = 0.0  # seconds of this pair's compiling, warm-up and children so far
         self.fixed = 0.0  # seconds of the last timed child outside its timed simulate call
         self.per_step: dict[int, float] = {}  # n -> timed seconds per step
         self.build: dict[int, float] = {}  # n -> untimed seconds of the timed simulate call
@@ -288,6 +320,10 @@ class _Pair:
     def _left(self) -> str:
         return (f"{max(self.share - self.spent, 0):.2g} s were left of this pair's "
                 f"{self.share:.2g} s share of the {self.budget_s:g} s budget")
+
+    def budget_left(self) -> float:
+        """Seconds until the budget ends, less :data:`RESERVE_S`."""
+        return self.deadline - time.perf_counter() - RESERVE_S
 
     def run(self, n: int, dt: float, target_s: float, max_steps: int, bandwidth: float, scene,
             warm_n: int, first_timeout: float, engine_build: dict[int, float]) -> dict:
@@ -308,8 +344,11 @@ class _Pair:
                          f"work ~{predicted - repeats * steps * t_step:.2g} s, extrapolated from "
                          f"{source}); " + self._left())
             return {"status": "skipped", "note": self.stop}
-        timeout = max(self.share - self.spent, TIMEOUT_FACTOR * predicted,
-                      first_timeout if first else 0.0)
+        timeout = min(max(self.share - self.spent, TIMEOUT_FACTOR * predicted,
+                          first_timeout if first else 0.0), self.budget_left())
+        if timeout <= 0:
+            self.stop = f"budget: the {self.budget_s:g} s budget ended before the run at n={_fmt_n(n)}"
+            return {"status": "skipped", "note": self.stop}
         began = time.perf_counter()
         outcome = run_isolated(_timed_run, (self.engine, self.method, dt, scene(n), scene(warm_n),
                                             steps, probe, target_s, max_steps), timeout)
@@ -357,9 +396,9 @@ def scaling_table(
     engines : engine names (registered, or ``module:Class`` already resolved)
     sizes : particle counts n (rounded to integers, run in increasing order)
     dt : the step, s
-    budget_s : seconds for the timed children of the table (see the module docstring:
-        each (engine, method) gets an equal share of what is left; sizes that would not
-        fit are ``skipped`` with the reason); the warm-up children come on top
+    budget_s : seconds for the whole table (see the module docstring: each (engine,
+        method) gets an equal share of what is left; sizes that would not fit are
+        ``skipped`` with the reason)
     progress : receives one line per row; default, lines (or a bar) on standard error
     target_s : seconds of timed stepping each run aims at
     case : the scene to scale (default the library's ``particle-rain``; one block)
@@ -378,8 +417,8 @@ def scaling_table(
     reading back, teardown); ``status`` ``ok``, ``unstable``, ``crashed``, ``timeout``,
     ``unsupported`` or ``skipped``; ``note``, the reason, or the engine's notes.
     ``attrs`` holds ``bandwidth_bytes_per_s``, ``bytes_per_particle_step``, ``dt``,
-    ``budget_s``, ``target_s``, ``elapsed_s`` (seconds of all the children) and
-    ``warmup_s`` (those of the warm-up children, outside the budget).
+    ``budget_s``, ``target_s``, ``elapsed_s`` (seconds of the whole call, within the
+    budget) and ``warmup_s`` (those of compiling and the warm-up children, within it).
     """
     from truestep.cases.loader import library, load_case
     from truestep.numerics import pin_threads
@@ -389,6 +428,8 @@ def scaling_table(
     ns = sorted({round(float(s)) for s in sizes})
     if not ns or ns[0] < 1:
         raise ValueError(f"sizes: need at least one size of 1 or more, got {list(sizes)}")
+    start_all = time.perf_counter()
+    deadline = start_all + budget_s
     bandwidth = copy_bandwidth()
     engines = list(dict.fromkeys(engines))
     adapters = {e: get_adapter(e) for e in engines}
@@ -415,23 +456,14 @@ def scaling_table(
     max_steps = max(MIN_STEPS, case.steps_for(dt)[0])  # a run covers at most the case's duration
     first_timeout = FIRST_TIMEOUT_S + 5 * target_s
     engine_build: dict[str, dict[int, float]] = {}  # engine -> n -> untimed s of its simulate
-    spent_all = warmups_s = 0.0
-    start_all = time.perf_counter()
+    warmups_s = 0.0
     with Progress(len(pairs) * len(ns), "bench", say=progress) as bar:
         for k, (engine, method) in enumerate(pairs):
-            share = max(0.0, budget_s - spent_all) / (len(pairs) - k)
-            pair = _Pair(engine, method, share, budget_s)
-            began = time.perf_counter()
-            warm = run_isolated(_warm_up, (engine, method, dt, scene(warm_n), max_steps),
-                                first_timeout)
-            warm_s = time.perf_counter() - began
-            warmups_s += warm_s
-            warm_note = ""
-            if warm.status == "ok":
-                pair.per_step[warm_n] = warm.value
-                if warm_s > 1.0:
-                    warm_note = (f"the warm-up (n={_fmt_n(warm_n)}, untimed, own process, "
-                                 f"outside the budget) took {warm_s:.2g} s")
+            share = max(0.0, deadline - time.perf_counter()) / (len(pairs) - k)
+            pair = _Pair(engine, method, share, budget_s, deadline)
+            warm, warm_note = _prepare_and_warm_up(pair, adapters[engine], dt, scene(warm_n),
+                                                   max_steps, first_timeout)
+            warmups_s += pair.spent
             for n in ns:
                 row = {"engine": engine, "method": method, "n": n}
                 if warm.status != "ok" and not pair.stop:
@@ -450,7 +482,6 @@ def scaling_table(
                 bar.done(f"{engine:9s} {method:17s} n={n:>9,d} {row['status']:8s} "
                          f"steps={row.get('steps', 0):<7d} wall={row.get('wall_s', math.nan):.3g}s "
                          f"rate={row.get('particle_steps_per_s', math.nan):.3g}/s")
-            spent_all += pair.spent
 
     table = pd.DataFrame(rows)
     for col in COLUMNS:
@@ -525,6 +556,7 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
     ax.grid(True, which="major", alpha=0.3)
     ax.set_title("Particle rain: particle-steps per second against n, one engine per colour, "
                  "one method per line style", fontsize=10)
-    ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.11, 1.0), frameon=False)
+    if ax.get_legend_handles_labels()[0]:  # none when every row failed
+        ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.11, 1.0), frameon=False)
     fig.tight_layout()
     return save(fig, path)

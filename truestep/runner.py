@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import os
 import statistics
 import traceback
 from collections.abc import Callable, Iterable
@@ -331,6 +332,12 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
     process of its own, so that the row of the step that crashed or hung says so and the
     others are measured.
     """
+    prepare = getattr(get_adapter(engine), "prepare", None)
+    if prepare is not None:  # compile here, before the fork: every run finds it ready
+        try:
+            prepare(case, method)
+        except Exception:  # the sweep's own process fails alike, and its rows say why
+            pass
     outcome = run_isolated(simulate_sweep, (engine, case, method, dts, timing),
                            SWEEP_SLACK * case.timeout_s * len(dts) + 10.0)
     if outcome.status != "ok":
@@ -346,16 +353,28 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
 
 def preload() -> None:
     """Prepare this process for runs, once for every forked run: one thread for every BLAS
-    and OpenMP runtime (:func:`truestep.numerics.pin_threads`), the compiled spring loop
-    and the compiled stepping loop of the reference implementation (the engine modules
-    are imported by :func:`plan`)."""
+    and OpenMP runtime (:func:`truestep.numerics.pin_threads`) and the compiled spring loop
+    of the reference implementation (the engine modules are imported by :func:`plan`; the
+    reference's stepping loops are compiled by :func:`compile_ahead`)."""
     from truestep.numerics import pin_threads
-    from truestep.reference_impl.compiled import compile_all
     from truestep.reference_impl.forces import compile_springs
 
     pin_threads()
     compile_springs()
-    compile_all()
+
+
+def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
+    """Compile what the planned sweeps (case, engine, method, entries) will run before the
+    first is timed, for each engine that can (``prepare_all(pairs, workers=...)``), on
+    ``workers`` cores (default: all). Nothing a run measures depends on it."""
+    pairs: dict[str, list[tuple]] = {}
+    for case, engine, method, entries in planned:
+        if not entries[0][3]:
+            pairs.setdefault(engine, []).append((case, method))
+    for engine, wanted in pairs.items():
+        ahead = getattr(get_adapter(engine), "prepare_all", None)
+        if ahead is not None:
+            ahead(wanted, workers=workers or len(os.sched_getaffinity(0)))
 
 
 def duplicate_of(adapter, case: Case, method: str) -> str | None:
@@ -417,6 +436,8 @@ def run_matrix(
                for method, entries in itertools.groupby(plan(case, engine, quick=quick),
                                                         key=lambda e: e[0])]
     total = sum(len(entries) for *_, entries in planned if not entries[0][3])
+    if cluster is None:
+        compile_ahead(planned)
     here = host_name()
     parts: list[list[dict]] = [[] for _ in planned]
     jobs: list[SweepJob] = []

@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Mutation testing of the numpy physics with cosmic-ray (see README.md beside this file).
+# Mutation testing of the numpy physics and of the compiled kernels with cosmic-ray (see
+# README.md beside this file; CONFIG=benchmarks/mutation/cosmic-ray-kernels.toml for the
+# kernels' session).
 #
 #   bash benchmarks/mutation/run.sh all        # setup, init, before (BEFORE=1 exec), after (rerun)
 #   bash benchmarks/mutation/run.sh setup      # a copy of HEAD in $MUT and a venv in $VENV
@@ -26,7 +28,7 @@ VENV="${VENV:-$MUT/.venv}"
 SESSION="${SESSION:-$MUT/session.sqlite}"
 SAMPLE="${SAMPLE:-40}"
 OFFSET="${OFFSET:-0}"
-CONFIG="benchmarks/mutation/cosmic-ray.toml"
+CONFIG="${CONFIG:-benchmarks/mutation/cosmic-ray.toml}"  # cosmic-ray-kernels.toml: the kernels
 export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-$MUT/.numba-cache}"
 
 # The per-mutant tests: the kill tests first, then the existing tests that reach the numpy
@@ -40,9 +42,21 @@ FORCE_TESTS=(tests/test_models_forces.py tests/test_solvers.py tests/test_bounce
 COLLISION_TESTS=(tests/test_models_collisions.py tests/test_bounce_properties.py
                  tests/test_stability_and_restitution.py)
 METRIC_TESTS=(tests/test_energy_criteria.py tests/test_orders_in_run.py tests/test_reference_runs.py)
+# The compiled path's kernels run as Python here (NUMBA_DISABLE_JIT=1): a mutant would
+# otherwise recompile every loop the tests use, minutes a mutant. Its kernel tests, then
+# the compiled path against the numpy oracle (less two 20 s scenes its other scenes and
+# the tiling test cover: 1000 particles of rain, and a cloth beside the stiff cloth).
+KERNEL_TESTS=(tests/test_reference_kernels.py tests/test_compiled_path.py)
+KERNEL_DESELECT=(--deselect "tests/test_compiled_path.py::test_compiled_equals_numpy[particle-rain]"
+                 --deselect "tests/test_compiled_path.py::test_compiled_equals_numpy[hanging-cloth]")
 DESELECT=(--deselect tests/test_models_collisions.py::test_bounce_times_converge_at_first_order)
+KERNEL_FILES=(reference_impl/forces_kernels.py reference_impl/collisions_kernels.py
+              reference_impl/particles_kernels.py reference_impl/tiles.py
+              reference_impl/integrate_kernels.py reference_impl/compose.py
+              reference_impl/step_slots.py reference_impl/compiled.py
+              reference_impl/solvers/any_method.py)
 TARGETS=(reference_impl/solvers/*.py reference_impl/forces.py reference_impl/collisions.py
-         truestep/metrics.py)
+         truestep/metrics.py "${KERNEL_FILES[@]}")
 
 cmd="${1:-all}"
 case "$cmd" in
@@ -136,6 +150,11 @@ tests)
     # Run from $MUT by cosmic-ray, once per mutant.
     changed="$(sha256sum --quiet -c .pristine.sha256 2>/dev/null | sed -n 's/: FAILED$//p')" || true
     case "$changed" in
+        reference_impl/*_kernels.py|reference_impl/solvers/*_kernels.py|reference_impl/tiles.py|\
+        reference_impl/compose.py|reference_impl/step_slots.py|reference_impl/compiled.py|\
+        reference_impl/solvers/any_method.py)
+            NUMBA_DISABLE_JIT=1 exec python -m pytest -x -q -p no:cacheprovider "${KERNEL_DESELECT[@]}" \
+                "${KERNEL_TESTS[@]}" ;;
         reference_impl/solvers/*) tests=("${SOLVER_TESTS[@]}") ;;
         reference_impl/forces.py) tests=("${FORCE_TESTS[@]}") ;;
         reference_impl/collisions.py) tests=("${COLLISION_TESTS[@]}") ;;

@@ -8,6 +8,8 @@ follow from their update formulas with ``h a = -a q - b (h v)`` in the units of
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from truestep.reference_impl.solvers.base import Solver
@@ -35,8 +37,28 @@ def lecture_step(a: float, b: float) -> np.ndarray:
     return np.array([[1.0 - a / 2, 1.0 - b / 2], [-a, 1.0 - b]])
 
 
+@dataclass(frozen=True)
+class Splitting:
+    """A splitting method's step as data, as a compiled step runs it
+    (:mod:`~truestep.reference_impl.solvers.splitting_kernels`).
+
+    kick : float
+        The opening kick ``v' = v + kick h a(q, v, t)``. ``1``: the whole kick, at the
+        step's start. ``1/2``: half a kick, the drift, then the other half at the new
+        positions and the half-step velocities, whose acceleration the next step reuses.
+    old, new : float
+        The drift ``q' = q + h (old v + new v')`` by the velocities before and after the
+        (opening) kick.
+    """
+
+    kick: float
+    old: float
+    new: float
+
+
 class _SplitSolver(Solver):
     needs_second_order = True
+    splitting: Splitting
 
     def _split(self) -> tuple[np.ndarray, np.ndarray, float]:
         x, t = self.system.get_state(), self.system.get_time()
@@ -59,6 +81,7 @@ class SymplecticEuler(_SplitSolver):
     facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=True,
                         stability=Stability(imaginary=2.0, real=2.0,
                                             step_matrix=symplectic_euler_step))
+    splitting = Splitting(kick=1.0, old=0.0, new=1.0)
 
     def step(self, dt: float) -> float:
         q, v, t = self._split()
@@ -81,6 +104,7 @@ class VelocityVerlet(_SplitSolver):
     name = "verlet"
     facts = MethodFacts(order=2, evaluations_per_step=1, symplectic=True, velocity_order=1,
                         stability=Stability(imaginary=2.0, real=2.0, step_matrix=verlet_step))
+    splitting = Splitting(kick=0.5, old=0.0, new=1.0)
 
     def __init__(self, system) -> None:
         super().__init__(system)
@@ -125,6 +149,7 @@ class LectureUpdate(_SplitSolver):
     facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=False,
                         exact_constant_acceleration=True,
                         stability=Stability(imaginary=0.0, real=2.0, step_matrix=lecture_step))
+    splitting = Splitting(kick=1.0, old=0.5, new=0.5)
 
     def step(self, dt: float) -> float:
         q, v, t = self._split()

@@ -1,0 +1,69 @@
+"""Compiling the reference's loops ahead of the runs that need them, on every core.
+
+A compiled loop (:mod:`~truestep.reference_impl.compiled`) takes seconds to compile, on one
+core, and milliseconds to load from numba's cache on disk. :func:`compile_all` compiles the
+loops a sweep (or a test session) will need before it starts, several at once in forked
+processes, so that the runs, timed one at a time, find them ready.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable, Iterable
+
+import numba
+
+from truestep.reference_impl import compiled
+from truestep.reference_impl.model import ParticleModel
+
+
+def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type]]) -> list[tuple]:
+    """One (model, method) of ``pairs`` for each loop they need that this process has not
+    prepared, in order of first need (pairs the compiled path cannot run are left out)."""
+    seen, needed = set(compiled._PREPARED), []
+    for model, method in pairs:
+        if compiled.compiled_reason(model, method) is not None:
+            continue
+        scene = compiled.pack(model)
+        kind = compiled.method_kind(method)
+        layout = compiled.layout_for(kind, scene)
+        key = compiled.composition(compiled.loop_kind(kind, layout, scene)[1], layout, scene)
+        if key not in seen:
+            seen.add(key)
+            needed.append((model, method))
+    return needed
+
+
+def _prepare_each(pairs: list[tuple], progress: Callable[[str], None] | None) -> None:
+    for model, method in pairs:
+        compiled.prepared(model, method, progress=progress)
+
+
+def compile_all(models: Iterable[ParticleModel] = (), methods: Iterable[str] | None = None,
+                *, pairs: Iterable[tuple] = (), workers: int = 1, share: tuple[int, int] = (0, 1),
+                progress: Callable[[str], None] | None = None) -> None:
+    """Compile (or load from numba's cache) the loops that ``methods`` (default: every
+    fixed-step method) need on ``models``, and those of ``pairs`` (model, method), so that
+    forked runs find them ready.
+
+    ``workers`` > 1 compiles them in that many processes at once (this one and forked
+    ones, each a share of the loops, into numba's cache), then loads the others' from the
+    cache: compiling is seconds a loop and uses one core. ``share`` (index, count) takes
+    only every count-th loop from the index-th (for processes that share the work among
+    themselves, such as a test session's workers)."""
+    from truestep.reference_impl.solvers import METHODS
+
+    names = list(methods) if methods is not None else list(METHODS)
+    wanted = [(model, method) for model in models for method in names] + list(pairs)
+    needed = loops_needed(wanted)[share[0]::share[1]]
+    workers = max(1, min(workers, len(needed)))
+    if workers > 1 and not numba.config.DISABLE_JIT:
+        context = multiprocessing.get_context("fork")
+        children = [context.Process(target=_prepare_each, args=(needed[k::workers], None))
+                    for k in range(1, workers)]
+        for child in children:
+            child.start()
+        _prepare_each(needed[0::workers], progress)
+        for child in children:
+            child.join()
+    _prepare_each(needed, progress)

@@ -1,0 +1,424 @@
+"""How a compiled step lays out its particles: tiles, and the collision pass of each layout.
+
+A tile is a run of particles whose state a step holds component-major (positions ``X``
+and velocities ``V`` of shape (3, m), with its scratch: :class:`Tile`). A scene whose
+particles act on one another is one tile; a scene whose particles do not is cut into
+tiles of :data:`BLOCK` particles, and the driver (:mod:`~truestep.reference_impl.integrate_kernels`)
+takes each tile through every step before the next (temporal blocking: the tile stays in
+the cache). A tile is stepped in one of two layouts, chosen when a run is packed
+(:mod:`~truestep.reference_impl.compiled`):
+
+:class:`Passes`
+    any scene: the derivative in passes over the tile (clear, each force kind, impulses,
+    contact, divide), then the method's update, then the collision pass of
+    :class:`~truestep.reference_impl.collisions.PlaneCollisions` over the tile.
+:class:`Fused`
+    scenes whose forces are all pointwise (gravity, drag, anchors, impulses): each
+    particle's whole step, every stage, in one loop the compiler vectorises
+    (:func:`fused_step`, with the method's step of one particle), the rare particles that
+    rest on a plane or feel an impulse (the tile's *special* particles) stepped again
+    alone; the collision pass then visits only the particles near a plane or resting on
+    one.
+
+Both collide a particle with :func:`collisions_kernels.collide` and nothing else.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from truestep.reference_impl.collisions import EPS_DISTANCE
+from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
+from truestep.reference_impl.compose import COLD, slot
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF
+from truestep.reference_impl.particles_kernels import (
+    applied_forces,
+    particle_force,
+    point_force,
+    scaled,
+)
+
+BLOCK = 256
+"""Particles of a tile of independent particles: its state and scratch (about 100 bytes
+a particle) stay in the L1 cache through all its steps."""
+
+SPECIAL, FRESH, CONTACT, VISITED = 0, 1, 2, 3
+"""Entries of :attr:`Tile.count`: how many special particles ``special`` lists (fused);
+whether the next step evaluates its first acceleration afresh (a method that reuses the
+last one); how many particles the last collision pass left in contact; how many it
+visited (fused, listed in ``visited``)."""
+
+
+class Tile(NamedTuple):
+    """The state and scratch of a tile of ``m`` particles.
+
+    X, V : (3, m) positions (m) and velocities (m/s), the state
+    F, A : (3, m) forces (N) and accelerations (m/s^2)
+    XS, VS : (3, m) a stage's state, or the state a fused step saved
+    KX, KV : (stages, 3, m) the stage derivatives of a tableau
+    DX, DV : (3, m) their weighted sums
+    contact : (planes, m) bool, the particles in contact with each plane
+    resting : (m,) bool, in contact with any plane (fused)
+    flags : (8 ceil(m / 8),) int64, the particles the fused collision pass visits (as wide
+        as the state, so that the loop that sets them stays vectorised)
+    special : (m,) int64, the special particles (fused), ``count[SPECIAL]`` of them
+    visited : (m,) int64, the particles the last fused collision pass visited
+    count : (4,) int64, see :data:`SPECIAL`
+    """
+
+    X: np.ndarray
+    V: np.ndarray
+    F: np.ndarray
+    A: np.ndarray
+    XS: np.ndarray
+    VS: np.ndarray
+    KX: np.ndarray
+    KV: np.ndarray
+    DX: np.ndarray
+    DV: np.ndarray
+    contact: np.ndarray
+    resting: np.ndarray
+    flags: np.ndarray
+    special: np.ndarray
+    visited: np.ndarray
+    count: np.ndarray
+
+
+def scratch(size: int, stages: int, planes: int) -> Tile:
+    """The buffers of a tile of up to ``size`` particles (one-dimensional, each field of
+    :class:`Tile` flattened), allocated once per run by Python: a compiled step allocates
+    nothing (it is compiled without numba's reference counting, see :mod:`compose`)."""
+    size = max(size, 1)
+    f = [np.zeros(3 * size) for _ in range(6)]
+    return Tile(*f, np.zeros(stages * 3 * size), np.zeros(stages * 3 * size), np.zeros(3 * size),
+                np.zeros(3 * size), np.zeros(planes * size, dtype=np.bool_),
+                np.zeros(size, dtype=np.bool_), np.zeros(8 * ((size + 7) // 8), dtype=np.int64),
+                np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64),
+                np.zeros(4, dtype=np.int64))
+
+
+@njit(**COLD)
+def tile_view(buffers, m):
+    """The tile of ``m`` particles in ``buffers`` (:func:`scratch`), its counts cleared."""
+    b = buffers
+    stages = b.KX.shape[0] // (3 * max(b.resting.shape[0], 1))
+    planes = b.contact.shape[0] // max(b.resting.shape[0], 1)
+    for k in range(b.count.shape[0]):
+        b.count[k] = 0
+    return Tile(b.X[:3 * m].reshape((3, m)), b.V[:3 * m].reshape((3, m)),
+                b.F[:3 * m].reshape((3, m)), b.A[:3 * m].reshape((3, m)),
+                b.XS[:3 * m].reshape((3, m)), b.VS[:3 * m].reshape((3, m)),
+                b.KX[:stages * 3 * m].reshape((stages, 3, m)),
+                b.KV[:stages * 3 * m].reshape((stages, 3, m)),
+                b.DX[:3 * m].reshape((3, m)), b.DV[:3 * m].reshape((3, m)),
+                b.contact[:planes * m].reshape((planes, m)), b.resting[:m],
+                b.flags[:8 * ((m + 7) // 8)], b.special[:m], b.visited[:m], b.count)
+
+
+@slot
+def collisions(scene, tile, t, dt):
+    """The collision and contact pass of the tile's layout after a step of ``dt`` (s)
+    ending at ``t`` (nothing for a scene without planes); returns whether it changed any
+    particle's state."""
+
+
+@slot
+def near_planes(scene, x, radius):
+    """Whether a particle at ``x`` (3-tuple, m) of ``radius`` (m) is within eps of a plane
+    of the scene (NaN counts as near), each plane's :func:`near_plane` or'ed; ``False``
+    without planes."""
+
+
+@slot
+def point_contact(scene, tile, f, v, p):
+    """``f`` with the contact force of every plane particle ``p`` rests on added
+    (:func:`particles_kernels.resting_force`); ``f`` without planes."""
+
+
+@njit(**LEAF)
+def axpy(y, a, x):
+    """``y + a x`` of 3-tuples (``a`` a float), component by component."""
+    return (y[0] + a * x[0], y[1] + a * x[1], y[2] + a * x[2])
+
+
+@njit(**LEAF)
+def load(A, p):
+    """Column ``p`` of a (3, m) array as a 3-tuple."""
+    return (A[0, p], A[1, p], A[2, p])
+
+
+@njit(**LEAF)
+def store(A, p, a):
+    """Set column ``p`` of a (3, m) array to the 3-tuple ``a``."""
+    A[0, p], A[1, p], A[2, p] = a
+
+
+@njit(**LEAF)
+def same_bits(a, b):
+    """Whether two floats have the same bits (``-0.0`` and ``0.0`` differ, as bytes do;
+    NaN counts as changed)."""
+    return a == b and np.copysign(1.0, a) == np.copysign(1.0, b)
+
+
+@njit(**LEAF)
+def moved(x, v, y, u):
+    """Whether the state ``(y, u)`` differs from ``(x, v)`` in any bit (3-tuples)."""
+    return not (same_bits(x[0], y[0]) and same_bits(x[1], y[1]) and same_bits(x[2], y[2])
+                and same_bits(v[0], u[0]) and same_bits(v[1], u[1]) and same_bits(v[2], u[2]))
+
+
+@njit(**LEAF)
+def near_plane(plane, x, radius):
+    """Whether a particle at ``x`` of ``radius`` is within eps of ``plane`` or its
+    distance is NaN: it is one the collision pass must see."""
+    return not signed_distance(x, radius, plane) >= EPS_DISTANCE
+
+
+@njit(**COLD)
+def passes_collisions(scene, tile, t, dt):
+    """The collision and contact pass over a tile (:class:`collisions.PlaneCollisions`):
+    planes one after the other, the applied force evaluated once, when the first particle
+    is found within eps of a plane. Sets the contact flags and ``count[CONTACT]``; returns
+    whether it changed any particle's state."""
+    X, V, F, contact = tile.X, tile.V, tile.F, tile.contact
+    par = scene.particles
+    planes = scene.planes
+    for k in range(contact.shape[0]):
+        for p in range(contact.shape[1]):
+            contact[k, p] = False
+    have_force = False
+    changed = False
+    on_any = 0
+    for k in range(len(planes)):
+        plane = planes[k]
+        for p in range(X.shape[1]):
+            if not par.movable[p]:
+                continue
+            x = load(X, p)
+            d = signed_distance(x, par.radius[p], plane)
+            if not within(d, par.radius[p], plane):
+                continue
+            if not have_force:  # the applied force at the end of the step, once per pass
+                applied_forces(scene, F, X, V, t)
+                have_force = True
+            v = load(V, p)
+            y, u, on = collide(x, v, load(F, p), par.inv_mass[p], d, plane, dt)
+            changed = changed or moved(x, v, y, u)
+            store(X, p, y)
+            store(V, p, u)
+            contact[k, p] = on
+            on_any += on
+    tile.count[CONTACT] = on_any
+    return changed
+
+
+@njit(**COLD)
+def passes_start(scene, tile, t):
+    """The collision pass on the first state (a particle may start on a plane); the first
+    step evaluates afresh."""
+    collisions(scene, tile, t, 0.0)
+    tile.count[FRESH] = 1
+
+
+class Passes(NamedTuple):
+    """The layout that runs the derivative in passes over a tile (any scene), in tiles of
+    ``size`` particles; ``collide`` is its collision pass."""
+
+    size: int
+    name = "passes"
+    start = passes_start
+    collide = passes_collisions
+
+
+@njit(**COLD)
+def collide_particle(scene, tile, p, t, dt):
+    """The collision and contact pass for particle ``p`` alone (its force depends on no
+    other particle): :func:`passes_collisions` restricted to it. Returns whether it rests
+    on any plane now."""
+    planes = scene.planes
+    par = scene.particles
+    for k in range(len(planes)):
+        tile.contact[k, p] = False
+    if not par.movable[p]:
+        return False
+    x, v = load(tile.X, p), load(tile.V, p)
+    f = (0.0, 0.0, 0.0)
+    have_force = False
+    resting = False
+    for k in range(len(planes)):
+        plane = planes[k]
+        d = signed_distance(x, par.radius[p], plane)
+        if not within(d, par.radius[p], plane):
+            continue
+        if not have_force:  # the applied force at the end of the step, once per pass
+            f = particle_force(scene, x, v, t, p)
+            have_force = True
+        x, v, on = collide(x, v, f, par.inv_mass[p], d, plane, dt)
+        tile.contact[k, p] = on
+        resting = resting or on
+    store(tile.X, p, x)
+    store(tile.V, p, v)
+    return resting
+
+
+@slot
+def kicked(scene, p):
+    """Whether particle ``p`` has impulses (``False`` for a scene without)."""
+
+
+@slot
+def list_kicked(scene, special):
+    """Write the particles that have impulses into ``special`` (int64); return how many
+    (0 for a scene without)."""
+
+
+@njit(**KERNEL)
+def list_special(scene, tile):
+    """List the tile's special particles in ``special``: those with impulses, then those
+    the last collision pass visited that rest on a plane and have none."""
+    n = list_kicked(scene, tile.special)
+    for q in range(tile.count[VISITED]):
+        p = tile.visited[q]
+        if tile.resting[p] and not kicked(scene, p):
+            tile.special[n] = p
+            n += 1
+    tile.count[SPECIAL] = n
+
+
+@njit(**KERNEL)
+def fused_collisions(scene, tile, t, dt):
+    """The collision pass of a fused step: on the particles ``flags`` marks (near a plane,
+    or special), each alone (:func:`collide_particle`), the flags cleared and the visited
+    ones listed. The flags are read eight at a time: most runs of eight have none.
+    Returns whether it changed any particle's state."""
+    flags = tile.flags
+    seen = 0
+    changed = False
+    for k in range(flags.shape[0] // 8):
+        b = 8 * k
+        if (flags[b] | flags[b + 1] | flags[b + 2] | flags[b + 3] | flags[b + 4] | flags[b + 5]
+                | flags[b + 6] | flags[b + 7]) == 0:
+            continue
+        for p in range(8 * k, 8 * k + 8):
+            if flags[p]:
+                flags[p] = 0
+                x, v = load(tile.X, p), load(tile.V, p)
+                tile.resting[p] = collide_particle(scene, tile, p, t, dt)
+                changed = changed or moved(x, v, load(tile.X, p), load(tile.V, p))
+                tile.visited[seen] = p
+                seen += 1
+    tile.count[VISITED] = seen
+    return changed
+
+
+@njit(**COLD)
+def fused_start(scene, tile, t):
+    """The collision pass on the first state, every particle visited (with planes), then
+    the special particles listed; the first step evaluates afresh."""
+    flags = tile.flags
+    for p in range(tile.X.shape[1]):
+        flags[p] = 1
+    collisions(scene, tile, t, 0.0)
+    for p in range(flags.shape[0]):
+        flags[p] = 0
+    list_special(scene, tile)
+    tile.count[FRESH] = 1
+
+
+class Fused(NamedTuple):
+    """The layout that steps each particle of a tile in one loop, for scenes whose forces
+    are all pointwise, in tiles of ``size`` particles; ``collide`` is its collision pass."""
+
+    size: int
+    name = "fused"
+    start = fused_start
+    collide = fused_collisions
+
+
+@njit(**KERNEL)
+def mark_special(scene, tile):
+    """Mark the special particles for the fused collision pass."""
+    for q in range(tile.count[SPECIAL]):
+        tile.flags[tile.special[q]] = 1
+
+
+@slot
+def point_accel(scene, tile, x, v, t, p):
+    """The acceleration (m/s^2, 3-tuple) of particle ``p`` at ``x``, ``v``, time ``t``, in
+    a fused step: :func:`smooth_accel`, or :func:`special_accel` for a special particle."""
+
+
+@slot
+def point_step(method, scene, tile, x, v, t, h, p):
+    """One step of ``method`` for particle ``p`` alone from ``x``, ``v`` (3-tuples) at time
+    ``t``, ``h`` s long: the method's step of one particle with :func:`smooth_accel`.
+    Returns ``(x', v')``."""
+
+
+@slot
+def step_particles(method, scene, tile, t, h):
+    """Every particle of the tile through one step of ``method`` (an ``AnyMethod``): the
+    loop's :func:`fused_particles` for the method's step; returns the evaluations."""
+
+
+@slot
+def special_step(method, scene, tile, x, v, t, h, p):
+    """:func:`point_step` of ``method`` (an ``AnyMethod``) with :func:`special_accel`."""
+
+
+@njit(**KERNEL)
+def smooth_accel(scene, tile, x, v, t, p):
+    """The acceleration of particle ``p`` under the scene's pointwise kinds (every force
+    but impulses and contact)."""
+    return scaled(point_force(scene, x, v, t, p), scene.particles.inv_mass[p])
+
+
+@njit(**KERNEL)
+def special_accel(scene, tile, x, v, t, p):
+    """The acceleration of particle ``p`` under its whole force: the pointwise kinds, its
+    impulses and the contact force of the planes it rests on."""
+    f = point_contact(scene, tile, particle_force(scene, x, v, t, p), v, p)
+    return scaled(f, scene.particles.inv_mass[p])
+
+
+@njit(**KERNEL)
+def fused_particles(method, scene, tile, t, h):
+    """Each particle's whole step (:func:`point_step` of ``method``, a compiled step of one
+    shape) in one loop that also marks those near a plane."""
+    X, V = tile.X, tile.V
+    radius = scene.particles.radius
+    for j in range(X.shape[1]):
+        x, v = point_step(method, scene, tile, load(X, j), load(V, j), t, h, j)
+        store(X, j, x)
+        store(V, j, v)
+        tile.flags[j] = near_planes(scene, x, radius[j])
+
+
+@njit(**KERNEL)
+def fused_step(method, scene, tile, t, h):
+    """One step of ``method`` over a tile of independent particles: each particle's whole
+    step (:func:`step_particles`); the special particles' again (:func:`special_step`) from
+    their state at the step's start, saved first (with the acceleration a method that
+    carries it keeps, into ``F``); then the collision pass on the marked ones, which says
+    whether the next step evaluates afresh, and the special ones listed anew. Returns the
+    evaluations the step made."""
+    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
+    special = tile.special
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        store(XS, p, load(X, p))
+        store(VS, p, load(V, p))
+        store(tile.F, p, load(tile.A, p))
+    evaluations = step_particles(method, scene, tile, t, h)
+    for q in range(tile.count[SPECIAL]):
+        p = special[q]
+        x, v = special_step(method, scene, tile, load(XS, p), load(VS, p), t, h, p)
+        store(X, p, x)
+        store(V, p, v)
+    mark_special(scene, tile)
+    tile.count[FRESH] = collisions(scene, tile, t + h, h)
+    list_special(scene, tile)
+    return evaluations
