@@ -28,7 +28,7 @@ from truestep.cases import load_cases
 from truestep.reference_impl import compiled, compose, precompile, step_slots, tiles
 from truestep.reference_impl.compiled import compiled_reason, independent, run_compiled
 from truestep.reference_impl.integrate import integrate
-from truestep.reference_impl.model import ParticleModel, Plane
+from truestep.reference_impl.model import ParticleModel, Plane, Springs
 from truestep.reference_impl.particles import ParticleSystem, total_energy
 from truestep.reference_impl.passes import passes_for
 from truestep.reference_impl.solvers import METHODS, ExplicitRungeKutta, get_solver
@@ -305,3 +305,136 @@ def test_method_facts_choose_the_step():
     assert kinds["dopri5"] is None and kinds["implicit-euler"] is None
     rk4 = kinds["rk4"]
     assert list(rk4.terms) == [0, 1, 1, 1] and list(rk4.cols[1:, 0]) == [0, 1, 2]
+
+
+# What the kernels' mutation sample (benchmarks/mutation, 40 mutants of 46eb984) found
+# untested: a collision pass that skips a flag of a run of eight, contact forces read from
+# the wrong component, contact flags not cleared, a blow-up between records not kept.
+# Each test below is the compiled path against the numpy oracle on a scene made for it.
+
+
+def lone_flag_model(n: int = 16, lone: tuple[int, ...] = (1, 9)) -> ParticleModel:
+    """Independent particles above a floor (y = 0): all high up (never near it in the run)
+    but those of ``lone``, which fall onto it and bounce. With (1, 9) the fused collision
+    pass sees, in each run of eight flags, only the flag at offset 1 set."""
+    x0 = np.zeros((n, 3))
+    x0[:, 0] = np.arange(n)
+    x0[:, 1] = 1000.0
+    for p in lone:
+        x0[p, 1] = 0.3
+    return ParticleModel(mass=np.ones(n), x0=x0, v0=np.zeros((n, 3)), radius=np.zeros(n),
+                         fixed=np.zeros(n, bool), gravity=np.array([0.0, -9.81, 0.0]),
+                         planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5)])
+
+
+# Kills tiles.py:302 `flags[b + 1]` -> `flags[b ** 1]` in fused_collisions: the run of
+# eight flags is then read without its second one, so a particle at offset 1 of its run
+# that is alone near a plane is never collided and falls through the floor.
+@pytest.mark.parametrize("method", ["euler", "symplectic-euler", "verlet", "lecture"])
+def test_a_particle_alone_near_a_plane_at_each_offset_of_a_run_of_eight_is_collided(method):
+    n = 16
+    for lone in [(k, 8 + k) for k in range(8)]:
+        model = lone_flag_model(n, lone)
+        assert compiled.layout_for(compiled.method_kind(method),
+                                   compiled.pack(model)).name == "fused"
+        fast, _ = run_compiled(model, method, 0.6, 1e-3, max_records=60)
+        slow = integrate(get_solver(method)(ParticleSystem(model, passes_for(model))),
+                         0.6, 1e-3, max_records=60)
+        assert fast.status == slow.status == "ok"
+        np.testing.assert_array_equal(fast.t, slow.t)
+        np.testing.assert_array_equal(fast.x, slow.x[:, :3 * n].reshape(-1, n, 3),
+                                      err_msg=f"{method}, lone {lone}")
+        # the falling particles never go below the floor
+        assert fast.x[:, list(lone), 1].min() >= -1e-9, (method, lone)
+
+
+def against_numpy(model: ParticleModel, method: str, duration: float, h: float, max_records: int,
+            exact: bool = True):
+    """The compiled run against the numpy oracle: status, records, times, states."""
+    n = model.n
+    fast, _ = run_compiled(model, method, duration, h, max_records=max_records)
+    slow = integrate(get_solver(method)(ParticleSystem(model, passes_for(model))),
+                     duration, h, max_records=max_records)
+    assert fast.status == slow.status, method
+    assert (fast.steps, fast.nfev) == (slow.steps, slow.nfev), method
+    np.testing.assert_array_equal(fast.t, slow.t, err_msg=method)
+    assert fast.t_fail == slow.t_fail, method
+    if fast.status == "ok":
+        xs = slow.x[:, :3 * n].reshape(-1, n, 3)
+        if exact:
+            np.testing.assert_array_equal(fast.x, xs, err_msg=method)
+        else:
+            np.testing.assert_allclose(fast.x, xs, rtol=0, atol=1e-12 * max(1.0, np.abs(xs).max()),
+                                       err_msg=method)
+    return fast, slow
+
+
+def dumbbell_on_floor(friction: float, v0=(1.0, 0.0, 0.0), lift: float = 0.0) -> ParticleModel:
+    """Two particles joined by a spring along x resting on a floor (y = 0), sliding at
+    ``v0``; a third particle rests on the floor alone. With ``lift`` > 0 a fourth particle,
+    1 m above the first and joined to it by a spring, starts upward at ``lift`` m/s and
+    yanks the first one off the floor. Springs make the scene non-pointwise: the
+    ``Passes`` layout (passes_collisions, add_contact_forces)."""
+    x0 = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [5.0, 0.0, 0.0]]
+    v = [list(v0), list(v0), [0.0, 0.0, 0.0]]
+    i, j = [0], [1]
+    if lift > 0:
+        x0.append([0.0, 1.0, 0.0])
+        v.append([0.0, lift, 0.0])
+        i.append(0)
+        j.append(3)
+    n = len(x0)
+    m = len(i)
+    springs = Springs(np.array(i), np.array(j), np.full(m, 50.0), np.full(m, 0.5), np.ones(m))
+    return ParticleModel(mass=np.ones(n), x0=np.array(x0), v0=np.array(v), radius=np.zeros(n),
+                         fixed=np.zeros(n, bool), gravity=np.array([0.0, -9.81, 0.0]),
+                         springs=springs,
+                         planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5, friction)])
+
+
+# Kills particles_kernels.py:119 `F[1, p]` -> `F[2, p]` in add_contact_forces: the contact
+# force of a particle resting on a floor y = 0 is then computed from (F_x, F_z, F_z), whose
+# normal push is F_z = 0, so Coulomb friction (limit mu |F_N|) vanishes and the dumbbell
+# slides on at its speed instead of slowing down.
+@pytest.mark.parametrize("method", ["euler", "symplectic-euler", "verlet", "lecture"])
+def test_friction_on_a_resting_dumbbell_of_the_passes_layout_is_the_numpy_one(method):
+    model = dumbbell_on_floor(friction=0.3)
+    assert compiled.layout_for(compiled.method_kind(method),
+                               compiled.pack(model)).name == "passes"
+    fast, _ = against_numpy(model, method, 0.5, 1e-3, max_records=50)
+    # friction slowed it: mu g t = 0.3 * 9.81 * 0.5 = 1.47 m/s > 1 m/s, it stopped
+    assert fast.x[-1, 0, 0] < 0.5 * 1.0 * 0.5 + 0.1
+
+
+# Kills tiles.py:190 `for p in range(contact.shape[1])` -> `for p in []` in
+# passes_collisions: the contact flags are then not cleared at the start of a pass, so a
+# particle yanked off the floor keeps its stale flag while another one still rests (the
+# pass's contact count is not zero): the floor keeps cancelling its downward push in the
+# air. A particle gets such a stale flag only when it leaves eps (1e-9 m) of the floor
+# within the step after a pass that found it resting, which a method whose later stages
+# already feel the spring's growing pull can do. Checked against the mutant: the rk4 case
+# fails (positions off by up to 3.9 m); midpoint and heun (kept here) and euler,
+# symplectic-euler, verlet, lecture in this scene do not tell it.
+@pytest.mark.parametrize("method", ["midpoint", "heun", "rk4"])
+def test_a_particle_leaving_the_floor_loses_its_contact_in_the_passes_layout(method):
+    model = dumbbell_on_floor(friction=0.0, v0=(0.0, 0.0, 0.0), lift=6.0)
+    fast, _ = against_numpy(model, method, 1.5, 1e-3, max_records=150, exact=method != "rk4")
+    assert fast.x[:, 0, 1].max() > 0.05  # the first particle did leave the floor
+
+
+# Kills integrate_kernels.py:122 `return kept + 1` -> `return kept ** 1` in stopped: a
+# blow-up first seen between records (no record since the last good check) is recorded
+# as the last state, as integrate() does; the mutant writes it but does not keep it.
+@pytest.mark.parametrize("method", ["euler", "lecture"])
+def test_a_blow_up_seen_between_records_is_recorded_as_integrate_does(method):
+    n = 3
+    model = ParticleModel(mass=np.full(n, 1e-4), x0=np.ones((n, 3)), v0=np.ones((n, 3)),
+                          radius=np.zeros(n), fixed=np.zeros(n, bool),
+                          gravity=np.array([0.0, -9.81, 0.0]), drag=0.5)
+    # explicit Euler's factor 1 - h k / m = -4: beyond BLOWUP in about 20 steps, found at
+    # the check of step 64; with 2 records (t = 0 and the end) no record lies between
+    fast, slow = against_numpy(model, method, 1.0, 1e-3, max_records=2)
+    assert fast.status == slow.status == "unstable"
+    assert len(slow.t) == 2 and len(fast.t) == 2
+    n_ = model.n
+    np.testing.assert_array_equal(fast.x, slow.x[:, :3 * n_].reshape(-1, n_, 3))
