@@ -9,52 +9,28 @@ those times alone.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from truestep.cases import exact_particles
 from truestep.cases.case import Case
+from truestep.cases.closed_forms import kepler_state, oscillator
+from truestep.cases.exact_registry import EXACT, Exact, ExactFn, exact_solution
+from truestep.cases.plugins import EXACT_GROUP, find_entry, names_with_entries
 from truestep.reference_impl.solvers import MethodFacts, get_solver
 
-
-@dataclass
-class Exact:
-    """Exact positions (and velocities, energy where known) at times ``t`` (s)."""
-
-    t: np.ndarray
-    x: np.ndarray
-    v: np.ndarray | None = None
-    energy: np.ndarray | None = None
-
-
-ExactFn = Callable[[Case, np.ndarray], Exact]
-EXACT: dict[str, ExactFn] = {}
-
-
-def exact_solution(name: str, *, check: Callable[[Case], None] | None = None,
-                   params: dict[str, str] | None = None, kind: str | None = None
-                   ) -> Callable[[ExactFn], ExactFn]:
-    """Register an exact solution under ``name``.
-
-    When a case names it, the loader checks that it fits the scene: by ``check(case)``
-    (which raises ``ValueError`` saying what does not fit) when given, else by
-    evaluating the solution at ``t = 0``, which must raise the same way or return the
-    case's start. ``params`` declares the ``[reference]`` parameters it reads (name ->
-    ``"positive"``, ``"nonnegative"``, ``"count"`` or ``"string"``): the loader checks
-    each and refuses any other; without it, any plain number, string or boolean passes.
-    ``kind`` (``"ode"`` or ``"particles"``) is the kind of case it solves, if only one.
-    """
-
-    def register(fn: ExactFn) -> ExactFn:
-        if check is not None:
-            fn.check = check  # type: ignore[attr-defined]
-        fn.params = params  # type: ignore[attr-defined]
-        fn.kind = kind  # type: ignore[attr-defined]
-        EXACT[name] = fn
-        return fn
-
-    return register
+__all__ = [
+    "EXACT",
+    "Exact",
+    "ExactFn",
+    "exact_named",
+    "exact_names",
+    "exact_particles",
+    "exact_solution",
+    "kepler_state",
+    "oscillator",
+]
 
 
 @exact_solution("circle", params={}, kind="ode")
@@ -64,36 +40,6 @@ def circle(case: Case, t: np.ndarray) -> Exact:
     c, s = np.cos(t), np.sin(t)
     x = np.stack([c * y0[0] - s * y0[1], s * y0[0] + c * y0[1]], axis=1)
     return Exact(t, x[:, None, :], None, np.full(t.shape, 0.5 * float(y0 @ y0)))
-
-
-def oscillator(m: float, k: float, c: float, u0: float, w0: float, t: np.ndarray):
-    """Displacement and velocity of ``m u'' + c u' + k u = 0`` from ``u(0)=u0, u'(0)=w0``.
-
-    Handles under-, critically and over-damped cases; ``m`` kg, ``k`` N/m, ``c`` N s/m.
-    """
-    omega0 = np.sqrt(k / m)
-    zeta = c / (2.0 * np.sqrt(k * m))
-    if zeta < 1.0:
-        wd = omega0 * np.sqrt(1.0 - zeta**2)
-        a = zeta * omega0
-        B = (w0 + a * u0) / wd
-        e = np.exp(-a * t)
-        u = e * (u0 * np.cos(wd * t) + B * np.sin(wd * t))
-        du = e * ((-a * u0 + B * wd) * np.cos(wd * t) + (-a * B - u0 * wd) * np.sin(wd * t))
-    elif zeta == 1.0:
-        a = omega0
-        B = w0 + a * u0
-        e = np.exp(-a * t)
-        u = e * (u0 + B * t)
-        du = e * (B - a * (u0 + B * t))
-    else:
-        r = omega0 * np.sqrt(zeta**2 - 1.0)
-        l1, l2 = -zeta * omega0 + r, -zeta * omega0 - r
-        A = (w0 - l2 * u0) / (l1 - l2)
-        B = u0 - A
-        u = A * np.exp(l1 * t) + B * np.exp(l2 * t)
-        du = A * l1 * np.exp(l1 * t) + B * l2 * np.exp(l2 * t)
-    return u, du
 
 
 @exact_solution("anchored-oscillator", params={}, kind="particles")
@@ -115,29 +61,6 @@ def anchored_oscillator(case: Case, t: np.ndarray) -> Exact:
     v = du[:, None] * axis
     energy = 0.5 * m.mass[0] * du**2 + 0.5 * a.stiffness[0] * u**2
     return Exact(t, x[:, None, :], v[:, None, :], energy)
-
-
-def kepler_state(e: float, mu: float, a: float, t: np.ndarray) -> np.ndarray:
-    """State ``(x, y, vx, vy)`` at times ``t`` of a Kepler orbit starting at pericentre.
-
-    Solves Kepler's equation ``E - e sin E = n t`` by Newton's method to machine
-    precision; semi-major axis ``a``, mean motion ``n = sqrt(mu / a^3)``.
-    """
-    n = np.sqrt(mu / a**3)
-    M = np.mod(n * t, 2 * np.pi)
-    E = M + e * np.sin(M) if e < 0.8 else np.full_like(M, np.pi)
-    for _ in range(50):
-        dE = (E - e * np.sin(E) - M) / (1 - e * np.cos(E))
-        E = E - dE
-        if np.max(np.abs(dE)) < 1e-15:
-            break
-    b = a * np.sqrt(1 - e**2)
-    denom = 1 - e * np.cos(E)
-    x = a * (np.cos(E) - e)
-    y = b * np.sin(E)
-    vx = -a * n * np.sin(E) / denom
-    vy = b * n * np.cos(E) / denom
-    return np.stack([x, y, vx, vy], axis=1)
 
 
 @exact_solution("kepler", params={}, kind="ode")
@@ -546,4 +469,12 @@ class ReferencePath:
         return Exact(t, x, v)
 
 
-import truestep.cases.exact_particles  # noqa: F401,E402
+def exact_named(name: str) -> ExactFn | None:
+    """The exact solution registered as ``name`` (built in, or installed by the entry-point
+    group ``truestep.exact``), or ``None``."""
+    return find_entry(EXACT_GROUP, name, EXACT, callable, "callable")
+
+
+def exact_names() -> list[str]:
+    """Every exact solution's name: built-in ones, then installed ones."""
+    return names_with_entries(EXACT_GROUP, dict(sorted(EXACT.items())))

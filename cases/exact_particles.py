@@ -1,6 +1,6 @@
 """Exact solutions of the particle cases: free flight, drag, two bodies, springs, bounces.
 
-Each is registered in :data:`truestep.cases.exact.EXACT` and returns positions and velocities
+Each is registered in :data:`truestep.cases.exact_registry.EXACT` and returns positions and velocities
 ``(T, n, 3)`` and the total energy ``(T,)`` (same formula as
 :func:`truestep.reference_impl.particles.total_energy`) at the requested times. Each checks that
 the scene is one it solves and raises ``ValueError`` naming what does not fit.
@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from truestep.cases.case import Case
-from truestep.cases.exact import Exact, exact_solution, kepler_state, oscillator
+from truestep.cases.closed_forms import kepler_state, oscillator
+from truestep.cases.exact_registry import Exact, exact_solution
 from truestep.reference_impl.model import ParticleModel
 
 

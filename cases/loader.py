@@ -19,6 +19,7 @@ import numpy as np
 from truestep.cases import plugins
 from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, StabilitySpec
 from truestep.cases.errors import CaseError, SelectionError
+from truestep.cases.exact import exact_named, exact_names
 from truestep.cases.fields import Fields, short
 from truestep.cases.files import FileRefused, read_regular
 from truestep.cases.limits import (
@@ -34,7 +35,9 @@ from truestep.cases.scene import read_scene
 from truestep.reference_impl.system import SecondOrderSystem
 from truestep.time_limit import TimeLimitExceeded, time_limit
 
-CASE_DIR = Path(__file__).resolve().parent
+CASE_DIR = plugins.CASE_DIR
+"""truestep's own case library (this folder)."""
+
 ODE_DIMENSIONS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
 """State dimension of the lecture's ODE systems (installed systems are checked by
 constructing them)."""
@@ -210,7 +213,7 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
     fn = _exact_fn(ref, exact) if exact is not None else None
     if exact is not None and fn is None:
         raise ref.error("exact", f"no exact solution named {short(exact)}; known: "
-                        f"{', '.join(plugins.exact_names())}")
+                        f"{', '.join(exact_names())}")
     exact_params = _exact_params(ref, fn)
     _check_reference_cost(ref, limits, duration, exact, exact_params, model)
     ref.done()
@@ -436,7 +439,7 @@ def _check_gate_steps(f: Fields, case: Case) -> None:
 
 def _exact_fn(ref: Fields, name: str):
     try:
-        return plugins.exact_solution(name)
+        return exact_named(name)
     except plugins.PluginError as err:
         raise ref.error("exact", str(err)) from None
 
@@ -474,7 +477,7 @@ def _read_ode(o: Fields, limits: Limits) -> OdeSpec:
 def _check_exact(case: Case) -> None:
     """The named exact solution must fit the scene: its own check if it has one, else it
     is evaluated at ``t = 0`` and must return the scene's start in the trajectory layout."""
-    fn = plugins.exact_solution(case.exact)
+    fn = exact_named(case.exact)
     where = "reference.exact"
     kind = getattr(fn, "kind", None)
     if kind is not None and kind != case.kind:

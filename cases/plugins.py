@@ -7,7 +7,7 @@ Three groups; code comes only from installed packages, never from a case file:
   one); truestep registers its own ``cases/`` this way;
 - ``truestep.exact``: ``name = "module:function"``, an exact solution
   ``fn(case, t) -> Exact`` that ``[reference] exact = "name"`` selects
-  (:mod:`truestep.cases.exact` says what it returns);
+  (:mod:`truestep.cases.exact` says what it returns and looks it up);
 - ``truestep.systems``: ``name = "module:Class"``, a
   :class:`~truestep.reference_impl.system.System` subclass constructed as
   ``Class(y0, **params)`` that ``[ode] system = "name"`` selects.
@@ -27,6 +27,9 @@ from truestep.reference_impl import odes
 from truestep.reference_impl.system import System
 
 CASES_GROUP, EXACT_GROUP, SYSTEMS_GROUP = "truestep.cases", "truestep.exact", "truestep.systems"
+
+CASE_DIR = Path(__file__).resolve().parent
+"""truestep's own case library: the directory of this package."""
 
 BUILTIN_SYSTEMS: dict[str, type[System]] = {
     "circle-field": odes.CircleField,
@@ -58,8 +61,6 @@ def _load(group: str, name: str, value: str) -> Any:
 
 def case_directories() -> list[tuple[str, Path]]:
     """(entry-point name, directory) of every installed case library, truestep's first."""
-    from truestep.cases.loader import CASE_DIR
-
     dirs = [("truestep", CASE_DIR)]
     for name, value in sorted(_group(CASES_GROUP).items()):
         obj = _load(CASES_GROUP, name, value)
@@ -75,7 +76,7 @@ def case_directories() -> list[tuple[str, Path]]:
     return dirs
 
 
-def _find(group: str, name: str, builtin: dict, fits: Callable[[Any], bool], kind: str) -> Any:
+def find_entry(group: str, name: str, builtin: dict, fits: Callable[[Any], bool], kind: str) -> Any:
     """``builtin[name]``, else the object the entry point ``name`` of ``group`` names
     (checked by ``fits``), else ``None``."""
     if name in builtin:
@@ -89,30 +90,16 @@ def _find(group: str, name: str, builtin: dict, fits: Callable[[Any], bool], kin
     return obj
 
 
-def _names(group: str, builtin: dict) -> list[str]:
+def names_with_entries(group: str, builtin: dict) -> list[str]:
     return [*builtin, *sorted(set(_group(group)) - set(builtin))]
 
 
 def ode_system(name: str) -> type[System] | None:
     """The ODE system class registered as ``name`` (the lecture's or installed), or ``None``."""
-    return _find(SYSTEMS_GROUP, name, BUILTIN_SYSTEMS,
+    return find_entry(SYSTEMS_GROUP, name, BUILTIN_SYSTEMS,
                  lambda c: isinstance(c, type) and issubclass(c, System), "a System subclass")
 
 
 def system_names() -> list[str]:
     """Every ODE system name: the lecture's, then installed ones."""
-    return _names(SYSTEMS_GROUP, BUILTIN_SYSTEMS)
-
-
-def exact_solution(name: str) -> Callable | None:
-    """The exact solution registered as ``name`` (built in or installed), or ``None``."""
-    from truestep.cases.exact import EXACT
-
-    return _find(EXACT_GROUP, name, EXACT, callable, "callable")
-
-
-def exact_names() -> list[str]:
-    """Every exact solution's name: built-in ones, then installed ones."""
-    from truestep.cases.exact import EXACT
-
-    return _names(EXACT_GROUP, dict(sorted(EXACT.items())))
+    return names_with_entries(SYSTEMS_GROUP, BUILTIN_SYSTEMS)

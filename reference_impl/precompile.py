@@ -67,26 +67,3 @@ def compile_all(models: Iterable[ParticleModel] = (), methods: Iterable[str] | N
         for child in children:
             child.join()
     _prepare_each(needed, progress)
-
-
-def main() -> None:
-    """``python -m truestep.reference_impl.precompile``: compile the loops of every case file
-    of the library and of the figures, every fixed-step method, on every core, into numba's
-    cache (what a first ``truestep run`` would do before its first timed run): a build
-    step for a fresh machine."""
-    import os
-    import time
-
-    from truestep.cases import load_case, load_cases
-    from truestep.figure_scenes import FIGURE_CASE_DIR
-
-    began = time.perf_counter()
-    cases = [*load_cases("*"), *(load_case(p) for p in sorted(FIGURE_CASE_DIR.glob("*.toml")))]
-    models = [c.model for c in cases if c.model is not None]
-    workers = len(os.sched_getaffinity(0))
-    compile_all(models, workers=workers, progress=lambda line: print(line, flush=True))
-    print(f"reference loops ready in {time.perf_counter() - began:.1f} s ({workers} workers)")
-
-
-if __name__ == "__main__":
-    main()

@@ -32,14 +32,11 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
-import socket
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-from truestep.cases.case import Case
 from truestep.isolation import Call, Outcome
+from truestep.sweep_job import SweepJob, host_name
 
 KILL_WORKER = "TRUESTEP_KILL_WORKER"
 """Fault injection for tests: ``CASE/ENGINE/METHOD:N:DIR`` makes the first ``N`` workers
@@ -55,25 +52,6 @@ class ClusterError(Exception):
 
     def __init__(self, message: str) -> None:
         super().__init__(" ".join(message.split()))
-
-
-@dataclass(frozen=True)
-class SweepJob:
-    """One case, engine and method over its sweep: what one task runs."""
-
-    index: int
-    case: Case
-    engine: str
-    method: str
-    dts: list[float]
-    adaptive: bool
-    timing: Any
-    want_traces: bool
-
-
-def host_name() -> str:
-    """The name of the machine this process runs on (the ``host`` column)."""
-    return socket.gethostname()
 
 
 _PRELOADED: list[bool] = [False]

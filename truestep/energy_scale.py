@@ -118,13 +118,13 @@ def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | Non
     states as ``x`` of shape (T, dim), ``v`` None); ``None`` without an exact solution."""
     if case.exact is None:
         return None
+    from truestep.cases.exact import exact_named
     from truestep.cases.exact import reference_path as run_path
-    from truestep.cases.plugins import exact_solution
 
     if case.exact == "reference-run":
         ex, alive = run_path(case)
     else:
-        ex = exact_solution(case.exact)(case, np.linspace(0.0, case.duration, GRID))
+        ex = exact_named(case.exact)(case, np.linspace(0.0, case.duration, GRID))
         alive = None
     if case.kind == "ode":
         return ex.t, ex.x[:, 0, :], None, None

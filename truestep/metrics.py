@@ -6,8 +6,7 @@ import numpy as np
 
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
-from truestep.cases.exact import Exact
-from truestep.cases.plugins import exact_solution
+from truestep.cases.exact import Exact, exact_named
 
 _EXACT_CACHE: dict[tuple[int, bytes], tuple[Case, Exact]] = {}
 _EXACT_CACHE_SIZE = 32
@@ -26,7 +25,7 @@ def exact_for(case: Case, t: np.ndarray) -> Exact | None:
     hit = _EXACT_CACHE.get(key)
     if hit is not None and hit[0] is case:
         return hit[1]
-    exact = exact_solution(case.exact)(case, t)
+    exact = exact_named(case.exact)(case, t)
     if len(_EXACT_CACHE) >= _EXACT_CACHE_SIZE:
         _EXACT_CACHE.pop(next(iter(_EXACT_CACHE)))
     _EXACT_CACHE[key] = (case, exact)

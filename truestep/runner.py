@@ -21,6 +21,7 @@ from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.isolation import Outcome, run_isolated
 from truestep.progress import Progress
+from truestep.sweep_job import SweepJob, host_name
 from truestep.time_limit import TimeLimitExceeded, time_limit
 from truestep.trust import checked
 
@@ -428,8 +429,6 @@ def run_matrix(
     sweep it already holds is taken from it instead of being run again. Every row
     records the ``host`` it ran on.
     """
-    from truestep.cluster import SweepJob, host_name
-
     timing = timing or (QUICK_TIMING if quick else Timing())
     preload()
     planned = [(case, engine, method, list(entries)) for case in cases for engine in engines
