@@ -117,7 +117,6 @@ class Trajectory:
         return self.t, self.energy
 
 
-
 @runtime_checkable
 class Adapter(Protocol):
     """One engine behind the harness.
@@ -209,8 +208,10 @@ velocities, float64)."""
 
 def unwatched_note(size: int) -> str:
     """The note of a run too large to record at every step (``size`` bytes of states)."""
-    return (f"watched at its records only: its every step would take {size / 2**20:.0f} MiB "
-            f"(over {MONITOR_BYTES / 2**20:.0f} MiB)")
+    return (
+        f"watched at its records only: its every step would take {size / 2**20:.0f} MiB "
+        f"(over {MONITOR_BYTES / 2**20:.0f} MiB)"
+    )
 
 
 def thin_records(traj: Trajectory, n_steps: int, max_records: int) -> Trajectory:
@@ -235,8 +236,9 @@ def thin_records(traj: Trajectory, n_steps: int, max_records: int) -> Trajectory
 def finite_until(x: np.ndarray, t: np.ndarray, limit: float = BLOWUP) -> tuple[str, float | None]:
     """Status of recorded states ``x`` (T, ...): ``ok`` or ``unstable`` at the first bad time."""
     flat = np.abs(x.reshape(len(x), -1))
-    bad = ~np.all(np.isfinite(flat), axis=1) | (np.nanmax(np.where(np.isfinite(flat), flat, np.inf),
-                                                          axis=1, initial=0.0) > limit)
+    bad = ~np.all(np.isfinite(flat), axis=1) | (
+        np.nanmax(np.where(np.isfinite(flat), flat, np.inf), axis=1, initial=0.0) > limit
+    )
     if not np.any(bad):
         return "ok", None
     return "unstable", float(t[int(np.argmax(bad))])
@@ -404,8 +406,7 @@ class FixedStepAdapter(abc.ABC):
         x, v = self.unpack(scene, snaps)
         return Recording(recorded * h, x, v, k, wall, stopped)
 
-    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False
-                 ) -> Trajectory:
+    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False) -> Trajectory:
         """Run ``case`` with ``method`` at step ``dt`` (s); see the class docstring.
 
         ``monitor``: for the run a row is measured from (timed runs leave it off): record
@@ -415,8 +416,7 @@ class FixedStepAdapter(abc.ABC):
         :data:`MONITOR_BYTES` is watched at its records only."""
         self.require(case, method)
         n_steps, h = case.steps_for(dt)
-        every = monitor and n_steps > case.max_records and (
-            n_steps * case.model.n * 48 <= MONITOR_BYTES)
+        every = monitor and n_steps > case.max_records and (n_steps * case.model.n * 48 <= MONITOR_BYTES)
         if monitor and n_steps > case.max_records and not every:
             notes_first = [unwatched_note(n_steps * case.model.n * 48)]
         else:
@@ -445,7 +445,15 @@ class FixedStepAdapter(abc.ABC):
         with np.errstate(all="ignore"):
             energy = total_energy(case.model, rec.x, rec.v)
         return Trajectory(
-            t=rec.t, x=rec.x, v=rec.v, energy=energy, status=status, t_fail=t_fail,
-            nfev=rec.steps * self.evaluations(method), steps=rec.steps,
-            wall_s=rec.wall_s, message="; ".join(notes), extremes=rec.extremes,
+            t=rec.t,
+            x=rec.x,
+            v=rec.v,
+            energy=energy,
+            status=status,
+            t_fail=t_fail,
+            nfev=rec.steps * self.evaluations(method),
+            steps=rec.steps,
+            wall_s=rec.wall_s,
+            message="; ".join(notes),
+            extremes=rec.extremes,
         )

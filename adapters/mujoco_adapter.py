@@ -182,6 +182,7 @@ INTEGRATORS: dict[str, int] = {
 }
 """Method name (the MJCF ``<option integrator>`` value) -> ``mjtIntegrator``."""
 
+
 def implicit_damper_step(a: float, b: float) -> np.ndarray:
     """``implicit``/``implicitfast`` on the linear test system: the velocity update is
     implicit in the velocity derivatives of the forces (the damper), explicit in the
@@ -189,9 +190,12 @@ def implicit_damper_step(a: float, b: float) -> np.ndarray:
     return np.array([[1.0 - a / (1.0 + b), 1.0 / (1.0 + b)], [-a / (1.0 + b), 1.0 / (1.0 + b)]])
 
 
-IMPLICIT_FACTS = MethodFacts(order=1, evaluations_per_step=1, symplectic=True,
-                             stability=Stability(imaginary=2.0, real=float("inf"),
-                                                 step_matrix=implicit_damper_step))
+IMPLICIT_FACTS = MethodFacts(
+    order=1,
+    evaluations_per_step=1,
+    symplectic=True,
+    stability=Stability(imaginary=2.0, real=float("inf"), step_matrix=implicit_damper_step),
+)
 """``implicit`` and ``implicitfast``: the velocity update is implicit in the forces'
 velocity derivatives (every damper); without dampers it is the same step as ``Euler``."""
 
@@ -359,8 +363,7 @@ def mjcf(
             world.append(f'<site name="anchor{a}" pos="{_vec(point)}"/>')
     for i in layout.free:
         joints = "".join(
-            f'<joint name="p{i}{c}" type="slide" axis="{ax}"/>'
-            for c, ax in zip("xyz", axes, strict=False)
+            f'<joint name="p{i}{c}" type="slide" axis="{ax}"/>' for c, ax in zip("xyz", axes, strict=False)
         )
         # rotational inertia plays no part (no rotational joints) but must be positive
         inertia = _vec(np.full(3, max(0.4 * model.mass[i] * radius[i] ** 2, 1e-12)))
@@ -407,25 +410,27 @@ def mjcf(
                 f'solref="{-stiffness:.17g} {-damping:.17g}" solimp="{solimp}"/>'
             )
 
-    text = "\n".join([
-        '<mujoco model="truestep">',
-        '  <compiler inertiafromgeom="false" angle="radian"/>',
-        f'  <option timestep="{h:.17g}" integrator="{method}" gravity="{_vec(model.gravity)}" '
-        'cone="elliptic">',
-        '    <flag energy="enable" autoreset="disable"/>',
-        "  </option>",
-        "  <default>",
-        f'    <joint armature="0" damping="{model.drag:.17g}" frictionloss="0" stiffness="0" '
-        'limited="false"/>',
-        '    <geom contype="0" conaffinity="0"/>',
-        "  </default>",
-        "  <worldbody>",
-        *("    " + w for w in world),
-        "  </worldbody>",
-        *(["  <tendon>", *("    " + t for t in tendons), "  </tendon>"] if tendons else []),
-        *(["  <contact>", *("    " + p for p in pairs), "  </contact>"] if pairs else []),
-        "</mujoco>",
-    ])
+    text = "\n".join(
+        [
+            '<mujoco model="truestep">',
+            '  <compiler inertiafromgeom="false" angle="radian"/>',
+            f'  <option timestep="{h:.17g}" integrator="{method}" gravity="{_vec(model.gravity)}" '
+            'cone="elliptic">',
+            '    <flag energy="enable" autoreset="disable"/>',
+            "  </option>",
+            "  <default>",
+            f'    <joint armature="0" damping="{model.drag:.17g}" frictionloss="0" stiffness="0" '
+            'limited="false"/>',
+            '    <geom contype="0" conaffinity="0"/>',
+            "  </default>",
+            "  <worldbody>",
+            *("    " + w for w in world),
+            "  </worldbody>",
+            *(["  <tendon>", *("    " + t for t in tendons), "  </tendon>"] if tendons else []),
+            *(["  <contact>", *("    " + p for p in pairs), "  </contact>"] if pairs else []),
+            "</mujoco>",
+        ]
+    )
     return text, layout
 
 
@@ -542,9 +547,21 @@ class MujocoAdapter(FixedStepAdapter):
     method_facts: ClassVar[dict[str, FactsSpec]] = METHOD_FACTS
     capabilities = frozenset(
         {
-            "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",
-            "anchored-springs", "universal-gravitation", "force-fields", "planes", "thin-walls", "friction",
-            "pinned-particles", "impulses",
+            "2d",
+            "3d",
+            "point-masses",
+            "uniform-gravity",
+            "drag",
+            "springs",
+            "spring-damping",
+            "anchored-springs",
+            "universal-gravitation",
+            "force-fields",
+            "planes",
+            "thin-walls",
+            "friction",
+            "pinned-particles",
+            "impulses",
         }
     )
 
@@ -647,15 +664,22 @@ def _step(
         if roll and j > i:
             span = steps_at[j] - step
             warmstart[0] = d.qacc_warmstart
-            roller.rollout([m], [d], states[i:i + 1], nstep=span, initial_warmstart=warmstart,
-                           state=out[: span * nstate], skip_checks=True)
+            roller.rollout(
+                [m],
+                [d],
+                states[i : i + 1],
+                nstep=span,
+                initial_warmstart=warmstart,
+                state=out[: span * nstate],
+                skip_checks=True,
+            )
             if warnings.any():
                 mujoco.mj_setState(m, d, states[i], spec)
                 d.qacc_warmstart[:] = warmstart[0]
                 warnings[:] = 0
                 roll = False
                 continue
-            states[i + 1:j + 1] = out.reshape(-1, nstate)[marks[i + 1:j + 1] - step - 1]
+            states[i + 1 : j + 1] = out.reshape(-1, nstate)[marks[i + 1 : j + 1] - step - 1]
             i, step = j, steps_at[j]
             continue
         target = steps_at[i + 1]
@@ -680,7 +704,7 @@ def _step(
     states = states[: i + 1]
     n, dim = case.model.n, lay.dim
     x, v = np.zeros((len(states), n, 3)), np.zeros((len(states), n, 3))
-    x[:, lay.free, :dim] = states[:, 1:1 + m.nq].reshape(len(states), -1, dim)
+    x[:, lay.free, :dim] = states[:, 1 : 1 + m.nq].reshape(len(states), -1, dim)
     x[:, lay.pinned] = scene.pinned_x
-    v[:, lay.free, :dim] = states[:, 1 + m.nq:1 + m.nq + m.nv].reshape(len(states), -1, dim)
+    v[:, lay.free, :dim] = states[:, 1 + m.nq : 1 + m.nq + m.nv].reshape(len(states), -1, dim)
     return states[:, 0].copy(), x, v, step, wall, bad

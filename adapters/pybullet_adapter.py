@@ -199,6 +199,7 @@ CLEAN_PARAMETERS: dict[str, float] = {
 CLEAN_CONTACT_PROCESSING_THRESHOLD = 0.0
 """m, per body: contacts still this far apart or farther are not handed to the solver."""
 
+
 @dataclass
 class BulletScene:
     """A particle scene built in one pybullet client.
@@ -270,18 +271,33 @@ def build_scene(model: ParticleModel, h: float, *, clean: bool) -> BulletScene:
         for i in range(model.n):
             radius = float(model.radius[i]) if model.radius[i] > 0 else POINT_RADIUS
             if radius not in shapes:
-                shapes[radius] = p.createCollisionShape(p.GEOM_SPHERE, radius=radius,
-                                                        physicsClientId=cid)
+                shapes[radius] = p.createCollisionShape(p.GEOM_SPHERE, radius=radius, physicsClientId=cid)
             mass = 0.0 if model.fixed[i] else float(model.mass[i])
-            body = p.createMultiBody(mass, shapes[radius], -1, model.x0[i].tolist(),
-                                     useMaximalCoordinates=maximal, physicsClientId=cid)
+            body = p.createMultiBody(
+                mass,
+                shapes[radius],
+                -1,
+                model.x0[i].tolist(),
+                useMaximalCoordinates=maximal,
+                physicsClientId=cid,
+            )
             bodies[i] = body
             if model.fixed[i]:
                 p.setCollisionFilterGroupMask(body, -1, 0, 0, physicsClientId=cid)
                 continue
-            p.changeDynamics(body, -1, mass=mass, localInertiaDiagonal=[0.0, 0.0, 0.0],
-                             linearDamping=0.0, angularDamping=0.0, maxJointVelocity=np.inf,
-                             restitution=1.0, lateralFriction=1.0, **extra, physicsClientId=cid)
+            p.changeDynamics(
+                body,
+                -1,
+                mass=mass,
+                localInertiaDiagonal=[0.0, 0.0, 0.0],
+                linearDamping=0.0,
+                angularDamping=0.0,
+                maxJointVelocity=np.inf,
+                restitution=1.0,
+                lateralFriction=1.0,
+                **extra,
+                physicsClientId=cid,
+            )
             group, mask = (POINTS, POINT_PLANES) if point[i] else (SPHERES, PLANES)
             if not model.planes:
                 group = mask = 0
@@ -289,8 +305,10 @@ def build_scene(model: ParticleModel, h: float, *, clean: bool) -> BulletScene:
             p.resetBaseVelocity(body, model.v0[i].tolist(), [0.0, 0.0, 0.0], physicsClientId=cid)
 
         for plane in model.planes:
-            for present, shift, group, mask in ((sphere, 0.0, PLANES, SPHERES),
-                                                (point, -POINT_RADIUS, POINT_PLANES, POINTS)):
+            for present, shift, group, mask in (
+                (sphere, 0.0, PLANES, SPHERES),
+                (point, -POINT_RADIUS, POINT_PLANES, POINTS),
+            ):
                 if not np.any(present):
                     continue
                 at = plane.point + shift * plane.normal
@@ -298,30 +316,51 @@ def build_scene(model: ParticleModel, h: float, *, clean: bool) -> BulletScene:
                 if plane.thickness > 0:  # a thin wall: a box whose face is the plane
                     half = 0.5 * plane.thickness
                     shape = p.createCollisionShape(
-                        p.GEOM_BOX, halfExtents=[WALL_HALF_SIZE, WALL_HALF_SIZE, half],
-                        physicsClientId=cid)
+                        p.GEOM_BOX, halfExtents=[WALL_HALF_SIZE, WALL_HALF_SIZE, half], physicsClientId=cid
+                    )
                     at = at - half * plane.normal
                     orientation = _z_to(plane.normal)
                 else:
-                    shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=plane.normal.tolist(),
-                                                   physicsClientId=cid)
-                body = p.createMultiBody(0.0, shape, -1, at.tolist(), orientation,
-                                         useMaximalCoordinates=maximal, physicsClientId=cid)
-                p.changeDynamics(body, -1, restitution=float(plane.restitution),
-                                 lateralFriction=float(plane.friction), **extra,
-                                 physicsClientId=cid)
+                    shape = p.createCollisionShape(
+                        p.GEOM_PLANE, planeNormal=plane.normal.tolist(), physicsClientId=cid
+                    )
+                body = p.createMultiBody(
+                    0.0,
+                    shape,
+                    -1,
+                    at.tolist(),
+                    orientation,
+                    useMaximalCoordinates=maximal,
+                    physicsClientId=cid,
+                )
+                p.changeDynamics(
+                    body,
+                    -1,
+                    restitution=float(plane.restitution),
+                    lateralFriction=float(plane.friction),
+                    **extra,
+                    physicsClientId=cid,
+                )
                 p.setCollisionFilterGroupMask(body, -1, group, mask, physicsClientId=cid)
     except BaseException:
         p.disconnect(cid)
         raise
     need_x, need_v, forced = _needs(model)
     drifting = model.fixed & np.any(model.v0 != 0, axis=1)
-    return BulletScene(cid, bodies, np.flatnonzero(movable), np.flatnonzero(need_x),
-                       np.flatnonzero(need_v), np.flatnonzero(forced), np.flatnonzero(drifting))
+    return BulletScene(
+        cid,
+        bodies,
+        np.flatnonzero(movable),
+        np.flatnonzero(need_x),
+        np.flatnonzero(need_v),
+        np.flatnonzero(forced),
+        np.flatnonzero(drifting),
+    )
 
 
-def external_forces(model: ParticleModel, f: np.ndarray, x: np.ndarray, v: np.ndarray,
-                    t: float) -> np.ndarray:
+def external_forces(
+    model: ParticleModel, f: np.ndarray, x: np.ndarray, v: np.ndarray, t: float
+) -> np.ndarray:
     """Every force but gravity into ``f`` (n, 3), N, at ``x``, ``v`` (n, 3) and time ``t`` (s)."""
     return forces.add_model_forces(f, model, x, v, t, gravity=False)
 
@@ -387,15 +426,26 @@ class PybulletAdapter(FixedStepAdapter):
 
     name = "pybullet"
     methods = ("default", "clean")
-    method_facts: ClassVar[dict[str, str]] = {"default": "symplectic-euler",
-                                               "clean": "symplectic-euler"}
+    method_facts: ClassVar[dict[str, str]] = {"default": "symplectic-euler", "clean": "symplectic-euler"}
     """Bullet steps velocity then position (semi-implicit Euler) with the numpy forces,
     dampers included, held at the start of the step: the reference's symplectic Euler."""
     capabilities = frozenset(
         {
-            "2d", "3d", "point-masses", "uniform-gravity", "drag", "springs", "spring-damping",
-            "anchored-springs", "universal-gravitation", "force-fields", "planes", "thin-walls", "friction",
-            "pinned-particles", "impulses",
+            "2d",
+            "3d",
+            "point-masses",
+            "uniform-gravity",
+            "drag",
+            "springs",
+            "spring-damping",
+            "anchored-springs",
+            "universal-gravitation",
+            "force-fields",
+            "planes",
+            "thin-walls",
+            "friction",
+            "pinned-particles",
+            "impulses",
         }
     )
 
@@ -404,8 +454,10 @@ class PybulletAdapter(FixedStepAdapter):
         step a free body the same way): without planes its trajectory is ``default``'s,
         bit for bit (tested)."""
         if method == "clean" and not case.model.planes:
-            return ("no contacts: the same trajectory as pybullet/default bit for bit "
-                    "(clean changes only contact handling)")
+            return (
+                "no contacts: the same trajectory as pybullet/default bit for bit "
+                "(clean changes only contact handling)"
+            )
         return None
 
     def build(self, case: Case, method: str, h: float) -> _Run:
@@ -426,8 +478,12 @@ class PybulletAdapter(FixedStepAdapter):
             run.fresh = False
             return
         x, v, f = run.x, run.v, run.f
-        get_x, get_v, apply, world = (p.getBasePositionAndOrientation, p.getBaseVelocity,
-                                      p.applyExternalForce, p.WORLD_FRAME)
+        get_x, get_v, apply, world = (
+            p.getBasePositionAndOrientation,
+            p.getBaseVelocity,
+            p.applyExternalForce,
+            p.WORLD_FRAME,
+        )
         for j in range(k, k + steps):
             if not run.fresh:
                 if run.bx:

@@ -173,20 +173,34 @@ def build_scene(model: ParticleModel, *, collision_slop: float) -> PymunkScene:
             space.add(circle)
         centre = model.x0[:, :2].mean(axis=0)
         for plane in model.planes:
-            space.add(_plane_segment(space, plane.point[:2], plane.normal[:2], centre,
-                                     plane.restitution, plane.friction,
-                                     0.5 * plane.thickness or PLANE_THICKNESS))
+            space.add(
+                _plane_segment(
+                    space,
+                    plane.point[:2],
+                    plane.normal[:2],
+                    centre,
+                    plane.restitution,
+                    plane.friction,
+                    0.5 * plane.thickness or PLANE_THICKNESS,
+                )
+            )
 
     s = model.springs
     for i, j, k, c, r in zip(s.i, s.j, s.stiffness, s.damping, s.rest, strict=True):
         if not (model.fixed[i] and model.fixed[j]):
-            space.add(pymunk.DampedSpring(bodies[i], bodies[j], (0.0, 0.0), (0.0, 0.0),
-                                          float(r), float(k), float(c)))
+            space.add(
+                pymunk.DampedSpring(
+                    bodies[i], bodies[j], (0.0, 0.0), (0.0, 0.0), float(r), float(k), float(c)
+                )
+            )
     a = model.anchors
     for i, p, k, c, r in zip(a.i, a.point, a.stiffness, a.damping, a.rest, strict=True):
         if not model.fixed[i]:
-            space.add(pymunk.DampedSpring(space.static_body, bodies[i], _planar(p), (0.0, 0.0),
-                                          float(r), float(k), float(c)))
+            space.add(
+                pymunk.DampedSpring(
+                    space.static_body, bodies[i], _planar(p), (0.0, 0.0), float(r), float(k), float(c)
+                )
+            )
 
     ids = pymunk.batch.Buffer()
     pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, ids)
@@ -219,8 +233,7 @@ def _plane_segment(
     foot = centre - float((centre - point) @ n) * n
     core = foot - half_thickness * n
     along = np.array([-n[1], n[0]]) * PLANE_HALF_LENGTH
-    seg = pymunk.Segment(space.static_body, _planar(core - along), _planar(core + along),
-                         half_thickness)
+    seg = pymunk.Segment(space.static_body, _planar(core - along), _planar(core + along), half_thickness)
     seg.elasticity, seg.friction = float(restitution), float(friction)
     return seg
 
@@ -239,17 +252,33 @@ class PymunkAdapter(FixedStepAdapter):
     name = "pymunk"
     methods = ("default",)
     adaptive_methods = ()
-    method_facts: ClassVar[dict[str, MethodFacts]] = {"default": MethodFacts(
-        order=1, evaluations_per_step=1, symplectic=True,
-        stability=Stability(imaginary=2.0, real=float("inf"), step_matrix=exact_damper_step))}
+    method_facts: ClassVar[dict[str, MethodFacts]] = {
+        "default": MethodFacts(
+            order=1,
+            evaluations_per_step=1,
+            symplectic=True,
+            stability=Stability(imaginary=2.0, real=float("inf"), step_matrix=exact_damper_step),
+        )
+    }
     """Position first, then velocity from forces at the new position: the adjoint of the
     reference's symplectic Euler, first order and symplectic, stable for ``omega h < 2``
     undamped; a spring's damper is integrated exactly (:func:`exact_damper_step`)."""
     capabilities = frozenset(
         {
-            "point-masses", "2d", "uniform-gravity", "drag", "springs", "spring-damping",
-            "anchored-springs", "planes", "thin-walls", "friction", "pinned-particles", "impulses",
-            "force-fields", "universal-gravitation",
+            "point-masses",
+            "2d",
+            "uniform-gravity",
+            "drag",
+            "springs",
+            "spring-damping",
+            "anchored-springs",
+            "planes",
+            "thin-walls",
+            "friction",
+            "pinned-particles",
+            "impulses",
+            "force-fields",
+            "universal-gravitation",
         }
     )
     collision_slop = 1e-4

@@ -55,9 +55,24 @@ class ReferenceAdapter:
 
     capabilities = frozenset(
         {
-            "ode", "second-order", "point-masses", "2d", "3d", "uniform-gravity", "drag",
-            "springs", "spring-damping", "anchored-springs", "universal-gravitation",
-            "force-fields", "planes", "thin-walls", "friction", "emitters", "pinned-particles", "impulses",
+            "ode",
+            "second-order",
+            "point-masses",
+            "2d",
+            "3d",
+            "uniform-gravity",
+            "drag",
+            "springs",
+            "spring-damping",
+            "anchored-springs",
+            "universal-gravitation",
+            "force-fields",
+            "planes",
+            "thin-walls",
+            "friction",
+            "emitters",
+            "pinned-particles",
+            "impulses",
         }
     )
 
@@ -83,8 +98,7 @@ class ReferenceAdapter:
     def __init__(self, *, compiled: bool = True) -> None:
         self.compiled = compiled
 
-    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False
-                 ) -> Trajectory:
+    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False) -> Trajectory:
         """Run ``case`` with ``method``: through the compiled loop where it applies
         (:func:`~truestep.reference_impl.compiled.compiled_reason`; not with
         ``compiled=False``), else through the numpy system and solver classes; the
@@ -125,8 +139,7 @@ class ReferenceAdapter:
         else:
             solver = cls(system)
             step = case.steps_for(dt)[1]
-        run = integrate(solver, case.duration, step, max_records=case.max_records,
-                        sample_at=samples)
+        run = integrate(solver, case.duration, step, max_records=case.max_records, sample_at=samples)
         x, v = trajectory_from_states(case, run.t, run.x)
         alive = run.extra.get("alive")
         if case.kind == "ode":
@@ -135,17 +148,37 @@ class ReferenceAdapter:
         else:
             energy = total_energy(case.model, x, v, alive)
         return Trajectory(
-            t=run.t, x=x, v=v, energy=energy, status=run.status, t_fail=run.t_fail,
-            nfev=run.nfev, steps=run.steps, wall_s=run.wall_s, alive=alive, path="numpy",
+            t=run.t,
+            x=x,
+            v=v,
+            energy=energy,
+            status=run.status,
+            t_fail=run.t_fail,
+            nfev=run.nfev,
+            steps=run.steps,
+            wall_s=run.wall_s,
+            alive=alive,
+            path="numpy",
             message=run.message,
         )
 
     def _simulate_compiled(self, case: Case, method: str, dt: float) -> Trajectory:
-        run, wall = run_compiled(case.model, method, case.duration, case.steps_for(dt)[1],
-                                 max_records=case.max_records)
+        run, wall = run_compiled(
+            case.model, method, case.duration, case.steps_for(dt)[1], max_records=case.max_records
+        )
         with np.errstate(all="ignore"):
             energy = total_energy(case.model, run.x, run.v)
         message = "non-finite or runaway state (beyond 1e12)" if run.status == "unstable" else ""
-        return Trajectory(t=run.t, x=run.x, v=run.v, energy=energy, status=run.status,
-                          t_fail=run.t_fail, nfev=run.nfev, steps=run.steps, wall_s=wall,
-                          path="compiled", message=message)
+        return Trajectory(
+            t=run.t,
+            x=run.x,
+            v=run.v,
+            energy=energy,
+            status=run.status,
+            t_fail=run.t_fail,
+            nfev=run.nfev,
+            steps=run.steps,
+            wall_s=wall,
+            path="compiled",
+            message=message,
+        )

@@ -33,12 +33,18 @@ class ScipyAdapter:
     name = "scipy"
     methods = ("RK45", "DOP853", "Radau")
     adaptive_methods = methods
-    method_facts = MappingProxyType({
-        "RK45": "dopri5",
-        "DOP853": MethodFacts(order=8, evaluations_per_step=12, symplectic=False),
-        "Radau": MethodFacts(order=5, evaluations_per_step=None, symplectic=False,
-                             stability=Stability(imaginary=INF, real=INF, a_stable=True)),
-    })
+    method_facts = MappingProxyType(
+        {
+            "RK45": "dopri5",
+            "DOP853": MethodFacts(order=8, evaluations_per_step=12, symplectic=False),
+            "Radau": MethodFacts(
+                order=5,
+                evaluations_per_step=None,
+                symplectic=False,
+                stability=Stability(imaginary=INF, real=INF, a_stable=True),
+            ),
+        }
+    )
     """From scipy's documentation and sources (``scipy/integrate/_ivp``): ``RK45`` is
     Dormand-Prince 5(4), the reference's ``dopri5`` tableau (six evaluations per accepted
     step, first same as last); ``DOP853`` is Dormand-Prince 8(5,3), twelve stages with
@@ -47,17 +53,29 @@ class ScipyAdapter:
     their stability data never give a step limit here."""
     capabilities = frozenset(
         {
-            "ode", "second-order", "point-masses", "2d", "3d", "uniform-gravity", "drag",
-            "springs", "spring-damping", "anchored-springs", "universal-gravitation",
-            "force-fields", "pinned-particles", "planes", "thin-walls", "friction",
+            "ode",
+            "second-order",
+            "point-masses",
+            "2d",
+            "3d",
+            "uniform-gravity",
+            "drag",
+            "springs",
+            "spring-damping",
+            "anchored-springs",
+            "universal-gravitation",
+            "force-fields",
+            "pinned-particles",
+            "planes",
+            "thin-walls",
+            "friction",
         }
     )
 
     def missing(self, case: Case, method: str) -> set[str]:
         return case.features - self.capabilities
 
-    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False
-                 ) -> Trajectory:
+    def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False) -> Trajectory:
         """Run ``case`` with solve_ivp's ``method`` at tolerance ``dt``; ``monitor``: also
         the energy's extremes over every accepted step (before the records are thinned)."""
         system = build_system(case)
@@ -82,15 +100,18 @@ class ScipyAdapter:
             if case.model is not None and case.model.planes:
                 sol = _with_impacts(case, system, derivative, method, dt, options)
             else:
-                sol = solve_ivp(derivative, (0.0, case.duration), x0, method=method,
-                                rtol=dt, atol=dt, **options)
+                sol = solve_ivp(
+                    derivative, (0.0, case.duration), x0, method=method, rtol=dt, atol=dt, **options
+                )
         except _NonFinite as bad:  # scipy would step on with NaN (or raise): unstable, here
             return _unstable_at(case, system, x0, bad, calls[0], time.perf_counter() - start)
         wall = time.perf_counter() - start
         t, states = sol.t, sol.y.T
-        step_t, step_energy = (_step_energies(case, system, getattr(sol, "step_t", sol.t),
-                                              getattr(sol, "step_y", sol.y).T)
-                               if monitor else (None, None))
+        step_t, step_energy = (
+            _step_energies(case, system, getattr(sol, "step_t", sol.t), getattr(sol, "step_y", sol.y).T)
+            if monitor
+            else (None, None)
+        )
         if len(t) > case.max_records + 1:
             keep = np.unique(np.linspace(0, len(t) - 1, case.max_records + 1).round().astype(int))
             t, states = t[keep], states[keep]
@@ -105,9 +126,18 @@ class ScipyAdapter:
         if not sol.success and status == "ok":  # finite, but scipy could not go on
             status, t_fail, message = "solver-failed", float(sol.t[-1]), sol.message
         return Trajectory(
-            t=t, x=x, v=v, energy=energy, status=status, t_fail=t_fail,
-            nfev=int(sol.nfev), steps=int(getattr(sol, "steps", len(sol.t) - 1)), wall_s=wall,
-            message=message, step_t=step_t, step_energy=step_energy,
+            t=t,
+            x=x,
+            v=v,
+            energy=energy,
+            status=status,
+            t_fail=t_fail,
+            nfev=int(sol.nfev),
+            steps=int(getattr(sol, "steps", len(sol.t) - 1)),
+            wall_s=wall,
+            message=message,
+            step_t=step_t,
+            step_energy=step_energy,
             extremes=None if step_energy is None else EnergyExtremes.of(step_t, step_energy),
         )
 
@@ -133,8 +163,7 @@ class _Pieces:
     step_y: np.ndarray
 
 
-def _with_impacts(case: Case, system, derivative, method: str, tol: float,
-                  options: dict) -> _Pieces:
+def _with_impacts(case: Case, system, derivative, method: str, tol: float, options: dict) -> _Pieces:
     """solve_ivp from impact to impact: each piece integrates until an event function
     (the least distance of a watched particle above a plane, or the least tangential
     speed of a particle friction is stopping: :meth:`ParticleSystem.event_watch`) falls
@@ -161,8 +190,17 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float,
             return float(np.min(g)) + EVENT_DEPTH if len(g) else 1.0
 
         event.terminal, event.direction = True, -1
-        sol = solve_ivp(derivative, (t, case.duration), x, method=method, rtol=tol, atol=tol,
-                        events=event, dense_output=True, **options)
+        sol = solve_ivp(
+            derivative,
+            (t, case.duration),
+            x,
+            method=method,
+            rtol=tol,
+            atol=tol,
+            events=event,
+            dense_output=True,
+            **options,
+        )
         nfev += int(sol.nfev)
         steps += len(sol.t) - 1
         step_ts.append(sol.t[1:])
@@ -187,8 +225,16 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float,
     if not ts or abs(ts[-1][-1] - t) > slack:
         ts.append(np.array([t]))
         ys.append(system.get_state()[:, None])
-    return _Pieces(np.concatenate(ts), np.concatenate(ys, axis=1), nfev, ok, message, steps,
-                   np.concatenate(step_ts), np.concatenate(step_ys, axis=1))
+    return _Pieces(
+        np.concatenate(ts),
+        np.concatenate(ys, axis=1),
+        nfev,
+        ok,
+        message,
+        steps,
+        np.concatenate(step_ts),
+        np.concatenate(step_ys, axis=1),
+    )
 
 
 def _just_past(sol, event, t_event: float, t_end: float) -> tuple[float, np.ndarray]:
@@ -206,8 +252,9 @@ def _just_past(sol, event, t_event: float, t_end: float) -> tuple[float, np.ndar
     return t_event, sol.y[:, -1]
 
 
-def _step_energies(case: Case, system, t: np.ndarray, states: np.ndarray
-                   ) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _step_energies(
+    case: Case, system, t: np.ndarray, states: np.ndarray
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Times and total energies at every accepted step (``None`` for an ODE without one)."""
     x, v = trajectory_from_states(case, t, states)
     if case.kind == "ode":
@@ -225,8 +272,7 @@ class _NonFinite(Exception):
         self.t, self.y = float(t), np.array(y, dtype=float)
 
 
-def _unstable_at(case: Case, system, x0: np.ndarray, bad: _NonFinite, nfev: int,
-                 wall: float) -> Trajectory:
+def _unstable_at(case: Case, system, x0: np.ndarray, bad: _NonFinite, nfev: int, wall: float) -> Trajectory:
     """The start and the first non-finite state: status ``unstable`` at its time."""
     t = np.array([0.0, bad.t])
     states = np.stack([x0, bad.y])
@@ -234,5 +280,15 @@ def _unstable_at(case: Case, system, x0: np.ndarray, bad: _NonFinite, nfev: int,
     energy = None
     if case.kind != "ode":
         energy = total_energy(case.model, x, v)
-    return Trajectory(t=t, x=x, v=v, energy=energy, status="unstable", t_fail=bad.t, nfev=nfev,
-                      steps=0, wall_s=wall, message=str(bad))
+    return Trajectory(
+        t=t,
+        x=x,
+        v=v,
+        energy=energy,
+        status="unstable",
+        t_fail=bad.t,
+        nfev=nfev,
+        steps=0,
+        wall_s=wall,
+        message=str(bad),
+    )

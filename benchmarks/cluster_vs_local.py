@@ -35,8 +35,12 @@ def free_port() -> int:
 
 def timed_run(args: list[str]) -> float:
     start = time.perf_counter()
-    subprocess.run([str(BIN / "truestep"), "run", *args], check=True,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    subprocess.run(
+        [str(BIN / "truestep"), "run", *args],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     return time.perf_counter() - start
 
 
@@ -52,8 +56,9 @@ def differences(a: Path, b: Path) -> list[str]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", default="free-fall,harmonic-oscillator,spring-chain,"
-                        "bouncing-ball,hanging-cloth")
+    parser.add_argument(
+        "--cases", default="free-fall,harmonic-oscillator,spring-chain,bouncing-ball,hanging-cloth"
+    )
     parser.add_argument("--engines", default="reference,pymunk,pybullet,mujoco")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--quick", action="store_true")
@@ -64,10 +69,23 @@ def main() -> int:
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
-    scheduler = subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
-                                  "--port", str(port), "--no-dashboard"], **quiet)
-    workers = subprocess.Popen([str(BIN / "dask"), "worker", address, "--nworkers",
-                                str(args.workers), "--nthreads", "1", "--no-dashboard"], **quiet)
+    scheduler = subprocess.Popen(
+        [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+        **quiet,
+    )
+    workers = subprocess.Popen(
+        [
+            str(BIN / "dask"),
+            "worker",
+            address,
+            "--nworkers",
+            str(args.workers),
+            "--nthreads",
+            "1",
+            "--no-dashboard",
+        ],
+        **quiet,
+    )
     try:
         time.sleep(3.0)  # the workers connect
         local = timed_run([*common, "--out", str(out / "local")])
@@ -80,8 +98,10 @@ def main() -> int:
     hosts = pd.read_csv(out / "cluster" / "results.csv")["host"].dropna().unique()
     print(f"cases {args.cases}; engines {args.engines}{' (quick)' if args.quick else ''}")
     print(f"local run:   {local:7.1f} s wall")
-    print(f"cluster run: {cluster:7.1f} s wall ({args.workers} single-threaded workers at "
-          f"{address}; hosts {', '.join(map(str, hosts))})")
+    print(
+        f"cluster run: {cluster:7.1f} s wall ({args.workers} single-threaded workers at "
+        f"{address}; hosts {', '.join(map(str, hosts))})"
+    )
     print("non-timing columns: " + ("identical" if not differ else "DIFFER in " + ", ".join(differ)))
     return 1 if differ else 0
 

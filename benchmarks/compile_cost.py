@@ -32,8 +32,10 @@ def measure(workers: int) -> None:
     imported = time.perf_counter()
     compile_all(models, workers=workers, progress=lambda line: print(line, flush=True))
     done = time.perf_counter()
-    print(f"{loops} loops compiled with {workers} worker(s) in {done - imported:.1f} s "
-          f"(imports {imported - began:.1f} s)")
+    print(
+        f"{loops} loops compiled with {workers} worker(s) in {done - imported:.1f} s "
+        f"(imports {imported - began:.1f} s)"
+    )
 
 
 def main() -> int:
@@ -46,8 +48,7 @@ def main() -> int:
         return 0
     with tempfile.TemporaryDirectory(prefix="truestep-numba-") as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-        return subprocess.call([sys.executable, __file__, "--child", "--workers",
-                                str(args.workers)], env=env)
+        return subprocess.call([sys.executable, __file__, "--child", "--workers", str(args.workers)], env=env)
 
 
 if __name__ == "__main__":

@@ -33,9 +33,11 @@ import pandas as pd
 MACHINE = {"wall_s", "wall_s_spread", "repeats", "host", "case_source"}
 """Columns that depend on the machine (truestep.runner.MACHINE_COLUMNS, restated so that
 this script reads the tables of any version)."""
-KEYS = {"results": ["case", "engine", "method", "dt_kind", "dt"],
-        "stability": ["case", "engine", "method"],
-        "restitution": ["engine", "method", "dt", "e_set", "bounce"]}
+KEYS = {
+    "results": ["case", "engine", "method", "dt_kind", "dt"],
+    "stability": ["case", "engine", "method"],
+    "restitution": ["engine", "method", "dt", "e_set", "bounce"],
+}
 
 
 def _busy() -> None:
@@ -43,8 +45,15 @@ def _busy() -> None:
         pass
 
 
-def run(truestep: str, out: Path, cases: str | None, *, env: dict | None = None,
-        extra: tuple[str, ...] = (), load: int = 0) -> float:
+def run(
+    truestep: str,
+    out: Path,
+    cases: str | None,
+    *,
+    env: dict | None = None,
+    extra: tuple[str, ...] = (),
+    load: int = 0,
+) -> float:
     """One ``truestep run`` into ``out`` (with ``load`` busy processes beside it); seconds."""
     busy = [mp.Process(target=_busy, daemon=True) for _ in range(load)]
     for p in busy:
@@ -54,8 +63,9 @@ def run(truestep: str, out: Path, cases: str | None, *, env: dict | None = None,
         if cases:
             argv += ["--cases", cases]
         start = time.perf_counter()
-        proc = subprocess.run(argv, env={**os.environ, **(env or {})}, capture_output=True,
-                              text=True, check=False)
+        proc = subprocess.run(
+            argv, env={**os.environ, **(env or {})}, capture_output=True, text=True, check=False
+        )
         if proc.returncode != 0:
             sys.exit(f"{' '.join(argv)} failed ({proc.returncode}): {proc.stderr[-2000:]}")
         return time.perf_counter() - start
@@ -72,15 +82,15 @@ def differing_cells(a: Path, b: Path) -> dict[str, int]:
         pa, pb = a / f"{name}.csv", b / f"{name}.csv"
         if not (pa.exists() and pb.exists()):
             continue
-        x, y = pd.read_csv(pa, dtype=str, keep_default_na=False), pd.read_csv(
-            pb, dtype=str, keep_default_na=False)
+        x, y = (
+            pd.read_csv(pa, dtype=str, keep_default_na=False),
+            pd.read_csv(pb, dtype=str, keep_default_na=False),
+        )
         columns = [c for c in x.columns if c in set(y.columns) and c not in MACHINE]
-        merged = x[columns].merge(y[columns], on=keys, how="outer", suffixes=("_a", "_b"),
-                                  indicator=True)
+        merged = x[columns].merge(y[columns], on=keys, how="outer", suffixes=("_a", "_b"), indicator=True)
         lonely = int((merged["_merge"] != "both").sum()) * len(columns)
         both = merged[merged["_merge"] == "both"]
-        diff = sum(int((both[f"{c}_a"] != both[f"{c}_b"]).sum())
-                   for c in columns if c not in keys)
+        diff = sum(int((both[f"{c}_a"] != both[f"{c}_b"]).sum()) for c in columns if c not in keys)
         out[name] = diff + lonely
     return out
 
@@ -123,8 +133,12 @@ def changed_picks(a: Path, b: Path) -> tuple[int, int, int, list[str]]:
     keys = sorted(set(pa) | set(pb))
     named = [k for k in keys if pa.get(k, ("", ""))[0] != pb.get(k, ("", ""))[0]]
     group = [k for k in keys if pa.get(k, ("", ""))[1] != pb.get(k, ("", ""))[1]]
-    return len(named), len(group), len(keys), [
-        f"{k}: {pa.get(k)} -> {pb.get(k)}" for k in keys if k in named or k in group]
+    return (
+        len(named),
+        len(group),
+        len(keys),
+        [f"{k}: {pa.get(k)} -> {pb.get(k)}" for k in keys if k in named or k in group],
+    )
 
 
 def main() -> None:
@@ -142,9 +156,11 @@ def main() -> None:
     def report(pair: str, a: Path, b: Path, seconds: str) -> None:
         cells = differing_cells(a, b)
         named, group, total, which = changed_picks(a, b)
-        lines.append(f"{pair:10s} cells differing {sum(cells.values()):5d} {cells}  picks: "
-                     f"named run changed {named}/{total}, tie group changed {group}/{total}  "
-                     f"({seconds})")
+        lines.append(
+            f"{pair:10s} cells differing {sum(cells.values()):5d} {cells}  picks: "
+            f"named run changed {named}/{total}, tie group changed {group}/{total}  "
+            f"({seconds})"
+        )
         print(lines[-1], flush=True)
         for k in which[:40]:
             print(f"    {k}", flush=True)
@@ -154,20 +170,22 @@ def main() -> None:
         t0 = run(args.truestep, base, args.cases, env={"OPENBLAS_NUM_THREADS": "1"})
     for pair in pairs:
         if pair == "threads":
-            t = run(args.truestep, args.out / "threads2", args.cases,
-                    env={"OPENBLAS_NUM_THREADS": "2"})
+            t = run(args.truestep, args.out / "threads2", args.cases, env={"OPENBLAS_NUM_THREADS": "2"})
             report(pair, base, args.out / "threads2", f"{t0:.0f} s / {t:.0f} s")
         elif pair == "load":
-            t = run(args.truestep, args.out / "loaded", args.cases,
-                    env={"OPENBLAS_NUM_THREADS": "1"}, load=2)
+            t = run(args.truestep, args.out / "loaded", args.cases, env={"OPENBLAS_NUM_THREADS": "1"}, load=2)
             report(pair, base, args.out / "loaded", f"{t0:.0f} s / {t:.0f} s loaded")
         elif pair == "cluster":
-            t = run(args.truestep, args.out / "cluster", args.cases,
-                    env={"OPENBLAS_NUM_THREADS": "1"}, extra=("--scheduler", "local:2"))
+            t = run(
+                args.truestep,
+                args.out / "cluster",
+                args.cases,
+                env={"OPENBLAS_NUM_THREADS": "1"},
+                extra=("--scheduler", "local:2"),
+            )
             report(pair, base, args.out / "cluster", f"{t0:.0f} s / {t:.0f} s on local:2")
         elif pair == "again":
-            t = run(args.truestep, args.out / "again", args.cases,
-                    env={"OPENBLAS_NUM_THREADS": "1"})
+            t = run(args.truestep, args.out / "again", args.cases, env={"OPENBLAS_NUM_THREADS": "1"})
             report(pair, base, args.out / "again", f"{t0:.0f} s / {t:.0f} s")
         elif pair == "published":
             t = run(args.truestep, args.out / "full", None)

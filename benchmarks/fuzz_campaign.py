@@ -69,7 +69,7 @@ BAD = {"long-error", "traceback", "hang", "memory", "accepted-then-failed"}
 """Outcomes that are findings (for ``gate`` also ``accepted`` and ``judged``: garbage read)."""
 GATE_BAD = BAD | {"accepted", "judged"}
 
-WORKER = r'''
+WORKER = r"""
 import json, os, resource, sys, traceback
 try:
     from truestep.cases.loader import load_case
@@ -109,7 +109,7 @@ for line in sys.stdin:
                  "in_repo": f"{os.path.relpath(mine.filename, root)}:{mine.lineno} {mine.name}"
                  if mine else ""}
     print(json.dumps(reply), file=out, flush=True)
-'''
+"""
 
 
 @dataclass
@@ -127,13 +127,21 @@ class Target:
         if python is None:
             venv = repo / ".venv" / "bin" / "python"
             python = venv if venv.exists() else Path(sys.executable)
-        probe = subprocess.run([str(python), "-c", "import truestep.cases.loader"], cwd=tempfile.gettempdir(),
-                               capture_output=True, text=True)
+        probe = subprocess.run(
+            [str(python), "-c", "import truestep.cases.loader"],
+            cwd=tempfile.gettempdir(),
+            capture_output=True,
+            text=True,
+        )
         layout = "new" if probe.returncode == 0 else "old"
-        commit = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
-                                capture_output=True, text=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True).stdout.strip()
+        commit = subprocess.run(
+            ["git", "-C", str(repo), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
         return cls(repo, python, layout, commit + ("+dirty" if dirty else ""))
 
     @property
@@ -176,10 +184,23 @@ class LoadWorker:
 
     def _start(self) -> None:
         self.proc = subprocess.Popen(
-            ["nice", "-n", "10", str(self.target.python), "-c", WORKER, str(self.memory_gb),
-             str(self.target.repo)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-            cwd=tempfile.gettempdir(), start_new_session=True)
+            [
+                "nice",
+                "-n",
+                "10",
+                str(self.target.python),
+                "-c",
+                WORKER,
+                str(self.memory_gb),
+                str(self.target.repo),
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+            cwd=tempfile.gettempdir(),
+            start_new_session=True,
+        )
         ready = self._read(120.0)
         if not ready or not ready.get("ready"):
             raise RuntimeError(f"the loader worker of {self.target.repo} did not start")
@@ -238,8 +259,9 @@ def classify_load(path: Path, worker: LoadWorker) -> dict[str, Any]:
     return reply
 
 
-def loader_phase(target: Target, n: int, seed: int, work: Path, timeout: float,
-                 memory_gb: float) -> list[dict[str, Any]]:
+def loader_phase(
+    target: Target, n: int, seed: int, work: Path, timeout: float, memory_gb: float
+) -> list[dict[str, Any]]:
     """``n`` generated case files through the target's loader."""
     bases = fs.load_bases(target.repo)
     schema = fs.Schema.of(b.data for b in bases)
@@ -264,8 +286,9 @@ def loader_phase(target: Target, n: int, seed: int, work: Path, timeout: float,
 # ---------------------------------------------------------------------------------------
 
 
-def _run(cmd: list[str], cwd: Path, timeout: float, env: dict[str, str] | None = None,
-         memory_gb: float = 8.0) -> tuple[int | None, str, str, float]:
+def _run(
+    cmd: list[str], cwd: Path, timeout: float, env: dict[str, str] | None = None, memory_gb: float = 8.0
+) -> tuple[int | None, str, str, float]:
     """Run ``cmd`` niced, in its own session, with an address-space cap; kill the whole
     group at ``timeout``. Returns (exit code or None on timeout, stdout, stderr, seconds)."""
 
@@ -276,9 +299,17 @@ def _run(cmd: list[str], cwd: Path, timeout: float, env: dict[str, str] | None =
         resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 
     start = time.perf_counter()
-    proc = subprocess.Popen(["nice", "-n", "10", *cmd], cwd=cwd, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, errors="backslashreplace",
-                            start_new_session=True, preexec_fn=limits)
+    proc = subprocess.Popen(
+        ["nice", "-n", "10", *cmd],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        errors="backslashreplace",
+        start_new_session=True,
+        preexec_fn=limits,
+    )
     try:
         out, err = proc.communicate(timeout=timeout)
         code: int | None = proc.returncode
@@ -316,8 +347,17 @@ def classify_run(target: Target, path: Path, timeout: float, memory_gb: float) -
         cases = str(path)
         if target.layout == "old":
             cases, env = _old_layout_copy(target, path, tmpdir)
-        cmd = [*target.cli, "run", "--quick", "--engines", "reference", "--cases", cases,
-               "--out", str(tmpdir / "out")]
+        cmd = [
+            *target.cli,
+            "run",
+            "--quick",
+            "--engines",
+            "reference",
+            "--cases",
+            cases,
+            "--out",
+            str(tmpdir / "out"),
+        ]
         code, _out, err, seconds = _run(cmd, tmpdir, timeout, env, memory_gb)
         statuses: dict[str, int] = {}
         results = tmpdir / "out" / "results.csv"
@@ -351,8 +391,16 @@ def classify_run(target: Target, path: Path, timeout: float, memory_gb: float) -
     return record
 
 
-def run_phase(target: Target, loaded: list[dict[str, Any]], m: int, seed: int, timeout: float,
-              memory_gb: float, jobs: int, partial: Path | None = None) -> list[dict[str, Any]]:
+def run_phase(
+    target: Target,
+    loaded: list[dict[str, Any]],
+    m: int,
+    seed: int,
+    timeout: float,
+    memory_gb: float,
+    jobs: int,
+    partial: Path | None = None,
+) -> list[dict[str, Any]]:
     """``m`` loader-accepted mutants (chosen with ``seed``) through ``truestep run``; each
     record is appended to ``partial`` (JSON lines) as it is done."""
     accepted = [r for r in loaded if r["outcome"] == "accepted"]
@@ -361,8 +409,12 @@ def run_phase(target: Target, loaded: list[dict[str, Any]], m: int, seed: int, t
     done: list[dict[str, Any]] = []
 
     def one(r: dict[str, Any]) -> dict[str, Any]:
-        rec = {"i": r["i"], "file": r["file"], "how": r["how"],
-               **classify_run(target, Path(r["file"]), timeout, memory_gb)}
+        rec = {
+            "i": r["i"],
+            "file": r["file"],
+            "how": r["how"],
+            **classify_run(target, Path(r["file"]), timeout, memory_gb),
+        }
         done.append(rec)
         if partial is not None:
             with partial.open("a") as fh:
@@ -381,14 +433,16 @@ def run_phase(target: Target, loaded: list[dict[str, Any]], m: int, seed: int, t
 # ---------------------------------------------------------------------------------------
 
 
-def classify_gate(target: Target, mutant: fs.TableMutant, tables: dict[str, bytes], timeout: float,
-                  work: Path) -> dict[str, Any]:
+def classify_gate(
+    target: Target, mutant: fs.TableMutant, tables: dict[str, bytes], timeout: float, work: Path
+) -> dict[str, Any]:
     """``truestep gate --results`` on the shipped tables with one replaced by ``mutant``."""
     work.mkdir(parents=True, exist_ok=True)
     for name, data in tables.items():
         (work / f"{name}.csv").write_bytes(mutant.data if name == mutant.table else data)
-    code, out, err, seconds = _run([*target.cli, "gate", "--results", str(work / "results.csv")],
-                                   target.repo, timeout)
+    code, out, err, seconds = _run(
+        [*target.cli, "gate", "--results", str(work / "results.csv")], target.repo, timeout
+    )
     record: dict[str, Any] = {"exit": code, "seconds": round(seconds, 2)}
     tail = err.strip().splitlines()
     record["stderr_tail"] = "\n".join(tail[-4:])[-800:]
@@ -413,12 +467,18 @@ def classify_gate(target: Target, mutant: fs.TableMutant, tables: dict[str, byte
     return record
 
 
-def gate_phase(target: Target, k: int, seed: int, timeout: float, work: Path,
-               jobs: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+def gate_phase(
+    target: Target, k: int, seed: int, timeout: float, work: Path, jobs: int
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """A control (the shipped tables as they are), then ``k`` damaged tables through ``gate``."""
     tables = fs.load_tables(target.repo)
-    control = classify_gate(target, fs.TableMutant("results", tables["results"], "as shipped"), tables,
-                            timeout, work / "gate" / "control")
+    control = classify_gate(
+        target,
+        fs.TableMutant("results", tables["results"], "as shipped"),
+        tables,
+        timeout,
+        work / "gate" / "control",
+    )
 
     def one(i: int) -> dict[str, Any]:
         mutant = fs.table_mutant(random.Random(f"{seed}:table:{i}"), tables)
@@ -469,7 +529,8 @@ def summarise(phase: str, records: list[dict[str, Any]], summary: Summary, outco
             classes.setdefault(_class_key(phase, r), []).append(r)
     summary.classes[phase] = [
         {"class": key, "count": len(rs), "example": _example(rs[0])}
-        for key, rs in sorted(classes.items(), key=lambda kv: -len(kv[1]))]
+        for key, rs in sorted(classes.items(), key=lambda kv: -len(kv[1]))
+    ]
     summary.bad[phase] = [_example(r) for r in records if r["outcome"] in bad]
 
 
@@ -487,15 +548,28 @@ def print_table(summary: Summary, out: Any = sys.stdout) -> None:
     """The counts, then the first examples of every bad outcome class."""
     t = summary.target
     print(f"target {t['repo']} at {t['commit']} ({t['layout']} layout), seed {summary.seed}", file=out)
-    cols = ("tried", "accepted", "ok", "clean", "long-error", "traceback", "hang", "memory",
-            "accepted-then-failed", "judged")
+    cols = (
+        "tried",
+        "accepted",
+        "ok",
+        "clean",
+        "long-error",
+        "traceback",
+        "hang",
+        "memory",
+        "accepted-then-failed",
+        "judged",
+    )
     print("| phase | " + " | ".join(cols) + " |", file=out)
     print("|---" * (len(cols) + 1) + "|", file=out)
     for phase, counts in summary.counts.items():
         cells = [str(counts[c]) if c in counts else "-" for c in cols]
         print(f"| {phase} | " + " | ".join(cells) + " |", file=out)
-    print("gate: accepted = exit 0 on garbage, judged = exit 1 (garbage read, gates failed); "
-          f"control (shipped tables): exit {summary.gate_control.get('exit')}", file=out)
+    print(
+        "gate: accepted = exit 0 on garbage, judged = exit 1 (garbage read, gates failed); "
+        f"control (shipped tables): exit {summary.gate_control.get('exit')}",
+        file=out,
+    )
     if summary.run_statuses:
         print(f"run rows by status (all runs): {summary.run_statuses}", file=out)
     print(f"seconds: {summary.seconds}", file=out)
@@ -528,10 +602,17 @@ def main(argv: list[str] | None = None) -> int:
     target = Target.of(args.repo, args.python)
     work = args.work or Path(tempfile.mkdtemp(prefix="fuzz-campaign-"))
     work.mkdir(parents=True, exist_ok=True)
-    summary = Summary(target={k: str(v) for k, v in asdict(target).items()}, seed=args.seed,
-                      command=" ".join([Path(sys.executable).name, *sys.argv]))
-    print(f"fuzzing {target.repo} ({target.commit}, {target.layout} layout) with {target.python}; "
-          f"files in {work}", file=sys.stderr, flush=True)
+    summary = Summary(
+        target={k: str(v) for k, v in asdict(target).items()},
+        seed=args.seed,
+        command=" ".join([Path(sys.executable).name, *sys.argv]),
+    )
+    print(
+        f"fuzzing {target.repo} ({target.commit}, {target.layout} layout) with {target.python}; "
+        f"files in {work}",
+        file=sys.stderr,
+        flush=True,
+    )
 
     def save() -> None:
         """The summary so far (after every phase, so a campaign cut short keeps its counts)."""
@@ -546,8 +627,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.run:
         start = time.perf_counter()
         save()
-        ran = run_phase(target, loaded, args.run, args.seed, args.run_timeout, args.memory_gb * 2, args.jobs,
-                        work / "run-records.jsonl")
+        ran = run_phase(
+            target,
+            loaded,
+            args.run,
+            args.seed,
+            args.run_timeout,
+            args.memory_gb * 2,
+            args.jobs,
+            work / "run-records.jsonl",
+        )
         summary.seconds["run"] = round(time.perf_counter() - start, 1)
         summarise("run", ran, summary, RUN_OUTCOMES)
         statuses: collections.Counter[str] = collections.Counter()

@@ -53,8 +53,7 @@ class Summary:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repo", type=Path, default=HERE.parent, help="checkout to attack")
-    parser.add_argument("--python", type=Path, default=None,
-                        help="interpreter that imports that checkout")
+    parser.add_argument("--python", type=Path, default=None, help="interpreter that imports that checkout")
     parser.add_argument("--only", default="", help="groups to run, comma-separated (default all)")
     parser.add_argument("--json", type=Path, default=None, help="write the summary here")
     parser.add_argument("--work", type=Path, default=None, help="keep the generated files here")
@@ -63,17 +62,22 @@ def main(argv: list[str] | None = None) -> int:
     work = args.work or Path(tempfile.mkdtemp(prefix="hostile-campaign-"))
     campaign = Campaign(target, work)
     only = {int(x) for x in args.only.split(",") if x.strip()} or set(GROUPS)
-    print(f"attacking {target.repo} ({target.commit}) with {target.python}; files in {work}",
-          file=sys.stderr, flush=True)
+    print(
+        f"attacking {target.repo} ({target.commit}) with {target.python}; files in {work}",
+        file=sys.stderr,
+        flush=True,
+    )
     started = time.perf_counter()
     for group, fns in BY_GROUP.items():
         if group in only:
             print(f"{group}. {GROUPS[group]}", file=sys.stderr, flush=True)
             for fn in fns:
                 campaign.attack(group, fn)
-    summary = Summary({k: str(v) for k, v in asdict(target).items()},
-                      " ".join([Path(sys.executable).name, *sys.argv]),
-                      seconds=round(time.perf_counter() - started, 1))
+    summary = Summary(
+        {k: str(v) for k, v in asdict(target).items()},
+        " ".join([Path(sys.executable).name, *sys.argv]),
+        seconds=round(time.perf_counter() - started, 1),
+    )
     for v in campaign.verdicts:
         counts = summary.counts.setdefault(v.group, {"tried": 0, "held": 0, "broken": 0})
         counts["tried"] += 1
@@ -83,8 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| # | finding | tried | held | broken |")
     print("|---|---|---|---|---|")
     for group, counts in sorted(summary.counts.items()):
-        print(f"| {group} | {GROUPS[group]} | {counts['tried']} | {counts['held']} | "
-              f"{counts['broken']} |")
+        print(f"| {group} | {GROUPS[group]} | {counts['tried']} | {counts['held']} | {counts['broken']} |")
     broken = [v for v in campaign.verdicts if not v.held]
     for v in broken:
         print(f"BROKEN [{v.group}] {v.name}: {v.note}")

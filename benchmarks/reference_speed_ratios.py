@@ -38,33 +38,46 @@ def per_step() -> None:
 def rain() -> None:
     """The rain at 1 ms: reference/lecture against pymunk/default, and their errors."""
     case = load_case(CASE_DIR / "particle-rain.toml")
-    ours, theirs = speed.interleave([speed.timed("reference", case, "lecture", 1e-3),
-                                     speed.timed("pymunk", case, "default", 1e-3)])
-    error = {e: measure(case, get_adapter(e).simulate(case, m, 1e-3))["error"]
-             for e, m in (("reference", "lecture"), ("pymunk", "default"))}
+    ours, theirs = speed.interleave(
+        [speed.timed("reference", case, "lecture", 1e-3), speed.timed("pymunk", case, "default", 1e-3)]
+    )
+    error = {
+        e: measure(case, get_adapter(e).simulate(case, m, 1e-3))["error"]
+        for e, m in (("reference", "lecture"), ("pymunk", "default"))
+    }
     work = case.model.n * case.steps_for(1e-3)[0]
-    print(f"rain 1 ms: reference/lecture {ours * 1e3:.3f} ms, pymunk/default "
-          f"{theirs * 1e3:.3f} ms: {theirs / ours:.1f}x; error {error['reference']:.3g} vs "
-          f"{error['pymunk']:.3g} m; {work / ours:.3g} particle-steps/s")
+    print(
+        f"rain 1 ms: reference/lecture {ours * 1e3:.3f} ms, pymunk/default "
+        f"{theirs * 1e3:.3f} ms: {theirs / ours:.1f}x; error {error['reference']:.3g} vs "
+        f"{error['pymunk']:.3g} m; {work / ours:.3g} particle-steps/s"
+    )
 
 
 def shared(name: str) -> None:
     """Every fixed-step reference method against the fastest engine on case ``name``."""
     case = load_case(CASE_DIR / f"{name}.toml")
     for dt in case.dts:
-        engines = [(e, m) for e in speed.ENGINES
-                   for m, d, adaptive, why in speed.plan(case, e, quick=False)
-                   if not why and not adaptive and d == dt and speed.runs_ok(e, case, m, dt)]
+        engines = [
+            (e, m)
+            for e in speed.ENGINES
+            for m, d, adaptive, why in speed.plan(case, e, quick=False)
+            if not why and not adaptive and d == dt and speed.runs_ok(e, case, m, dt)
+        ]
         if not engines:
             continue
         first = {em: speed.timed(em[0], case, em[1], dt)() for em in engines}
         fastest = min(first, key=first.get)
         if first[fastest] < speed.SHARED_MIN_S:
             continue
-        ours = [m for m in speed.FIXED
-                if not speed.plan_skips(case, m) and speed.runs_ok("reference", case, m, dt)]
-        walls = speed.interleave([speed.timed(fastest[0], case, fastest[1], dt)]
-                                 + [speed.timed("reference", case, m, dt) for m in ours])
+        ours = [
+            m
+            for m in speed.FIXED
+            if not speed.plan_skips(case, m) and speed.runs_ok("reference", case, m, dt)
+        ]
+        walls = speed.interleave(
+            [speed.timed(fastest[0], case, fastest[1], dt)]
+            + [speed.timed("reference", case, m, dt) for m in ours]
+        )
         ratios = ", ".join(f"{m} {walls[0] / w:.1f}x" for m, w in zip(ours, walls[1:], strict=True))
         print(f"{name} dt={dt:g} vs {fastest[0]}/{fastest[1]} {walls[0] * 1e3:.4f} ms: {ratios}")
 

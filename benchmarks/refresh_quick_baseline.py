@@ -24,8 +24,9 @@ KEPT = ("results.csv", "stability.csv", "restitution.csv", "run.json")
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "quick"
-        subprocess.run([sys.executable, "-m", "truestep", "run", "--quick", "--out", str(out)],
-                       check=True, cwd=ROOT)
+        subprocess.run(
+            [sys.executable, "-m", "truestep", "run", "--quick", "--out", str(out)], check=True, cwd=ROOT
+        )
         BASELINE.mkdir(parents=True, exist_ok=True)
         for name in KEPT:
             shutil.copyfile(out / name, BASELINE / name)

@@ -20,11 +20,10 @@ def main(argv: list[str]) -> int:
     pending = b""
     while chunk := proc.stdout.read1(4096):
         pending += chunk
-        while (ends := [k for k in (pending.find(b"\n"), pending.find(b"\r")) if k >= 0]):
-            line, pending = pending[:min(ends)], pending[min(ends) + 1:]
+        while ends := [k for k in (pending.find(b"\n"), pending.find(b"\r")) if k >= 0]:
+            line, pending = pending[: min(ends)], pending[min(ends) + 1 :]
             if line.strip():
-                print(f"{time.perf_counter() - began:8.2f} {line.decode(errors='replace')}",
-                      flush=True)
+                print(f"{time.perf_counter() - began:8.2f} {line.decode(errors='replace')}", flush=True)
     code = proc.wait()
     print(f"{time.perf_counter() - began:8.2f} EXIT {code}", flush=True)
     return code

@@ -58,8 +58,11 @@ from truestep.reference_impl.integrate import record_indices
 SCENES: dict[str, float] = {"bouncing-ball": 1e-3, "particle-rain": 1e-3}
 """Scene name -> the step (s) it runs at: each case's finest step in its sweep."""
 RUNS: list[tuple[str, str]] = [
-    ("pymunk", "default"), ("pybullet", "default"), ("pybullet", "clean"),
-    ("mujoco", "Euler"), ("mujoco", "RK4"),
+    ("pymunk", "default"),
+    ("pybullet", "default"),
+    ("pybullet", "clean"),
+    ("mujoco", "Euler"),
+    ("mujoco", "RK4"),
 ]
 REPEATS = 5
 """Fewest timed rounds per test, after one warm-up round."""
@@ -169,8 +172,8 @@ def mujoco_rollout(case: Case, method: str, dt: float) -> tuple[float, np.ndarra
     sensordata = np.empty((1, n_steps, m.nsensordata))
     start = time.perf_counter()
     rollout.rollout(m, d, initial[None], nstep=n_steps, state=state, sensordata=sensordata)
-    qpos = state[0, picks, 1:1 + m.nq].copy()
-    qvel = state[0, picks, 1 + m.nq:1 + m.nq + m.nv].copy()
+    qpos = state[0, picks, 1 : 1 + m.nq].copy()
+    qvel = state[0, picks, 1 + m.nq : 1 + m.nq + m.nv].copy()
     wall = time.perf_counter() - start
     assert qvel.shape == (len(picks), m.nv)
     return wall, qpos[-1].reshape(-1, scene.layout.dim)[:, :2]
@@ -193,24 +196,29 @@ def table():
     rows: list[tuple[str, str, str, str, float, float, float, float]] = []
     yield rows
     heads = {
-        "overhead": (f"adapter overhead, A = adapter.simulate(...).wall_s, B = bare engine loop; "
-                     f"median of {REPEATS}-{MAX_REPEATS} interleaved runs after {WARMUP} warm-up; target "
-                     f"A/B <= {TARGET:.2f}"),
-        "stepping": (f"MuJoCo without per-step Python forces, A = the way named, B = one mj_step "
-                     f"call per step; median of {REPEATS}-{MAX_REPEATS} interleaved runs after {WARMUP} "
-                     "warm-up"),
+        "overhead": (
+            f"adapter overhead, A = adapter.simulate(...).wall_s, B = bare engine loop; "
+            f"median of {REPEATS}-{MAX_REPEATS} interleaved runs after {WARMUP} warm-up; target "
+            f"A/B <= {TARGET:.2f}"
+        ),
+        "stepping": (
+            f"MuJoCo without per-step Python forces, A = the way named, B = one mj_step "
+            f"call per step; median of {REPEATS}-{MAX_REPEATS} interleaved runs after {WARMUP} "
+            "warm-up"
+        ),
     }
     for kind, head in heads.items():
         mine = [row[1:] for row in rows if row[0] == kind]
         if not mine:
             continue
         print(f"\n\n{head}")
-        print(f"{'scene':14s} {'engine':9s} {'method':22s} {'A s':>9s} {'B s':>9s} {'A/B':>6s} "
-              f"{'min A/min B':>11s}")
+        print(
+            f"{'scene':14s} {'engine':9s} {'method':22s} {'A s':>9s} {'B s':>9s} {'A/B':>6s} "
+            f"{'min A/min B':>11s}"
+        )
         for scene, engine, method, a, b, ratio, best in mine:
             flag = "  > target" if kind == "overhead" and ratio > TARGET else ""
-            print(f"{scene:14s} {engine:9s} {method:22s} {a:9.4f} {b:9.4f} {ratio:6.3f} "
-                  f"{best:11.3f}{flag}")
+            print(f"{scene:14s} {engine:9s} {method:22s} {a:9.4f} {b:9.4f} {ratio:6.3f} {best:11.3f}{flag}")
 
 
 def interleave(benchmark, runs: list[Callable[[], float]]) -> list[list[float]]:
@@ -259,11 +267,16 @@ def test_adapter_overhead(benchmark, table, engine, method, scene):
     # the last bit (all three engines are deterministic within a process).
     np.testing.assert_array_equal(last["adapter"], last["bare"])
     ratio, best = statistics.median(a) / statistics.median(b), min(a) / min(b)
-    benchmark.extra_info.update(adapter_s=a, bare_s=b, adapter_median_s=statistics.median(a),
-                                bare_median_s=statistics.median(b), ratio=ratio,
-                                ratio_of_minima=best, target=TARGET)
-    table.append(("overhead", scene, engine, method, statistics.median(a), statistics.median(b),
-                  ratio, best))
+    benchmark.extra_info.update(
+        adapter_s=a,
+        bare_s=b,
+        adapter_median_s=statistics.median(a),
+        bare_median_s=statistics.median(b),
+        ratio=ratio,
+        ratio_of_minima=best,
+        target=TARGET,
+    )
+    table.append(("overhead", scene, engine, method, statistics.median(a), statistics.median(b), ratio, best))
 
 
 @pytest.mark.engine
@@ -278,6 +291,7 @@ def test_mujoco_rollout(benchmark, table, method, scene):
         def run() -> float:
             wall, last[name] = loops[name](case, method, dt)
             return wall
+
         return run
 
     benchmark.group = f"mujoco stepping: {scene}"
@@ -290,5 +304,15 @@ def test_mujoco_rollout(benchmark, table, method, scene):
         benchmark.extra_info[f"{name}_s"] = sample
         benchmark.extra_info[f"{name}_ratio"] = statistics.median(sample) / base
         if name != "mj_step":
-            table.append(("stepping", scene, "mujoco", f"{method}, {name}", statistics.median(sample),
-                          base, statistics.median(sample) / base, min(sample) / fastest))
+            table.append(
+                (
+                    "stepping",
+                    scene,
+                    "mujoco",
+                    f"{method}, {name}",
+                    statistics.median(sample),
+                    base,
+                    statistics.median(sample) / base,
+                    min(sample) / fastest,
+                )
+            )

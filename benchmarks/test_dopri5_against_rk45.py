@@ -32,8 +32,15 @@ from truestep.adapters import get_adapter
 from truestep.adapters.base import Trajectory
 from truestep.cases.loader import CASE_DIR, load_case
 
-CASES = ("arenstorf-orbit", "kepler-orbit", "close-encounter", "circle-field", "spring-chain",
-         "hanging-cloth", "spring-damper-pair")
+CASES = (
+    "arenstorf-orbit",
+    "kepler-orbit",
+    "close-encounter",
+    "circle-field",
+    "spring-chain",
+    "hanging-cloth",
+    "spring-damper-pair",
+)
 """The ODE cases and particle scenes both engines run; each at every tolerance of its sweep."""
 RUNS = [(name, tol) for name in CASES for tol in load_case(CASE_DIR / f"{name}.toml").tolerances]
 REPEATS = 7
@@ -54,19 +61,27 @@ def table():
     medians, A / B of the fastest runs, rounds)."""
     rows: list[tuple[str, float, str, str, float, float, float, float, int]] = []
     yield rows
-    print(f"\n\nA = reference dopri5, B = scipy RK45, wall_s of adapter.simulate; median of "
-          f"{REPEATS}-{MAX_REPEATS} interleaved runs after {WARMUP} warm-up; target A/B <= "
-          f"{TARGET:.2f}")
-    print(f"{'case':20s} {'tol':>7s} {'steps A/B':>11s} {'nfev A/B':>13s} {'A ms':>9s} "
-          f"{'B ms':>9s} {'A/B':>6s} {'min A/min B':>11s} {'rounds':>6s}")
+    print(
+        f"\n\nA = reference dopri5, B = scipy RK45, wall_s of adapter.simulate; median of "
+        f"{REPEATS}-{MAX_REPEATS} interleaved runs after {WARMUP} warm-up; target A/B <= "
+        f"{TARGET:.2f}"
+    )
+    print(
+        f"{'case':20s} {'tol':>7s} {'steps A/B':>11s} {'nfev A/B':>13s} {'A ms':>9s} "
+        f"{'B ms':>9s} {'A/B':>6s} {'min A/min B':>11s} {'rounds':>6s}"
+    )
     for name, tol, steps, nfev, a, b, ratio, best, rounds in rows:
         flag = "  > target" if ratio > TARGET else ""
-        print(f"{name:20s} {tol:7.0e} {steps:>11s} {nfev:>13s} {a * 1e3:9.3f} {b * 1e3:9.3f} "
-              f"{ratio:6.3f} {best:11.3f} {rounds:6d}{flag}")
+        print(
+            f"{name:20s} {tol:7.0e} {steps:>11s} {nfev:>13s} {a * 1e3:9.3f} {b * 1e3:9.3f} "
+            f"{ratio:6.3f} {best:11.3f} {rounds:6d}{flag}"
+        )
     ratios = [row[6] for row in rows]
     if ratios:
-        print(f"{'all':20s} {'':7s} {'':11s} {'':13s} {'':9s} {'':9s} "
-              f"{statistics.median(ratios):6.3f}   (median of the ratios; max {max(ratios):.3f})")
+        print(
+            f"{'all':20s} {'':7s} {'':11s} {'':13s} {'':9s} {'':9s} "
+            f"{statistics.median(ratios):6.3f}   (median of the ratios; max {max(ratios):.3f})"
+        )
 
 
 def interleave(benchmark, runs: list[Callable[[], float]]) -> tuple[list[list[float]], int]:
@@ -110,8 +125,27 @@ def test_dopri5_against_rk45(benchmark, table, name, tol):
     assert getattr(ours, "path", "numpy") in ("", "numpy")  # the numpy solver, not a compiled loop
     ratio, best = statistics.median(a) / statistics.median(b), min(a) / min(b)
     benchmark.extra_info.update(
-        dopri5_s=a, rk45_s=b, dopri5_median_s=statistics.median(a),
-        rk45_median_s=statistics.median(b), ratio=ratio, ratio_of_minima=best, target=TARGET,
-        steps=(ours.steps, theirs.steps), nfev=(ours.nfev, theirs.nfev), rounds=rounds)
-    table.append((name, tol, f"{ours.steps}/{theirs.steps}", f"{ours.nfev}/{theirs.nfev}",
-                  statistics.median(a), statistics.median(b), ratio, best, rounds))
+        dopri5_s=a,
+        rk45_s=b,
+        dopri5_median_s=statistics.median(a),
+        rk45_median_s=statistics.median(b),
+        ratio=ratio,
+        ratio_of_minima=best,
+        target=TARGET,
+        steps=(ours.steps, theirs.steps),
+        nfev=(ours.nfev, theirs.nfev),
+        rounds=rounds,
+    )
+    table.append(
+        (
+            name,
+            tol,
+            f"{ours.steps}/{theirs.steps}",
+            f"{ours.nfev}/{theirs.nfev}",
+            statistics.median(a),
+            statistics.median(b),
+            ratio,
+            best,
+            rounds,
+        )
+    )

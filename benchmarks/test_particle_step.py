@@ -57,27 +57,41 @@ def rain(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x, v, np.zeros(n, dtype=bool)
 
 
-def report(benchmark, capsys, label: str, n: int, steps: int, bandwidth: float,
-           walls: list[float] | None = None) -> None:
+def report(
+    benchmark, capsys, label: str, n: int, steps: int, bandwidth: float, walls: list[float] | None = None
+) -> None:
     """Print and store the rates, from the benchmark's rounds or from ``walls`` (the
     stepping times the compiled path reports, packing and allocation excluded)."""
     median = float(np.median(walls)) if walls else benchmark.stats.stats.median
     rate = n * steps / median
     best = n * steps / (min(walls) if walls else benchmark.stats.stats.min)
     used = BYTES_PER_PARTICLE * n / median
-    benchmark.extra_info.update(particle_steps_per_s=rate, best_particle_steps_per_s=best,
-                                bandwidth_fraction=used / bandwidth, bandwidth_bytes_per_s=bandwidth)
+    benchmark.extra_info.update(
+        particle_steps_per_s=rate,
+        best_particle_steps_per_s=best,
+        bandwidth_fraction=used / bandwidth,
+        bandwidth_bytes_per_s=bandwidth,
+    )
     with capsys.disabled():
-        print(f"\n{label:6s} n={n:>8d} steps/call={steps:>3d}: {rate:9.3g} particle-steps/s "
-              f"(best round {best:9.3g}), {used / 1e9:6.2f} GB/s = {used / bandwidth:6.1%} of the "
-              f"{bandwidth / 1e9:.1f} GB/s copy bandwidth")
+        print(
+            f"\n{label:6s} n={n:>8d} steps/call={steps:>3d}: {rate:9.3g} particle-steps/s "
+            f"(best round {best:9.3g}), {used / 1e9:6.2f} GB/s = {used / bandwidth:6.1%} of the "
+            f"{bandwidth / 1e9:.1f} GB/s copy bandwidth"
+        )
 
 
 def rain_model(n: int) -> ParticleModel:
     x0, v0, _ = rain(n)
-    return ParticleModel(mass=np.full(n, MASS), x0=x0, v0=v0, radius=np.full(n, RADIUS),
-                         fixed=np.zeros(n, bool), gravity=GRAVITY, drag=DRAG,
-                         planes=[Plane(FLOOR_POINT, FLOOR_NORMAL, RESTITUTION)])
+    return ParticleModel(
+        mass=np.full(n, MASS),
+        x0=x0,
+        v0=v0,
+        radius=np.full(n, RADIUS),
+        fixed=np.zeros(n, bool),
+        gravity=GRAVITY,
+        drag=DRAG,
+        planes=[Plane(FLOOR_POINT, FLOOR_NORMAL, RESTITUTION)],
+    )
 
 
 @pytest.mark.parametrize("steps", [1, 100])
@@ -100,9 +114,16 @@ def test_rain_compiled(benchmark, capsys, bandwidth, n, steps):
 @pytest.mark.parametrize("n", [1_000, 100_000])
 def test_rain_numpy_reference(benchmark, capsys, bandwidth, n):
     x0, v0, _ = rain(n)
-    model = ParticleModel(mass=np.full(n, MASS), x0=x0, v0=v0, radius=np.full(n, RADIUS),
-                          fixed=np.zeros(n, bool), gravity=GRAVITY, drag=DRAG,
-                          planes=[Plane(FLOOR_POINT, FLOOR_NORMAL, RESTITUTION)])
+    model = ParticleModel(
+        mass=np.full(n, MASS),
+        x0=x0,
+        v0=v0,
+        radius=np.full(n, RADIUS),
+        fixed=np.zeros(n, bool),
+        gravity=GRAVITY,
+        drag=DRAG,
+        planes=[Plane(FLOOR_POINT, FLOOR_NORMAL, RESTITUTION)],
+    )
     system = ParticleSystem(model, passes_for(model))
     solver = LectureUpdate(system)
 

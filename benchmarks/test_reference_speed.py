@@ -99,18 +99,23 @@ def test_one_particle_step(benchmark, table):
     per_step = {m: w / steps * 1e9 for m, w in zip([*FIXED, "mujoco/Euler"], walls, strict=True)}
     benchmark.extra_info.update(ns_per_step=per_step)
     table.append(f"one particle on a spring, {steps} steps of {dt * 1e3:g} ms: ns per step")
-    table += [f"  {m:18s} {ns:8.1f}" + (f"   target <= {PER_STEP_TARGET_NS[m]:g}"
-                                         if m in PER_STEP_TARGET_NS else "")
-              for m, ns in per_step.items()]
+    table += [
+        f"  {m:18s} {ns:8.1f}"
+        + (f"   target <= {PER_STEP_TARGET_NS[m]:g}" if m in PER_STEP_TARGET_NS else "")
+        for m, ns in per_step.items()
+    ]
     missed = {m: round(per_step[m], 1) for m, t in PER_STEP_TARGET_NS.items() if per_step[m] > t}
     assert not missed, f"ns per step over the targets {PER_STEP_TARGET_NS}: {missed}"
 
 
 def rain_runs() -> list[tuple[str, str]]:
     case = load_case(CASE_DIR / "particle-rain.toml")
-    return [(engine, method) for engine in ENGINES
-            for method, _, adaptive, why_not in plan(case, engine, quick=False)
-            if not why_not and not adaptive]
+    return [
+        (engine, method)
+        for engine in ENGINES
+        for method, _, adaptive, why_not in plan(case, engine, quick=False)
+        if not why_not and not adaptive
+    ]
 
 
 @pytest.mark.engine
@@ -118,23 +123,34 @@ def rain_runs() -> list[tuple[str, str]]:
 def test_rain_against_every_engine(benchmark, table, engine, method):
     case, dt = load_case(CASE_DIR / "particle-rain.toml"), 1e-3
     ours, theirs = benchmark.pedantic(
-        interleave, args=([timed("reference", case, "lecture", dt), timed(engine, case, method, dt)],),
-        rounds=1, iterations=1)
-    error = {e: measure(case, get_adapter(e).simulate(case, m, dt))["error"]
-             for e, m in (("reference", "lecture"), (engine, method))}
+        interleave,
+        args=([timed("reference", case, "lecture", dt), timed(engine, case, method, dt)],),
+        rounds=1,
+        iterations=1,
+    )
+    error = {
+        e: measure(case, get_adapter(e).simulate(case, m, dt))["error"]
+        for e, m in (("reference", "lecture"), (engine, method))
+    }
     ratio = theirs / ours
     benchmark.extra_info.update(reference_s=ours, engine_s=theirs, ratio=ratio, error=error)
-    table.append(f"rain at 1 ms: reference/lecture {ours * 1e3:.3f} ms, {engine}/{method} "
-                 f"{theirs * 1e3:.3f} ms: {ratio:6.1f}x; error {error['reference']:.3g} m "
-                 f"against {error[engine]:.3g} m; {1e6 / ours:.3g} particle-steps/s")
+    table.append(
+        f"rain at 1 ms: reference/lecture {ours * 1e3:.3f} ms, {engine}/{method} "
+        f"{theirs * 1e3:.3f} ms: {ratio:6.1f}x; error {error['reference']:.3g} m "
+        f"against {error[engine]:.3g} m; {1e6 / ours:.3g} particle-steps/s"
+    )
     assert error["reference"] <= error[engine]
     if engine == "pymunk":  # the fastest engine on rain
         assert ratio >= RAIN_TARGET, f"{ratio:.1f}x pymunk, target {RAIN_TARGET:g}x"
 
 
 def shared_cases() -> list[Case]:
-    return [c for c in load_cases("*") if compiled_reason(c.model, "rk4") is None
-            and any(not why for e in ENGINES for _, _, _, why in plan(c, e, quick=False))]
+    return [
+        c
+        for c in load_cases("*")
+        if compiled_reason(c.model, "rk4") is None
+        and any(not why for e in ENGINES for _, _, _, why in plan(c, e, quick=False))
+    ]
 
 
 @pytest.mark.engine
@@ -144,8 +160,12 @@ def test_every_method_against_the_fastest_engine(benchmark, table, case):
 
     def measure_case() -> None:
         for dt in case.dts:
-            engines = [(e, m) for e in ENGINES for m, d, adaptive, why in plan(case, e, quick=False)
-                       if not why and not adaptive and d == dt and runs_ok(e, case, m, dt)]
+            engines = [
+                (e, m)
+                for e in ENGINES
+                for m, d, adaptive, why in plan(case, e, quick=False)
+                if not why and not adaptive and d == dt and runs_ok(e, case, m, dt)
+            ]
             if not engines:
                 continue
             first = {em: timed(*em[:1], case, em[1], dt)() for em in engines}
@@ -158,8 +178,10 @@ def test_every_method_against_the_fastest_engine(benchmark, table, case):
             walls = interleave(runs)
             for m, w in zip(ours, walls[1:], strict=True):
                 ratio = walls[0] / w
-                line = (f"{case.name:20s} dt={dt:<9.3g} {m:17s} {w * 1e3:9.4f} ms, "
-                        f"{fastest[0]}/{fastest[1]} {walls[0] * 1e3:9.4f} ms: {ratio:6.1f}x")
+                line = (
+                    f"{case.name:20s} dt={dt:<9.3g} {m:17s} {w * 1e3:9.4f} ms, "
+                    f"{fastest[0]}/{fastest[1]} {walls[0] * 1e3:9.4f} ms: {ratio:6.1f}x"
+                )
                 table.append(line)
                 benchmark.extra_info[f"{m}@{dt:g}"] = ratio
                 if ratio < SHARED_TARGET:

@@ -84,8 +84,7 @@ def _check_period(case: Case) -> None:
         raise ValueError(f"needs [reference] period, a positive number of seconds, got {period!r}")
 
 
-@exact_solution("periodic", check=_check_period, params={"period": "positive"},
-                kind="ode")
+@exact_solution("periodic", check=_check_period, params={"period": "positive"}, kind="ode")
 def periodic(case: Case, t: np.ndarray) -> Exact:
     """A periodic orbit known only at its start and after whole periods (``period``, s)."""
     period = float(case.exact_params["period"])
@@ -194,11 +193,14 @@ def _check_linear(case: Case) -> None:
     if m is None:
         raise ValueError("'linear' is the exact solution of particle scenes")
     if np.any(m.springs.rest != 0) or np.any(m.anchors.rest != 0) or m.planes or m.fields:
-        raise ValueError(f"{case.file}: reference.exact: 'linear' needs zero-rest-length "
-                         "springs and no planes or fields")
+        raise ValueError(
+            f"{case.file}: reference.exact: 'linear' needs zero-rest-length springs and no planes or fields"
+        )
     if m.n > LINEAR_MAX_PARTICLES:
-        raise ValueError(f"'linear' solves at most {LINEAR_MAX_PARTICLES} particles densely "
-                         f"(its matrices grow with their square); this scene has {m.n}")
+        raise ValueError(
+            f"'linear' solves at most {LINEAR_MAX_PARTICLES} particles densely "
+            f"(its matrices grow with their square); this scene has {m.n}"
+        )
 
 
 @exact_solution("linear", check=_check_linear, params={}, kind="particles")
@@ -234,8 +236,9 @@ def linear(case: Case, t: np.ndarray) -> Exact:
     C += m.drag * np.eye(n)
     # Pinned particles: their positions enter as constant forcing on the free ones.
     inv_m = np.where(free, 1.0 / m.mass, 0.0)
-    forcing = inv_m[:, None] * (anchor_force - K[:, ~free] @ m.x0[~free]) \
-        + np.where(free[:, None], m.gravity, 0.0)
+    forcing = inv_m[:, None] * (anchor_force - K[:, ~free] @ m.x0[~free]) + np.where(
+        free[:, None], m.gravity, 0.0
+    )
     Kf = inv_m[free, None] * K[np.ix_(free, free)]
     Cf = inv_m[free, None] * C[np.ix_(free, free)]
     nf = int(free.sum())
@@ -282,13 +285,16 @@ def _check_reference_run(case: Case) -> None:
 
     method = case.exact_params.get("method", "dopri5")
     if method not in METHODS:
-        raise ValueError(f"[reference] method must be a reference method ({', '.join(METHODS)}), "
-                         f"got {method!r}")
+        raise ValueError(
+            f"[reference] method must be a reference method ({', '.join(METHODS)}), got {method!r}"
+        )
     m = case.model
     if METHODS[method].adaptive:
         if m is not None and (m.planes or m.emitters):
-            raise ValueError("an adaptive reference run needs a smooth scene (no planes, no "
-                             "emitters): name a fixed-step [reference] method and dt")
+            raise ValueError(
+                "an adaptive reference run needs a smooth scene (no planes, no "
+                "emitters): name a fixed-step [reference] method and dt"
+            )
         rtol = case.exact_params.get("rtol", 1e-12)
         if isinstance(rtol, bool) or not isinstance(rtol, int | float) or not 1e-14 <= rtol <= 1e-6:
             raise ValueError(f"[reference] rtol must be a number from 1e-14 to 1e-6, got {rtol!r}")
@@ -296,9 +302,11 @@ def _check_reference_run(case: Case) -> None:
     dt = case.exact_params.get("dt")
     finest = min(case.dts + case.quick_dts)
     if isinstance(dt, bool) or not isinstance(dt, int | float) or not 0 < dt <= finest / 4:
-        raise ValueError(f"[reference] dt of a fixed-step reference run must be a number of "
-                         f"seconds at most a quarter of the finest step swept ({finest:g}), "
-                         f"got {dt!r}")
+        raise ValueError(
+            f"[reference] dt of a fixed-step reference run must be a number of "
+            f"seconds at most a quarter of the finest step swept ({finest:g}), "
+            f"got {dt!r}"
+        )
     if case.duration / dt > 1e7:
         raise ValueError(f"[reference] dt {dt:g} s makes {case.duration / dt:.3g} steps (at most 1e7)")
     n = case.duration / dt
@@ -307,13 +315,18 @@ def _check_reference_run(case: Case) -> None:
     for step in case.dts + case.quick_dts:
         ratio = step / dt
         if abs(ratio - round(ratio)) > 1e-9 * ratio:
-            raise ValueError(f"[reference] dt {dt:g} s must divide every swept step (not "
-                             f"{step:g} s: {ratio:.6g} of it), so that the run is known at "
-                             "every time a row records")
+            raise ValueError(
+                f"[reference] dt {dt:g} s must divide every swept step (not "
+                f"{step:g} s: {ratio:.6g} of it), so that the run is known at "
+                "every time a row records"
+            )
 
 
-@exact_solution("reference-run", check=_check_reference_run,
-                params={"method": "string", "rtol": "positive", "dt": "positive"})
+@exact_solution(
+    "reference-run",
+    check=_check_reference_run,
+    params={"method": "string", "rtol": "positive", "dt": "positive"},
+)
 def reference_run(case: Case, t: np.ndarray) -> Exact:
     """No closed form: a run of the reference implementation far finer than the sweep,
     known along the whole run. ``[reference] method`` names it: ``dopri5`` (the default)
@@ -347,8 +360,7 @@ steps the case's rows record are kept."""
 
 
 def _reference(case: Case) -> ReferencePath:
-    key = (case.file, case.name, case.duration, repr(case.exact_params), repr(case.ode),
-           id(case.model))
+    key = (case.file, case.name, case.duration, repr(case.exact_params), repr(case.ode), id(case.model))
     hit = _REFERENCE_RUNS.get(key)
     if hit is None or hit[0] is not case.model:
         hit = _REFERENCE_RUNS[key] = (case.model, ReferencePath.of(case))
@@ -391,8 +403,9 @@ class ReferencePath:
             tol = float(case.exact_params.get("rtol", 1e-12))
             solver = cls_(system, rtol=tol, atol=tol)
             dense: list = []
-            run = integrate(solver, case.duration, case.duration, on_step=lambda: dense.append(
-                solver.dense()))
+            run = integrate(
+                solver, case.duration, case.duration, on_step=lambda: dense.append(solver.dense())
+            )
             path = cls(run.t, run.x, None, n, dense=dense)
         else:
             steps = max(1, round(case.duration / float(case.exact_params["dt"])))
@@ -405,8 +418,13 @@ class ReferencePath:
                     rows = round(case.duration / dt)
                     marks.append(record_indices(rows, case.max_records) * ratio)
                 keep = np.unique(np.concatenate(marks))
-            run = integrate(cls_(system), case.duration, case.duration / steps,
-                            max_records=steps, record_at=None if isinstance(keep, int) else keep)
+            run = integrate(
+                cls_(system),
+                case.duration,
+                case.duration / steps,
+                max_records=steps,
+                record_at=None if isinstance(keep, int) else keep,
+            )
             path = cls(run.t, run.x, case.duration / steps, n, alive=run.extra.get("alive"))
         if run.status != "ok":
             raise ValueError(f"{case.file}: the reference run went {run.status} at t = {run.t_fail}")

@@ -30,9 +30,17 @@ def _require(ok: bool, case: Case, what: str) -> None:
 
 def _free_forces(case: Case, *, drag: bool) -> ParticleModel:
     m = case.model
-    _require(not len(m.springs) and not len(m.anchors) and m.gravitation is None
-             and not m.fields and not m.planes and not m.impulses and not m.emitters,
-             case, "particles under gravity and drag only")
+    _require(
+        not len(m.springs)
+        and not len(m.anchors)
+        and m.gravitation is None
+        and not m.fields
+        and not m.planes
+        and not m.impulses
+        and not m.emitters,
+        case,
+        "particles under gravity and drag only",
+    )
     _require(drag or m.drag == 0, case, "no drag (drag = 0)")
     return m
 
@@ -81,9 +89,18 @@ def two_body(case: Case, t: np.ndarray) -> Exact:
     """
     m = case.model
     g = m.gravitation
-    _require(m.n == 2 and g is not None and g.softening == 0 and not np.any(m.gravity)
-             and not len(m.springs) and not m.planes and m.drag == 0 and not np.any(m.fixed),
-             case, "exactly two free bodies under unsoftened gravitation alone")
+    _require(
+        m.n == 2
+        and g is not None
+        and g.softening == 0
+        and not np.any(m.gravity)
+        and not len(m.springs)
+        and not m.planes
+        and m.drag == 0
+        and not np.any(m.fixed),
+        case,
+        "exactly two free bodies under unsoftened gravitation alone",
+    )
     m0, m1 = m.mass
     total = m0 + m1
     mu = g.G * total
@@ -125,9 +142,19 @@ def spring_pair(case: Case, t: np.ndarray) -> Exact:
     """
     m = case.model
     s = m.springs
-    _require(m.n == 2 and len(s) == 1 and not len(m.anchors) and m.drag == 0 and not m.planes
-             and m.gravitation is None and not m.fields and not m.impulses
-             and not np.any(m.fixed), case, "two free masses joined by one spring")
+    _require(
+        m.n == 2
+        and len(s) == 1
+        and not len(m.anchors)
+        and m.drag == 0
+        and not m.planes
+        and m.gravitation is None
+        and not m.fields
+        and not m.impulses
+        and not np.any(m.fixed),
+        case,
+        "two free masses joined by one spring",
+    )
     i, j = int(s.i[0]), int(s.j[0])
     mi, mj = m.mass[i], m.mass[j]
     total, reduced = mi + mj, mi * mj / (mi + mj)
@@ -135,11 +162,13 @@ def spring_pair(case: Case, t: np.ndarray) -> Exact:
     axis = sep / np.linalg.norm(sep)
     rel_v = m.v0[j] - m.v0[i]
     across = rel_v - (rel_v @ axis) * axis
-    _require(float(np.linalg.norm(across)) <= 1e-12 * max(1.0, float(np.linalg.norm(rel_v))),
-             case, "the relative velocity along the spring")
+    _require(
+        float(np.linalg.norm(across)) <= 1e-12 * max(1.0, float(np.linalg.norm(rel_v))),
+        case,
+        "the relative velocity along the spring",
+    )
     u0 = float(np.linalg.norm(sep) - s.rest[0])
-    u, du = oscillator(reduced, float(s.stiffness[0]), float(s.damping[0]), u0,
-                       float(rel_v @ axis), t)
+    u, du = oscillator(reduced, float(s.stiffness[0]), float(s.damping[0]), u0, float(rel_v @ axis), t)
     tt = t[:, None]
     cm = (mi * m.x0[i] + mj * m.x0[j]) / total + (mi * m.v0[i] + mj * m.v0[j]) / total * tt
     cm = cm + 0.5 * m.gravity * tt**2
@@ -151,9 +180,7 @@ def spring_pair(case: Case, t: np.ndarray) -> Exact:
     return Exact(t, x, v, _energy(m, x, v, 0.5 * s.stiffness[0] * u**2))
 
 
-def bounce_schedule(
-    u0: float, w0: float, g: float, e: float, t_max: float
-) -> tuple[np.ndarray, np.ndarray]:
+def bounce_schedule(u0: float, w0: float, g: float, e: float, t_max: float) -> tuple[np.ndarray, np.ndarray]:
     """Bounce times ``T_k`` (s) and launch speeds ``e^k V`` (m/s) up to ``t_max``, k = 1, 2, ...
 
     A point ``u0 >= 0`` above a plane, moving at ``w0`` along its normal, gravity ``g``
@@ -173,14 +200,26 @@ def bounce_schedule(
 def _plane_motion(case: Case) -> tuple[ParticleModel, np.ndarray, float, float, float]:
     """Particle 0 above plane 0 with gravity along ``-N``: model, N, g, height, normal speed."""
     m = case.model
-    _require(m.n == 1 and len(m.planes) == 1 and m.drag == 0 and not len(m.springs)
-             and not len(m.anchors) and m.gravitation is None and not m.fields
-             and not m.impulses, case, "one particle, one plane, gravity")
+    _require(
+        m.n == 1
+        and len(m.planes) == 1
+        and m.drag == 0
+        and not len(m.springs)
+        and not len(m.anchors)
+        and m.gravitation is None
+        and not m.fields
+        and not m.impulses,
+        case,
+        "one particle, one plane, gravity",
+    )
     plane = m.planes[0]
     n = plane.normal
     g = float(-(m.gravity @ n))
-    _require(g > 0 and np.allclose(m.gravity, -g * n, rtol=0, atol=1e-12 * g),
-             case, "gravity along the plane's inward normal")
+    _require(
+        g > 0 and np.allclose(m.gravity, -g * n, rtol=0, atol=1e-12 * g),
+        case,
+        "gravity along the plane's inward normal",
+    )
     u0 = float((m.x0[0] - plane.point) @ n - m.radius[0])
     _require(u0 >= 0, case, "the particle to start on or above the plane")
     return m, n, g, u0, float(m.v0[0] @ n)
@@ -256,18 +295,32 @@ def bouncing_rain(case: Case, t: np.ndarray) -> Exact:
     other force; each follows its own chain of parabolas (:func:`bounce_schedule`).
     """
     m = case.model
-    _require(len(m.planes) == 1 and m.drag == 0 and not len(m.springs) and not len(m.anchors)
-             and m.gravitation is None and not m.fields and not m.impulses, case,
-             "independent particles, one plane, gravity")
+    _require(
+        len(m.planes) == 1
+        and m.drag == 0
+        and not len(m.springs)
+        and not len(m.anchors)
+        and m.gravitation is None
+        and not m.fields
+        and not m.impulses,
+        case,
+        "independent particles, one plane, gravity",
+    )
     plane = m.planes[0]
     n = plane.normal
     g = float(-(m.gravity @ n))
-    _require(g > 0 and np.allclose(m.gravity, -g * n, rtol=0, atol=1e-12 * g),
-             case, "gravity along the plane's inward normal")
+    _require(
+        g > 0 and np.allclose(m.gravity, -g * n, rtol=0, atol=1e-12 * g),
+        case,
+        "gravity along the plane's inward normal",
+    )
     x = np.empty((len(t), m.n, 3))
     v = np.empty((len(t), m.n, 3))
     for i in range(m.n):
-        _require(float((m.x0[i] - plane.point) @ n - m.radius[i]) >= 0, case,
-                 "every particle to start on or above the plane")
+        _require(
+            float((m.x0[i] - plane.point) @ n - m.radius[i]) >= 0,
+            case,
+            "every particle to start on or above the plane",
+        )
         x[:, i], v[:, i] = bounce_path(m.x0[i], m.v0[i], float(m.radius[i]), plane, g, t)
     return Exact(t, x, v, None)

@@ -27,9 +27,13 @@ ExactFn = Callable[[Case, np.ndarray], Exact]
 EXACT: dict[str, ExactFn] = {}
 
 
-def exact_solution(name: str, *, check: Callable[[Case], None] | None = None,
-                   params: dict[str, str] | None = None, kind: str | None = None
-                   ) -> Callable[[ExactFn], ExactFn]:
+def exact_solution(
+    name: str,
+    *,
+    check: Callable[[Case], None] | None = None,
+    params: dict[str, str] | None = None,
+    kind: str | None = None,
+) -> Callable[[ExactFn], ExactFn]:
     """Register an exact solution under ``name``.
 
     When a case names it, the loader checks that it fits the scene: by ``check(case)``

@@ -48,8 +48,9 @@ class Fields:
 
     def __init__(self, file: str, table: Any, path: str = "") -> None:
         if not isinstance(table, dict):
-            raise CaseError(file, path or "<top>",
-                            f"expected a table, got {type(table).__name__} {short(table)}")
+            raise CaseError(
+                file, path or "<top>", f"expected a table, got {type(table).__name__} {short(table)}"
+            )
         self.file, self.table, self.path = file, table, path
         self._read: set[str] = set()
 
@@ -111,8 +112,9 @@ class Fields:
             raise self.error(name, f"must be at least {at_least:g}, got {value:g}")
         return value
 
-    def integer(self, name: str, default: Any = _MISSING, *, minimum: int | None = None,
-                maximum: int = MAX_INTEGER) -> int:
+    def integer(
+        self, name: str, default: Any = _MISSING, *, minimum: int | None = None, maximum: int = MAX_INTEGER
+    ) -> int:
         """An integer of the file (not a float, not a bool) in ``minimum..maximum``."""
         value = self.raw(name, default)
         if isinstance(value, bool) or not isinstance(value, int):
@@ -129,8 +131,9 @@ class Fields:
             raise self.error(name, f"expected true or false, got {short(value)}")
         return value
 
-    def string(self, name: str, default: Any = _MISSING, *, choices: Any = None,
-               max_length: int = 200) -> str:
+    def string(
+        self, name: str, default: Any = _MISSING, *, choices: Any = None, max_length: int = 200
+    ) -> str:
         """A string of at most ``max_length`` characters, one of ``choices`` if given."""
         value = self.raw(name, default)
         if value is None:
@@ -163,7 +166,12 @@ class Fields:
         return list(value)
 
     def numbers(
-        self, name: str, default: Any = _MISSING, *, positive: bool = False, nonempty: bool = True,
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        positive: bool = False,
+        nonempty: bool = True,
         max_length: int = 10_000,
     ) -> list[float]:
         """A list of finite numbers (at most ``max_length``)."""
@@ -207,8 +215,9 @@ class Fields:
     def vec3(self, name: str, default: Any = _MISSING) -> np.ndarray:
         return self.array(name, default, shape=(3,))
 
-    def indices(self, name: str, n: int, *, shape: tuple[int | None, ...],
-                default: Any = _MISSING) -> np.ndarray:
+    def indices(
+        self, name: str, n: int, *, shape: tuple[int | None, ...], default: Any = _MISSING
+    ) -> np.ndarray:
         """An integer array of the given shape whose entries number particles ``0..n-1``."""
         value = self.raw(name, default)
         if not _nested_integers(value, shape):
@@ -217,8 +226,10 @@ class Fields:
             arr = np.asarray(value, dtype=np.int64) if _fits_int64(value) else None
         except ValueError:  # ragged: rows of different lengths
             raise self.error(name, f"expected integers of shape {_fmt(shape)}, got {short(value)}") from None
-        if arr is not None and (arr.ndim != len(shape) or any(
-                s is not None and s != a for s, a in zip(shape, arr.shape, strict=True))):
+        if arr is not None and (
+            arr.ndim != len(shape)
+            or any(s is not None and s != a for s, a in zip(shape, arr.shape, strict=True))
+        ):
             raise self.error(name, f"expected shape {_fmt(shape)}, got {arr.shape}")
         if arr is None or np.any(arr < 0) or np.any(arr >= n):
             raise self.error(name, f"particle index out of range 0..{n - 1}")

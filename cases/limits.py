@@ -44,8 +44,15 @@ class Limits:
 
 
 DEFAULT = Limits()
-CEILING = Limits(particles=10_000_000, springs=50_000_000, steps=200_000_000, records=1_000_000,
-                 work=2e11, memory_mb=16384.0, timeout_s=21600.0)
+CEILING = Limits(
+    particles=10_000_000,
+    springs=50_000_000,
+    steps=200_000_000,
+    records=1_000_000,
+    work=2e11,
+    memory_mb=16384.0,
+    timeout_s=21600.0,
+)
 """The most a case file's ``[limits]`` may raise each limit to (ten times the default; the
 timeout to the default budget of a whole run, 6 h). Only the command line goes beyond,
 with ``truestep run --trust-limits --limit KEY=VALUE``: a case file is data from
@@ -69,12 +76,14 @@ def read_limits(f: Fields, base: Limits) -> Limits:
     for key in KEYS:
         if t.has(key):
             ceiling = getattr(CEILING, key)
-            values[key] = (t.number(key, positive=True) if key in _FLOATS
-                           else t.integer(key, minimum=1))
+            values[key] = t.number(key, positive=True) if key in _FLOATS else t.integer(key, minimum=1)
             if values[key] > ceiling:
-                raise t.error(key, f"{values[key]:.3g} is over the ceiling of {ceiling:.3g} a case "
-                              f"file may raise it to (only truestep run {TRUST_FLAG} --limit "
-                              f"{key}=N goes beyond it)")
+                raise t.error(
+                    key,
+                    f"{values[key]:.3g} is over the ceiling of {ceiling:.3g} a case "
+                    f"file may raise it to (only truestep run {TRUST_FLAG} --limit "
+                    f"{key}=N goes beyond it)",
+                )
     t.done()
     return dataclasses.replace(base, **values)
 
@@ -85,8 +94,10 @@ def check_ceilings(values: dict[str, float], *, trusted: bool, where: str = "--l
     for key, value in values.items():
         ceiling = getattr(CEILING, key)
         if not trusted and value > ceiling:
-            raise ValueError(f"{where} {key}={value:.3g} is over the ceiling of {ceiling:.3g}; "
-                             f"add {TRUST_FLAG} if the cases of this run are trusted")
+            raise ValueError(
+                f"{where} {key}={value:.3g} is over the ceiling of {ceiling:.3g}; "
+                f"add {TRUST_FLAG} if the cases of this run are trusted"
+            )
 
 
 def parse_override(items: list[str], *, trusted: bool = False) -> dict[str, float]:
@@ -97,8 +108,9 @@ def parse_override(items: list[str], *, trusted: bool = False) -> dict[str, floa
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or key not in KEYS:
-            raise ValueError(f"--limit: expected KEY=VALUE with KEY one of {', '.join(KEYS)}, "
-                             f"got {item[:40]!r}")
+            raise ValueError(
+                f"--limit: expected KEY=VALUE with KEY one of {', '.join(KEYS)}, got {item[:40]!r}"
+            )
         try:
             value = float(raw)
         except ValueError:
@@ -112,8 +124,9 @@ def parse_override(items: list[str], *, trusted: bool = False) -> dict[str, floa
 
 def override(limits: Limits, values: dict[str, float]) -> Limits:
     """``limits`` with ``values`` (from :func:`parse_override`) put over it."""
-    return dataclasses.replace(limits, **{
-        k: (float(v) if k in _FLOATS else int(v)) for k, v in values.items()})
+    return dataclasses.replace(
+        limits, **{k: (float(v) if k in _FLOATS else int(v)) for k, v in values.items()}
+    )
 
 
 class Budget:
@@ -131,10 +144,16 @@ class Budget:
         self.particles += int(particles)
         self.springs += int(springs)
         if self.particles > self.limits.particles:
-            raise f.error(field, f"the scene would have {self.particles:.3g} particles, over "
-                          f"the limit of {self.limits.particles:.3g} (raise it with [limits] "
-                          "particles or --limit particles=N)")
+            raise f.error(
+                field,
+                f"the scene would have {self.particles:.3g} particles, over "
+                f"the limit of {self.limits.particles:.3g} (raise it with [limits] "
+                "particles or --limit particles=N)",
+            )
         if self.springs > self.limits.springs:
-            raise f.error(field, f"the scene would have {self.springs:.3g} springs, over "
-                          f"the limit of {self.limits.springs:.3g} (raise it with [limits] "
-                          "springs or --limit springs=N)")
+            raise f.error(
+                field,
+                f"the scene would have {self.springs:.3g} springs, over "
+                f"the limit of {self.limits.springs:.3g} (raise it with [limits] "
+                "springs or --limit springs=N)",
+            )

@@ -41,8 +41,17 @@ CASE_DIR = plugins.CASE_DIR
 ODE_DIMENSIONS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
 """State dimension of the lecture's ODE systems (installed systems are checked by
 constructing them)."""
-GATE_KINDS = {"order", "error", "energy_drift", "status", "property", "stability-limit", "speedup",
-              "restitution", "no-worse-than"}
+GATE_KINDS = {
+    "order",
+    "error",
+    "energy_drift",
+    "status",
+    "property",
+    "stability-limit",
+    "speedup",
+    "restitution",
+    "no-worse-than",
+}
 GATE_NUMBERS = {"expect", "tol", "max", "min", "rel_tol", "factor", "bounce", "e_set"}
 MAX_FILE_BYTES = 16 * 2**20
 """The largest case or gates file read (16 MiB): a scene bigger than that is built from
@@ -65,8 +74,10 @@ def library() -> dict[str, Path]:
     for source, directory in plugins.case_directories():
         for path in sorted(directory.glob("*.toml")):
             if path.stem in found:
-                raise SelectionError(f"case {path.stem!r} is defined twice: {found[path.stem]} "
-                                     f"and {path} (entry point {source!r})")
+                raise SelectionError(
+                    f"case {path.stem!r} is defined twice: {found[path.stem]} "
+                    f"and {path} (entry point {source!r})"
+                )
             found[path.stem] = path
     return found
 
@@ -100,22 +111,29 @@ def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
             lib = library() if lib is None else lib
             files = [p for name, p in lib.items() if fnmatch.fnmatchcase(name, item)]
             if not files:
-                raise SelectionError(f"--cases: no case matches {item!r} (known: "
-                                     f"{', '.join(lib) or 'none'}; a file or directory also works)")
+                raise SelectionError(
+                    f"--cases: no case matches {item!r} (known: "
+                    f"{', '.join(lib) or 'none'}; a file or directory also works)"
+                )
         for f in files:
             out.setdefault(f.resolve(), f)
     return list(out.values())
 
 
-def load_cases(selection: str | Iterable[str] = "*", *,
-               limits: dict[str, float] | None = None, trust_limits: bool = False,
-               engines: Iterable[str] | None = None) -> list[Case]:
+def load_cases(
+    selection: str | Iterable[str] = "*",
+    *,
+    limits: dict[str, float] | None = None,
+    trust_limits: bool = False,
+    engines: Iterable[str] | None = None,
+) -> list[Case]:
     """Load every case a selection names (:func:`case_files`); raises :class:`CaseError`
     on the first bad file and :class:`SelectionError` when an item matches nothing or
     two cases share a name. ``limits``, ``trust_limits`` and ``engines`` as
     :func:`load_case`."""
-    cases = [load_case(p, limits=limits, trust_limits=trust_limits, engines=engines)
-             for p in case_files(selection)]
+    cases = [
+        load_case(p, limits=limits, trust_limits=trust_limits, engines=engines) for p in case_files(selection)
+    ]
     seen: dict[str, str] = {}
     for c in cases:
         if c.name in seen:
@@ -124,8 +142,13 @@ def load_cases(selection: str | Iterable[str] = "*", *,
     return cases
 
 
-def load_case(path: str | Path, *, limits: dict[str, float] | None = None,
-              trust_limits: bool = False, engines: Iterable[str] | None = None) -> Case:
+def load_case(
+    path: str | Path,
+    *,
+    limits: dict[str, float] | None = None,
+    trust_limits: bool = False,
+    engines: Iterable[str] | None = None,
+) -> Case:
     """Load one case file, validating every field, its cost and its gates.
 
     The cost limits are :data:`truestep.cases.limits.DEFAULT`, raised or lowered by the
@@ -145,8 +168,9 @@ def load_case(path: str | Path, *, limits: dict[str, float] | None = None,
     try:
         return _load_case(path, limits or {}, engines)
     except (MemoryError, RecursionError, OverflowError) as err:
-        raise CaseError(str(path), "<file>", f"cannot be loaded: {type(err).__name__}: "
-                        f"{str(err)[:80]}") from None
+        raise CaseError(
+            str(path), "<file>", f"cannot be loaded: {type(err).__name__}: {str(err)[:80]}"
+        ) from None
 
 
 def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str] | None) -> Case:
@@ -155,30 +179,38 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
     limits = override(read_limits(f, DEFAULT), limit_values)
     name = path.stem
     if not re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", name) or len(name) > 80:
-        raise CaseError(file, "<name>", "case names (the file name) are lower-case ASCII words "
-                        "and digits joined by dashes, at most 80 characters")
+        raise CaseError(
+            file,
+            "<name>",
+            "case names (the file name) are lower-case ASCII words "
+            "and digits joined by dashes, at most 80 characters",
+        )
 
     kind = f.string("kind", choices={"ode", "particles"})
     run = f.sub("run")
     duration = run.number("duration", positive=True)
     if duration < MIN_STEP_S:
-        raise run.error("duration", f"{duration:g} s is shorter than the smallest step a case "
-                        f"may name, {MIN_STEP_S:g} s")
+        raise run.error(
+            "duration", f"{duration:g} s is shorter than the smallest step a case may name, {MIN_STEP_S:g} s"
+        )
     dts, quick_dts = _read_steps(run, duration)
     for where, values in (("dt", dts), ("quick_dt", quick_dts)):
         if min(values) < MIN_STEP_S:
-            raise run.error(where, f"a step of {min(values):g} s is below the smallest a case "
-                            f"may name, {MIN_STEP_S:g} s")
+            raise run.error(
+                where, f"a step of {min(values):g} s is below the smallest a case may name, {MIN_STEP_S:g} s"
+            )
     tolerances = run.numbers("tolerances", [1e-4, 1e-6, 1e-8], positive=True, max_length=MAX_SWEEP)
-    quick_tolerances = run.numbers("quick_tolerances", tolerances[:2], positive=True,
-                                   max_length=MAX_SWEEP)
+    quick_tolerances = run.numbers("quick_tolerances", tolerances[:2], positive=True, max_length=MAX_SWEEP)
     for where, values in (("dt", dts), ("quick_dt", quick_dts)):
         if max(values) > duration:
             raise run.error(where, f"a step of {max(values):g} s exceeds the duration {duration:g} s")
     tolerances_ok = all(1e-14 <= t < 1 for t in tolerances + quick_tolerances)
     if not tolerances_ok:
-        raise run.error("tolerances", "every tolerance must lie in 1e-14..1 (below 1e-14 an "
-                        f"adaptive step cannot meet it in float64), got {short(tolerances)}")
+        raise run.error(
+            "tolerances",
+            "every tolerance must lie in 1e-14..1 (below 1e-14 an "
+            f"adaptive step cannot meet it in float64), got {short(tolerances)}",
+        )
     max_records = run.integer("max_records", 2000, minimum=2, maximum=limits.records)
     timeout_s = run.number("timeout", 120.0, at_least=1.0, at_most=limits.timeout_s)
     in_quick = run.boolean("quick", True)
@@ -189,14 +221,17 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
     run.done()
     steps = duration / min(dts + quick_dts)
     if steps > limits.steps:
-        raise run.error("dt", f"duration / dt = {steps:.3g} steps, over the limit of "
-                        f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)")
+        raise run.error(
+            "dt",
+            f"duration / dt = {steps:.3g} steps, over the limit of "
+            f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)",
+        )
 
     ode = model = None
     if kind == "ode":
         ode = _read_ode(f.sub("ode"), limits)
         if f.has("scene"):
-            raise f.error("scene", "an ode case has no scene (kind = \"ode\")")
+            raise f.error("scene", 'an ode case has no scene (kind = "ode")')
     else:
         model = read_scene(f.sub("scene"), Budget(limits))
         if model.n == 0:
@@ -212,8 +247,7 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
     escape_energy = ref.number("escape_energy", None)
     fn = _exact_fn(ref, exact) if exact is not None else None
     if exact is not None and fn is None:
-        raise ref.error("exact", f"no exact solution named {short(exact)}; known: "
-                        f"{', '.join(exact_names())}")
+        raise ref.error("exact", f"no exact solution named {short(exact)}; known: {', '.join(exact_names())}")
     exact_params = _exact_params(ref, fn)
     _check_reference_cost(ref, limits, duration, exact, exact_params, model)
     ref.done()
@@ -271,8 +305,9 @@ def check_case_gates(case: Case, engines: set[str]) -> None:
     property of the case: :class:`CaseError` naming the gate's field otherwise."""
     for g in case.gates:
         if g.kind == "property" and g.params["name"] not in case.properties:
-            raise CaseError(case.file, f"{g.where}.name",
-                            f"{short(g.params['name'])} is not in this case's properties")
+            raise CaseError(
+                case.file, f"{g.where}.name", f"{short(g.params['name'])} is not in this case's properties"
+            )
         if g.engine != "*" and g.engine not in engines:
             raise CaseError(case.file, f"{g.where}.engine", f"unknown engine {short(g.engine)}")
 
@@ -288,31 +323,40 @@ def _check_emitters(f: Fields, limits: Limits, duration: float, model) -> None:
     for i, e in enumerate(model.emitters if model is not None else []):
         frames = duration / e.frame_dt
         if frames > limits.steps:
-            raise f.error(f"scene.emitters[{i}].frame_dt", f"duration / frame_dt = {frames:.3g} "
-                          f"frames, over the step limit of {limits.steps:.3g} (raise it with "
-                          "[limits] steps or --limit steps=N)")
+            raise f.error(
+                f"scene.emitters[{i}].frame_dt",
+                f"duration / frame_dt = {frames:.3g} "
+                f"frames, over the step limit of {limits.steps:.3g} (raise it with "
+                "[limits] steps or --limit steps=N)",
+            )
 
 
-def _check_reference_cost(ref: Fields, limits: Limits, duration: float, exact: str | None,
-                          params: dict[str, object], model) -> None:
+def _check_reference_cost(
+    ref: Fields, limits: Limits, duration: float, exact: str | None, params: dict[str, object], model
+) -> None:
     """A fixed-step reference run is a run too: its step is at least
     :data:`~truestep.cases.limits.MIN_STEP_S`, its steps and work within the limits."""
     dt = params.get("dt")
     if exact != "reference-run" or not isinstance(dt, float | int) or isinstance(dt, bool):
         return
     if dt < MIN_STEP_S:
-        raise ref.error("dt", f"a step of {dt:g} s is below the smallest a case may name, "
-                        f"{MIN_STEP_S:g} s")
+        raise ref.error("dt", f"a step of {dt:g} s is below the smallest a case may name, {MIN_STEP_S:g} s")
     steps = duration / dt
     if steps > limits.steps:
-        raise ref.error("dt", f"duration / dt = {steps:.3g} steps, over the limit of "
-                        f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)")
+        raise ref.error(
+            "dt",
+            f"duration / dt = {steps:.3g} steps, over the limit of "
+            f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)",
+        )
     n = model.n if model is not None else 1
     springs = (len(model.springs) + len(model.anchors.i)) if model is not None else 0
     if (n + springs) * steps > limits.work:
-        raise ref.error("dt", f"the reference run does ({n} + {springs}) x {steps:.3g} = "
-                        f"{(n + springs) * steps:.3g} updates, over the limit of "
-                        f"{limits.work:.3g} (raise it with [limits] work or --limit work=N)")
+        raise ref.error(
+            "dt",
+            f"the reference run does ({n} + {springs}) x {steps:.3g} = "
+            f"{(n + springs) * steps:.3g} updates, over the limit of "
+            f"{limits.work:.3g} (raise it with [limits] work or --limit work=N)",
+        )
 
 
 def _check_cost(f: Fields, limits: Limits, steps: float, records: int, model) -> None:
@@ -321,14 +365,20 @@ def _check_cost(f: Fields, limits: Limits, steps: float, records: int, model) ->
     springs = (len(model.springs) + len(model.anchors.i)) if model is not None else 0
     work = (n + springs) * steps
     if work > limits.work:
-        raise f.error("run.dt", f"(particles + springs) x steps = ({n} + {springs}) x "
-                      f"{steps:.3g} = {work:.3g} updates, over the limit of {limits.work:.3g} "
-                      "(raise it with [limits] work or --limit work=N)")
+        raise f.error(
+            "run.dt",
+            f"(particles + springs) x steps = ({n} + {springs}) x "
+            f"{steps:.3g} = {work:.3g} updates, over the limit of {limits.work:.3g} "
+            "(raise it with [limits] work or --limit work=N)",
+        )
     memory_mb = records * n * 48 / 2**20
     if memory_mb > limits.memory_mb:
-        raise f.error("run.max_records", f"{records} records of {n} particles need "
-                      f"{memory_mb:.4g} MiB, over the limit of {limits.memory_mb:g} MiB "
-                      "(raise it with [limits] memory_mb or --limit memory_mb=N)")
+        raise f.error(
+            "run.max_records",
+            f"{records} records of {n} particles need "
+            f"{memory_mb:.4g} MiB, over the limit of {limits.memory_mb:g} MiB "
+            "(raise it with [limits] memory_mb or --limit memory_mb=N)",
+        )
 
 
 def _read_stability(f: Fields, limits: Limits) -> StabilitySpec | None:
@@ -349,8 +399,11 @@ def _read_stability(f: Fields, limits: Limits) -> StabilitySpec | None:
     if spec.dt_lo >= spec.dt_hi:
         raise s.error("dt_hi", f"must exceed dt_lo ({spec.dt_lo:g})")
     if spec.horizon / spec.dt_lo > limits.steps:
-        raise s.error("dt_lo", f"horizon / dt_lo = {spec.horizon / spec.dt_lo:.3g} steps, over "
-                      f"the limit of {limits.steps:.3g} (raise it with [limits] steps)")
+        raise s.error(
+            "dt_lo",
+            f"horizon / dt_lo = {spec.horizon / spec.dt_lo:.3g} steps, over "
+            f"the limit of {limits.steps:.3g} (raise it with [limits] steps)",
+        )
     s.done()
     return spec
 
@@ -413,10 +466,13 @@ def _read_steps(run: Fields, duration: float) -> tuple[list[float], list[float]]
         for dt in values:
             n = duration / dt
             if n >= 1 and abs(n - round(n)) > STEP_FIT * n:
-                raise run.error(key, f"{dt:g} s does not divide the duration {duration:.10g} s "
-                                f"({n:.6g} steps): the run would take steps of "
-                                f"{duration / max(round(n), 1):.6g} s; choose a duration of "
-                                "whole steps, or give the sweep as `steps`")
+                raise run.error(
+                    key,
+                    f"{dt:g} s does not divide the duration {duration:.10g} s "
+                    f"({n:.6g} steps): the run would take steps of "
+                    f"{duration / max(round(n), 1):.6g} s; choose a duration of "
+                    "whole steps, or give the sweep as `steps`",
+                )
     return dts, quick_dts
 
 
@@ -432,9 +488,13 @@ def _check_gate_steps(f: Fields, case: Case) -> None:
             continue
         for which, swept in sweeps:
             if not any(abs(g.dt - s) <= 1e-9 * s for s in swept):
-                raise CaseError(case.file, f"{g.where}.dt", f"{g.dt:g} is not a step or "
-                                f"tolerance of this case's {which} "
-                                f"({', '.join(f'{s:g}' for s in sorted(swept))})")
+                raise CaseError(
+                    case.file,
+                    f"{g.where}.dt",
+                    f"{g.dt:g} is not a step or "
+                    f"tolerance of this case's {which} "
+                    f"({', '.join(f'{s:g}' for s in sorted(swept))})",
+                )
 
 
 def _exact_fn(ref: Fields, name: str):
@@ -457,8 +517,11 @@ def _read_ode(o: Fields, limits: Limits) -> OdeSpec:
         raise o.error("system", f"no ODE system named {name!r}; known: {', '.join(plugins.system_names())}")
     raw = o.raw("y0")
     if isinstance(raw, list) and len(raw) > 6 * limits.particles:
-        raise o.error("y0", f"{len(raw)} numbers, over six per particle of the limit of "
-                      f"{limits.particles:.3g} (raise it with [limits] particles)")
+        raise o.error(
+            "y0",
+            f"{len(raw)} numbers, over six per particle of the limit of "
+            f"{limits.particles:.3g} (raise it with [limits] particles)",
+        )
     y0 = o.array("y0", shape=(ODE_DIMENSIONS[name],) if name in ODE_DIMENSIONS else (None,))
     params = {k: o.number(k) for k in o.table if k not in ("system", "y0")}
     o.done()
@@ -466,11 +529,15 @@ def _read_ode(o: Fields, limits: Limits) -> OdeSpec:
         system = cls(y0, **params)
         dy = np.asarray(system.derivative(y0.copy(), 0.0), float)
     except Exception as err:  # the parameters or the start do not fit the system
-        raise o.error("system", f"{name!r} cannot be built from y0 and "
-                      f"{sorted(params) or 'no parameters'}: {type(err).__name__}: {err}") from None
+        raise o.error(
+            "system",
+            f"{name!r} cannot be built from y0 and "
+            f"{sorted(params) or 'no parameters'}: {type(err).__name__}: {err}",
+        ) from None
     if dy.shape != y0.shape:
-        raise o.error("y0", f"{name!r} returns a derivative of shape {dy.shape} for a start of "
-                      f"shape {y0.shape}")
+        raise o.error(
+            "y0", f"{name!r} returns a derivative of shape {dy.shape} for a start of shape {y0.shape}"
+        )
     return OdeSpec(name, y0, params, second_order=isinstance(system, SecondOrderSystem))
 
 
@@ -481,8 +548,11 @@ def _check_exact(case: Case) -> None:
     where = "reference.exact"
     kind = getattr(fn, "kind", None)
     if kind is not None and kind != case.kind:
-        raise CaseError(case.file, where, f"{case.exact!r} is the exact solution of {kind} cases; "
-                        f"this case is kind = {case.kind!r}")
+        raise CaseError(
+            case.file,
+            where,
+            f"{case.exact!r} is the exact solution of {kind} cases; this case is kind = {case.kind!r}",
+        )
     try:
         with time_limit(EXACT_CHECK_S, f"checking {case.exact!r}"):
             check = getattr(fn, "check", None)
@@ -500,11 +570,16 @@ def _check_exact(case: Case) -> None:
     if len(getattr(start, "t", [])) == 0:
         return  # known at some times only, not at the start
     if x.shape != shape:
-        raise CaseError(case.file, where, f"{case.exact!r} gives positions of shape {x.shape}; "
-                        f"this case's are {shape}")
+        raise CaseError(
+            case.file, where, f"{case.exact!r} gives positions of shape {x.shape}; this case's are {shape}"
+        )
     if not np.allclose(x, x0, rtol=1e-9, atol=1e-12):
-        raise CaseError(case.file, where, f"{case.exact!r} does not start where the case starts "
-                        f"(largest difference {np.max(np.abs(x - x0)):.3g})")
+        raise CaseError(
+            case.file,
+            where,
+            f"{case.exact!r} does not start where the case starts "
+            f"(largest difference {np.max(np.abs(x - x0)):.3g})",
+        )
 
 
 def _read_gates(f: Fields) -> list[Gate]:
@@ -580,8 +655,9 @@ def _require(g: Fields, kind: str, params: dict, dt: float | None) -> None:
     if kind == "property" and "min" not in params and "max" not in params:
         raise g.error("max", "a property gate needs min, max or both")
     if kind == "stability-limit" and "rel_tol" not in params and "min" not in params:
-        raise g.error("rel_tol", "a stability-limit gate needs rel_tol (against the exact limit), "
-                      "min (s), or both")
+        raise g.error(
+            "rel_tol", "a stability-limit gate needs rel_tol (against the exact limit), min (s), or both"
+        )
     if kind == "no-worse-than" and not params["factor"] > 0:
         raise g.error("factor", f"must be positive, got {params['factor']:g}")
 
@@ -599,8 +675,11 @@ def load_gates_file(path: str | Path) -> list[tuple[list[str], Gate]]:
     for i, g in enumerate(f.subs("gates")):
         raw = g.raw("cases", "*")
         patterns = [raw] if isinstance(raw, str) else raw
-        if not isinstance(patterns, list) or not patterns or not all(
-                isinstance(p, str) and p.strip() for p in patterns):
+        if (
+            not isinstance(patterns, list)
+            or not patterns
+            or not all(isinstance(p, str) and p.strip() for p in patterns)
+        ):
             raise g.error("cases", f"expected a case name, glob, or a list of them, got {raw!r}")
         out.append(([p.strip() for p in patterns], read_gate(g, f"gates[{i}]")))
     f.raw("baseline", None)

@@ -65,8 +65,14 @@ class MeshPart:
     def pool(cls, capacity: int, mass: float) -> MeshPart:
         """An emitter's pool: ``capacity`` particles, all dead until spawned."""
         z = np.zeros((capacity, 3))
-        return cls(np.full(capacity, mass), z, z.copy(), np.zeros(capacity),
-                   np.zeros(capacity, bool), Springs.empty())
+        return cls(
+            np.full(capacity, mass),
+            z,
+            z.copy(),
+            np.zeros(capacity),
+            np.zeros(capacity, bool),
+            Springs.empty(),
+        )
 
 
 MESH_KINDS: set[str] = {"triangle", "tetrahedron", "cube", "rope", "cloth"}
@@ -92,8 +98,9 @@ def read_mesh(f: Fields, budget: Budget) -> MeshPart:
     pinned = f.raw("pinned", [])
     if isinstance(pinned, list) and len(pinned) > n:
         raise f.error("pinned", f"{len(pinned)} vertex numbers for a {kind} of {n} vertices")
-    if not isinstance(pinned, list) or not all(isinstance(i, int) and not isinstance(i, bool)
-                                               for i in pinned):
+    if not isinstance(pinned, list) or not all(
+        isinstance(i, int) and not isinstance(i, bool) for i in pinned
+    ):
         raise f.error("pinned", f"expected a list of vertex numbers, got {short(pinned)}")
     bad = [i for i in pinned if not 0 <= i < n]
     if bad:
@@ -101,8 +108,9 @@ def read_mesh(f: Fields, budget: Budget) -> MeshPart:
     fixed = np.zeros(n, bool)
     fixed[pinned] = True
     f.done()
-    return MeshPart(mass, mesh.vertices, np.tile(velocity, (n, 1)), np.full(n, radius), fixed,
-                    springs, mesh.faces)
+    return MeshPart(
+        mass, mesh.vertices, np.tile(velocity, (n, 1)), np.full(n, radius), fixed, springs, mesh.faces
+    )
 
 
 SMALL_MESHES = {"triangle": (3, 3), "tetrahedron": (4, 6), "cube": (8, 28)}
@@ -158,8 +166,9 @@ def read_emitter(f: Fields) -> EmitterSpec:
     lifetime = f.integer("lifetime", minimum=1, maximum=10**9)
     jitter = f.integer("lifetime_jitter", 0, minimum=0, maximum=10**9)
     if jitter >= lifetime:
-        raise f.error("lifetime_jitter", f"must be below lifetime ({lifetime}) so every life "
-                                         "lasts at least one frame")
+        raise f.error(
+            "lifetime_jitter", f"must be below lifetime ({lifetime}) so every life lasts at least one frame"
+        )
     spec = EmitterSpec(
         shape=shape,
         center=f.vec3("center"),
@@ -188,8 +197,11 @@ def read_emitter(f: Fields) -> EmitterSpec:
         raise f.error("rate_n", f"spawns {per_frame:.3g} particles per frame: no pool holds that")
     most = math.ceil(per_frame) * (lifetime + jitter)
     if spec.capacity < most:
-        raise f.error("capacity", f"the pool must hold the largest population, "
-                                  f"ceil(n + r) x (lifetime + jitter) = {most}, got {spec.capacity}")
+        raise f.error(
+            "capacity",
+            f"the pool must hold the largest population, "
+            f"ceil(n + r) x (lifetime + jitter) = {most}, got {spec.capacity}",
+        )
     f.done()
     return spec
 

@@ -69,8 +69,7 @@ def case_directories() -> list[tuple[str, Path]]:
         else:
             where = obj() if callable(obj) else obj
         if not isinstance(where, str | Path) or not Path(where).is_dir():
-            raise PluginError(f"entry point {CASES_GROUP} {name} = {value!r}: "
-                              f"{where!r} is not a directory")
+            raise PluginError(f"entry point {CASES_GROUP} {name} = {value!r}: {where!r} is not a directory")
         if Path(where).resolve() != CASE_DIR:
             dirs.append((name, Path(where)))
     return dirs
@@ -96,8 +95,13 @@ def names_with_entries(group: str, builtin: dict) -> list[str]:
 
 def ode_system(name: str) -> type[System] | None:
     """The ODE system class registered as ``name`` (the lecture's or installed), or ``None``."""
-    return find_entry(SYSTEMS_GROUP, name, BUILTIN_SYSTEMS,
-                 lambda c: isinstance(c, type) and issubclass(c, System), "a System subclass")
+    return find_entry(
+        SYSTEMS_GROUP,
+        name,
+        BUILTIN_SYSTEMS,
+        lambda c: isinstance(c, type) and issubclass(c, System),
+        "a System subclass",
+    )
 
 
 def system_names() -> list[str]:

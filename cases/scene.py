@@ -24,8 +24,13 @@ from truestep.reference_impl.model import (
 FIELD_KINDS = {"vortex", "wind"}
 FIELD_PARAMS: dict[str, dict[str, str]] = {
     "vortex": {"center": "point", "axis": "direction", "strength": "number", "core": "positive"},
-    "wind": {"direction": "direction", "speed": "number", "gust": "number", "freq": "nonnegative",
-             "k": "nonnegative"},
+    "wind": {
+        "direction": "direction",
+        "speed": "number",
+        "gust": "number",
+        "freq": "nonnegative",
+        "k": "nonnegative",
+    },
 }
 """Each field kind's parameters and what they must be (see
 :func:`truestep.reference_impl.forces.field_force`)."""
@@ -115,12 +120,10 @@ def _read_particles(f: Fields, budget: Budget) -> MeshPart:
     fixed_raw = f.raw("fixed", False)
     if isinstance(fixed_raw, bool):
         fixed = np.full(n, fixed_raw)
-    elif (isinstance(fixed_raw, list) and len(fixed_raw) == n
-          and all(isinstance(v, bool) for v in fixed_raw)):
+    elif isinstance(fixed_raw, list) and len(fixed_raw) == n and all(isinstance(v, bool) for v in fixed_raw):
         fixed = np.array(fixed_raw, dtype=bool)
     else:
-        raise f.error("fixed", f"expected true, false or a list of {n} of them, "
-                      f"got {short(fixed_raw)}")
+        raise f.error("fixed", f"expected true, false or a list of {n} of them, got {short(fixed_raw)}")
     f.done()
     return MeshPart(mass, x0, v0, radius, fixed, Springs.empty())
 
@@ -197,8 +200,15 @@ def _read_anchors(tables: list[Fields], x0: np.ndarray, n: int) -> Anchors:
             raise f.error("particle", f"index {i} out of range 0..{n - 1}")
         point = f.vec3("point")
         rest = f.number("rest", float(np.linalg.norm(x0[i] - point)), nonnegative=True)
-        rows.append((i, point, f.number("stiffness", nonnegative=True),
-                     f.number("damping", 0.0, nonnegative=True), rest))
+        rows.append(
+            (
+                i,
+                point,
+                f.number("stiffness", nonnegative=True),
+                f.number("damping", 0.0, nonnegative=True),
+                rest,
+            )
+        )
         f.done()
     return Anchors(
         np.array([r[0] for r in rows]),
@@ -268,8 +278,9 @@ def _concat_springs(sets: list[Springs]) -> Springs:
     sets = [s for s in sets if len(s)]
     if not sets:
         return Springs.empty()
-    return Springs(*(np.concatenate([getattr(s, a) for s in sets])
-                     for a in ("i", "j", "stiffness", "damping", "rest")))
+    return Springs(
+        *(np.concatenate([getattr(s, a) for s in sets]) for a in ("i", "j", "stiffness", "damping", "rest"))
+    )
 
 
 def _check_planar(f: Fields, m: ParticleModel) -> None:

@@ -79,9 +79,7 @@ def signed_distances(x: np.ndarray, radius: np.ndarray, plane: Plane) -> np.ndar
     return (x - plane.point) @ plane.normal - radius
 
 
-def add_contact_forces(
-    f: np.ndarray, v: np.ndarray, contact: np.ndarray, planes: list[Plane]
-) -> None:
+def add_contact_forces(f: np.ndarray, v: np.ndarray, contact: np.ndarray, planes: list[Plane]) -> None:
     """Add the contact force (and friction) of every plane to particles in contact.
 
     f : (n, 3) N, the applied forces, changed in place; v : (n, 3) m/s;
@@ -110,7 +108,8 @@ def add_contact_forces(
             held = ~sliding & (ft_mag <= limit)
             slipping = ~sliding & ~held
             static = np.where(held, 1.0, 0.0) + np.where(
-                slipping, limit / np.where(slipping, ft_mag, 1.0), 0.0)
+                slipping, limit / np.where(slipping, ft_mag, 1.0), 0.0
+            )
             fk -= kinetic[:, None] * vt + static[:, None] * ft
         f[idx] = fk
 
@@ -219,14 +218,19 @@ class PlaneCollisions:
         x[idx[on]] -= d[on, None] * n
         vk += (vn_new - vn)[:, None] * n
         if plane.friction > 0:
-            vk -= self._sticking(plane, on, vk, f, an, dt, rest)[:, None] * (
-                vk - vn_new[:, None] * n)
+            vk -= self._sticking(plane, on, vk, f, an, dt, rest)[:, None] * (vk - vn_new[:, None] * n)
         v[idx] = vk
         return on
 
     def _sticking(
-        self, plane: Plane, on: np.ndarray, v: np.ndarray, f: np.ndarray, an: np.ndarray,
-        dt: float, rest: np.ndarray | float = 0.0,
+        self,
+        plane: Plane,
+        on: np.ndarray,
+        v: np.ndarray,
+        f: np.ndarray,
+        an: np.ndarray,
+        dt: float,
+        rest: np.ndarray | float = 0.0,
     ) -> np.ndarray:
         """Which contact particles friction stops now (1.0) or lets slide (0.0), shape (k,).
 

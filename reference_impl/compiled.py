@@ -77,8 +77,11 @@ def method_kind(method: str | type):
     s = getattr(cls, "splitting", None)
     if s is None:
         return None
-    return (KickDrift(float(s.old), float(s.new), 1) if s.kick == 1.0
-            else KickDriftKick(float(s.kick), float(s.old), float(s.new)))
+    return (
+        KickDrift(float(s.old), float(s.new), 1)
+        if s.kick == 1.0
+        else KickDriftKick(float(s.kick), float(s.old), float(s.new))
+    )
 
 
 def compiled_reason(model: ParticleModel | None, method: str) -> str | None:
@@ -118,12 +121,20 @@ def forces_of(m: ParticleModel) -> tuple:
         kinds.append(Drag(float(m.drag)))
     s, a = m.springs, m.anchors
     if len(s):
-        kinds.append(Springs(_i64(s.i), _i64(s.j), _f64(s.stiffness), _f64(s.damping),
-                             _f64(s.rest)))
+        kinds.append(Springs(_i64(s.i), _i64(s.j), _f64(s.stiffness), _f64(s.damping), _f64(s.rest)))
     if len(a):
         order, start = _grouped(_i64(a.i), m.n)
-        kinds.append(Anchors(_i64(a.i), _f64(np.reshape(a.point, (-1, 3)).T),
-                             _f64(a.stiffness), _f64(a.damping), _f64(a.rest), start, order))
+        kinds.append(
+            Anchors(
+                _i64(a.i),
+                _f64(np.reshape(a.point, (-1, 3)).T),
+                _f64(a.stiffness),
+                _f64(a.damping),
+                _f64(a.rest),
+                start,
+                order,
+            )
+        )
     if m.gravitation is not None:
         kinds.append(Gravitation(float(m.gravitation.G), float(m.gravitation.softening)))
     return tuple(kinds)
@@ -155,11 +166,23 @@ def pack(m: ParticleModel) -> Scene:
     """``m`` as a compiled step reads it (:class:`~truestep.reference_impl.particles_kernels.Scene`)."""
     fixed = np.asarray(m.fixed, dtype=bool)
     mass = _f64(m.mass)
-    particles = Particles(mass, _f64(np.where(fixed, 0.0, 1.0 / mass)), _f64(m.radius),
-                          np.ascontiguousarray(~fixed), _f64(np.where(fixed, 0.0, mass)))
-    planes = tuple(Plane(tuple(float(c) for c in p.point), tuple(float(c) for c in p.normal),
-                         float(p.restitution), float(p.friction), float(p.thickness))
-                   for p in m.planes)
+    particles = Particles(
+        mass,
+        _f64(np.where(fixed, 0.0, 1.0 / mass)),
+        _f64(m.radius),
+        np.ascontiguousarray(~fixed),
+        _f64(np.where(fixed, 0.0, mass)),
+    )
+    planes = tuple(
+        Plane(
+            tuple(float(c) for c in p.point),
+            tuple(float(c) for c in p.normal),
+            float(p.restitution),
+            float(p.friction),
+            float(p.thickness),
+        )
+        for p in m.planes
+    )
     return Scene(particles, forces_of(m), impulses_of(m), planes or None)
 
 
@@ -212,11 +235,9 @@ def composition(held, layout, scene: Scene) -> tuple:
     (``held``, :func:`loop_kind`; fused, its tableaux' patterns of non-zero entries). Runs
     that agree on it share one loop."""
     planes = len(scene.planes) if scene.planes is not None else 0
-    kinds = (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes,
-             type(layout))
+    kinds = (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes, type(layout))
     if isinstance(layout, Fused):
-        return (*kinds, tuple((field, pattern(k) if field == "tableau" else ())
-                              for field, k in held))
+        return (*kinds, tuple((field, pattern(k) if field == "tableau" else ()) for field, k in held))
     return (*kinds, type(held))
 
 
@@ -254,8 +275,7 @@ def _shown_if_slow(label: str, say: Callable[[str], None]):
             say(f"compiled reference kernels for {label} in {time.perf_counter() - began:.1f} s")
 
 
-def prepared(model: ParticleModel, method: str, *,
-             progress: Callable[[str], None] | None = None) -> tuple:
+def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], None] | None = None) -> tuple:
     """The packed run of ``method`` on ``model``: (loop, kind, layout, scene), the loop
     compiled or loaded from the cache (shown through ``progress``, stderr by default,
     when slow). The loop is the compiled function itself (``Dispatcher.get_overload``):
@@ -274,10 +294,24 @@ def prepared(model: ParticleModel, method: str, *,
     if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
         _PREPARED[key] = loop
         return loop, kind, layout, scene
-    sig = tuple(typeof(a) for a in (
-        kind, 1, scene, np.zeros((3, 1)), np.zeros((3, 1)), 1.0, 1, np.zeros(1, bool),
-        tiles.scratch(1, stages(kind), len(model.planes)), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)),
-        np.zeros(1), unwatched()))
+    sig = tuple(
+        typeof(a)
+        for a in (
+            kind,
+            1,
+            scene,
+            np.zeros((3, 1)),
+            np.zeros((3, 1)),
+            1.0,
+            1,
+            np.zeros(1, bool),
+            tiles.scratch(1, stages(kind), len(model.planes)),
+            np.zeros((1, 1, 3)),
+            np.zeros((1, 1, 3)),
+            np.zeros(1),
+            unwatched(),
+        )
+    )
     if sig not in loop.overloads:
         with _shown_if_slow(describe(held, layout, scene), progress or _stderr):
             loop.compile(sig)
@@ -285,15 +319,33 @@ def prepared(model: ParticleModel, method: str, *,
     return _PREPARED[key], kind, layout, scene
 
 
-def run_compiled(model: ParticleModel, method: str, duration: float, h: float, *,
-                 max_records: int = 2000, track_energy: bool = False,
-                 progress: Callable[[str], None] | None = None) -> tuple[CompiledRun, float]:
+def run_compiled(
+    model: ParticleModel,
+    method: str,
+    duration: float,
+    h: float,
+    *,
+    max_records: int = 2000,
+    track_energy: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[CompiledRun, float]:
     """Run ``method`` on ``model`` for ``round(duration / h)`` steps of ``h`` s; return the
     run and the wall time of the stepping (s, the compiled loop only: packing the scene,
     compiling and allocating the records happen before it). With ``track_energy`` the
     run's ``extra`` holds ``energy_min`` and ``energy_max`` (J) over every step."""
     loop, kind, layout, scene = prepared(model, method, progress=progress)
-    result = run(loop, kind, layout.size, scene, model.x0, model.v0, h, round(duration / h),
-                 stages=stages(kind), planes=len(model.planes), max_records=max_records,
-                 track_energy=track_energy)
+    result = run(
+        loop,
+        kind,
+        layout.size,
+        scene,
+        model.x0,
+        model.v0,
+        h,
+        round(duration / h),
+        stages=stages(kind),
+        planes=len(model.planes),
+        max_records=max_records,
+        track_energy=track_energy,
+    )
     return result, result.wall_s

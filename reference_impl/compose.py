@@ -43,15 +43,25 @@ LOOP = {"cache": True, "error_model": "numpy", "_nrt": False}
 (its arrays all come from Python, which holds them while it runs; it allocates none), so
 that passing arrays between the functions it is made of costs nothing."""
 
-KERNEL_MODULES = ("forces_kernels", "collisions_kernels", "particles_kernels", "tiles",
-                  "solvers/explicit_rk_kernels", "solvers/splitting_kernels",
-                  "solvers/any_method",
-                  "integrate_kernels", "compose", "step_slots", "collisions", "integrate")
+KERNEL_MODULES = (
+    "forces_kernels",
+    "collisions_kernels",
+    "particles_kernels",
+    "tiles",
+    "solvers/explicit_rk_kernels",
+    "solvers/splitting_kernels",
+    "solvers/any_method",
+    "integrate_kernels",
+    "compose",
+    "step_slots",
+    "collisions",
+    "integrate",
+)
 """The modules whose source a compiled loop is made of (beside this one's folder)."""
 
-FINGERPRINT = hashlib.sha256(b"".join(
-    (Path(__file__).parent / f"{name}.py").read_bytes() for name in KERNEL_MODULES
-)).hexdigest()[:12]
+FINGERPRINT = hashlib.sha256(
+    b"".join((Path(__file__).parent / f"{name}.py").read_bytes() for name in KERNEL_MODULES)
+).hexdigest()[:12]
 """A hash of the source of every module in :data:`KERNEL_MODULES`: part of the name under
 which a compiled loop is cached."""
 
@@ -81,7 +91,8 @@ def glue(s: Slot, body: list[str], names: dict) -> Dispatcher:
     """A filling for slot ``s``: a function of its parameters whose ``body`` (lines of
     Python) may call ``names``; compiled inline."""
     source = f"def {s.name}({', '.join(s.params)}):\n" + "".join(
-        f"    {line}\n" for line in body or ["return None"])
+        f"    {line}\n" for line in body or ["return None"]
+    )
     namespace = dict(names)
     exec(compile(source, f"<{s.name} of a compiled step>", "exec"), namespace)
     fn = namespace[s.name]
@@ -123,14 +134,22 @@ def _reaches(fn, slots: dict, memo: dict) -> bool:
         return memo[py]
     memo[py] = False
     g = getattr(py, "__globals__", {})
-    memo[py] = any(isinstance(g.get(name), Slot) or (
-        _function(g.get(name)) and _reaches(g[name], slots, memo))
-        for name in getattr(getattr(py, "__code__", None), "co_names", ()))
+    memo[py] = any(
+        isinstance(g.get(name), Slot) or (_function(g.get(name)) and _reaches(g[name], slots, memo))
+        for name in getattr(getattr(py, "__code__", None), "co_names", ())
+    )
     return memo[py]
 
 
-def instantiate(fn, slots: dict, *, options: dict | None = None, name: str | None = None,
-                _memo: dict | None = None, _tag: str | None = None) -> Dispatcher:
+def instantiate(
+    fn,
+    slots: dict,
+    *,
+    options: dict | None = None,
+    name: str | None = None,
+    _memo: dict | None = None,
+    _tag: str | None = None,
+) -> Dispatcher:
     """``fn`` compiled with its slots filled from ``slots`` (slot name -> filling), and
     every function it calls that reaches a slot instantiated alike; compiled with
     ``options`` (default :data:`INLINE`) under the qualified ``name`` (default its own,

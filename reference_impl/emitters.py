@@ -39,9 +39,7 @@ from truestep.reference_impl.model import EmitterSpec, ParticleModel
 if TYPE_CHECKING:
     from truestep.reference_impl.particles import ParticleSystem
 
-CUBE_NORMALS = np.array(
-    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float
-)
+CUBE_NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
 
 
 def tangents(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -65,8 +63,9 @@ def emitter_faces(spec: EmitterSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray
         normals = (spec.normal / np.linalg.norm(spec.normal))[None, :]
     else:
         raise ValueError(f"emitter: unknown shape {spec.shape!r} (known: cube, plane)")
-    centers = spec.center + 0.5 * spec.size * normals if spec.shape == "cube" else (
-        spec.center[None, :].copy())
+    centers = (
+        spec.center + 0.5 * spec.size * normals if spec.shape == "cube" else (spec.center[None, :].copy())
+    )
     us, ws = zip(*(tangents(n) for n in normals), strict=True)
     return centers, normals, np.array(us), np.array(ws)
 
@@ -228,9 +227,11 @@ class Emitter:
         cos_t = 1.0 - rng.random(k) * (1.0 - math.cos(spec.spread))
         sin_t = np.sqrt(1.0 - cos_t**2)
         phi = 2.0 * math.pi * rng.random(k)
-        direction = (cos_t[:, None] * normals[face]
-                     + (sin_t * np.cos(phi))[:, None] * us[face]
-                     + (sin_t * np.sin(phi))[:, None] * ws[face])
+        direction = (
+            cos_t[:, None] * normals[face]
+            + (sin_t * np.cos(phi))[:, None] * us[face]
+            + (sin_t * np.sin(phi))[:, None] * ws[face]
+        )
         speed = spec.speed * (1.0 + spec.speed_jitter * (2.0 * rng.random(k) - 1.0))
         size = spec.particle_size * (1.0 + spec.size_jitter * (2.0 * rng.random(k) - 1.0))
         life = spec.lifetime + rng.integers(-spec.lifetime_jitter, spec.lifetime_jitter + 1, k)

@@ -75,8 +75,7 @@ def add_anchors(f: np.ndarray, x: np.ndarray, v: np.ndarray, a: Anchors) -> None
     """Damped springs from particles ``a.i`` to the fixed points ``a.point``
     (:func:`forces_kernels.add_anchor_forces`)."""
     if len(a):
-        add_anchor_forces(f.T, x.T, v.T, a.i, np.asarray(a.point).T, a.stiffness, a.damping,
-                          a.rest)
+        add_anchor_forces(f.T, x.T, v.T, a.i, np.asarray(a.point).T, a.stiffness, a.damping, a.rest)
 
 
 def compile_springs() -> None:
@@ -164,8 +163,9 @@ def gravitation_jacobian(x: np.ndarray, mass: np.ndarray, g: Gravitation) -> np.
     s2 = np.einsum("ijk,ijk->ij", d, d) + g.softening**2
     np.fill_diagonal(s2, np.inf)
     w = g.G * mass[:, None] * mass[None, :] / (s2 * np.sqrt(s2))
-    blocks = w[:, :, None, None] * (np.eye(3) - 3.0 * d[:, :, :, None] * d[:, :, None, :]
-                                    / s2[:, :, None, None])
+    blocks = w[:, :, None, None] * (
+        np.eye(3) - 3.0 * d[:, :, :, None] * d[:, :, None, :] / s2[:, :, None, None]
+    )
     blocks[np.arange(n), np.arange(n)] = -blocks.sum(axis=1)
     return blocks
 
@@ -179,9 +179,7 @@ def gravitation_energy(x: np.ndarray, mass: np.ndarray, g: Gravitation) -> float
     return -np.sum(g.G * mass[iu[0]] * mass[iu[1]] / r, axis=-1)
 
 
-def field_force(
-    field: ForceField, x: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float
-) -> np.ndarray:
+def field_force(field: ForceField, x: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float) -> np.ndarray:
     """The force (N, shape (n, 3)) of a position/time-dependent field on every particle.
 
     ``vortex``: ``f = strength * m * (axis x r_perp) * min(1, (core / |r_perp|)^2)`` where

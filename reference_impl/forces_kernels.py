@@ -88,8 +88,7 @@ def gravity_energy(kind, X, particles):
 def gravity_add(kind, F, X, V, t, particles):
     """:func:`gravity_at` on every particle of the tile."""
     for p in range(F.shape[1]):
-        F[0, p], F[1, p], F[2, p] = gravity_at(kind, (F[0, p], F[1, p], F[2, p]), None, None,
-                                               t, particles, p)
+        F[0, p], F[1, p], F[2, p] = gravity_at(kind, (F[0, p], F[1, p], F[2, p]), None, None, t, particles, p)
 
 
 class Gravity(NamedTuple):
@@ -114,8 +113,9 @@ def drag_at(kind, f, x, v, t, particles, p):
 def drag_add(kind, F, X, V, t, particles):
     """:func:`drag_at` on every particle of the tile."""
     for p in range(F.shape[1]):
-        F[0, p], F[1, p], F[2, p] = drag_at(kind, (F[0, p], F[1, p], F[2, p]), None,
-                                            (V[0, p], V[1, p], V[2, p]), t, particles, p)
+        F[0, p], F[1, p], F[2, p] = drag_at(
+            kind, (F[0, p], F[1, p], F[2, p]), None, (V[0, p], V[1, p], V[2, p]), t, particles, p
+        )
 
 
 class Drag(NamedTuple):
@@ -197,8 +197,9 @@ def springs_energy(kind, X, particles):
     e = 0.0
     for s in range(kind.i.shape[0]):
         a, b = kind.i[s], kind.j[s]
-        e += stretch_energy(X[0, a] - X[0, b], X[1, a] - X[1, b], X[2, a] - X[2, b],
-                            kind.stiffness[s], kind.rest[s])
+        e += stretch_energy(
+            X[0, a] - X[0, b], X[1, a] - X[1, b], X[2, a] - X[2, b], kind.stiffness[s], kind.rest[s]
+        )
     return e
 
 
@@ -228,8 +229,13 @@ def anchors_energy(kind, X, particles):
     e = 0.0
     for s in range(kind.i.shape[0]):
         a = kind.i[s]
-        e += stretch_energy(X[0, a] - kind.point[0, s], X[1, a] - kind.point[1, s],
-                            X[2, a] - kind.point[2, s], kind.stiffness[s], kind.rest[s])
+        e += stretch_energy(
+            X[0, a] - kind.point[0, s],
+            X[1, a] - kind.point[1, s],
+            X[2, a] - kind.point[2, s],
+            kind.stiffness[s],
+            kind.rest[s],
+        )
     return e
 
 
@@ -255,8 +261,9 @@ def anchors_at(kind, f, x, v, t, particles, p):
 @njit(**KERNEL)
 def anchors_cut(kind, lo, hi):
     """The anchors of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
-    return Anchors(kind.i, kind.point, kind.stiffness, kind.damping, kind.rest,
-                   kind.start[lo:hi + 1], kind.order)
+    return Anchors(
+        kind.i, kind.point, kind.stiffness, kind.damping, kind.rest, kind.start[lo : hi + 1], kind.order
+    )
 
 
 class Anchors(NamedTuple):
@@ -354,8 +361,7 @@ def impulses_add(kind, F, X, V, t, particles):
     """:func:`impulse_at` on every particle of the tile that has impulses."""
     for q in range(kind.kicked.shape[0]):
         p = kind.kicked[q] - kind.first
-        F[0, p], F[1, p], F[2, p] = impulse_at(kind, (F[0, p], F[1, p], F[2, p]), None, None,
-                                               t, particles, p)
+        F[0, p], F[1, p], F[2, p] = impulse_at(kind, (F[0, p], F[1, p], F[2, p]), None, None, t, particles, p)
 
 
 @njit(**KERNEL)
@@ -363,7 +369,7 @@ def impulses_cut(kind, lo, hi):
     """The impulses of particles ``lo`` to ``hi`` of a tile, numbered from ``lo``."""
     k = kind.kicked
     a, b = np.searchsorted(k, lo), np.searchsorted(k, hi)
-    return Impulses(kind.start[lo:hi + 1], kind.force, kind.on, kind.off, k[a:b], lo)
+    return Impulses(kind.start[lo : hi + 1], kind.force, kind.on, kind.off, k[a:b], lo)
 
 
 class Impulses(NamedTuple):

@@ -65,8 +65,13 @@ def record_indices(n_steps: int, max_records: int) -> np.ndarray:
 
 
 def integrate(
-    solver: Solver, t_end: float, dt: float, *, max_records: int = 2000,
-    record_at: np.ndarray | None = None, on_step: Callable[[], None] | None = None,
+    solver: Solver,
+    t_end: float,
+    dt: float,
+    *,
+    max_records: int = 2000,
+    record_at: np.ndarray | None = None,
+    on_step: Callable[[], None] | None = None,
     sample_at: np.ndarray | None = None,
 ) -> Run:
     """Step ``solver.system`` from its current time to ``t_end``.
@@ -91,102 +96,137 @@ def integrate(
     """
     system = solver.system
     t0 = system.get_time()
-    ts, xs, obs = [t0], [system.get_state()], [system.observe()]
-    status, t_fail, steps, message = "ok", None, 0, ""
+    first = system.observe()
+    # An adaptive run keeps the keys of the first observation: if it has none, nothing
+    # observed later would be kept, so the system is not asked again.
+    rec = _Records([t0], [system.get_state()], [first], observed=bool(first) or not solver.adaptive)
     start = time.perf_counter()
     if solver.adaptive:
-        t = t0
-        slack = 1e-12 * max(1.0, abs(t_end))  # a remainder below this is round-off in t
-        # ``extra`` keeps the keys of the first observation: if it has none, nothing
-        # observed later would be kept, so the system is not asked again.
-        observed = bool(obs[0])
-        locate = callable(getattr(solver, "dense", None))
-        grid = np.asarray(sample_at, float) if sample_at is not None and locate else None
-        next_sample = 0
-        if locate:
-            system.located = True
-            system.rest_height = float(getattr(solver, "atol", 0.0))
-        while t_end - t > slack:
-            watch = system.event_watch() if locate else None
-            g0 = watch(system.get_state()) if watch is not None else None
-            try:
-                h = solver.step(t_end - t)
-            except FloatingPointError as err:
-                status, t_fail, message = "unstable", t, str(err)
-                break
-            except SolverFailed as err:
-                status, t_fail, message = "solver-failed", t, str(err)
-                break
-            if on_step is not None:
-                on_step()
-            full = h
-            if watch is not None:
-                h = _stop_at_event(system, solver, watch, g0, t, h)
-            if grid is not None:  # the run between steps, by the solver's continuous extension
-                dense = solver.dense()
-                while next_sample < len(grid) and grid[next_sample] < t + h - slack:
-                    if grid[next_sample] > t + slack:
-                        ts.append(float(grid[next_sample]))
-                        xs.append(dense(grid[next_sample]))
-                        if observed:
-                            obs.append(system.observe())
-                    next_sample += 1
-            system.between_steps(h)
-            steps += 1
-            t = system.get_time()
-            x = system.get_state()
-            if h == full or grid is None or t_end - t <= slack:  # not a step cut at an event
-                ts.append(t)
-                xs.append(x)
-                if observed:
-                    obs.append(system.observe())
-            if not _well_inside(x) and not _finite(x):
-                if ts[-1] != t:
-                    ts.append(t)
-                    xs.append(x)
-                    if observed:
-                        obs.append(system.observe())
-                status, t_fail = "unstable", t
-                break
+        status, t_fail, steps, message = _run_adaptive(solver, t_end, rec, on_step, sample_at)
     else:
         n_steps = round((t_end - t0) / dt)
         marks = np.zeros(n_steps + 1, dtype=bool)
-        marks[record_indices(n_steps, max_records) if record_at is None
-              else np.asarray(record_at, int)] = True
-        checked = 1  # records before this index are known finite
-        for i in range(1, n_steps + 1):
-            try:
-                solver.step(dt)
-            except FloatingPointError as err:
-                status, t_fail, message = "unstable", system.get_time(), str(err)
-                break
-            except SolverFailed as err:
-                status, t_fail, message = "solver-failed", system.get_time(), str(err)
-                break
-            system.between_steps(dt)
-            steps = i
-            if marks[i]:
-                ts.append(system.get_time())
-                xs.append(system.get_state())
-                obs.append(system.observe())
-            if i % CHECK_EVERY == 0 or i == n_steps:
-                x = xs[-1] if marks[i] else system.get_state()
-                if _finite(x):
-                    checked = len(xs)
-                    continue
-                bad = next((k for k in range(checked, len(xs)) if not _finite(xs[k])), None)
-                if bad is None:  # first seen between records: record it
-                    ts.append(system.get_time())
-                    xs.append(x)
-                    obs.append(system.observe())
-                else:
-                    del ts[bad + 1 :], xs[bad + 1 :], obs[bad + 1 :]
-                status, t_fail = "unstable", ts[-1]
-                break
+        marks[record_indices(n_steps, max_records) if record_at is None else np.asarray(record_at, int)] = (
+            True
+        )
+        status, t_fail, steps, message = _run_fixed(solver, dt, marks, rec)
     wall = time.perf_counter() - start
-    extra = {k: np.array([o[k] for o in obs]) for k in obs[0]}
-    return Run(np.array(ts), np.array(xs), solver.nfev, steps, wall, extra, status, t_fail,
-               message)
+    extra = {k: np.array([o[k] for o in rec.obs]) for k in rec.obs[0]}
+    return Run(np.array(rec.ts), np.array(rec.xs), solver.nfev, steps, wall, extra, status, t_fail, message)
+
+
+@dataclass
+class _Records:
+    """A run's records so far: times (s), states and observations (each a list, one entry a
+    record); ``observed``: whether to ask the system for an observation at each."""
+
+    ts: list[float]
+    xs: list[np.ndarray]
+    obs: list[dict]
+    observed: bool
+
+    def add(self, system, t: float, x: np.ndarray) -> None:
+        self.ts.append(t)
+        self.xs.append(x)
+        if self.observed:
+            self.obs.append(system.observe())
+
+    def cut_after(self, k: int) -> None:
+        """Keep the records up to index ``k``."""
+        del self.ts[k + 1 :], self.xs[k + 1 :], self.obs[k + 1 :]
+
+
+Ending = tuple[str, float | None, int, str]
+"""How a run ended: status, time of the failure (s) or None, steps taken, message."""
+
+
+def _run_adaptive(
+    solver: Solver,
+    t_end: float,
+    rec: _Records,
+    on_step: Callable[[], None] | None,
+    sample_at: np.ndarray | None,
+) -> Ending:
+    """The adaptive solver's steps to ``t_end`` (see :func:`integrate`)."""
+    system = solver.system
+    t = system.get_time()
+    slack = 1e-12 * max(1.0, abs(t_end))  # a remainder below this is round-off in t
+    locate = callable(getattr(solver, "dense", None))
+    grid = np.asarray(sample_at, float) if sample_at is not None and locate else None
+    next_sample, steps = 0, 0
+    if locate:
+        system.located = True
+        system.rest_height = float(getattr(solver, "atol", 0.0))
+    while t_end - t > slack:
+        watch = system.event_watch() if locate else None
+        g0 = watch(system.get_state()) if watch is not None else None
+        try:
+            h = solver.step(t_end - t)
+        except FloatingPointError as err:
+            return "unstable", t, steps, str(err)
+        except SolverFailed as err:
+            return "solver-failed", t, steps, str(err)
+        if on_step is not None:
+            on_step()
+        full = h
+        if watch is not None:
+            h = _stop_at_event(system, solver, watch, g0, t, h)
+        if grid is not None:  # the run between steps, by the solver's continuous extension
+            next_sample = _sample_between(solver, rec, grid, next_sample, t, t + h, slack)
+        system.between_steps(h)
+        steps += 1
+        t = system.get_time()
+        x = system.get_state()
+        if h == full or grid is None or t_end - t <= slack:  # not a step cut at an event
+            rec.add(system, t, x)
+        if not _well_inside(x) and not _finite(x):
+            if rec.ts[-1] != t:
+                rec.add(system, t, x)
+            return "unstable", t, steps, ""
+    return "ok", None, steps, ""
+
+
+def _sample_between(
+    solver: Solver, rec: _Records, grid: np.ndarray, k: int, t0: float, t1: float, slack: float
+) -> int:
+    """Record the samples of ``grid`` from index ``k`` inside the step ``(t0, t1)`` (s), by the
+    solver's continuous extension; returns the index of the first sample after the step."""
+    dense = solver.dense()
+    while k < len(grid) and grid[k] < t1 - slack:
+        if grid[k] > t0 + slack:
+            rec.add(solver.system, float(grid[k]), dense(grid[k]))
+        k += 1
+    return k
+
+
+def _run_fixed(solver: Solver, dt: float, marks: np.ndarray, rec: _Records) -> Ending:
+    """``len(marks) - 1`` fixed steps of ``dt`` (s), recording where ``marks`` says, checking
+    for a blow-up every :data:`CHECK_EVERY` steps and at the end."""
+    system = solver.system
+    n_steps = len(marks) - 1
+    checked = 1  # records before this index are known finite
+    for i in range(1, n_steps + 1):
+        try:
+            solver.step(dt)
+        except FloatingPointError as err:
+            return "unstable", system.get_time(), i - 1, str(err)
+        except SolverFailed as err:
+            return "solver-failed", system.get_time(), i - 1, str(err)
+        system.between_steps(dt)
+        if marks[i]:
+            rec.add(system, system.get_time(), system.get_state())
+        if i % CHECK_EVERY == 0 or i == n_steps:
+            x = rec.xs[-1] if marks[i] else system.get_state()
+            if _finite(x):
+                checked = len(rec.xs)
+                continue
+            bad = next((k for k in range(checked, len(rec.xs)) if not _finite(rec.xs[k])), None)
+            if bad is None:  # first seen between records: record it
+                rec.add(system, system.get_time(), x)
+            else:
+                rec.cut_after(bad)
+            return "unstable", rec.ts[-1], i, ""
+    return "ok", None, n_steps, ""
 
 
 EVENT_PRECISION = 1e-12

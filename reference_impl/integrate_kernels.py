@@ -163,8 +163,9 @@ def drive(method, size, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, 
     kept, steps, nfev, unstable = 0, 0, 0, False
     for lo in range(0, max(n, 1), size):
         hi = min(lo + size, n)
-        kept, steps, nfev, unstable = run_tile(method, cut(scene, lo, hi), X0, V0, lo, h,
-                                               n_steps, record, buffers, xs, vs, ts, monitor)
+        kept, steps, nfev, unstable = run_tile(
+            method, cut(scene, lo, hi), X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor
+        )
         if unstable and size < n:
             return kept, steps, nfev, unstable, True
     return kept, steps, nfev, unstable, False
@@ -190,9 +191,21 @@ class DrivenRun:
     rerun_whole: bool = False
 
 
-def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float,
-        n_steps: int, *, stages: int, planes: int, max_records: int = 2000,
-        track_energy: bool = False) -> DrivenRun:
+def run(
+    loop,
+    method,
+    size: int,
+    scene,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    h: float,
+    n_steps: int,
+    *,
+    stages: int,
+    planes: int,
+    max_records: int = 2000,
+    track_energy: bool = False,
+) -> DrivenRun:
     """Step ``scene`` from ``x0``, ``v0`` ((n, 3), m and m/s) through ``n_steps`` steps of
     ``h`` s with ``loop`` (:func:`drive` compiled for this scene and ``method``) in tiles
     of ``size`` particles; ``stages`` and ``planes`` size the scratch. Records and results
@@ -219,8 +232,20 @@ def run(loop, method, size: int, scene, x0: np.ndarray, v0: np.ndarray, h: float
         args = (scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor)
         kept, steps, nfev, unstable, split = loop(method, max(n, 1), *args)
     wall = time.perf_counter() - start
-    extra = ({"energy_min": float(monitor.bounds[0]), "energy_max": float(monitor.bounds[1])}
-             if track_energy else {})
-    return DrivenRun(ts[:kept].copy(), xs[:kept].copy(), vs[:kept].copy(), int(nfev), int(steps),
-                     "unstable" if unstable else "ok",
-                     float(ts[kept - 1]) if unstable else None, wall, extra, rerun)
+    extra = (
+        {"energy_min": float(monitor.bounds[0]), "energy_max": float(monitor.bounds[1])}
+        if track_energy
+        else {}
+    )
+    return DrivenRun(
+        ts[:kept].copy(),
+        xs[:kept].copy(),
+        vs[:kept].copy(),
+        int(nfev),
+        int(steps),
+        "unstable" if unstable else "ok",
+        float(ts[kept - 1]) if unstable else None,
+        wall,
+        extra,
+        rerun,
+    )

@@ -59,7 +59,8 @@ def mass_spring(
     i, j = mesh.edges[:, 0].copy(), mesh.edges[:, 1].copy()
     rest = np.linalg.norm(mesh.vertices[i] - mesh.vertices[j], axis=1)
     springs = Springs(
-        i, j,
+        i,
+        j,
         np.broadcast_to(np.asarray(stiffness, float), (m,)).copy(),
         np.broadcast_to(np.asarray(damping, float), (m,)).copy(),
         rest,

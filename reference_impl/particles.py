@@ -113,19 +113,23 @@ class ParticleSystem(SecondOrderSystem):
         n = self.n
         pos = x[: 3 * n].reshape(n, 3)
         vel = x[3 * n :].reshape(n, 3)
-        rows, cols, kx, kv = [np.arange(n)], [np.arange(n)], [np.zeros((n, 3, 3))], [
-            np.broadcast_to(-m.drag * np.eye(3), (n, 3, 3))]
+        rows, cols, kx, kv = (
+            [np.arange(n)],
+            [np.arange(n)],
+            [np.zeros((n, 3, 3))],
+            [np.broadcast_to(-m.drag * np.eye(3), (n, 3, 3))],
+        )
         s, a = m.springs, m.anchors
         if len(s):
-            jx, jv = forces.spring_jacobians(pos[s.i] - pos[s.j], vel[s.i] - vel[s.j],
-                                             s.stiffness, s.damping, s.rest)
+            jx, jv = forces.spring_jacobians(
+                pos[s.i] - pos[s.j], vel[s.i] - vel[s.j], s.stiffness, s.damping, s.rest
+            )
             rows += [s.i, s.i, s.j, s.j]
             cols += [s.i, s.j, s.i, s.j]
             kx += [jx, -jx, -jx, jx]
             kv += [jv, -jv, -jv, jv]
         if len(a):
-            jx, jv = forces.spring_jacobians(pos[a.i] - a.point, vel[a.i],
-                                             a.stiffness, a.damping, a.rest)
+            jx, jv = forces.spring_jacobians(pos[a.i] - a.point, vel[a.i], a.stiffness, a.damping, a.rest)
             rows += [a.i]
             cols += [a.i]
             kx += [jx]
@@ -186,8 +190,9 @@ class ParticleSystem(SecondOrderSystem):
         Force fields and impulses have no potential; scenes with them report the
         mechanical energy of the rest, which the metrics then treat as not conserved.
         """
-        return total_energy(self.model, x[: 3 * self.n].reshape(-1, 3),
-                            x[3 * self.n :].reshape(-1, 3), self.alive)
+        return total_energy(
+            self.model, x[: 3 * self.n].reshape(-1, 3), x[3 * self.n :].reshape(-1, 3), self.alive
+        )
 
 
 class PlaneEvents:
@@ -212,17 +217,18 @@ class PlaneEvents:
             moving = on & free & (speed > 0) & (plane.friction > 0)
             self.watched.append(watched)
             self.sliding.append(moving)
-            self.direction.append(np.where(moving[:, None],
-                                           vt / np.where(speed > 0, speed, 1.0)[:, None], 0.0))
+            self.direction.append(
+                np.where(moving[:, None], vt / np.where(speed > 0, speed, 1.0)[:, None], 0.0)
+            )
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         n = self.n
         pos, vel = x[: 3 * n].reshape(n, 3), x[3 * n :].reshape(n, 3)
         out = []
-        for plane, watched, moving, u in zip(self.planes, self.watched, self.sliding,
-                                             self.direction, strict=True):
-            out.append(np.where(watched, collisions.signed_distances(pos, self.radius, plane),
-                                np.inf))
+        for plane, watched, moving, u in zip(
+            self.planes, self.watched, self.sliding, self.direction, strict=True
+        ):
+            out.append(np.where(watched, collisions.signed_distances(pos, self.radius, plane), np.inf))
             out.append(np.where(moving, np.sum(vel * u, axis=1), np.inf))
         return np.concatenate(out)
 

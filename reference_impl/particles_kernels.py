@@ -88,8 +88,9 @@ def tile_particles(particles, lo, hi):
     """The constants of particles ``lo`` to ``hi`` (a tile of a scene whose particles do
     not act on one another)."""
     p = particles
-    return Particles(p.mass[lo:hi], p.inv_mass[lo:hi], p.radius[lo:hi], p.movable[lo:hi],
-                     p.moving_mass[lo:hi])
+    return Particles(
+        p.mass[lo:hi], p.inv_mass[lo:hi], p.radius[lo:hi], p.movable[lo:hi], p.moving_mass[lo:hi]
+    )
 
 
 @njit(**KERNEL)
@@ -116,8 +117,7 @@ def add_contact_forces(scene, F, V, contact, any_contact):
         plane = planes[k]
         for p in range(F.shape[1]):
             if contact[k, p]:
-                f = contact_force((F[0, p], F[1, p], F[2, p]), (V[0, p], V[1, p], V[2, p]),
-                                  plane)
+                f = contact_force((F[0, p], F[1, p], F[2, p]), (V[0, p], V[1, p], V[2, p]), plane)
                 F[0, p], F[1, p], F[2, p] = f
 
 
@@ -162,8 +162,7 @@ def kinetic_energy(V, particles):
     """``sum m |v|^2 / 2`` of the movable particles, J."""
     e = 0.0
     for p in range(V.shape[1]):
-        e += particles.moving_mass[p] * (V[0, p] * V[0, p] + V[1, p] * V[1, p]
-                                         + V[2, p] * V[2, p])
+        e += particles.moving_mass[p] * (V[0, p] * V[0, p] + V[1, p] * V[1, p] + V[2, p] * V[2, p])
     return 0.5 * e
 
 

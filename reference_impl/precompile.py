@@ -39,9 +39,15 @@ def _prepare_each(pairs: list[tuple], progress: Callable[[str], None] | None) ->
         compiled.prepared(model, method, progress=progress)
 
 
-def compile_all(models: Iterable[ParticleModel] = (), methods: Iterable[str] | None = None,
-                *, pairs: Iterable[tuple] = (), workers: int = 1, share: tuple[int, int] = (0, 1),
-                progress: Callable[[str], None] | None = None) -> None:
+def compile_all(
+    models: Iterable[ParticleModel] = (),
+    methods: Iterable[str] | None = None,
+    *,
+    pairs: Iterable[tuple] = (),
+    workers: int = 1,
+    share: tuple[int, int] = (0, 1),
+    progress: Callable[[str], None] | None = None,
+) -> None:
     """Compile (or load from numba's cache) the loops that ``methods`` (default: every
     fixed-step method) need on ``models``, and those of ``pairs`` (model, method), so that
     forked runs find them ready.
@@ -55,12 +61,13 @@ def compile_all(models: Iterable[ParticleModel] = (), methods: Iterable[str] | N
 
     names = list(methods) if methods is not None else list(METHODS)
     wanted = [(model, method) for model in models for method in names] + list(pairs)
-    needed = loops_needed(wanted)[share[0]::share[1]]
+    needed = loops_needed(wanted)[share[0] :: share[1]]
     workers = max(1, min(workers, len(needed)))
     if workers > 1 and not numba.config.DISABLE_JIT:
         context = multiprocessing.get_context("fork")
-        children = [context.Process(target=_prepare_each, args=(needed[k::workers], None))
-                    for k in range(1, workers)]
+        children = [
+            context.Process(target=_prepare_each, args=(needed[k::workers], None)) for k in range(1, workers)
+        ]
         for child in children:
             child.start()
         _prepare_each(needed[0::workers], progress)

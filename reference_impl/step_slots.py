@@ -29,8 +29,7 @@ def _kernel_calls(kinds: tuple, role: str, call: str) -> tuple[list[str], dict]:
     """Lines calling each kind's kernel ``role`` as ``call`` (formatted with the kernel's
     name and the kind's index), and the names they use."""
     names = {name_of(getattr(type(k), role)): getattr(type(k), role) for k in kinds}
-    lines = [call.format(fn=name_of(getattr(type(k), role)), i=i)
-             for i, k in enumerate(kinds)]
+    lines = [call.format(fn=name_of(getattr(type(k), role)), i=i) for i, k in enumerate(kinds)]
     return lines, names
 
 
@@ -38,33 +37,53 @@ def force_slots(scene: Scene) -> dict:
     """The fillings of the derivative's slots (:mod:`particles_kernels`) for ``scene``."""
     P, S = particles_kernels, scene
     kinds, pointwise = S.forces, all(type(k).pointwise for k in S.forces)
-    adds, add_names = _kernel_calls(kinds, "add", "{fn}(scene.forces[{i}], F, X, V, t, "
-                                                  "scene.particles)")
-    ats, at_names = _kernel_calls(kinds if pointwise else (), "at",
-                                  "f = {fn}(scene.forces[{i}], f, x, v, t, scene.particles, p)")
-    energies, e_names = _kernel_calls(kinds, "energy", "e += {fn}(scene.forces[{i}], X, "
-                                                       "scene.particles)")
+    adds, add_names = _kernel_calls(kinds, "add", "{fn}(scene.forces[{i}], F, X, V, t, scene.particles)")
+    ats, at_names = _kernel_calls(
+        kinds if pointwise else (), "at", "f = {fn}(scene.forces[{i}], f, x, v, t, scene.particles, p)"
+    )
+    energies, e_names = _kernel_calls(kinds, "energy", "e += {fn}(scene.forces[{i}], X, scene.particles)")
     kicked = S.impulses is not None
     return {
         "add_forces": glue(P.add_forces, adds, add_names),
         "point_force": glue(P.point_force, ["f = (0.0, 0.0, 0.0)", *ats, "return f"], at_names),
-        "potential_energy": glue(P.potential_energy, ["e = 0.0", *energies, "return e"],
-                                 e_names),
-        "add_impulses": (glue(P.add_impulses, ["impulses_add(scene.impulses, F, X, V, t, "
-                                               "scene.particles)"], {"impulses_add": impulses_add})
-                         if kicked else nothing(P.add_impulses)),
-        "point_impulses": (glue(P.point_impulses, ["return impulse_at(scene.impulses, f, None, "
-                                                   "None, t, scene.particles, p)"],
-                                {"impulse_at": impulse_at})
-                           if kicked else nothing(P.point_impulses, "f")),
-        "kicked": (glue(tiles.kicked, ["return scene.impulses.start[p + 1] > "
-                                       "scene.impulses.start[p]"], {})
-                   if kicked else nothing(tiles.kicked, "False")),
-        "list_kicked": (glue(tiles.list_kicked, ["k = scene.impulses.kicked",
-                                                 "for q in range(k.shape[0]):",
-                                                 "    special[q] = k[q] - scene.impulses.first",
-                                                 "return k.shape[0]"], {})
-                        if kicked else nothing(tiles.list_kicked, "0")),
+        "potential_energy": glue(P.potential_energy, ["e = 0.0", *energies, "return e"], e_names),
+        "add_impulses": (
+            glue(
+                P.add_impulses,
+                ["impulses_add(scene.impulses, F, X, V, t, scene.particles)"],
+                {"impulses_add": impulses_add},
+            )
+            if kicked
+            else nothing(P.add_impulses)
+        ),
+        "point_impulses": (
+            glue(
+                P.point_impulses,
+                ["return impulse_at(scene.impulses, f, None, None, t, scene.particles, p)"],
+                {"impulse_at": impulse_at},
+            )
+            if kicked
+            else nothing(P.point_impulses, "f")
+        ),
+        "kicked": (
+            glue(tiles.kicked, ["return scene.impulses.start[p + 1] > scene.impulses.start[p]"], {})
+            if kicked
+            else nothing(tiles.kicked, "False")
+        ),
+        "list_kicked": (
+            glue(
+                tiles.list_kicked,
+                [
+                    "k = scene.impulses.kicked",
+                    "for q in range(k.shape[0]):",
+                    "    special[q] = k[q] - scene.impulses.first",
+                    "return k.shape[0]",
+                ],
+                {},
+            )
+            if kicked
+            else nothing(tiles.list_kicked, "0")
+        ),
         "cut": cut_glue(S),
     }
 
@@ -87,26 +106,31 @@ def cut_glue(scene: Scene):
         names["impulses_cut"] = type(scene.impulses).cut
         impulses = "impulses_cut(scene.impulses, lo, hi)"
     kinds = "".join(f"{part}, " for part in parts)
-    return glue(integrate_kernels.cut, [
-        f"return Scene(tile_particles(scene.particles, lo, hi), ({kinds}), {impulses}, "
-        "scene.planes)"], names)
+    return glue(
+        integrate_kernels.cut,
+        [f"return Scene(tile_particles(scene.particles, lo, hi), ({kinds}), {impulses}, scene.planes)"],
+        names,
+    )
 
 
 def plane_slots(layout, scene: Scene) -> dict:
     """The fillings of the collision slots (:mod:`tiles`) for ``scene`` in ``layout``."""
     T = tiles
     if scene.planes is None:
-        return {"add_contact": nothing(particles_kernels.add_contact),
-                "point_contact": nothing(T.point_contact, "f"),
-                "near_planes": nothing(T.near_planes, "False"),
-                "collisions": nothing(T.collisions, "False")}
-    near = " | ".join(f"near_plane(scene.planes[{k}], x, radius)"
-                      for k in range(len(scene.planes)))
+        return {
+            "add_contact": nothing(particles_kernels.add_contact),
+            "point_contact": nothing(T.point_contact, "f"),
+            "near_planes": nothing(T.near_planes, "False"),
+            "collisions": nothing(T.collisions, "False"),
+        }
+    near = " | ".join(f"near_plane(scene.planes[{k}], x, radius)" for k in range(len(scene.planes)))
     return {
         "add_contact": particles_kernels.add_contact_forces,
-        "point_contact": glue(T.point_contact, ["return resting_force(scene, f, v, "
-                                                "tile.contact, p)"],
-                              {"resting_force": particles_kernels.resting_force}),
+        "point_contact": glue(
+            T.point_contact,
+            ["return resting_force(scene, f, v, tile.contact, p)"],
+            {"resting_force": particles_kernels.resting_force},
+        ),
         "near_planes": glue(T.near_planes, [f"return {near}"], {"near_plane": T.near_plane}),
         "collisions": type(layout).collide,
     }
@@ -139,17 +163,24 @@ def fused_slots(slots: dict, steps: tuple) -> dict:
         test = f"{shape} and method.pattern == {i}" if field == "tableau" else shape
         point = instantiate(kind.point_step(), smooth, _memo={})
         slots[f"point_step_{i}"] = point
-        names[f"particles_{i}"] = instantiate(tiles.fused_particles,
-                                              {**slots, "point_step": point}, _memo={})
-        made = ("2 if tile.count[FRESH] else 1" if field == "kick_drift_kick"
-                else f"method.{field}.evaluations")
-        lines += [f"if {test}:", f"    n = {made}",
-                  f"    particles_{i}(method.{field}, scene, tile, t, h)", "    return n"]
+        names[f"particles_{i}"] = instantiate(tiles.fused_particles, {**slots, "point_step": point}, _memo={})
+        made = (
+            "2 if tile.count[FRESH] else 1" if field == "kick_drift_kick" else f"method.{field}.evaluations"
+        )
+        lines += [
+            f"if {test}:",
+            f"    n = {made}",
+            f"    particles_{i}(method.{field}, scene, tile, t, h)",
+            "    return n",
+        ]
         if f"special_{field}" not in names:
-            names[f"special_{field}"] = instantiate(kind.special_step(), special, _memo={},
-                                                    options=compose.COPY_COLD)
-            specials += [f"if {shape}:",
-                         f"    return special_{field}(method.{field}, scene, tile, x, v, t, h, p)"]
+            names[f"special_{field}"] = instantiate(
+                kind.special_step(), special, _memo={}, options=compose.COPY_COLD
+            )
+            specials += [
+                f"if {shape}:",
+                f"    return special_{field}(method.{field}, scene, tile, x, v, t, h, p)",
+            ]
     names["KICK_DRIFT_KICK"] = KICK_DRIFT_KICK
     slots["step_particles"] = glue(tiles.step_particles, [*lines, "return -1"], names)
     slots["special_step"] = glue(tiles.special_step, [*specials, "return x, v"], names)
@@ -167,8 +198,5 @@ def loop_for(kind, layout, scene: Scene):
     slots = slots_for(kind, layout, scene)
     name = cache_name("drive", slots)
     if name not in _LOOPS:
-        _LOOPS[name] = instantiate(integrate_kernels.drive, slots, name=name,
-                                   options=compose.LOOP)
+        _LOOPS[name] = instantiate(integrate_kernels.drive, slots, name=name, options=compose.LOOP)
     return _LOOPS[name]
-
-

@@ -114,9 +114,7 @@ def collect_strands(
     return strands
 
 
-def ballistic_deviation(
-    strands: Strands, gravity: np.ndarray, drag: float, mass: float
-) -> np.ndarray:
+def ballistic_deviation(strands: Strands, gravity: np.ndarray, drag: float, mass: float) -> np.ndarray:
     """Distance of every strand point from the exact path of its root, shape (P,), m.
 
     Each strand's first point and velocity fix the motion under uniform gravity and

@@ -93,11 +93,19 @@ def scratch(size: int, stages: int, planes: int) -> Tile:
     nothing (it is compiled without numba's reference counting, see :mod:`compose`)."""
     size = max(size, 1)
     f = [np.zeros(3 * size) for _ in range(6)]
-    return Tile(*f, np.zeros(stages * 3 * size), np.zeros(stages * 3 * size), np.zeros(3 * size),
-                np.zeros(3 * size), np.zeros(planes * size, dtype=np.bool_),
-                np.zeros(size, dtype=np.bool_), np.zeros(8 * ((size + 7) // 8), dtype=np.int64),
-                np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64),
-                np.zeros(4, dtype=np.int64))
+    return Tile(
+        *f,
+        np.zeros(stages * 3 * size),
+        np.zeros(stages * 3 * size),
+        np.zeros(3 * size),
+        np.zeros(3 * size),
+        np.zeros(planes * size, dtype=np.bool_),
+        np.zeros(size, dtype=np.bool_),
+        np.zeros(8 * ((size + 7) // 8), dtype=np.int64),
+        np.zeros(size, dtype=np.int64),
+        np.zeros(size, dtype=np.int64),
+        np.zeros(4, dtype=np.int64),
+    )
 
 
 @njit(**COLD)
@@ -108,14 +116,24 @@ def tile_view(buffers, m):
     planes = b.contact.shape[0] // max(b.resting.shape[0], 1)
     for k in range(b.count.shape[0]):
         b.count[k] = 0
-    return Tile(b.X[:3 * m].reshape((3, m)), b.V[:3 * m].reshape((3, m)),
-                b.F[:3 * m].reshape((3, m)), b.A[:3 * m].reshape((3, m)),
-                b.XS[:3 * m].reshape((3, m)), b.VS[:3 * m].reshape((3, m)),
-                b.KX[:stages * 3 * m].reshape((stages, 3, m)),
-                b.KV[:stages * 3 * m].reshape((stages, 3, m)),
-                b.DX[:3 * m].reshape((3, m)), b.DV[:3 * m].reshape((3, m)),
-                b.contact[:planes * m].reshape((planes, m)), b.resting[:m],
-                b.flags[:8 * ((m + 7) // 8)], b.special[:m], b.visited[:m], b.count)
+    return Tile(
+        b.X[: 3 * m].reshape((3, m)),
+        b.V[: 3 * m].reshape((3, m)),
+        b.F[: 3 * m].reshape((3, m)),
+        b.A[: 3 * m].reshape((3, m)),
+        b.XS[: 3 * m].reshape((3, m)),
+        b.VS[: 3 * m].reshape((3, m)),
+        b.KX[: stages * 3 * m].reshape((stages, 3, m)),
+        b.KV[: stages * 3 * m].reshape((stages, 3, m)),
+        b.DX[: 3 * m].reshape((3, m)),
+        b.DV[: 3 * m].reshape((3, m)),
+        b.contact[: planes * m].reshape((planes, m)),
+        b.resting[:m],
+        b.flags[: 8 * ((m + 7) // 8)],
+        b.special[:m],
+        b.visited[:m],
+        b.count,
+    )
 
 
 @slot
@@ -166,8 +184,14 @@ def same_bits(a, b):
 @njit(**LEAF)
 def moved(x, v, y, u):
     """Whether the state ``(y, u)`` differs from ``(x, v)`` in any bit (3-tuples)."""
-    return not (same_bits(x[0], y[0]) and same_bits(x[1], y[1]) and same_bits(x[2], y[2])
-                and same_bits(v[0], u[0]) and same_bits(v[1], u[1]) and same_bits(v[2], u[2]))
+    return not (
+        same_bits(x[0], y[0])
+        and same_bits(x[1], y[1])
+        and same_bits(x[2], y[2])
+        and same_bits(v[0], u[0])
+        and same_bits(v[1], u[1])
+        and same_bits(v[2], u[2])
+    )
 
 
 @njit(**LEAF)
@@ -299,8 +323,16 @@ def fused_collisions(scene, tile, t, dt):
     changed = False
     for k in range(flags.shape[0] // 8):
         b = 8 * k
-        if (flags[b] | flags[b + 1] | flags[b + 2] | flags[b + 3] | flags[b + 4] | flags[b + 5]
-                | flags[b + 6] | flags[b + 7]) == 0:
+        if (
+            flags[b]
+            | flags[b + 1]
+            | flags[b + 2]
+            | flags[b + 3]
+            | flags[b + 4]
+            | flags[b + 5]
+            | flags[b + 6]
+            | flags[b + 7]
+        ) == 0:
             continue
         for p in range(8 * k, 8 * k + 8):
             if flags[p]:

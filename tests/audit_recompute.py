@@ -268,8 +268,7 @@ def closed_and_outward(faces: np.ndarray) -> bool:
     """Every directed edge of the triangles appears once and its reverse once: a closed,
     consistently oriented surface."""
     directed = [(int(f[a]), int(f[(a + 1) % 3])) for f in faces for a in range(3)]
-    return len(set(directed)) == len(directed) and all((b, a) in set(directed)
-                                                        for a, b in directed)
+    return len(set(directed)) == len(directed) and all((b, a) in set(directed) for a, b in directed)
 
 
 def enclosed_volume(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -425,8 +424,9 @@ def spawn_moments(n: float, r: float, samples: int = 400_000) -> tuple[float, fl
     return float(xs.mean()), float(xs.var() + np.mean(frac * (1 - frac)))
 
 
-def population_null(sampled_frames: np.ndarray, n: float, r: float, lifetimes: np.ndarray,
-                    reps: int, seed: int) -> np.ndarray:
+def population_null(
+    sampled_frames: np.ndarray, n: float, r: float, lifetimes: np.ndarray, reps: int, seed: int
+) -> np.ndarray:
     """Monte Carlo of the summed live population at ``sampled_frames``: every frame ``i``
     spawns ``floor(n + U r + U')`` particles, each living ``L`` frames (uniform over
     ``lifetimes``) and counted at the sampled frames in ``i .. i + L - 1``. Returns the
@@ -475,8 +475,12 @@ def energy_behaviour(model) -> str:
         return "conservative"
     if len(model.fields) or len(model.emitters) or len(model.impulses):
         return "source"
-    lossy = (model.drag > 0 or np.any(model.springs.damping > 0) or np.any(model.anchors.damping > 0)
-             or any(p.restitution < 1 or p.friction > 0 for p in model.planes))
+    lossy = (
+        model.drag > 0
+        or np.any(model.springs.damping > 0)
+        or np.any(model.anchors.damping > 0)
+        or any(p.restitution < 1 or p.friction > 0 for p in model.planes)
+    )
     return "dissipative" if lossy else "conservative"
 
 
@@ -529,8 +533,9 @@ def grows_every_quarter(t, e, scale) -> bool:
     return True
 
 
-def motion_verdict(t, e, scale: float, behaviour: str, escape: float | None = None,
-                   t_all=None, e_all=None) -> tuple[str, float | None]:
+def motion_verdict(
+    t, e, scale: float, behaviour: str, escape: float | None = None, t_all=None, e_all=None
+) -> tuple[str, float | None]:
     """``("ok", None)`` or ``("unstable", when)`` for a finite run, from its energy at every
     step it took (``t_all``, ``e_all``; its records ``t``, ``e`` when those are not given).
     Unstable: the escape energy reached and kept to the end (a spike through a close
@@ -551,7 +556,7 @@ def motion_verdict(t, e, scale: float, behaviour: str, escape: float | None = No
     far = np.abs(rise) > scale
     if far.any() and grows_every_quarter(t_all, e_all, scale):
         return "unstable", float(t_all[np.argmax(far)])
-    late = rise[_halves(t_all):]
+    late = rise[_halves(t_all) :]
     if behaviour == "dissipative":
         if len(late) and float(np.median(late)) > GAIN * scale:
             return "unstable", float(t_all[np.argmax(rise > GAIN * scale)])
@@ -606,8 +611,9 @@ def particle_reference(model, t_end: float, tol: float = 1e-12):
     :func:`particle_rhs`, read between its steps by its own continuous extension."""
     n = len(model.mass)
     y0 = np.concatenate([model.x0.ravel(), model.v0.ravel()])
-    sol = solve_ivp(particle_rhs(model), (0.0, t_end), y0, method="DOP853", rtol=tol, atol=tol,
-                    dense_output=True)
+    sol = solve_ivp(
+        particle_rhs(model), (0.0, t_end), y0, method="DOP853", rtol=tol, atol=tol, dense_output=True
+    )
     assert sol.success, sol.message
 
     def at(t):
@@ -670,8 +676,9 @@ def arcs(t, u, w, g: float):
     return drop, found
 
 
-def oscillator_run(scheme: str, m: float, k: float, c: float, h: float, u0: float, w0: float,
-                   steps: int) -> tuple[np.ndarray, np.ndarray]:
+def oscillator_run(
+    scheme: str, m: float, k: float, c: float, h: float, u0: float, w0: float, steps: int
+) -> tuple[np.ndarray, np.ndarray]:
     """``steps`` steps of ``scheme`` (see :func:`_one_step`) on ``m u'' = -k u - c u'`` from
     ``u0``, ``w0``: displacements and velocities after every step, (steps + 1,) each
     (NaN from the first step beyond 1e12: a blow-up)."""
@@ -712,8 +719,10 @@ def backward_euler_has_no_solution(model, x: np.ndarray, v: np.ndarray, h: float
             near = 0.5 * min(d[i, k], d[j, k])
             pull += 2 * G * model.mass[k] / near**2
     least = 1.5 * (2 * h * h * mu) ** (1 / 3)
-    return c + h * h * pull < least, (f"pair {i}-{j}: |r + h w| = {c:.6g}, other bodies' pull "
-                                      f"h^2 |d| <= {h * h * pull:.3g}, least reachable {least:.6g}")
+    return c + h * h * pull < least, (
+        f"pair {i}-{j}: |r + h w| = {c:.6g}, other bodies' pull "
+        f"h^2 |d| <= {h * h * pull:.3g}, least reachable {least:.6g}"
+    )
 
 
 def kepler_backward_euler(mu: float, q0, w0, h: float, t_end: float):

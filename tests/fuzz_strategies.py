@@ -177,11 +177,38 @@ def huge_int(rng: random.Random) -> int:
 
 def nasty_number(rng: random.Random) -> int | float:
     """A number a field should refuse, or one at the edge of what it may take."""
-    return rng.choice([
-        math.nan, math.inf, -math.inf, 0, 0.0, -0.0, -1, -1.0, 1e-300, -1e-300, 5e-324, 1e300,
-        -1e300, 1.7976931348623157e308, 1e12, 10**9, 10**12, 10**15, 10**16, 2**31, 2**53 + 1, 3.5,
-        0.5, 1, 2, 100000, -100000, huge_int(rng),
-    ])
+    return rng.choice(
+        [
+            math.nan,
+            math.inf,
+            -math.inf,
+            0,
+            0.0,
+            -0.0,
+            -1,
+            -1.0,
+            1e-300,
+            -1e-300,
+            5e-324,
+            1e300,
+            -1e300,
+            1.7976931348623157e308,
+            1e12,
+            10**9,
+            10**12,
+            10**15,
+            10**16,
+            2**31,
+            2**53 + 1,
+            3.5,
+            0.5,
+            1,
+            2,
+            100000,
+            -100000,
+            huge_int(rng),
+        ]
+    )
 
 
 def nasty_value(rng: random.Random, depth: int = 0) -> Any:
@@ -199,8 +226,20 @@ def nasty_value(rng: random.Random, depth: int = 0) -> Any:
     if kind == 6:
         return []
     if kind == 7:
-        return rng.choice([["a", "b", "c"], [1, "a"], [[1, 2], [3]], [[[]]], [math.nan] * 3,
-                           [1e300, -1e300, 0.0], [0, 0], [-1, 10**9], [[0, 0, 0]] * 3, [{}]])
+        return rng.choice(
+            [
+                ["a", "b", "c"],
+                [1, "a"],
+                [[1, 2], [3]],
+                [[[]]],
+                [math.nan] * 3,
+                [1e300, -1e300, 0.0],
+                [0, 0],
+                [-1, 10**9],
+                [[0, 0, 0]] * 3,
+                [{}],
+            ]
+        )
     if kind == 8:
         return {}
     if kind == 9:
@@ -264,8 +303,11 @@ def _label(path: Path_) -> str:
 
 
 def _numbers(data: Any) -> list[Path_]:
-    return [p for p in _paths(data)
-            if isinstance(_get(data, p), int | float) and not isinstance(_get(data, p), bool)]
+    return [
+        p
+        for p in _paths(data)
+        if isinstance(_get(data, p), int | float) and not isinstance(_get(data, p), bool)
+    ]
 
 
 def _mut_delete(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
@@ -294,8 +336,9 @@ def _mut_number(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
     path = rng.choice(paths)
     old = _get(data, path)
     if isinstance(old, int) and rng.random() < 0.5:
-        new: int | float = rng.choice([old + 1, old + 1000, -old - 1, -1, old * 10**6, 10**9, 10**12,
-                                       huge_int(rng)])
+        new: int | float = rng.choice(
+            [old + 1, old + 1000, -old - 1, -1, old * 10**6, 10**9, 10**12, huge_int(rng)]
+        )
     elif rng.random() < 0.5:
         new = rng.choice([math.nan, math.inf, -math.inf, 0.0, -0.0])
     else:
@@ -311,8 +354,9 @@ def _mut_number(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
 def _mut_unknown_key(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
     where = rng.choice(_tables(data))
     table = _get(data, where)
-    key = rng.choice(["unknown", "dtt", "Duration", "strenght", "exta", "__class__", "", " ", "a.b",
-                      "ключ", "x" * 300])
+    key = rng.choice(
+        ["unknown", "dtt", "Duration", "strenght", "exta", "__class__", "", " ", "a.b", "ключ", "x" * 300]
+    )
     table[key] = nasty_value(rng)
     return f"unknown key {_label((*where, key))[:80]}"
 
@@ -453,30 +497,46 @@ def _mut_scene(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
         scene.setdefault("planes", [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0]}])
         planes = scene["planes"]
         if isinstance(planes, list) and planes and isinstance(planes[0], dict):
-            planes[0]["normal"] = rng.choice([[0.0, 0.0, 0.0], [math.nan, 1.0, 0.0], [1e-320, 0.0, 0.0],
-                                              [0.0, 1.0], [1.0, 0.0, 0.0, 0.0]])
+            planes[0]["normal"] = rng.choice(
+                [[0.0, 0.0, 0.0], [math.nan, 1.0, 0.0], [1e-320, 0.0, 0.0], [0.0, 1.0], [1.0, 0.0, 0.0, 0.0]]
+            )
             return f"scene.planes[0].normal = {_value(planes[0]['normal'])}"
     if choice == 1:
-        emitter = {"shape": "cube", "center": [0.0, 0.0, 0.0], "size": 0.1, "rate_n": 1e9,
-                   "rate_r": 0.0, "speed": 1.0, "lifetime": 10**6, "frame_dt": 0.01,
-                   "capacity": rng.choice([10**9, 10**12, 2**62, 0, -1]), "particle_mass": 0.01}
-        scene.setdefault("emitters", []).append(emitter) if isinstance(scene.get("emitters", []), list) \
-            else None
+        emitter = {
+            "shape": "cube",
+            "center": [0.0, 0.0, 0.0],
+            "size": 0.1,
+            "rate_n": 1e9,
+            "rate_r": 0.0,
+            "speed": 1.0,
+            "lifetime": 10**6,
+            "frame_dt": 0.01,
+            "capacity": rng.choice([10**9, 10**12, 2**62, 0, -1]),
+            "particle_mass": 0.01,
+        }
+        scene.setdefault("emitters", []).append(emitter) if isinstance(
+            scene.get("emitters", []), list
+        ) else None
         return f"scene.emitters += capacity {emitter['capacity']}, rate_n 1e9"
     if choice == 2:
-        scene["fields"] = [rng.choice([
-            {"kind": "vortex", "center": ["a", "b", "c"]},
-            {"kind": "radial", "center": [0.0, 0.0, 0.0]},
-            {"kind": "drag"},
-            {"kind": "gravity", "strength": "strong"},
-            {"kind": "unknown-field", "strength": 1.0},
-        ])]
+        scene["fields"] = [
+            rng.choice(
+                [
+                    {"kind": "vortex", "center": ["a", "b", "c"]},
+                    {"kind": "radial", "center": [0.0, 0.0, 0.0]},
+                    {"kind": "drag"},
+                    {"kind": "gravity", "strength": "strong"},
+                    {"kind": "unknown-field", "strength": 1.0},
+                ]
+            )
+        ]
         return f"scene.fields = {_value(scene['fields'])[:80]}"
     if choice == 3:
         springs = scene.get("springs")
         if isinstance(springs, list) and springs and isinstance(springs[0], dict):
-            springs[0]["pairs"] = rng.choice([[[0, 10**6]], [[-1, 0]], [[0, 0]], [[0]], [[0, 1, 2]],
-                                              [[0.5, 1]], [["a", "b"]]])
+            springs[0]["pairs"] = rng.choice(
+                [[[0, 10**6]], [[-1, 0]], [[0, 0]], [[0]], [[0, 1, 2]], [[0.5, 1]], [["a", "b"]]]
+            )
             return f"scene.springs[0].pairs = {_value(springs[0]['pairs'])}"
     if choice == 4:
         anchors = scene.get("anchors")
@@ -494,8 +554,21 @@ def _mut_scene(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
         for k, v in scene.items():
             if isinstance(v, list) and v and isinstance(v[0], dict):
                 for kk in v[0]:
-                    if kk in {"nx", "ny", "nz", "n", "count", "segments", "rows", "cols", "blocks",
-                              "strands", "per_strand", "resolution", "capacity"}:
+                    if kk in {
+                        "nx",
+                        "ny",
+                        "nz",
+                        "n",
+                        "count",
+                        "segments",
+                        "rows",
+                        "cols",
+                        "blocks",
+                        "strands",
+                        "per_strand",
+                        "resolution",
+                        "capacity",
+                    }:
                         v[0][kk] = rng.choice([10**5, 10**7, 10**9, 10**15])
                         return f"scene.{k}[0].{kk} = {v[0][kk]}"
         scene["particles"] = [{"position": [[0.0, 0.0, 0.0]] * 2, "mass": 1.0, "count": 10**9}]
@@ -534,20 +607,55 @@ def _mut_ode(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
                 return f"ode.{k} length changed"
     ref = data.setdefault("reference", {})
     if isinstance(ref, dict):
-        ref["exact"] = rng.choice(["linear", "kepler", "free-fall", "reference-run", "projectile",
-                                   "no-such", "circle", ""])
+        ref["exact"] = rng.choice(
+            ["linear", "kepler", "free-fall", "reference-run", "projectile", "no-such", "circle", ""]
+        )
         return f"reference.exact = {ref['exact']!r}"
     return "reference not a table"
 
 
 def _mut_gates(rng: random.Random, data: dict, others: Sequence[dict]) -> str:
     gates = data.get("gates")
-    gate = {"kind": rng.choice(["order", "error", "energy_drift", "status", "property", "stability-limit",
-                                "speedup", "restitution", "no-worse-than", "bogus"])}
-    for k in rng.sample(["method", "engine", "dt", "expect", "tol", "max", "min", "rel_tol", "factor",
-                         "bounce", "e_set", "name", "bounces", "against"], rng.randint(0, 5)):
-        gate[k] = nasty_value(rng) if rng.random() < 0.5 else rng.choice(
-            ["rk4", "euler", "reference", 1e-3, 2, [], "nope"])
+    gate = {
+        "kind": rng.choice(
+            [
+                "order",
+                "error",
+                "energy_drift",
+                "status",
+                "property",
+                "stability-limit",
+                "speedup",
+                "restitution",
+                "no-worse-than",
+                "bogus",
+            ]
+        )
+    }
+    for k in rng.sample(
+        [
+            "method",
+            "engine",
+            "dt",
+            "expect",
+            "tol",
+            "max",
+            "min",
+            "rel_tol",
+            "factor",
+            "bounce",
+            "e_set",
+            "name",
+            "bounces",
+            "against",
+        ],
+        rng.randint(0, 5),
+    ):
+        gate[k] = (
+            nasty_value(rng)
+            if rng.random() < 0.5
+            else rng.choice(["rk4", "euler", "reference", 1e-3, 2, [], "nope"])
+        )
     if isinstance(gates, list):
         gates.append(gate)
     else:
@@ -595,8 +703,10 @@ def byte_mutation(rng: random.Random, text: bytes) -> tuple[bytes, str]:
     if choice == 2:
         depth = rng.choice([50, 500, 1000, 3000, 10000, 100000])
         inline = rng.random() < 0.3
-        return text + f"\ndeep = {_nest(depth, inline)}\n".encode(), \
-            f"deep nesting {depth} ({'inline tables' if inline else 'arrays'})"
+        return (
+            text + f"\ndeep = {_nest(depth, inline)}\n".encode(),
+            f"deep nesting {depth} ({'inline tables' if inline else 'arrays'})",
+        )
     if choice == 3:
         digits = rng.choice([400, 4301, 5000, 20000])
         number = "9" * digits
@@ -629,11 +739,17 @@ def byte_mutation(rng: random.Random, text: bytes) -> tuple[bytes, str]:
         return text, "nothing to duplicate"
     if choice == 11:
         size = rng.choice([10**5, 10**6])
-        return text + b"\n[run2]\n" + b"".join(b"k%d = %d\n" % (i, i) for i in range(size // 10)), \
-            f"{size // 10} extra keys"
-    return text + b"\n" + rng.choice([b"[[gates]]\n" * 2000, b'title = """' + b"x" * 100000 + b'"""',
-                                      b"[a.b.c.d.e.f.g.h.i.j.k.l.m.n.o.p]\nx = 1",
-                                      b"\"\\ud800\" = 1"]), "appended oddities"
+        return text + b"\n[run2]\n" + b"".join(
+            b"k%d = %d\n" % (i, i) for i in range(size // 10)
+        ), f"{size // 10} extra keys"
+    return text + b"\n" + rng.choice(
+        [
+            b"[[gates]]\n" * 2000,
+            b'title = """' + b"x" * 100000 + b'"""',
+            b"[a.b.c.d.e.f.g.h.i.j.k.l.m.n.o.p]\nx = 1",
+            b'"\\ud800" = 1',
+        ]
+    ), "appended oddities"
 
 
 def _replace_or_append(text: bytes, key: str, number: str) -> bytes:
@@ -814,8 +930,25 @@ def load_tables(root: Path = ROOT) -> dict[str, bytes]:
 
 
 STATUS_VALUES = ["0", "1", "1.5", "OK", "okay", "", "nan", "crashed ", "🙂", "ok;rm -rf /"]
-CELL_VALUES = ["abc", "1e999", "nan", "inf", "-", "1,2", '"', "NaN", "0x10", "1_000", "TRUE", " ", "\t",
-               "1e-400", "9" * 5000, "<script>", "=cmd|' /C calc'!A0"]
+CELL_VALUES = [
+    "abc",
+    "1e999",
+    "nan",
+    "inf",
+    "-",
+    "1,2",
+    '"',
+    "NaN",
+    "0x10",
+    "1_000",
+    "TRUE",
+    " ",
+    "\t",
+    "1e-400",
+    "9" * 5000,
+    "<script>",
+    "=cmd|' /C calc'!A0",
+]
 
 
 def _csv_rows(text: str) -> list[list[str]]:
@@ -844,12 +977,31 @@ def table_mutant(rng: random.Random, tables: dict[str, bytes]) -> TableMutant:
     choice = rng.randrange(14)
 
     def done(data: bytes | str, how: str) -> TableMutant:
-        return TableMutant(name, data.encode("utf-8", "surrogatepass") if isinstance(data, str) else data,
-                           f"{name}.csv: {how}")
+        return TableMutant(
+            name,
+            data.encode("utf-8", "surrogatepass") if isinstance(data, str) else data,
+            f"{name}.csv: {how}",
+        )
 
     if choice == 0 and header:
-        needed = [c for c in header if c in {"case", "engine", "method", "dt", "status", "error", "dt_limit",
-                                             "dt_limit_exact", "e_set", "bounce", "e_measured"}]
+        needed = [
+            c
+            for c in header
+            if c
+            in {
+                "case",
+                "engine",
+                "method",
+                "dt",
+                "status",
+                "error",
+                "dt_limit",
+                "dt_limit_exact",
+                "e_set",
+                "bounce",
+                "e_measured",
+            }
+        ]
         col = rng.choice(needed or header)
         k = header.index(col)
         kept = [[c for i, c in enumerate(r) if i != k] for r in rows]
@@ -857,12 +1009,29 @@ def table_mutant(rng: random.Random, tables: dict[str, bytes]) -> TableMutant:
     if choice == 1 and body:
         r = rng.randrange(len(body))
         row = body[r]
-        body[r] = row[:-rng.randint(1, max(1, len(row) - 1))] if rng.random() < 0.5 else [*row, "extra", "x"]
+        body[r] = row[: -rng.randint(1, max(1, len(row) - 1))] if rng.random() < 0.5 else [*row, "extra", "x"]
         return done(_csv_text([header, *body]), f"row {r + 2} ragged")
     if choice == 2 and body:
-        numeric = [i for i, c in enumerate(header) if c in {"dt", "error", "energy_drift", "nfev", "steps",
-                                                            "wall_s", "dt_limit", "dt_limit_exact", "runs",
-                                                            "e_set", "bounce", "e_measured", "v_in"}]
+        numeric = [
+            i
+            for i, c in enumerate(header)
+            if c
+            in {
+                "dt",
+                "error",
+                "energy_drift",
+                "nfev",
+                "steps",
+                "wall_s",
+                "dt_limit",
+                "dt_limit_exact",
+                "runs",
+                "e_set",
+                "bounce",
+                "e_measured",
+                "v_in",
+            }
+        ]
         if numeric:
             col = rng.choice(numeric)
             r = rng.randrange(len(body))
@@ -874,7 +1043,7 @@ def table_mutant(rng: random.Random, tables: dict[str, bytes]) -> TableMutant:
         k = header.index("status")
         value = rng.choice(STATUS_VALUES)
         every = rng.random() < 0.5
-        for r in (body if every else [rng.choice(body)]):
+        for r in body if every else [rng.choice(body)]:
             if k < len(r):
                 r[k] = value
         return done(_csv_text([header, *body]), f"status = {value!r} in {'every row' if every else 'a row'}")
@@ -904,8 +1073,10 @@ def table_mutant(rng: random.Random, tables: dict[str, bytes]) -> TableMutant:
         return done(raw[: rng.randrange(len(raw) + 1)] + b'"', "truncated, unclosed quote")
     if choice == 12 and header:
         return done(_csv_text([[f"{c}?" for c in header], *body]), "every header name changed")
-    return done(_csv_text([header, *[[rng.choice(CELL_VALUES) for _ in header] for _ in range(3)]]),
-                "rows of junk cells")
+    return done(
+        _csv_text([header, *[[rng.choice(CELL_VALUES) for _ in header] for _ in range(3)]]),
+        "rows of junk cells",
+    )
 
 
 # ---------------------------------------------------------------------------------------

@@ -14,15 +14,17 @@ from truestep.runner import MACHINE_COLUMNS as TIMING_COLUMNS
 
 def snapshot(root: Path) -> dict[str, bytes]:
     """Every file under ``root`` (hidden ones too) by relative path, with its bytes."""
-    return {str(p.relative_to(root)): p.read_bytes()
-            for p in sorted(root.rglob("*")) if p.is_file()}
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
 def scratch_left(out: Path) -> list[str]:
     """Staging and old folders of ``out`` beside it (the journal does not count, nor the
     lock file a killed run leaves for the next run to take over)."""
-    return sorted(n for n in os.listdir(out.parent)
-                  if n.startswith(f".{out.name}.") and not n.endswith((".partial", ".lock")))
+    return sorted(
+        n
+        for n in os.listdir(out.parent)
+        if n.startswith(f".{out.name}.") and not n.endswith((".partial", ".lock"))
+    )
 
 
 def _running(pid: int) -> bool:
@@ -59,5 +61,6 @@ def assert_same_tables(a: Path, b: Path) -> None:
     """results, stability and restitution of two runs agree in every non-timing column
     (NaN equal to NaN)."""
     for name in ("results", "stability", "restitution"):
-        pd.testing.assert_frame_equal(non_timing(a / f"{name}.csv"), non_timing(b / f"{name}.csv"),
-                                      check_exact=True, obj=name)
+        pd.testing.assert_frame_equal(
+            non_timing(a / f"{name}.csv"), non_timing(b / f"{name}.csv"), check_exact=True, obj=name
+        )

@@ -54,8 +54,9 @@ def compile_reference_loops() -> None:
 def table() -> pd.DataFrame:
     compile_reference_loops()
     lines: list[str] = []
-    out = bench.scaling_table(["reference", "pymunk"], sizes=SIZES, budget_s=6.0,
-                              target_s=TARGET_S, progress=lines.append)
+    out = bench.scaling_table(
+        ["reference", "pymunk"], sizes=SIZES, budget_s=6.0, target_s=TARGET_S, progress=lines.append
+    )
     out.attrs["lines"] = lines
     return out
 
@@ -77,14 +78,19 @@ def test_the_rain_scene_at_n_is_the_case_s_own_block(case_named):
 
 @pytest.mark.engine
 def test_every_engine_method_and_size_is_a_row(table):
-    expected = {(e, m, n) for e in ("reference", "pymunk") for m, n in
-                itertools.product(get_adapter(e).methods, SIZES)}
+    expected = {
+        (e, m, n)
+        for e in ("reference", "pymunk")
+        for m, n in itertools.product(get_adapter(e).methods, SIZES)
+    }
     got = set(zip(table["engine"], table["method"], table["n"], strict=True))
     assert got == expected and len(table) == len(expected)
     assert list(table.columns) == bench.COLUMNS
     assert set(table["status"]) <= {"ok", "skipped", "unsupported"}
-    run = table[~table["status"].isin(["unsupported"]) & ~table["note"].str.startswith(
-        ("adaptive", "the case skips it"))]
+    run = table[
+        ~table["status"].isin(["unsupported"])
+        & ~table["note"].str.startswith(("adaptive", "the case skips it"))
+    ]
     assert len(table.attrs["lines"]) == len(run)  # one progress line per row of a pair that ran
     for engine in ("reference", "pymunk"):
         assert ((table["engine"] == engine) & (table["status"] == "ok")).any()
@@ -118,8 +124,9 @@ def test_rows_not_run_say_why(table):
 
 @pytest.mark.engine
 def test_sizes_beyond_the_budget_are_skipped_with_the_numbers():
-    out = bench.scaling_table(["pymunk"], sizes=(10, 100, 1_000_000), budget_s=6.0,
-                              target_s=TARGET_S, progress=lambda line: None)
+    out = bench.scaling_table(
+        ["pymunk"], sizes=(10, 100, 1_000_000), budget_s=6.0, target_s=TARGET_S, progress=lambda line: None
+    )
     assert list(out["n"]) == [10, 100, 1_000_000]
     assert out["status"].iloc[0] == "ok"  # the first size runs while any budget is left
     big = out.iloc[-1]
@@ -130,8 +137,9 @@ def test_sizes_beyond_the_budget_are_skipped_with_the_numbers():
 
 @pytest.mark.engine
 def test_a_budget_spent_before_a_pair_skips_its_rows_saying_so():
-    out = bench.scaling_table(["pymunk"], sizes=(10, 100), budget_s=1e-3, target_s=TARGET_S,
-                              progress=lambda line: None)
+    out = bench.scaling_table(
+        ["pymunk"], sizes=(10, 100), budget_s=1e-3, target_s=TARGET_S, progress=lambda line: None
+    )
     assert (out["status"] == "skipped").all()
     assert out["note"].str.startswith("budget: the 0.001 s budget ended").all()
 
@@ -140,8 +148,13 @@ def test_a_budget_spent_before_a_pair_skips_its_rows_saying_so():
 def test_the_whole_table_keeps_within_its_budget():
     compile_reference_loops()
     budget = 10.0
-    out = bench.scaling_table(["reference", "pymunk"], sizes=(10, 100, 1000, 10_000, 100_000),
-                              budget_s=budget, target_s=0.05, progress=lambda line: None)
+    out = bench.scaling_table(
+        ["reference", "pymunk"],
+        sizes=(10, 100, 1000, 10_000, 100_000),
+        budget_s=budget,
+        target_s=0.05,
+        progress=lambda line: None,
+    )
     # the bandwidth measurement, compiling, the warm-ups and every child count: the table
     # ends within the budget (and the few ms of assembling the table after the last child)
     assert out.attrs["elapsed_s"] <= budget + 0.25
@@ -155,8 +168,9 @@ def test_a_crash_a_raise_and_a_hang_are_rows(monkeypatch):
     monkeypatch.setattr(truestep.adapters, "_RESOLVED", dict(truestep.adapters._RESOLVED))
     monkeypatch.setattr(bench, "FIRST_TIMEOUT_S", 0.5)  # the hang is killed after 0.5 s
     name = resolve_engine("test_bench:CrashingAdapter")
-    out = bench.scaling_table([name], sizes=SIZES, budget_s=6.0, target_s=TARGET_S,
-                              progress=lambda line: None).set_index(["method", "n"])
+    out = bench.scaling_table(
+        [name], sizes=SIZES, budget_s=6.0, target_s=TARGET_S, progress=lambda line: None
+    ).set_index(["method", "n"])
     assert out.loc[("dies", 10), "status"] == "crashed"
     assert "exit code 3" in out.loc[("dies", 10), "note"]
     assert out.loc[("raises", 10), "status"] == "crashed"
@@ -172,11 +186,14 @@ def test_a_crash_a_raise_and_a_hang_are_rows(monkeypatch):
 def test_the_figure_draws_what_ran_and_the_bandwidth_line(tmp_path):
     rows = [("reference", "euler", n, 4, 0.2, n * 4 / 0.2, "ok", "") for n in (100, 1000, 10000)]
     rows += [("reference", "lecture", n, 4, 0.1, n * 4 / 0.1, "ok", "") for n in (100, 1000)]
-    rows += [("pymunk", "default", 100, 8, 0.2, 4000.0, "ok", ""),
-             ("pymunk", "default", 1000, None, None, None, "skipped", "budget: the run ..."),
-             ("mujoco", "Euler", 100, None, None, None, "crashed", "engine process died")]
-    table = pd.DataFrame(rows, columns=["engine", "method", "n", "steps", "wall_s",
-                                        "particle_steps_per_s", "status", "note"])
+    rows += [
+        ("pymunk", "default", 100, 8, 0.2, 4000.0, "ok", ""),
+        ("pymunk", "default", 1000, None, None, None, "skipped", "budget: the run ..."),
+        ("mujoco", "Euler", 100, None, None, None, "crashed", "engine process died"),
+    ]
+    table = pd.DataFrame(
+        rows, columns=["engine", "method", "n", "steps", "wall_s", "particle_steps_per_s", "status", "note"]
+    )
     path = bench.scaling_plot(table, 2e10, tmp_path / "figures" / "scaling.png")
     with Image.open(path) as img:
         assert img.format == "PNG" and img.width > 500
@@ -193,8 +210,7 @@ def test_extrapolation_follows_an_affine_cost_and_a_faster_one():
 @pytest.mark.engine
 def test_the_command_writes_the_table_and_the_figure(tmp_path, capsys):
     out = tmp_path / "bench"
-    code = main(["bench", "--engines", "pymunk", "--sizes", "10,100", "--budget", "1",
-                 "--out", str(out)])
+    code = main(["bench", "--engines", "pymunk", "--sizes", "10,100", "--budget", "1", "--out", str(out)])
     assert code == 0
     printed = capsys.readouterr().out
     assert "copy bandwidth" in printed and "particle-steps/s" in printed
@@ -214,13 +230,29 @@ def test_the_command_rejects_bad_input_and_writes_nothing(tmp_path, capsys, argv
 
 def _synthetic() -> pd.DataFrame:
     """Three engines; only two reach n = 1000; the numbers are chosen, not measured."""
-    rows = [("a", "fast", 100, 4e8), ("a", "slow", 100, 1e8), ("a", "fast", 1000, 3e8),
-            ("b", "x", 100, 2e7), ("b", "x", 1000, 1.5e7), ("c", "y", 100, 1e6)]
-    table = pd.DataFrame([{"engine": e, "method": m, "n": n, "particle_steps_per_s": r,
-                           "bandwidth_fraction": r * 96 / 1e10, "status": "ok", "note": ""}
-                          for e, m, n, r in rows]
-                         + [{"engine": "c", "method": "y", "n": 1000, "status": "skipped",
-                             "note": "budget"}])
+    rows = [
+        ("a", "fast", 100, 4e8),
+        ("a", "slow", 100, 1e8),
+        ("a", "fast", 1000, 3e8),
+        ("b", "x", 100, 2e7),
+        ("b", "x", 1000, 1.5e7),
+        ("c", "y", 100, 1e6),
+    ]
+    table = pd.DataFrame(
+        [
+            {
+                "engine": e,
+                "method": m,
+                "n": n,
+                "particle_steps_per_s": r,
+                "bandwidth_fraction": r * 96 / 1e10,
+                "status": "ok",
+                "note": "",
+            }
+            for e, m, n, r in rows
+        ]
+        + [{"engine": "c", "method": "y", "n": 1000, "status": "skipped", "note": "budget"}]
+    )
     table.attrs.update(bandwidth_bytes_per_s=1e10, bytes_per_particle_step=96, budget_s=20.0)
     return table
 

@@ -36,8 +36,9 @@ def _exact_schedule(t_end: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array(times), np.array(speeds)
 
 
-def soft_bounces(dt: float, contact_steps: int, *, depth: float, chatter: float,
-                 t_end: float = 2.5) -> Trajectory:
+def soft_bounces(
+    dt: float, contact_steps: int, *, depth: float, chatter: float, t_end: float = 2.5
+) -> Trajectory:
     """The ball's trajectory sampled every ``dt`` s (see the module docstring): in each
     contact window the height dips to ``-depth`` m and the normal velocity is replaced by
     a rebound with ``chatter`` m/s of sign-changing wobble on it."""
@@ -61,9 +62,11 @@ def soft_bounces(dt: float, contact_steps: int, *, depth: float, chatter: float,
     return Trajectory(t=t, x=x, v=v, energy=None, steps=len(t) - 1)
 
 
-@pytest.mark.parametrize(("contact_steps", "depth", "chatter"),
-                         [(1, 0.0, 0.0), (10, 0.004, 0.0), (16, 0.01, 0.3)],
-                         ids=["hard", "soft", "soft-chatter"])
+@pytest.mark.parametrize(
+    ("contact_steps", "depth", "chatter"),
+    [(1, 0.0, 0.0), (10, 0.004, 0.0), (16, 0.01, 0.3)],
+    ids=["hard", "soft", "soft-chatter"],
+)
 def test_apex_and_launch_of_each_flight_are_exact(case_named, contact_steps, depth, chatter):
     case = case_named("bouncing-ball")
     dt = 1e-3
@@ -89,7 +92,8 @@ def test_reading_inside_the_contact_gives_the_old_hundred_percent(case_named):
     exact = H0 * E ** (2 * np.arange(1, 4))
     assert np.max(np.abs(apex[:3] / exact - 1)) > 0.9
     assert PROPERTIES["apex_height_error"](case_named("bouncing-ball"), traj) <= (
-        G * 2e-3**2 / 8 / (H0 * E**6))
+        G * 2e-3**2 / 8 / (H0 * E**6)
+    )
 
 
 def test_a_flight_that_is_not_ballistic_is_measured_by_the_heights_it_reaches(case_named):

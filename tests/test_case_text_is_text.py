@@ -14,20 +14,22 @@ from truestep.cases.errors import CaseError
 from truestep.cases.loader import CASE_DIR, load_case
 from truestep.cli import main
 
-HOSTILE_TEXT = ("<script>alert(1)</script> ![x](/etc/hostname) <details open> | a | b | "
-                "[link](javascript:alert(1)) **bold** `code` $\\frac{1$ # not a heading "
-                "__import__('os').system('touch PWNED') {{7*7}} &amp;")
+HOSTILE_TEXT = (
+    "<script>alert(1)</script> ![x](/etc/hostname) <details open> | a | b | "
+    "[link](javascript:alert(1)) **bold** `code` $\\frac{1$ # not a heading "
+    "__import__('os').system('touch PWNED') {{7*7}} &amp;"
+)
 
 
 def _hostile_case(folder: Path) -> Path:
     text = (CASE_DIR / "free-fall.toml").read_text()
     title = "title = " + _toml_string(HOSTILE_TEXT[:190])
-    text = re.sub(r'^title = .*$', lambda m: title, text, count=1, flags=re.M)
+    text = re.sub(r"^title = .*$", lambda m: title, text, count=1, flags=re.M)
     description = "description = " + _toml_string(
-        "\n# heading?\n" + HOSTILE_TEXT + "\n<img src=x onerror=alert(1)>")
+        "\n# heading?\n" + HOSTILE_TEXT + "\n<img src=x onerror=alert(1)>"
+    )
     text = re.sub(r'^description = """(.|\n)*?"""', lambda m: description, text, count=1, flags=re.M)
-    text = text.replace('family = "particles"',
-                        'family = "particles"\nhard = ' + _toml_string(HOSTILE_TEXT))
+    text = text.replace('family = "particles"', 'family = "particles"\nhard = ' + _toml_string(HOSTILE_TEXT))
     path = folder / "hostile-text.toml"
     path.write_text(text)
     return path
@@ -83,8 +85,9 @@ def test_a_title_with_an_unbalanced_dollar_still_draws_its_figure(report: Path) 
     assert (report / "figures" / "hostile-text-work-precision.png").is_file()
 
 
-@pytest.mark.parametrize("name", ["..", "...", "a..b", "Upper", "dots.in.name", "ümlaut", "a_b",
-                                  "-lead", "x" * 81])
+@pytest.mark.parametrize(
+    "name", ["..", "...", "a..b", "Upper", "dots.in.name", "ümlaut", "a_b", "-lead", "x" * 81]
+)
 def test_a_case_name_that_could_leave_out_is_refused(tmp_path: Path, name: str) -> None:
     """Figure files are named after the case: only lower-case ASCII words joined by dashes
     can be names, so no name can hold a path separator or a parent reference."""

@@ -30,8 +30,9 @@ dt = {dt}
 """
 
 
-def _case(tmp_path: Path, *, duration: str = "1.0", dt: str = "[0.01]", extra: str = "",
-          body: str | None = None) -> Path:
+def _case(
+    tmp_path: Path, *, duration: str = "1.0", dt: str = "[0.01]", extra: str = "", body: str | None = None
+) -> Path:
     path = tmp_path / "ceiling-case.toml"
     path.write_text(body or CASE.format(duration=duration, dt=dt, extra=extra))
     return path
@@ -55,24 +56,43 @@ def test_only_the_command_line_with_trust_goes_past_a_ceiling(tmp_path, capsys):
     with pytest.raises(CaseError, match="over the ceiling"):
         load_case(_case(tmp_path), limits={"steps": 1e12})
     assert load_case(_case(tmp_path), limits={"steps": 1e12}, trust_limits=True)
-    assert main(["run", "--quick", "--engines", "reference", "--cases", str(_case(tmp_path)),
-                 "--limit", "particles=1e9", "--out", str(tmp_path / "rep")]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--quick",
+                "--engines",
+                "reference",
+                "--cases",
+                str(_case(tmp_path)),
+                "--limit",
+                "particles=1e9",
+                "--out",
+                str(tmp_path / "rep"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--trust-limits" in err[0]
     assert not (tmp_path / "rep").exists()
 
 
-EMITTER = ('[[scene.emitters]]\nshape = "cube"\ncenter = [0.0, 0.0, 0.0]\nsize = 0.1\n'
-           'rate_n = 1.0\nspeed = 1.0\nlifetime = 2\ncapacity = 4\nframe_dt = {frame_dt}\n')
+EMITTER = (
+    '[[scene.emitters]]\nshape = "cube"\ncenter = [0.0, 0.0, 0.0]\nsize = 0.1\n'
+    "rate_n = 1.0\nspeed = 1.0\nlifetime = 2\ncapacity = 4\nframe_dt = {frame_dt}\n"
+)
 
 
-@pytest.mark.parametrize(("change", "field"), [
-    ({"dt": "[1e-12]", "duration": "1e-9"}, "run.dt"),
-    ({"dt": "[1e-300]", "duration": "1e-296"}, "run.duration"),
-    ({"extra": "[stability]\nhorizon = 1.0\ndt_lo = 1e-300\ndt_hi = 0.1\n"}, "stability.dt_lo"),
-    ({"extra": '[reference]\nexact = "reference-run"\nmethod = "rk4"\ndt = 1e-12\n'},
-     "reference.dt"),
-])
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"dt": "[1e-12]", "duration": "1e-9"}, "run.dt"),
+        ({"dt": "[1e-300]", "duration": "1e-296"}, "run.duration"),
+        ({"extra": "[stability]\nhorizon = 1.0\ndt_lo = 1e-300\ndt_hi = 0.1\n"}, "stability.dt_lo"),
+        ({"extra": '[reference]\nexact = "reference-run"\nmethod = "rk4"\ndt = 1e-12\n'}, "reference.dt"),
+    ],
+)
 def test_steps_below_the_smallest_are_refused(tmp_path, change, field):
     with pytest.raises(CaseError) as err:
         load_case(_case(tmp_path, **change))
@@ -82,16 +102,19 @@ def test_steps_below_the_smallest_are_refused(tmp_path, change, field):
 @pytest.mark.parametrize(("frame_dt", "reason"), [("1e-300", "at least"), ("1e-8", "frames")])
 def test_an_emitters_frames_count_as_steps(tmp_path, frame_dt, reason):
     body = CASE.format(duration="1.0", dt="[0.01]", extra="").replace(
-        "[run]", EMITTER.format(frame_dt=frame_dt) + "[run]")
+        "[run]", EMITTER.format(frame_dt=frame_dt) + "[run]"
+    )
     with pytest.raises(CaseError, match=reason) as err:
         load_case(_case(tmp_path, body=body))
     assert err.value.field == "scene.emitters[0].frame_dt"
 
 
 def test_a_dense_exact_solution_of_a_big_scene_is_refused_before_it_is_built(tmp_path):
-    body = ('kind = "particles"\n[scene]\n[[scene.blocks]]\ncount = 20000\nlow = [0.0, 0.0, 0.0]\n'
-            'high = [1.0, 1.0, 1.0]\nmass = 1.0\n[run]\nduration = 1.0\ndt = [0.01]\n'
-            '[reference]\nexact = "linear"\n')
+    body = (
+        'kind = "particles"\n[scene]\n[[scene.blocks]]\ncount = 20000\nlow = [0.0, 0.0, 0.0]\n'
+        "high = [1.0, 1.0, 1.0]\nmass = 1.0\n[run]\nduration = 1.0\ndt = [0.01]\n"
+        '[reference]\nexact = "linear"\n'
+    )
     started = time.monotonic()
     with pytest.raises(CaseError, match="at most 1000 particles"):
         load_case(_case(tmp_path, body=body))
@@ -105,16 +128,24 @@ def _grown_by(fn) -> float:
     return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
 
 
-@pytest.mark.parametrize("scene", [
-    lambda: {"particles": [{"position": [[0.0, 0.0, 0.0]] * 2_000_000, "mass": 1.0}]},
-    lambda: {"particles": [{"position": [[0.0, 0.0, 0.0]], "mass": 1.0,
-                            "velocity": [[0.0, 0.0, 0.0]] * 2_000_000}]},
-    lambda: {"particles": [{"position": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
-                            "mass": [1.0] * 2_000_000}]},
-    lambda: {"particles": [{"position": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], "mass": 1.0}],
-             "springs": [{"pairs": [[0, 1]] * 6_000_000, "stiffness": 1.0}]},
-    lambda: {"gravity": [0.0] * 2_000_000},
-], ids=["positions", "velocities", "masses", "spring pairs", "a vector"])
+@pytest.mark.parametrize(
+    "scene",
+    [
+        lambda: {"particles": [{"position": [[0.0, 0.0, 0.0]] * 2_000_000, "mass": 1.0}]},
+        lambda: {
+            "particles": [
+                {"position": [[0.0, 0.0, 0.0]], "mass": 1.0, "velocity": [[0.0, 0.0, 0.0]] * 2_000_000}
+            ]
+        },
+        lambda: {"particles": [{"position": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], "mass": [1.0] * 2_000_000}]},
+        lambda: {
+            "particles": [{"position": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], "mass": 1.0}],
+            "springs": [{"pairs": [[0, 1]] * 6_000_000, "stiffness": 1.0}],
+        },
+        lambda: {"gravity": [0.0] * 2_000_000},
+    ],
+    ids=["positions", "velocities", "masses", "spring pairs", "a vector"],
+)
 def test_explicit_lists_are_counted_before_an_array_is_built(scene):
     table = scene()
 
@@ -127,10 +158,14 @@ def test_explicit_lists_are_counted_before_an_array_is_built(scene):
 
 def test_load_case_refuses_the_gates_the_command_line_refuses(tmp_path, capsys):
     gates = {
-        "a property the case does not name": ('[[gates]]\nkind = "property"\nname = "final_speed"\n'
-                                               'method = "rk4"\ndt = 0.01\nmax = 1.0\n', "name"),
-        "an unknown engine": ('[[gates]]\nkind = "status"\nengine = "nosuch"\nmethod = "rk4"\n'
-                              'dt = 0.01\nexpect = "ok"\n', "engine"),
+        "a property the case does not name": (
+            '[[gates]]\nkind = "property"\nname = "final_speed"\nmethod = "rk4"\ndt = 0.01\nmax = 1.0\n',
+            "name",
+        ),
+        "an unknown engine": (
+            '[[gates]]\nkind = "status"\nengine = "nosuch"\nmethod = "rk4"\ndt = 0.01\nexpect = "ok"\n',
+            "engine",
+        ),
     }
     for text, field in gates.values():
         path = _case(tmp_path, extra=text)
@@ -150,7 +185,6 @@ def test_the_python_api_refuses_gates_on_unknown_engines_as_the_command_line_doe
     from truestep.api import Tables
 
     tables = Tables(pd.DataFrame({"case": ["free-fall"], "engine": ["mine"]}))
-    gate = {"cases": "*", "kind": "order", "engine": "nosuch", "method": "x", "expect": 1.0,
-            "tol": 0.1}
+    gate = {"cases": "*", "kind": "order", "engine": "nosuch", "method": "x", "expect": 1.0, "tol": 0.1}
     with pytest.raises(CaseError, match="unknown engine 'nosuch'"):
         truestep.check(tables, gates=[gate])

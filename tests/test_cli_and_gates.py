@@ -17,8 +17,9 @@ from truestep.runner import run_matrix
 @pytest.fixture(scope="module")
 def quick_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
-    assert main(["run", "--quick", "--cases", "circle-field", "--engines", "reference",
-                 "--out", str(out)]) == 0
+    assert (
+        main(["run", "--quick", "--cases", "circle-field", "--engines", "reference", "--out", str(out)]) == 0
+    )
     return out
 
 
@@ -26,8 +27,18 @@ def test_run_writes_every_contracted_file(quick_report):
     for name in ("results.csv", "stability.csv", "restitution.csv", "index.md", "index.html"):
         assert (quick_report / name).is_file(), name
     results = pd.read_csv(quick_report / "results.csv")
-    for col in ("case", "engine", "method", "dt", "dt_kind", "status", "error",
-                "energy_drift", "nfev", "wall_s"):
+    for col in (
+        "case",
+        "engine",
+        "method",
+        "dt",
+        "dt_kind",
+        "status",
+        "error",
+        "energy_drift",
+        "nfev",
+        "wall_s",
+    ):
         assert col in results.columns
     # Methods that need a position/velocity split are rows that say why, not gaps.
     verlet = results[results["method"] == "verlet"]
@@ -37,8 +48,7 @@ def test_run_writes_every_contracted_file(quick_report):
 
 
 def test_gate_passes_on_a_good_run(quick_report, capsys):
-    code = main(["gate", "--results", str(quick_report / "results.csv"),
-                 "--cases", "circle-field"])
+    code = main(["gate", "--results", str(quick_report / "results.csv"), "--cases", "circle-field"])
     assert code == 0, capsys.readouterr().out
 
 
@@ -59,8 +69,7 @@ def test_bad_input_exits_2_with_one_line_and_loses_nothing(quick_report, tmp_pat
     bad = CASE_DIR / "zz-broken-for-test.toml"
     bad.write_text('kind = "particles"\n[run]\nduration = -1\ndt = [0.1]\n')
     try:
-        code = main(["run", "--quick", "--cases", "zz-broken-for-test", "--out",
-                     str(quick_report)])
+        code = main(["run", "--quick", "--cases", "zz-broken-for-test", "--out", str(quick_report)])
     finally:
         bad.unlink()
     err = capsys.readouterr().err

@@ -31,8 +31,9 @@ TIMING = set(MACHINE_COLUMNS)
 
 
 def _run(out: Path, *extra: str) -> int:
-    return main(["run", "--quick", "--cases", CASES, "--engines", "reference,pymunk",
-                 "--out", str(out), *extra])
+    return main(
+        ["run", "--quick", "--cases", CASES, "--engines", "reference,pymunk", "--out", str(out), *extra]
+    )
 
 
 def _same_but_timing(a: Path, b: Path) -> None:
@@ -48,8 +49,12 @@ def short_leases():
     the default 30 s (the scheduler of a ``LocalCluster`` runs in this process)."""
     import dask
 
-    with dask.config.set({"distributed.scheduler.locks.lease-timeout": "2s",
-                          "distributed.scheduler.locks.lease-validation-interval": "0.5s"}):
+    with dask.config.set(
+        {
+            "distributed.scheduler.locks.lease-timeout": "2s",
+            "distributed.scheduler.locks.lease-validation-interval": "0.5s",
+        }
+    ):
         yield
 
 
@@ -61,7 +66,8 @@ def local_run(tmp_path_factory) -> Path:
 
 
 def test_a_local_cluster_with_a_worker_killed_mid_run_gives_a_local_run_s_tables(
-        local_run: Path, tmp_path: Path, monkeypatch) -> None:
+    local_run: Path, tmp_path: Path, monkeypatch
+) -> None:
     """Two single-threaded workers; one dies as it starts a sweep. That sweep runs again
     on the other, every row is there exactly once, and every column but the timing ones
     and ``host`` equals the local run's."""
@@ -87,11 +93,27 @@ def test_a_sweep_that_kills_every_worker_is_crashed_rows(tmp_path: Path, monkeyp
     monkeypatch.setenv(KILL_WORKER, f"free-fall/reference/euler:99:{deaths}")
     out = tmp_path / "cluster"
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
-        assert main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
-                     "--out", str(out), "--scheduler", "local:2"]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--quick",
+                    "--cases",
+                    "free-fall",
+                    "--engines",
+                    "reference",
+                    "--out",
+                    str(out),
+                    "--scheduler",
+                    "local:2",
+                ]
+            )
+            == 0
+        )
     results = pd.read_csv(out / "results.csv")
-    euler = results[(results["case"] == "free-fall") & (results["method"] == "euler")
-                    & (results["engine"] == "reference")]
+    euler = results[
+        (results["case"] == "free-fall") & (results["method"] == "euler") & (results["engine"] == "reference")
+    ]
     assert len(euler) == 4 and set(euler["status"]) == {"crashed"}
     assert euler["message"].str.contains("worker died").all()
     others = results[~results.index.isin(euler.index) & results["status"].isin(["ok"])]
@@ -118,28 +140,46 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_the_scheduler_going_away_ends_the_run_with_one_error_and_keeps_the_sweeps(
-        tmp_path: Path) -> None:
+def test_the_scheduler_going_away_ends_the_run_with_one_error_and_keeps_the_sweeps(tmp_path: Path) -> None:
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     bin_dir = Path(sys.executable).parent
     env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
-    scheduler = subprocess.Popen([bin_dir / "dask", "scheduler", "--host", "127.0.0.1", "--port",
-                                  str(port), "--no-dashboard"], env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    worker = subprocess.Popen([bin_dir / "dask", "worker", address, "--nthreads", "1",
-                               "--no-dashboard"], env=env, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+    scheduler = subprocess.Popen(
+        [bin_dir / "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    worker = subprocess.Popen(
+        [bin_dir / "dask", "worker", address, "--nthreads", "1", "--no-dashboard"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     out = tmp_path / "out"
     out.mkdir()
     (out / MARKER).write_text(MARKER_TEXT)
     (out / "index.md").write_text("the previous report")
     try:
-        run = subprocess.Popen([bin_dir / "truestep", "run", "--quick", "--cases",
-                                "free-fall,harmonic-oscillator,spring-chain,damped-oscillator",
-                                "--engines", "reference,pymunk,pybullet", "--out", str(out),
-                                "--scheduler", address], stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+        run = subprocess.Popen(
+            [
+                bin_dir / "truestep",
+                "run",
+                "--quick",
+                "--cases",
+                "free-fall,harmonic-oscillator,spring-chain,damped-oscillator",
+                "--engines",
+                "reference,pymunk,pybullet",
+                "--out",
+                str(out),
+                "--scheduler",
+                address,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         journal = tmp_path / ".out.partial"
         deadline = time.monotonic() + 120
         while not list(journal.glob("sweep-*.json")) and time.monotonic() < deadline:

@@ -45,7 +45,10 @@ def test_every_particle_case_but_fields_and_emitters_is_compiled():
     names = {c.name for c in load_cases("*") if c.model is not None}
     assert names - {c.name for c in CASES} == {"hair-strands", "particle-fountain"}
     assert {c.name for c in CASES if independent(c.model)} >= {
-        "particle-rain", "bouncing-ball", "harmonic-oscillator"}
+        "particle-rain",
+        "bouncing-ball",
+        "harmonic-oscillator",
+    }
     assert not independent(next(c for c in CASES if c.name == "spring-chain").model)
 
 
@@ -72,8 +75,9 @@ def test_compiled_equals_numpy(case):
             size = max(1.0, float(np.max(np.abs(slow.x))), float(np.max(np.abs(slow.v))))
             np.testing.assert_allclose(fast.x, slow.x, rtol=0, atol=ROUND_OFF * size, err_msg=label)
             np.testing.assert_allclose(fast.v, slow.v, rtol=0, atol=ROUND_OFF * size, err_msg=label)
-            np.testing.assert_allclose(fast.energy, slow.energy, rtol=1e-9, atol=ROUND_OFF * size,
-                                       err_msg=label)
+            np.testing.assert_allclose(
+                fast.energy, slow.energy, rtol=1e-9, atol=ROUND_OFF * size, err_msg=label
+            )
         assert fast.t_fail == slow.t_fail, label
 
 
@@ -82,22 +86,31 @@ def test_fields_and_emitters_run_on_the_numpy_path(case_named):
     assert traj.path == "numpy"
     assert compiled_reason(case_named("hair-strands").model, "lecture") == "emitters"
     assert compiled_reason(None, "rk4").startswith("an ODE case")
-    assert "not a fixed-step explicit method" in compiled_reason(case_named("free-fall").model,
-                                                                 "implicit-euler")
+    assert "not a fixed-step explicit method" in compiled_reason(
+        case_named("free-fall").model, "implicit-euler"
+    )
 
 
-@pytest.mark.parametrize("name, method", [
-    ("harmonic-oscillator", "rk4"), ("bouncing-ball", "lecture"), ("hanging-cloth", "verlet"),
-    ("close-encounter", "heun"), ("particle-rain", "symplectic-euler"),
-    ("triangle-impulse", "euler"), ("sliding-contact", "midpoint")])
-def test_energy_watched_at_every_step_bounds_the_numpy_energy_of_every_record(case_named, name,
-                                                                              method):
+@pytest.mark.parametrize(
+    "name, method",
+    [
+        ("harmonic-oscillator", "rk4"),
+        ("bouncing-ball", "lecture"),
+        ("hanging-cloth", "verlet"),
+        ("close-encounter", "heun"),
+        ("particle-rain", "symplectic-euler"),
+        ("triangle-impulse", "euler"),
+        ("sliding-contact", "midpoint"),
+    ],
+)
+def test_energy_watched_at_every_step_bounds_the_numpy_energy_of_every_record(case_named, name, method):
     case = case_named(name)
     dt = case.dts[0]
     h = case.steps_for(dt)[1]
     plain, _ = run_compiled(case.model, method, case.duration, h, max_records=case.max_records)
-    watched, _ = run_compiled(case.model, method, case.duration, h,
-                              max_records=case.max_records, track_energy=True)
+    watched, _ = run_compiled(
+        case.model, method, case.duration, h, max_records=case.max_records, track_energy=True
+    )
     # watching changes nothing in the run
     np.testing.assert_array_equal(watched.x, plain.x)
     np.testing.assert_array_equal(watched.v, plain.v)
@@ -107,8 +120,7 @@ def test_energy_watched_at_every_step_bounds_the_numpy_energy_of_every_record(ca
     scale = max(1.0, float(np.max(np.abs(energy))))
     # the compiled sums run in another order than numpy's (1e-16 of the energy a term)
     assert low <= energy.min() + 1e-12 * scale and high >= energy.max() - 1e-12 * scale
-    every, _ = run_compiled(case.model, method, case.duration, h, max_records=plain.steps,
-                            track_energy=True)
+    every, _ = run_compiled(case.model, method, case.duration, h, max_records=plain.steps, track_energy=True)
     assert len(every.t) == every.steps + 1  # every state recorded: the bounds are theirs
     energy = total_energy(case.model, every.x, every.v)
     assert every.extra["energy_min"] == pytest.approx(energy.min(), rel=1e-12, abs=1e-12 * scale)
@@ -120,12 +132,18 @@ def unstable_in_one_tile(n: int = 3 * tiles.BLOCK) -> ParticleModel:
     """Independent particles under drag; those of the second tile so light that explicit
     Euler's factor ``1 - h k / m`` exceeds 1 in size: they blow up, the others do not."""
     mass = np.ones(n)
-    mass[tiles.BLOCK + 10: tiles.BLOCK + 20] = 1e-4
+    mass[tiles.BLOCK + 10 : tiles.BLOCK + 20] = 1e-4
     rng = np.random.default_rng(5)
-    return ParticleModel(mass=mass, x0=rng.normal(size=(n, 3)), v0=rng.normal(size=(n, 3)),
-                         radius=np.zeros(n), fixed=np.zeros(n, bool),
-                         gravity=np.array([0.0, -9.81, 0.0]), drag=0.5,
-                         planes=[Plane(np.array([0.0, -5.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.5)])
+    return ParticleModel(
+        mass=mass,
+        x0=rng.normal(size=(n, 3)),
+        v0=rng.normal(size=(n, 3)),
+        radius=np.zeros(n),
+        fixed=np.zeros(n, bool),
+        gravity=np.array([0.0, -9.81, 0.0]),
+        drag=0.5,
+        planes=[Plane(np.array([0.0, -5.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.5)],
+    )
 
 
 @pytest.mark.parametrize("method", ["euler", "lecture"])
@@ -142,7 +160,7 @@ def test_a_blow_up_in_one_tile_ends_the_run_as_the_whole_scene_does(method):
     assert (fast.steps, fast.nfev, fast.t_fail) == (slow.steps, slow.nfev, slow.t_fail)
     np.testing.assert_array_equal(fast.t, slow.t)
     n = model.n
-    np.testing.assert_array_equal(fast.x, slow.x[:, :3 * n].reshape(-1, n, 3))
+    np.testing.assert_array_equal(fast.x, slow.x[:, : 3 * n].reshape(-1, n, 3))
 
 
 class Ralston(ExplicitRungeKutta):
@@ -164,8 +182,9 @@ def test_a_new_tableau_is_compiled_from_its_facts_alone(case_named, monkeypatch)
         system = ParticleSystem(case.model, passes_for(case.model))
         slow = integrate(Ralston(system), 0.2, h)
         n = case.model.n
-        np.testing.assert_allclose(fast.x, slow.x[:, :3 * n].reshape(-1, n, 3), rtol=0,
-                                   atol=1e-12 * max(1.0, np.abs(slow.x).max()))
+        np.testing.assert_allclose(
+            fast.x, slow.x[:, : 3 * n].reshape(-1, n, 3), rtol=0, atol=1e-12 * max(1.0, np.abs(slow.x).max())
+        )
         assert fast.nfev == slow.nfev == 2 * fast.steps
 
 
@@ -189,8 +208,10 @@ def held(scene, method: str) -> tuple:
 
 
 def test_a_step_is_composed_of_only_what_its_scene_declares(case_named):
-    harmonic, ball = compiled.pack(case_named("harmonic-oscillator").model), compiled.pack(
-        case_named("bouncing-ball").model)
+    harmonic, ball = (
+        compiled.pack(case_named("harmonic-oscillator").model),
+        compiled.pack(case_named("bouncing-ball").model),
+    )
     plain, planes = (step_slots.slots_for(*held(scene, "lecture")) for scene in (harmonic, ball))
     # no planes: the collision slots are filled with nothing; with them, the kernels
     assert "return False" in compose.source_of(plain["collisions"])
@@ -205,10 +226,8 @@ def test_a_step_is_composed_of_only_what_its_scene_declares(case_named):
     assert len(names) == 2
 
 
-def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named,
-                                                                      monkeypatch):
-    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model),
-                                      "lecture"))
+def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named, monkeypatch):
+    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model), "lecture"))
     before = compose.cache_name("drive", slots)
     monkeypatch.setattr(compose, "FINGERPRINT", "another source")
     assert compose.cache_name("drive", slots) != before
@@ -268,15 +287,20 @@ def test_loops_from_the_cache_made_in_other_processes_keep_their_own_copies(tmp_
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_DISABLE_JIT": "0"}
 
     def run(*names: str) -> list[str]:
-        return subprocess.run([sys.executable, "two_fillings.py", *names], cwd=tmp_path,
-                              env=env, capture_output=True, text=True, check=True).stdout.split()
+        return subprocess.run(
+            [sys.executable, "two_fillings.py", *names],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.split()
 
     assert run("plus") == ["2.0"] and run("times") == ["10.0"]
     assert run("plus", "times") == ["2.0", "10.0"]
 
 
-def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named,
-                                                                         monkeypatch):
+def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named, monkeypatch):
     monkeypatch.setattr(compiled, "_PREPARED", {})
     precompile.compile_all([case_named("free-fall").model], progress=lambda line: None)
     # one loop: euler, midpoint and heun, rk4 (three patterns of a tableau), a kick and
@@ -285,7 +309,9 @@ def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_na
     assert len(compiled._PREPARED) == 1
     model = case_named("free-fall").model
     assert {compiled.prepared(model, m)[2] for m in ("euler", "rk4", "verlet")} == {
-        tiles.Fused(tiles.BLOCK), tiles.Fused(len(model.mass))}
+        tiles.Fused(tiles.BLOCK),
+        tiles.Fused(len(model.mass)),
+    }
 
 
 def test_one_loop_runs_every_method_in_passes(case_named):
@@ -299,7 +325,8 @@ def test_method_facts_choose_the_step():
 
     kinds = {m: compiled.method_kind(m) for m in METHODS}
     assert {m for m, k in kinds.items() if isinstance(k, Tableau)} == {
-        m for m, cls in METHODS.items() if issubclass(cls, ExplicitRungeKutta)}
+        m for m, cls in METHODS.items() if issubclass(cls, ExplicitRungeKutta)
+    }
     assert isinstance(kinds["verlet"], KickDriftKick) and kinds["verlet"].carries_state
     assert kinds["lecture"] == KickDrift(0.5, 0.5, 1)
     assert kinds["dopri5"] is None and kinds["implicit-euler"] is None
@@ -322,9 +349,15 @@ def lone_flag_model(n: int = 16, lone: tuple[int, ...] = (1, 9)) -> ParticleMode
     x0[:, 1] = 1000.0
     for p in lone:
         x0[p, 1] = 0.3
-    return ParticleModel(mass=np.ones(n), x0=x0, v0=np.zeros((n, 3)), radius=np.zeros(n),
-                         fixed=np.zeros(n, bool), gravity=np.array([0.0, -9.81, 0.0]),
-                         planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5)])
+    return ParticleModel(
+        mass=np.ones(n),
+        x0=x0,
+        v0=np.zeros((n, 3)),
+        radius=np.zeros(n),
+        fixed=np.zeros(n, bool),
+        gravity=np.array([0.0, -9.81, 0.0]),
+        planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5)],
+    )
 
 
 # Kills tiles.py:302 `flags[b + 1]` -> `flags[b ** 1]` in fused_collisions: the run of
@@ -335,37 +368,41 @@ def test_a_particle_alone_near_a_plane_at_each_offset_of_a_run_of_eight_is_colli
     n = 16
     for lone in [(k, 8 + k) for k in range(8)]:
         model = lone_flag_model(n, lone)
-        assert compiled.layout_for(compiled.method_kind(method),
-                                   compiled.pack(model)).name == "fused"
+        assert compiled.layout_for(compiled.method_kind(method), compiled.pack(model)).name == "fused"
         fast, _ = run_compiled(model, method, 0.6, 1e-3, max_records=60)
-        slow = integrate(get_solver(method)(ParticleSystem(model, passes_for(model))),
-                         0.6, 1e-3, max_records=60)
+        slow = integrate(
+            get_solver(method)(ParticleSystem(model, passes_for(model))), 0.6, 1e-3, max_records=60
+        )
         assert fast.status == slow.status == "ok"
         np.testing.assert_array_equal(fast.t, slow.t)
-        np.testing.assert_array_equal(fast.x, slow.x[:, :3 * n].reshape(-1, n, 3),
-                                      err_msg=f"{method}, lone {lone}")
+        np.testing.assert_array_equal(
+            fast.x, slow.x[:, : 3 * n].reshape(-1, n, 3), err_msg=f"{method}, lone {lone}"
+        )
         # the falling particles never go below the floor
         assert fast.x[:, list(lone), 1].min() >= -1e-9, (method, lone)
 
 
-def against_numpy(model: ParticleModel, method: str, duration: float, h: float, max_records: int,
-            exact: bool = True):
+def against_numpy(
+    model: ParticleModel, method: str, duration: float, h: float, max_records: int, exact: bool = True
+):
     """The compiled run against the numpy oracle: status, records, times, states."""
     n = model.n
     fast, _ = run_compiled(model, method, duration, h, max_records=max_records)
-    slow = integrate(get_solver(method)(ParticleSystem(model, passes_for(model))),
-                     duration, h, max_records=max_records)
+    slow = integrate(
+        get_solver(method)(ParticleSystem(model, passes_for(model))), duration, h, max_records=max_records
+    )
     assert fast.status == slow.status, method
     assert (fast.steps, fast.nfev) == (slow.steps, slow.nfev), method
     np.testing.assert_array_equal(fast.t, slow.t, err_msg=method)
     assert fast.t_fail == slow.t_fail, method
     if fast.status == "ok":
-        xs = slow.x[:, :3 * n].reshape(-1, n, 3)
+        xs = slow.x[:, : 3 * n].reshape(-1, n, 3)
         if exact:
             np.testing.assert_array_equal(fast.x, xs, err_msg=method)
         else:
-            np.testing.assert_allclose(fast.x, xs, rtol=0, atol=1e-12 * max(1.0, np.abs(xs).max()),
-                                       err_msg=method)
+            np.testing.assert_allclose(
+                fast.x, xs, rtol=0, atol=1e-12 * max(1.0, np.abs(xs).max()), err_msg=method
+            )
     return fast, slow
 
 
@@ -386,10 +423,16 @@ def dumbbell_on_floor(friction: float, v0=(1.0, 0.0, 0.0), lift: float = 0.0) ->
     n = len(x0)
     m = len(i)
     springs = Springs(np.array(i), np.array(j), np.full(m, 50.0), np.full(m, 0.5), np.ones(m))
-    return ParticleModel(mass=np.ones(n), x0=np.array(x0), v0=np.array(v), radius=np.zeros(n),
-                         fixed=np.zeros(n, bool), gravity=np.array([0.0, -9.81, 0.0]),
-                         springs=springs,
-                         planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5, friction)])
+    return ParticleModel(
+        mass=np.ones(n),
+        x0=np.array(x0),
+        v0=np.array(v),
+        radius=np.zeros(n),
+        fixed=np.zeros(n, bool),
+        gravity=np.array([0.0, -9.81, 0.0]),
+        springs=springs,
+        planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5, friction)],
+    )
 
 
 # Kills particles_kernels.py:119 `F[1, p]` -> `F[2, p]` in add_contact_forces: the contact
@@ -399,8 +442,7 @@ def dumbbell_on_floor(friction: float, v0=(1.0, 0.0, 0.0), lift: float = 0.0) ->
 @pytest.mark.parametrize("method", ["euler", "symplectic-euler", "verlet", "lecture"])
 def test_friction_on_a_resting_dumbbell_of_the_passes_layout_is_the_numpy_one(method):
     model = dumbbell_on_floor(friction=0.3)
-    assert compiled.layout_for(compiled.method_kind(method),
-                               compiled.pack(model)).name == "passes"
+    assert compiled.layout_for(compiled.method_kind(method), compiled.pack(model)).name == "passes"
     fast, _ = against_numpy(model, method, 0.5, 1e-3, max_records=50)
     # friction slowed it: mu g t = 0.3 * 9.81 * 0.5 = 1.47 m/s > 1 m/s, it stopped
     assert fast.x[-1, 0, 0] < 0.5 * 1.0 * 0.5 + 0.1
@@ -428,13 +470,19 @@ def test_a_particle_leaving_the_floor_loses_its_contact_in_the_passes_layout(met
 @pytest.mark.parametrize("method", ["euler", "lecture"])
 def test_a_blow_up_seen_between_records_is_recorded_as_integrate_does(method):
     n = 3
-    model = ParticleModel(mass=np.full(n, 1e-4), x0=np.ones((n, 3)), v0=np.ones((n, 3)),
-                          radius=np.zeros(n), fixed=np.zeros(n, bool),
-                          gravity=np.array([0.0, -9.81, 0.0]), drag=0.5)
+    model = ParticleModel(
+        mass=np.full(n, 1e-4),
+        x0=np.ones((n, 3)),
+        v0=np.ones((n, 3)),
+        radius=np.zeros(n),
+        fixed=np.zeros(n, bool),
+        gravity=np.array([0.0, -9.81, 0.0]),
+        drag=0.5,
+    )
     # explicit Euler's factor 1 - h k / m = -4: beyond BLOWUP in about 20 steps, found at
     # the check of step 64; with 2 records (t = 0 and the end) no record lies between
     fast, slow = against_numpy(model, method, 1.0, 1e-3, max_records=2)
     assert fast.status == slow.status == "unstable"
     assert len(slow.t) == 2 and len(fast.t) == 2
     n_ = model.n
-    np.testing.assert_array_equal(fast.x, slow.x[:, :3 * n_].reshape(-1, n_, 3))
+    np.testing.assert_array_equal(fast.x, slow.x[:, : 3 * n_].reshape(-1, n_, 3))

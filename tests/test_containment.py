@@ -63,8 +63,7 @@ def test_what_a_call_starts_dies_with_it_and_its_output_stays_with_it(tmp_path, 
             assert out.status == status, out
             assert _pid(pids) and still_running(_pid(pids)) == [], (how, then)
             if then != "hang":
-                for word in ("PRINTED-STDOUT", "PRINTED-STDERR", "WRITTEN-FD1", "ECHOED",
-                             "C-PRINTF"):
+                for word in ("PRINTED-STDOUT", "PRINTED-STDERR", "WRITTEN-FD1", "ECHOED", "C-PRINTF"):
                     assert word in out.output, (word, out.output)
     seen = capfd.readouterr()
     assert "PRINTED" not in seen.out + seen.err and "ECHOED" not in seen.out + seen.err
@@ -88,9 +87,11 @@ with handled():
 def test_sigterm_to_truestep_kills_what_the_adapter_started(tmp_path):
     for how in ("child", "daemon"):
         pids = tmp_path / how
-        parent = subprocess.Popen([sys.executable, "-c", SIGTERMED, str(pids), how],
-                                  cwd=Path(__file__).parent,
-                                  env={**os.environ, "PYTHONPATH": str(Path(__file__).parent)})
+        parent = subprocess.Popen(
+            [sys.executable, "-c", SIGTERMED, str(pids), how],
+            cwd=Path(__file__).parent,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).parent)},
+        )
         deadline = time.monotonic() + 60
         while not pids.exists() and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -123,8 +124,7 @@ def test_a_failed_rows_message_shows_the_engines_output(tmp_path, capfd):
     resolve_engine("test_containment:Chatty")
     case = load_cases("free-fall")[0]
     before = {p for p in os.listdir("/proc") if p.isdigit()}
-    rows = run_sweep(case, "chatty-test", "rk4", case.quick_dts, adaptive=False,
-                     timing=Timing(max_repeats=1))
+    rows = run_sweep(case, "chatty-test", "rk4", case.quick_dts, adaptive=False, timing=Timing(max_repeats=1))
     assert [r["status"] for r in rows] == ["ok"] * (len(rows) - 1) + ["crashed"]
     assert "the last step failed" in rows[-1]["message"]
     assert "engine output: " in rows[-1]["message"] and "CHATTY" in rows[-1]["message"]
@@ -132,8 +132,11 @@ def test_a_failed_rows_message_shows_the_engines_output(tmp_path, capfd):
     seen = capfd.readouterr()
     assert "CHATTY" not in seen.out + seen.err
     left = [int(p) for p in {p for p in os.listdir("/proc") if p.isdigit()} - before]
-    assert [p for p in still_running(left, 1.0)
-            if "sleep(120)" in Path(f"/proc/{p}/cmdline").read_text(errors="replace")] == []
+    assert [
+        p
+        for p in still_running(left, 1.0)
+        if "sleep(120)" in Path(f"/proc/{p}/cmdline").read_text(errors="replace")
+    ] == []
 
 
 def test_start_isolated_children_lead_their_own_process_group():

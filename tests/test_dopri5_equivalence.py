@@ -31,49 +31,179 @@ BEFORE: dict[tuple[str, float], tuple[int, int, list[float]]] = {
     # dopri5 before the speed-up (commit 2c7ccd8, x86-64). The final state is the whole
     # state for an ODE case; for a particle scene the position and velocity of its first
     # particle, then of its last.
-    ("arenstorf-orbit", 1e-06): (132, 1004, [0.9940240003771242, 0.00010122550230045159,
-                                             0.016266010125374153, -1.9976650669076321]),
-    ("arenstorf-orbit", 1e-08): (320, 2114, [0.9939995551165938, -8.905028691476085e-07,
-                                             -0.000147530534280918, -2.0016543505471343]),
-    ("arenstorf-orbit", 1e-10): (794, 4772, [0.9939999922483008, -1.995806338218279e-08,
-                                             -3.2712560716664785e-06, -2.0015863131915537]),
-    ("kepler-orbit", 1e-06): (94, 746, [0.4000092260929083, -4.941399139173769e-05,
-                                        8.677148786603861e-05, 1.9999614588916232]),
-    ("kepler-orbit", 1e-08): (222, 1370, [0.4000000326167521, -4.206044917697688e-06,
-                                          1.2710292828226055e-05, 1.9999998703704254]),
-    ("close-encounter", 1e-06): (305, 2324, [
-        -1.1378697835451124, -1.2820922686593954, 0.0, 0.7629872506421028, 0.6555921338021603,
-        0.0, -1.2737523054606112, -1.2355603531277985, 0.0, -1.7630456473570921,
-        -1.8437586418206955, 0.0]),
-    ("close-encounter", 1e-08): (737, 4838, [
-        -1.1384691116033578, -1.2826549328725505, 0.0, 0.7813919246427723, 0.6482965515498526,
-        0.0, -1.2733815033133447, -1.2350728689725174, 0.0, -1.7815809012490946,
-        -1.836519077402772, 0.0]),
+    ("arenstorf-orbit", 1e-06): (
+        132,
+        1004,
+        [0.9940240003771242, 0.00010122550230045159, 0.016266010125374153, -1.9976650669076321],
+    ),
+    ("arenstorf-orbit", 1e-08): (
+        320,
+        2114,
+        [0.9939995551165938, -8.905028691476085e-07, -0.000147530534280918, -2.0016543505471343],
+    ),
+    ("arenstorf-orbit", 1e-10): (
+        794,
+        4772,
+        [0.9939999922483008, -1.995806338218279e-08, -3.2712560716664785e-06, -2.0015863131915537],
+    ),
+    ("kepler-orbit", 1e-06): (
+        94,
+        746,
+        [0.4000092260929083, -4.941399139173769e-05, 8.677148786603861e-05, 1.9999614588916232],
+    ),
+    ("kepler-orbit", 1e-08): (
+        222,
+        1370,
+        [0.4000000326167521, -4.206044917697688e-06, 1.2710292828226055e-05, 1.9999998703704254],
+    ),
+    ("close-encounter", 1e-06): (
+        305,
+        2324,
+        [
+            -1.1378697835451124,
+            -1.2820922686593954,
+            0.0,
+            0.7629872506421028,
+            0.6555921338021603,
+            0.0,
+            -1.2737523054606112,
+            -1.2355603531277985,
+            0.0,
+            -1.7630456473570921,
+            -1.8437586418206955,
+            0.0,
+        ],
+    ),
+    ("close-encounter", 1e-08): (
+        737,
+        4838,
+        [
+            -1.1384691116033578,
+            -1.2826549328725505,
+            0.0,
+            0.7813919246427723,
+            0.6482965515498526,
+            0.0,
+            -1.2733815033133447,
+            -1.2350728689725174,
+            0.0,
+            -1.7815809012490946,
+            -1.836519077402772,
+            0.0,
+        ],
+    ),
     ("circle-field", 1e-05): (16, 98, [0.9999780378941382, 2.0052135973960827e-05]),
     ("circle-field", 1e-09): (94, 566, [0.9999999974209434, 3.042092185795431e-10]),
-    ("spring-chain", 1e-06): (159, 1004, [
-        0.09771289487391474, 0.0, 0.0, 1.3213472963485684, 0.0, 0.0, 0.2800714559722241,
-        0.0, 0.0, 2.958993234403833, 0.0, 0.0]),
-    ("spring-chain", 1e-08): (399, 2408, [
-        0.09771870051034491, 0.0, 0.0, 1.3212271118223868, 0.0, 0.0, 0.28007051764033875,
-        0.0, 0.0, 2.958979922786661, 0.0, 0.0]),
-    ("hanging-cloth", 1e-04): (326, 2252, [
-        0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.7004601531757786, 0.28896835711728935,
-        0.0056273161127085, 4.3915830852412764e-05, -1.455662906089871e-05,
-        -0.003831417118886127]),
-    ("spring-damper-pair", 1e-06): (23, 152, [
-        0.6518735193678133, 1.0, 0.0, 1.1470988031948064, 1.0, 0.0, 1.6493754935440625, 1.0,
-        0.0, 0.28430039893506487, 1.0, 0.0]),
-    ("spring-damper-pair", 1e-08): (56, 344, [
-        0.6518733385557235, 0.9999999999999997, 0.0, 1.1471102676763232, 1.0, 0.0,
-        1.649375553814759, 0.9999999999999997, 0.0, 0.284296577441226, 1.0, 0.0]),
+    ("spring-chain", 1e-06): (
+        159,
+        1004,
+        [
+            0.09771289487391474,
+            0.0,
+            0.0,
+            1.3213472963485684,
+            0.0,
+            0.0,
+            0.2800714559722241,
+            0.0,
+            0.0,
+            2.958993234403833,
+            0.0,
+            0.0,
+        ],
+    ),
+    ("spring-chain", 1e-08): (
+        399,
+        2408,
+        [
+            0.09771870051034491,
+            0.0,
+            0.0,
+            1.3212271118223868,
+            0.0,
+            0.0,
+            0.28007051764033875,
+            0.0,
+            0.0,
+            2.958979922786661,
+            0.0,
+            0.0,
+        ],
+    ),
+    ("hanging-cloth", 1e-04): (
+        326,
+        2252,
+        [
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.7004601531757786,
+            0.28896835711728935,
+            0.0056273161127085,
+            4.3915830852412764e-05,
+            -1.455662906089871e-05,
+            -0.003831417118886127,
+        ],
+    ),
+    ("spring-damper-pair", 1e-06): (
+        23,
+        152,
+        [
+            0.6518735193678133,
+            1.0,
+            0.0,
+            1.1470988031948064,
+            1.0,
+            0.0,
+            1.6493754935440625,
+            1.0,
+            0.0,
+            0.28430039893506487,
+            1.0,
+            0.0,
+        ],
+    ),
+    ("spring-damper-pair", 1e-08): (
+        56,
+        344,
+        [
+            0.6518733385557235,
+            0.9999999999999997,
+            0.0,
+            1.1471102676763232,
+            1.0,
+            0.0,
+            1.649375553814759,
+            0.9999999999999997,
+            0.0,
+            0.284296577441226,
+            1.0,
+            0.0,
+        ],
+    ),
     # Collisions between the steps, and an emitter (an observed ``alive`` per record).
-    ("bouncing-ball", 1e-04): (7, 110, [0.0, 0.05, 0.0, 0.0, 0.0, 0.0,
-                                        0.0, 0.05, 0.0, 0.0, 0.0, 0.0]),
-    ("particle-fountain", 1e-04): (30, 236, [
-        0.01590686260198923, 0.6872307931956028, 0.10911231377729383, -0.19258380019061336,
-        -1.3369081296404475, 0.3327362847885536, 0.16535705617749294, 0.09186648900030531,
-        -0.7140433247098886, 0.4983328057958335, -3.156962156913829, -1.8784259410968824]),
+    ("bouncing-ball", 1e-04): (7, 110, [0.0, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.0]),
+    ("particle-fountain", 1e-04): (
+        30,
+        236,
+        [
+            0.01590686260198923,
+            0.6872307931956028,
+            0.10911231377729383,
+            -0.19258380019061336,
+            -1.3369081296404475,
+            0.3327362847885536,
+            0.16535705617749294,
+            0.09186648900030531,
+            -0.7140433247098886,
+            0.4983328057958335,
+            -3.156962156913829,
+            -1.8784259410968824,
+        ],
+    ),
 }
 FOUNTAIN_ALIVE = ((31, 1200), 18781)
 """particle-fountain at 1e-4 before the speed-up: the shape of ``extra["alive"]`` (one
@@ -136,7 +266,7 @@ class TextbookDopri5(DormandPrince54):
             scale = self.atol + np.maximum(np.abs(x), np.abs(x_new)) * self.rtol
             err = _textbook_rms(h * (self.E @ self._k) / scale)
             if err <= 1.0:
-                factor = self.max_factor if err == 0 else self.safety * err ** -0.2
+                factor = self.max_factor if err == 0 else self.safety * err**-0.2
                 factor = min(self.max_factor, factor)
                 if rejected:
                     factor = min(1.0, factor)
@@ -145,7 +275,7 @@ class TextbookDopri5(DormandPrince54):
             if not np.isfinite(err):
                 factor = self.min_factor
             else:
-                factor = max(self.min_factor, self.safety * err ** -0.2)
+                factor = max(self.min_factor, self.safety * err**-0.2)
             h *= factor
             rejected = True
             self.n_rejected += 1
@@ -164,8 +294,9 @@ def _textbook_rms(a: np.ndarray) -> float:
 def run_case(case, cls: type[DormandPrince54], tol: float) -> Run:
     """``cls`` on the case's numpy system at rtol = atol = ``tol``, as the adapter runs it."""
     system = build_system(case)
-    return integrate(cls(system, rtol=tol, atol=tol), case.duration, case.duration,
-                     max_records=case.max_records)
+    return integrate(
+        cls(system, rtol=tol, atol=tol), case.duration, case.duration, max_records=case.max_records
+    )
 
 
 def final_state(case, run: Run) -> np.ndarray:
@@ -197,8 +328,7 @@ def runs(case_named):
     def get(name: str, tol: float) -> tuple[Run, Run]:
         if (name, tol) not in cache:
             case = recorded_case(case_named(name))
-            cache[name, tol] = (run_case(case, DormandPrince54, tol),
-                                run_case(case, TextbookDopri5, tol))
+            cache[name, tol] = (run_case(case, DormandPrince54, tol), run_case(case, TextbookDopri5, tol))
         return cache[name, tol]
 
     return get
@@ -232,12 +362,18 @@ def test_the_steps_evaluations_and_states_recorded_before(case_named, runs, name
     steps, nfev, state = BEFORE[name, tol]
     new, old = runs(name, tol)
     if name in ROUNDED_STEPS and (old.steps, old.nfev) != (steps, nfev):
-        pytest.skip(f"{name}: the code before the speed-up rounds otherwise on this machine "
-                    f"({old.steps} steps, {old.nfev} evaluations)")
+        pytest.skip(
+            f"{name}: the code before the speed-up rounds otherwise on this machine "
+            f"({old.steps} steps, {old.nfev} evaluations)"
+        )
     assert new.status == "ok"
     assert (new.steps, new.nfev) == (steps, nfev)
-    np.testing.assert_allclose(final_state(recorded_case(case_named(name)), new), state, rtol=0,
-                               atol=ROUND_OFF.get(name, ROUND_OFF_DEFAULT))
+    np.testing.assert_allclose(
+        final_state(recorded_case(case_named(name)), new),
+        state,
+        rtol=0,
+        atol=ROUND_OFF.get(name, ROUND_OFF_DEFAULT),
+    )
 
 
 def test_the_observed_extras_are_kept_per_record(runs):
@@ -279,14 +415,14 @@ def test_after_an_event_the_first_stage_is_the_derivative_at_the_changed_state()
     np.testing.assert_allclose(run.x[later], exact, rtol=1e-6, atol=0)
 
 
-AGREED_WITH_SCIPY = [key for key in BEFORE if key[0] not in ROUNDED_STEPS | {
-    "bouncing-ball", "particle-fountain"}]
+AGREED_WITH_SCIPY = [
+    key for key in BEFORE if key[0] not in ROUNDED_STEPS | {"bouncing-ball", "particle-fountain"}
+]
 """Where scipy's RK45 took the same steps and evaluations before (it models no collisions
 or emitters; on the cloth the two round apart, :data:`ROUNDED_STEPS`)."""
 
 
-@pytest.mark.parametrize(("name", "tol"), AGREED_WITH_SCIPY,
-                         ids=[f"{n}-{t:g}" for n, t in AGREED_WITH_SCIPY])
+@pytest.mark.parametrize(("name", "tol"), AGREED_WITH_SCIPY, ids=[f"{n}-{t:g}" for n, t in AGREED_WITH_SCIPY])
 def test_the_steps_evaluations_and_states_of_scipys_rk45(case_named, runs, name, tol):
     case = recorded_case(case_named(name))
     theirs = get_adapter("scipy").simulate(case, "RK45", tol)
@@ -294,14 +430,11 @@ def test_the_steps_evaluations_and_states_of_scipys_rk45(case_named, runs, name,
     assert (new.steps, new.nfev) == (theirs.steps, theirs.nfev)
     ours = new.x[-1]
     if case.kind == "ode":
-        np.testing.assert_allclose(ours, theirs.x[-1, 0], rtol=0,
-                                   atol=ROUND_OFF.get(name, ROUND_OFF_DEFAULT))
+        np.testing.assert_allclose(ours, theirs.x[-1, 0], rtol=0, atol=ROUND_OFF.get(name, ROUND_OFF_DEFAULT))
     else:
         n = case.model.n
-        np.testing.assert_allclose(ours[: 3 * n].reshape(n, 3), theirs.x[-1], rtol=0,
-                                   atol=ROUND_OFF_DEFAULT)
-        np.testing.assert_allclose(ours[3 * n :].reshape(n, 3), theirs.v[-1], rtol=0,
-                                   atol=ROUND_OFF_DEFAULT)
+        np.testing.assert_allclose(ours[: 3 * n].reshape(n, 3), theirs.x[-1], rtol=0, atol=ROUND_OFF_DEFAULT)
+        np.testing.assert_allclose(ours[3 * n :].reshape(n, 3), theirs.v[-1], rtol=0, atol=ROUND_OFF_DEFAULT)
 
 
 class Riccati(System):
@@ -312,11 +445,14 @@ class Riccati(System):
             return x * x
 
 
-@pytest.mark.parametrize(("tol", "steps", "nfev", "t_fail"), [
-    # Recorded before the speed-up: the first state beyond BLOWUP ends the run, recorded.
-    (1e-6, 172, 2054, 1.0000006495122762),
-    (1e-9, 672, 4034, 0.9999999999458525),
-])
+@pytest.mark.parametrize(
+    ("tol", "steps", "nfev", "t_fail"),
+    [
+        # Recorded before the speed-up: the first state beyond BLOWUP ends the run, recorded.
+        (1e-6, 172, 2054, 1.0000006495122762),
+        (1e-9, 672, 4034, 0.9999999999458525),
+    ],
+)
 def test_a_blow_up_ends_an_adaptive_run_at_the_same_step(tol, steps, nfev, t_fail):
     run = integrate(DormandPrince54(Riccati(np.array([1.0, 0.5])), rtol=tol, atol=tol), 3.0, 3.0)
     assert (run.status, run.steps, run.nfev, len(run.t)) == ("unstable", steps, nfev, steps + 1)
@@ -326,9 +462,25 @@ def test_a_blow_up_ends_an_adaptive_run_at_the_same_step(tol, steps, nfev, t_fai
 
 def test_the_quick_blow_up_check_never_passes_what_the_full_one_fails():
     below = np.nextafter(BLOWUP, 0.0)
-    states = [np.array(v) for v in (
-        [], [0.0], [below], [-below], [BLOWUP], [-BLOWUP], [np.nan], [np.inf], [-np.inf],
-        [1.0, np.nan], [1e200, 1.0], [below] * 3, [0.7 * BLOWUP] * 3, [1e-300, -1e-300])]
+    states = [
+        np.array(v)
+        for v in (
+            [],
+            [0.0],
+            [below],
+            [-below],
+            [BLOWUP],
+            [-BLOWUP],
+            [np.nan],
+            [np.inf],
+            [-np.inf],
+            [1.0, np.nan],
+            [1e200, 1.0],
+            [below] * 3,
+            [0.7 * BLOWUP] * 3,
+            [1e-300, -1e-300],
+        )
+    ]
     for x in states:
         with np.errstate(over="ignore"):  # 1e200 squared: the sum overflows, as it may
             assert not _well_inside(x) or _finite(x), x
@@ -347,8 +499,9 @@ def _gappy_tableau() -> np.ndarray:
     return a
 
 
-@pytest.mark.parametrize("a", [DormandPrince54.A[:6], RK4.A, _gappy_tableau()],
-                         ids=["dopri5", "rk4", "gappy"])
+@pytest.mark.parametrize(
+    "a", [DormandPrince54.A[:6], RK4.A, _gappy_tableau()], ids=["dopri5", "rk4", "gappy"]
+)
 @pytest.mark.parametrize("dim", [1, 4, 384])
 def test_stages_summed_by_column_are_the_rows_to_the_last_bit(a, dim):
     stages = stages_of(a)

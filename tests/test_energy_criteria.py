@@ -29,9 +29,11 @@ def test_a_single_jump_is_not_growth_wherever_it_falls(where):
     assert energy_grows(T, energy) == (where > 0.5)  # the old row criterion's blind spot
 
 
-@pytest.mark.parametrize("energy", [np.exp(0.5 * T), 1.0 + 0.2 * T,
-                                    (1.0 + 0.3 * np.sin(7.3 * T) ** 2) * np.exp(0.3 * T)],
-                         ids=["exponential", "linear", "growing-oscillation"])
+@pytest.mark.parametrize(
+    "energy",
+    [np.exp(0.5 * T), 1.0 + 0.2 * T, (1.0 + 0.3 * np.sin(7.3 * T) ** 2) * np.exp(0.3 * T)],
+    ids=["exponential", "linear", "growing-oscillation"],
+)
 def test_growth_through_the_run_is_growth(energy):
     assert energy_keeps_growing(T, energy)
 
@@ -48,8 +50,7 @@ def _search_run(case, engine: str, method: str, dt: float):
     return get_adapter(engine).simulate(trial, method, dt)
 
 
-@pytest.mark.parametrize(("engine", "method"), [("reference", "symplectic-euler"),
-                                                ("mujoco", "Euler")])
+@pytest.mark.parametrize(("engine", "method"), [("reference", "symplectic-euler"), ("mujoco", "Euler")])
 def test_the_damped_cloth_is_unstable_where_its_energy_stays_up(case_named, engine, method):
     """hanging-cloth (damped springs, drag): at 0.9 x the limit published before (4.60 ms,
     4.67 ms) the energy only falls; at 0.95 x it swings to 5-7 times its start: a damped

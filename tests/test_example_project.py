@@ -20,8 +20,10 @@ import pytest
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "leapfrog-lab"
 ENGINE = "leapfrog_lab.adapter:LeapfrogAdapter"
-CASES = ("free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball,"
-         f"{EXAMPLE / 'leapfrog_lab' / 'cases'}")
+CASES = (
+    "free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball,"
+    f"{EXAMPLE / 'leapfrog_lab' / 'cases'}"
+)
 GATES = EXAMPLE / "truestep-gates.toml"
 MUTANTS = {
     # the 1/2 dropped in the first drift of the position update
@@ -49,8 +51,9 @@ def _env(path: Path) -> dict[str, str]:
 
 
 def _truestep(*args: str, path: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "truestep", *args], env=_env(path),
-                          capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "truestep", *args], env=_env(path), capture_output=True, text=True, timeout=600
+    )
 
 
 @pytest.fixture(scope="module")
@@ -66,10 +69,29 @@ def runs(tmp_path_factory) -> dict[str, Path]:
         # a mutant's own rows are what its gates and its baseline comparison read (a gate
         # against the reference is not evaluated there); the example runs beside it
         engines = f"{ENGINE},reference" if name is None else ENGINE
-        procs[label] = (subprocess.Popen(
-            [sys.executable, "-m", "truestep", "run", "--quick", "--cases", CASES,
-             "--engines", engines, "--out", str(out)], env=_env(src),
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True), out, src)
+        procs[label] = (
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "truestep",
+                    "run",
+                    "--quick",
+                    "--cases",
+                    CASES,
+                    "--engines",
+                    engines,
+                    "--out",
+                    str(out),
+                ],
+                env=_env(src),
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            ),
+            out,
+            src,
+        )
     dirs = {}
     for label, (proc, out, src) in procs.items():
         _, err = proc.communicate(timeout=600)
@@ -85,8 +107,16 @@ def test_the_example_passes_its_gates_on_lecture_and_own_cases(runs):
     mine = results[results["engine"] == "leapfrog"]
     assert {"three-mass-chain", "lossless-bounce", "free-fall"} <= set(mine["case"])
     assert (mine["status"] == "ok").all()
-    done = _truestep("gate", "--results", str(good / "results.csv"), "--gates", str(GATES),
-                     "--junit", str(good / "junit.xml"), path=runs["good-src"])
+    done = _truestep(
+        "gate",
+        "--results",
+        str(good / "results.csv"),
+        "--gates",
+        str(GATES),
+        "--junit",
+        str(good / "junit.xml"),
+        path=runs["good-src"],
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     held = int(done.stdout.strip().splitlines()[-1].split()[0])
     assert held >= 14, done.stdout
@@ -95,12 +125,19 @@ def test_the_example_passes_its_gates_on_lecture_and_own_cases(runs):
 @pytest.mark.parametrize("mutant", list(MUTANTS))
 def test_each_mutant_fails_its_gates_and_is_worse_than_the_baseline(runs, mutant):
     out = runs[mutant]
-    done = _truestep("gate", "--results", str(out / "results.csv"), "--gates", str(GATES),
-                     path=runs[f"{mutant}-src"])
+    done = _truestep(
+        "gate", "--results", str(out / "results.csv"), "--gates", str(GATES), path=runs[f"{mutant}-src"]
+    )
     assert done.returncode == 1, done.stdout + done.stderr
     assert "FAIL" in done.stdout and "leapfrog/leapfrog" in done.stdout
-    base = _truestep("gate", "--results", str(out / "results.csv"), "--baseline",
-                     str(runs["good"]), path=runs[f"{mutant}-src"])
+    base = _truestep(
+        "gate",
+        "--results",
+        str(out / "results.csv"),
+        "--baseline",
+        str(runs["good"]),
+        path=runs[f"{mutant}-src"],
+    )
     assert base.returncode == 1, base.stdout + base.stderr
     worse = [line for line in base.stdout.splitlines() if line.startswith("WORSE")]
     assert worse and all(" leapfrog leapfrog " in line for line in worse), base.stdout
@@ -110,9 +147,14 @@ def _pytest_example(src: Path) -> subprocess.Popen:
     tests = src / "tests"
     shutil.copytree(EXAMPLE / "tests", tests, dirs_exist_ok=True)
     shutil.copy(GATES, src / "truestep-gates.toml")
-    return subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                             str(tests)], cwd=src, env=_env(src), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
+        cwd=src,
+        env=_env(src),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
 
 
 PLUGIN_MUTANT = "half-dropped"

@@ -92,8 +92,9 @@ def test_the_circle_field_scenes_are_the_old_ones():
     np.testing.assert_allclose(new.x[:, 0, :], old.x, rtol=ROUND_OFF, atol=ROUND_OFF)
     # Old: dopri5 at tolerance 1e-9 over one period, from the first of its starting points.
     curves = figure_case("integral-curves")
-    old = integrate(get_solver("dopri5")(CircleField(np.array([0.55, 0.0])), rtol=1e-9, atol=1e-9),
-                    2 * np.pi, 2 * np.pi)
+    old = integrate(
+        get_solver("dopri5")(CircleField(np.array([0.55, 0.0])), rtol=1e-9, atol=1e-9), 2 * np.pi, 2 * np.pi
+    )
     new = run_reference(curves, "dopri5", 1e-9)
     at_steps = np.isin(new.t, old.t)  # besides its steps, the run is sampled in between
     assert at_steps.sum() == len(old.t)
@@ -114,22 +115,34 @@ def test_the_drag_scene_is_the_test_equation_euler_stepped():
 
 def test_the_spring_pair_and_the_triangle_are_the_old_scenes():
     model = ParticleModel(
-        mass=np.array([1.0, 2.0]), x0=np.array([[0.0, 0, 0], [1.5, 0, 0]]), v0=np.zeros((2, 3)),
-        radius=np.zeros(2), fixed=np.zeros(2, bool),
-        springs=Springs(np.array([0]), np.array([1]), np.array([40.0]), np.array([1.5]),
-                        np.array([1.0])))
+        mass=np.array([1.0, 2.0]),
+        x0=np.array([[0.0, 0, 0], [1.5, 0, 0]]),
+        v0=np.zeros((2, 3)),
+        radius=np.zeros(2),
+        fixed=np.zeros(2, bool),
+        springs=Springs(np.array([0]), np.array([1]), np.array([40.0]), np.array([1.5]), np.array([1.0])),
+    )
     old, _ = _particles(_old_run(ParticleSystem(model), "rk4", 5.0, 1e-2), 2)
-    np.testing.assert_allclose(run_reference(figure_case("stretched-spring-pair"), "rk4").x, old,
-                               rtol=ROUND_OFF, atol=ROUND_OFF)
+    np.testing.assert_allclose(
+        run_reference(figure_case("stretched-spring-pair"), "rk4").x, old, rtol=ROUND_OFF, atol=ROUND_OFF
+    )
 
     mesh = meshes.triangle(1.0)
     mass, springs = meshes.mass_spring(mesh, 3.0, 300.0, 0.0)
-    model = ParticleModel(mass, mesh.vertices.copy(), np.zeros((3, 3)), np.zeros(3),
-                          np.zeros(3, bool), springs=springs,
-                          impulses=[(1, np.array([25.0, 0.0, 0.0]), 0.0, 0.02)], dimension=2)
+    model = ParticleModel(
+        mass,
+        mesh.vertices.copy(),
+        np.zeros((3, 3)),
+        np.zeros(3),
+        np.zeros(3, bool),
+        springs=springs,
+        impulses=[(1, np.array([25.0, 0.0, 0.0]), 0.0, 0.02)],
+        dimension=2,
+    )
     old, _ = _particles(_old_run(ParticleSystem(model), "lecture", 0.28, 0.04), 3)
-    np.testing.assert_allclose(run_reference(figure_case("triangle-push"), "lecture").x, old,
-                               rtol=ROUND_OFF, atol=ROUND_OFF)
+    np.testing.assert_allclose(
+        run_reference(figure_case("triangle-push"), "lecture").x, old, rtol=ROUND_OFF, atol=ROUND_OFF
+    )
 
 
 @pytest.mark.parametrize("bracing", ["edges", "volume"])
@@ -139,25 +152,55 @@ def test_the_cubes_are_the_old_pushed_cubes(bracing):
     fixed = np.zeros(8, bool)
     fixed[[0, 1, 4, 5]] = True
     push = [(i, np.array([20.0, -20.0, 0.0]), 0.0, np.inf) for i in (2, 3, 6, 7)]
-    model = ParticleModel(mass, mesh.vertices.copy(), np.zeros((8, 3)), np.zeros(8), fixed,
-                          drag=2.0, springs=springs, impulses=push, surfaces=[mesh.faces])
+    model = ParticleModel(
+        mass,
+        mesh.vertices.copy(),
+        np.zeros((8, 3)),
+        np.zeros(8),
+        fixed,
+        drag=2.0,
+        springs=springs,
+        impulses=push,
+        surfaces=[mesh.faces],
+    )
     old, _ = _particles(_old_run(ParticleSystem(model), "verlet", 3.0, 2e-3), 8)
     name = {"edges": "pushed-cube-edges", "volume": "pushed-cube-braced"}[bracing]
-    np.testing.assert_allclose(run_reference(figure_case(name), "verlet").x, old,
-                               rtol=ROUND_OFF, atol=ROUND_OFF)
+    np.testing.assert_allclose(
+        run_reference(figure_case(name), "verlet").x, old, rtol=ROUND_OFF, atol=ROUND_OFF
+    )
 
 
 def test_the_fountain_is_the_old_fountain_and_its_attributes_are_the_emitters():
     # The old figure's loop: one lecture step per frame, 29 frames, a 12000-slot pool. The
     # figure case's pool is larger (its run is longer), which changes no draw of the seeded
     # emitter while no slot is reused: the first slots hold the same particles.
-    spec = EmitterSpec(shape="cube", center=np.zeros(3), size=0.3, rate_n=260.0, rate_r=20.0,
-                       speed=3.0, spread=0.35, lifetime=20, lifetime_jitter=5, capacity=12000,
-                       speed_jitter=0.2, particle_size=0.006, size_jitter=0.5, fade_height=1.0,
-                       seed=7)
+    spec = EmitterSpec(
+        shape="cube",
+        center=np.zeros(3),
+        size=0.3,
+        rate_n=260.0,
+        rate_r=20.0,
+        speed=3.0,
+        spread=0.35,
+        lifetime=20,
+        lifetime_jitter=5,
+        capacity=12000,
+        speed_jitter=0.2,
+        particle_size=0.006,
+        size_jitter=0.5,
+        fade_height=1.0,
+        seed=7,
+    )
     cap = spec.capacity
-    model = ParticleModel(np.ones(cap), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros(cap),
-                          np.zeros(cap, bool), gravity=G, emitters=[spec])
+    model = ParticleModel(
+        np.ones(cap),
+        np.zeros((cap, 3)),
+        np.zeros((cap, 3)),
+        np.zeros(cap),
+        np.zeros(cap, bool),
+        gravity=G,
+        emitters=[spec],
+    )
     system = ParticleSystem(model, passes_for(model))
     emitter = next(p for p in system.passes if isinstance(p, Emitter))
     solver = get_solver("lecture")(system)
@@ -171,8 +214,9 @@ def test_the_fountain_is_the_old_fountain_and_its_attributes_are_the_emitters():
     np.testing.assert_allclose(new.x[s, :cap], system.positions, rtol=ROUND_OFF, atol=ROUND_OFF)
     assert not new.alive[s, cap:].any()
     # Ages and lifespans read off the alive mask give the emitter's own colours.
-    np.testing.assert_allclose(new.colors[:cap][system.alive], emitter.colors(system)[system.alive],
-                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        new.colors[:cap][system.alive], emitter.colors(system)[system.alive], rtol=1e-12, atol=1e-15
+    )
     assert list(new.emitter.spawned[: s + 1]) == emitter.spawned
 
 
@@ -180,8 +224,16 @@ def test_the_box_is_the_old_box_and_its_floor_bounces_follow_k_r():
     base = figure_case("particle-in-a-box")
     for e in (1.0, 0.75, 0.5):
         planes = box_planes(np.array([-1.0, 0.0, -1.0]), np.array([1.0, 2.0, 1.0]), restitution=e)
-        model = ParticleModel(np.ones(1), np.array([[-0.7, 1.6, 0.0]]), np.array([[2.6, 1.2, 0.0]]),
-                              np.zeros(1), np.zeros(1, bool), gravity=G, planes=planes, dimension=2)
+        model = ParticleModel(
+            np.ones(1),
+            np.array([[-0.7, 1.6, 0.0]]),
+            np.array([[2.6, 1.2, 0.0]]),
+            np.zeros(1),
+            np.zeros(1, bool),
+            gravity=G,
+            planes=planes,
+            dimension=2,
+        )
         old, _ = _particles(_old_run(ParticleSystem(model, passes_for(model)), "lecture", 2.0, 2e-3), 1)
         case = with_restitution(base, e)
         traj = run_reference(case, "lecture")
@@ -200,8 +252,16 @@ def test_the_inclined_wall_is_the_old_wall_and_contact_is_read_off_the_state():
     angle = math.radians(20.0)
     normal = np.array([-math.sin(angle), math.cos(angle), 0.0])
     plane = Plane(np.zeros(3), normal, restitution=0.5)
-    model = ParticleModel(np.ones(1), 0.15 * normal[None, :], np.zeros((1, 3)), np.zeros(1),
-                          np.zeros(1, bool), gravity=G, planes=[plane], dimension=2)
+    model = ParticleModel(
+        np.ones(1),
+        0.15 * normal[None, :],
+        np.zeros((1, 3)),
+        np.zeros(1),
+        np.zeros(1, bool),
+        gravity=G,
+        planes=[plane],
+        dimension=2,
+    )
     system = ParticleSystem(model, passes_for(model))
     solver = get_solver("lecture")(system)
     x, flag = [system.positions[0].copy()], [False]
@@ -218,7 +278,7 @@ def test_the_inclined_wall_is_the_old_wall_and_contact_is_read_off_the_state():
     d, vn = (traj.x[:, 0] - p.point) @ p.normal, traj.v[:, 0] @ p.normal
     # The old figure read the contact pass's flag; the state the pass leaves says the same.
     assert contact_start(d, vn) == int(np.argmax(flag))
-    assert all(flag[contact_start(d, vn):])
+    assert all(flag[contact_start(d, vn) :])
 
 
 def test_a_variant_changes_only_what_it_replaces():

@@ -64,8 +64,7 @@ def test_records_energy_and_evaluations_of_a_user_engine(case_named):
     np.testing.assert_allclose(traj.x, x, rtol=0, atol=1e-12)
     np.testing.assert_allclose(traj.v, m.v0 + G * (k * h)[:, None, None], rtol=0, atol=1e-12)
     kinetic = 0.5 * np.einsum("n,tni,tni->t", m.mass, traj.v, traj.v)
-    np.testing.assert_allclose(traj.energy, kinetic - np.einsum("n,tni,i->t", m.mass, traj.x, G),
-                               rtol=1e-12)
+    np.testing.assert_allclose(traj.energy, kinetic - np.einsum("n,tni,i->t", m.mass, traj.x, G), rtol=1e-12)
     assert traj.wall_s > 0
 
 

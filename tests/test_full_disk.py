@@ -23,9 +23,26 @@ def test_a_full_disk_is_exit_2_with_one_line_and_the_old_report_survives(tmp_pat
     def small_files() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (24 * 1024, 24 * 1024))
 
-    run = subprocess.run([sys.executable, "-m", "truestep", "run", "--quick", "--engines",
-                          "reference", "--cases", "free-fall", "--out", "rep"], cwd=tmp_path,
-                         capture_output=True, text=True, timeout=300, preexec_fn=small_files)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "truestep",
+            "run",
+            "--quick",
+            "--engines",
+            "reference",
+            "--cases",
+            "free-fall",
+            "--out",
+            "rep",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=small_files,
+    )
     lines = [line for line in run.stderr.splitlines() if line.strip()]
     assert run.returncode == 2, run.stderr
     assert "Traceback" not in run.stderr and lines[-1].startswith("truestep: error: cannot write")

@@ -39,9 +39,14 @@ ROOT = Path(__file__).resolve().parent.parent
 LOAD_TIMEOUT_S = 3.0
 """Per file: the slowest shipped case loads in well under a second."""
 
-BOUNDED = settings(max_examples=150, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate],
-                   report_multiple_bugs=False, suppress_health_check=[HealthCheck.too_slow],
-                   derandomize=os.environ.get("TRUESTEP_FUZZ_RANDOM") != "1")
+BOUNDED = settings(
+    max_examples=150,
+    deadline=None,
+    phases=[Phase.explicit, Phase.reuse, Phase.generate],
+    report_multiple_bugs=False,
+    suppress_health_check=[HealthCheck.too_slow],
+    derandomize=os.environ.get("TRUESTEP_FUZZ_RANDOM") != "1",
+)
 """Bounded: the same examples every run (``TRUESTEP_FUZZ_RANDOM=1`` draws fresh ones), so
 that the normal suite does not pass or fail by chance; the campaign covers more."""
 
@@ -85,9 +90,11 @@ def _check_load(worker: object, scratch: Path, mutant: fs.CaseMutant) -> None:
     _check_load.n = counter  # type: ignore[attr-defined]
     path = mutant.write(scratch / f"{counter:05d}")
     reply = campaign.classify_load(path, worker)
-    detail = (f"{reply['outcome']}: {reply.get('type', '')} {reply.get('in_repo') or reply.get('at', '')} "
-              f"{reply.get('why', '')}\n  message: {str(reply.get('message', ''))[:400]}\n"
-              f"  how: {mutant.how}\n  file starts: {mutant.data[:300]!r}")
+    detail = (
+        f"{reply['outcome']}: {reply.get('type', '')} {reply.get('in_repo') or reply.get('at', '')} "
+        f"{reply.get('why', '')}\n  message: {str(reply.get('message', ''))[:400]}\n"
+        f"  how: {mutant.how}\n  file starts: {mutant.data[:300]!r}"
+    )
     assert reply["outcome"] in {"accepted", "clean"}, detail
 
 
@@ -183,16 +190,37 @@ def test_fuzz_campaign_long(request: pytest.FixtureRequest, tmp_path: Path) -> N
     if not _asked_for(request.config):
         pytest.skip("the long fuzz campaign runs with -m fuzz or TRUESTEP_FUZZ=1")
     out = tmp_path / "summary.json"
-    campaign.main(["--loader", os.environ.get("TRUESTEP_FUZZ_LOADER", "10000"),
-                   "--run", os.environ.get("TRUESTEP_FUZZ_RUN", "200"),
-                   "--gate", os.environ.get("TRUESTEP_FUZZ_GATE", "100"),
-                   "--seed", os.environ.get("TRUESTEP_FUZZ_SEED", "4"), "--jobs", "2",
-                   "--repo", str(ROOT), "--python", sys.executable, "--work", str(tmp_path / "work"),
-                   "--json", str(out)])
+    campaign.main(
+        [
+            "--loader",
+            os.environ.get("TRUESTEP_FUZZ_LOADER", "10000"),
+            "--run",
+            os.environ.get("TRUESTEP_FUZZ_RUN", "200"),
+            "--gate",
+            os.environ.get("TRUESTEP_FUZZ_GATE", "100"),
+            "--seed",
+            os.environ.get("TRUESTEP_FUZZ_SEED", "4"),
+            "--jobs",
+            "2",
+            "--repo",
+            str(ROOT),
+            "--python",
+            sys.executable,
+            "--work",
+            str(tmp_path / "work"),
+            "--json",
+            str(out),
+        ]
+    )
     import json
 
     summary = json.loads(out.read_text())
-    bad = {phase: {k: v for k, v in counts.items() if k in campaign.GATE_BAD and v and
-                   (phase == "gate" or k in campaign.BAD)}
-           for phase, counts in summary["counts"].items()}
+    bad = {
+        phase: {
+            k: v
+            for k, v in counts.items()
+            if k in campaign.GATE_BAD and v and (phase == "gate" or k in campaign.BAD)
+        }
+        for phase, counts in summary["counts"].items()
+    }
     assert not any(bad.values()), (bad, {p: c[:5] for p, c in summary["classes"].items()})

@@ -60,8 +60,12 @@ tol = 1e-6
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("run")
-    assert main(["run", "--quick", "--cases", "harmonic-oscillator", "--engines", "reference",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            ["run", "--quick", "--cases", "harmonic-oscillator", "--engines", "reference", "--out", str(out)]
+        )
+        == 0
+    )
     return out
 
 
@@ -80,8 +84,7 @@ def _gates_file(tmp_path: Path, text: str = GATES) -> str:
 
 
 def test_gates_file_for_any_engine_with_wildcards(run_dir, tmp_path, capsys):
-    code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates",
-                 _gates_file(tmp_path), "-v"])
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates", _gates_file(tmp_path), "-v"])
     out = capsys.readouterr().out
     assert code == 0, out
     assert "ok   harmonic-oscillator gates[0] order reference/rk4" in out
@@ -96,7 +99,8 @@ def test_gates_file_for_any_engine_with_wildcards(run_dir, tmp_path, capsys):
 def test_strict_nothing_evaluated_fails(copy, capsys):
     d, results = copy
     results[results["engine"] == "reference"].assign(engine="someone-else").to_csv(
-        d / "results.csv", index=False)
+        d / "results.csv", index=False
+    )
     code = main(["gate", "--results", str(d / "results.csv")])
     out = capsys.readouterr().out
     assert code == 1
@@ -118,8 +122,15 @@ def test_a_gated_row_that_crashed_fails_the_gate(copy, capsys):
 
 
 def test_a_cases_item_that_matches_nothing_exits_2(run_dir, capsys):
-    code = main(["gate", "--results", str(run_dir / "results.csv"), "--cases",
-                 "harmonic-oscillator,harmonic-oscilator"])
+    code = main(
+        [
+            "gate",
+            "--results",
+            str(run_dir / "results.csv"),
+            "--cases",
+            "harmonic-oscillator,harmonic-oscilator",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "no case matches 'harmonic-oscilator'" in err
     assert main(["run", "--cases", "free-fall,nosuch-*", "--out", "/nonexistent"]) == 2
@@ -131,9 +142,23 @@ def test_junit_markdown_and_json_outputs(run_dir, tmp_path, monkeypatch, capsys)
     summary.write_text("earlier step\n")
     monkeypatch.setenv("GITHUB_STEP_SUMMARY", str(summary))
     junit, md, js = tmp_path / "j.xml", tmp_path / "s.md", tmp_path / "g.json"
-    code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates",
-                 _gates_file(tmp_path), "--junit", str(junit), "--markdown", str(md),
-                 "--json", str(js), "--baseline", str(run_dir)])
+    code = main(
+        [
+            "gate",
+            "--results",
+            str(run_dir / "results.csv"),
+            "--gates",
+            _gates_file(tmp_path),
+            "--junit",
+            str(junit),
+            "--markdown",
+            str(md),
+            "--json",
+            str(js),
+            "--baseline",
+            str(run_dir),
+        ]
+    )
     capsys.readouterr()
     assert code == 0
     doc = json.loads(js.read_text())
@@ -169,8 +194,18 @@ def test_baseline_lists_worse_better_appeared_and_vanished(run_dir, copy, capsys
     assert "GONE   results harmonic-oscillator reference lecture dt=0.002" in out
     assert "WORSE  orders harmonic-oscillator reference rk4 order:" in out
     # a tolerance wide enough for a doubled error lets that row pass
-    code = main(["gate", "--results", str(d / "results.csv"), "--baseline", str(run_dir),
-                 "--tolerance", "error=1.5", "-q"])
+    code = main(
+        [
+            "gate",
+            "--results",
+            str(d / "results.csv"),
+            "--baseline",
+            str(run_dir),
+            "--tolerance",
+            "error=1.5",
+            "-q",
+        ]
+    )
     out = capsys.readouterr().out
     assert "reference rk4 dt=0.001 error" not in out
 
@@ -192,15 +227,28 @@ def test_baseline_wall_time_only_as_a_ratio_in_the_same_run(run_dir, copy, capsy
 
 
 def test_bad_gate_inputs_exit_2(run_dir, tmp_path, capsys):
-    bad = _gates_file(tmp_path, '[[gates]]\nkind = "order"\nengine = "nosuch"\nmethod = "x"\n'
-                      'expect = 1.0\ntol = 0.1\n')
+    bad = _gates_file(
+        tmp_path, '[[gates]]\nkind = "order"\nengine = "nosuch"\nmethod = "x"\nexpect = 1.0\ntol = 0.1\n'
+    )
     assert main(["gate", "--results", str(run_dir / "results.csv"), "--gates", bad]) == 2
     assert "gates[0].engine: unknown engine 'nosuch'" in capsys.readouterr().err
     bad = _gates_file(tmp_path, '[[gates]]\nkind = "no-worse-than"\nmethod = "x"\nthan = "rk4"\n')
     assert main(["gate", "--results", str(run_dir / "results.csv"), "--gates", bad]) == 2
     assert "gates[0].than: expected 'engine/method'" in capsys.readouterr().err
-    assert main(["gate", "--results", str(run_dir / "results.csv"), "--baseline",
-                 str(run_dir), "--tolerance", "speed=2"]) == 2
+    assert (
+        main(
+            [
+                "gate",
+                "--results",
+                str(run_dir / "results.csv"),
+                "--baseline",
+                str(run_dir),
+                "--tolerance",
+                "speed=2",
+            ]
+        )
+        == 2
+    )
     assert "--tolerance: expected QUANTITY=NUMBER" in capsys.readouterr().err
 
 
@@ -238,10 +286,11 @@ def test_cases_by_file_and_directory_and_the_python_api(tmp_path):
     shutil.copy(CASE_DIR / "free-fall.toml", tmp_path / "my-fall.toml")
     cases = truestep.load_cases(f"{mine},{tmp_path / 'my-fall.toml'},harmonic-*")
     assert [c.name for c in cases] == ["my-circle", "my-fall", "harmonic-oscillator"]
-    tables = truestep.run(cases[:2], ["reference"], quick=True, analyses=False,
-                          progress=lambda _: None)
-    assert set(tables.results["case_source"]) == {str(mine / "my-circle.toml"),
-                                                  str(tmp_path / "my-fall.toml")}
+    tables = truestep.run(cases[:2], ["reference"], quick=True, analyses=False, progress=lambda _: None)
+    assert set(tables.results["case_source"]) == {
+        str(mine / "my-circle.toml"),
+        str(tmp_path / "my-fall.toml"),
+    }
     verdicts = truestep.check(tables)
     assert set(verdicts["verdict"]) == {"pass"} and len(verdicts) > 5
     same = truestep.compare(tables, tables)
@@ -261,7 +310,9 @@ def test_declared_orders_are_gated_on_request(run_dir, monkeypatch, capsys):
 
     monkeypatch.setattr(RK4, "facts", dataclasses.replace(RK4.facts, order=5))
     assert main(args) == 1
-    assert "FAIL harmonic-oscillator declared order reference/rk4: measured order 3.99" in \
-        capsys.readouterr().out
+    assert (
+        "FAIL harmonic-oscillator declared order reference/rk4: measured order 3.99"
+        in capsys.readouterr().out
+    )
     monkeypatch.setattr(RK4, "facts", dataclasses.replace(RK4.facts, order=3))
     assert main(args) == 0  # delivering more than it declares holds

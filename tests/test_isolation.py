@@ -63,8 +63,14 @@ def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
         return real(engine, case, method, dt, timing, **kw)
 
     monkeypatch.setattr(runner, "simulate_timed", flaky)
-    rows = runner.run_sweep(case, "reference", "symplectic-euler", [2e-3, 1e-3, 5e-4],
-                            adaptive=False, timing=runner.Timing(long_run_s=0.0))
+    rows = runner.run_sweep(
+        case,
+        "reference",
+        "symplectic-euler",
+        [2e-3, 1e-3, 5e-4],
+        adaptive=False,
+        timing=runner.Timing(long_run_s=0.0),
+    )
     assert [r["status"] for r in rows] == ["ok", "crashed", "crashed"]
     assert "exit code 7" in rows[1]["message"]
     assert "ValueError: no such step" in rows[2]["message"]
@@ -79,7 +85,8 @@ def test_compiled_loops_loaded_before_forking_still_run_in_the_children():
 
     runner.preload()
     case = load_cases("bouncing-ball")[0]
-    rows = runner.run_sweep(case, "reference", "lecture", [0.004], adaptive=False,
-                            timing=runner.Timing(long_run_s=0.0))
+    rows = runner.run_sweep(
+        case, "reference", "lecture", [0.004], adaptive=False, timing=runner.Timing(long_run_s=0.0)
+    )
     assert rows[0]["status"] == "ok", rows[0].get("message")
     assert rows[0]["path"] == "compiled"

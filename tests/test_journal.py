@@ -39,8 +39,9 @@ def swept(tmp_path_factory):
     journal = Journal(out)
     journal.start(fingerprint(cases, ["reference"], quick=True))
     traces: dict = {}
-    results = run_matrix(cases, ["reference"], quick=True, traces=traces, journal=journal,
-                         progress=lambda _: None)
+    results = run_matrix(
+        cases, ["reference"], quick=True, traces=traces, journal=journal, progress=lambda _: None
+    )
     return out, cases, results, traces
 
 
@@ -54,8 +55,9 @@ def test_a_resumed_sweep_gives_the_rows_and_traces_it_made(swept):
     out, cases, results, traces = swept
     journal = _resume(out, cases)
     again: dict = {}
-    resumed = run_matrix(cases, ["reference"], quick=True, traces=again, journal=journal,
-                         progress=lambda _: None)
+    resumed = run_matrix(
+        cases, ["reference"], quick=True, traces=again, journal=journal, progress=lambda _: None
+    )
     pd.testing.assert_frame_equal(resumed.drop(columns="host"), results.drop(columns="host"))
     assert again.keys() == traces.keys()
     for key, (t, e) in traces.items():
@@ -64,8 +66,7 @@ def test_a_resumed_sweep_gives_the_rows_and_traces_it_made(swept):
 
 
 def test_the_analyses_tables_round_trip_exactly():
-    tables = {name: pd.read_csv(REPORTS / f"{name}.csv")
-              for name in ("stability", "restitution", "scaling")}
+    tables = {name: pd.read_csv(REPORTS / f"{name}.csv") for name in ("stability", "restitution", "scaling")}
     tables["scaling"]["steps"] = tables["scaling"]["steps"].astype("Int64")
     tables["scaling"].loc[0, "steps"] = pd.NA
     tables["scaling"].attrs.update(bandwidth_bytes_per_s=1.5e10, budget_s=12.0, note="x")
@@ -77,8 +78,9 @@ def test_the_analyses_tables_round_trip_exactly():
         assert back[name].to_csv(index=False) == table.to_csv(index=False)
 
 
-@pytest.mark.parametrize("text", [b"NaN", b'{"a": Infinity}', b"1e999", b"[" * 100000,
-                                  pickle.dumps({"a": 1})])
+@pytest.mark.parametrize(
+    "text", [b"NaN", b'{"a": Infinity}', b"1e999", b"[" * 100000, pickle.dumps({"a": 1})]
+)
 def test_anything_but_strict_json_is_refused(text):
     with pytest.raises(DataError):
         load_json(text)
@@ -103,11 +105,10 @@ def test_planted_and_damaged_checkpoints_are_ignored_never_loaded(swept, tmp_pat
         line = resumed.ignored_line()
         assert "ignored 7 entries" in line and "never loaded" in line and "\n" not in line
         assert resumed.analyses() is None
-        rows = run_matrix(cases, ["reference"], quick=True, journal=resumed,
-                          progress=lambda _: None)
+        rows = run_matrix(cases, ["reference"], quick=True, journal=resumed, progress=lambda _: None)
         pd.testing.assert_frame_equal(
-            rows.drop(columns=list(MACHINE_COLUMNS)),
-            results.drop(columns=list(MACHINE_COLUMNS)))
+            rows.drop(columns=list(MACHINE_COLUMNS)), results.drop(columns=list(MACHINE_COLUMNS))
+        )
         assert not mark.exists()
     finally:
         for p in journal.dir.iterdir():
@@ -140,8 +141,17 @@ def test_a_journal_that_is_a_link_or_holds_no_journal_is_not_resumed(tmp_path, c
     (tmp_path / ".rep.partial" / "journal.json").write_bytes(pickle.dumps(fp))
     with pytest.raises(JournalError, match="not a journal"):
         Journal(tmp_path / "rep").resume(fp)
-    argv = ["run", "--quick", "--cases", "free-fall", "--engines", "reference", "--out",
-            str(tmp_path / "rep"), "--resume"]
+    argv = [
+        "run",
+        "--quick",
+        "--cases",
+        "free-fall",
+        "--engines",
+        "reference",
+        "--out",
+        str(tmp_path / "rep"),
+        "--resume",
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a journal" in err[0]

@@ -12,14 +12,20 @@ import grimp
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FOLDERS = {"truestep": "truestep", "adapters": "truestep.adapters", "cases": "truestep.cases",
-           "reference_impl": "truestep.reference_impl"}
+FOLDERS = {
+    "truestep": "truestep",
+    "adapters": "truestep.adapters",
+    "cases": "truestep.cases",
+    "reference_impl": "truestep.reference_impl",
+}
 LAYERS = {"harness": 0, "adapters": 1, "cases": 2, "reference_impl": 3}
 """Which folder may import which: a module imports only modules of its own folder or of a
 folder below it (harness -> adapters -> cases -> reference_impl)."""
-LAYER_EXCEPTIONS = {("truestep.cases.loader", "truestep.adapters"),
-                    ("truestep.cases.loader", "truestep.properties"),
-                    ("truestep.cases.loader", "truestep.time_limit")}
+LAYER_EXCEPTIONS = {
+    ("truestep.cases.loader", "truestep.adapters"),
+    ("truestep.cases.loader", "truestep.properties"),
+    ("truestep.cases.loader", "truestep.time_limit"),
+}
 """Known arrows against the layers, each a lazy import inside a function (the loader checks
 that a gate names a registered engine and a known property, and bounds its own time)."""
 
@@ -117,8 +123,14 @@ def test_no_import_cycles(graph):
 def test_the_cycle_finder_finds_a_cycle():
     """The check above can fail: a two-module cycle and a three-module one are found."""
     fake = grimp.ImportGraph()
-    for a, b in [("p.a", "p.b"), ("p.b", "p.a"), ("p.c", "p.d"), ("p.d", "p.e"), ("p.e", "p.c"),
-                 ("p.e", "p.f")]:
+    for a, b in [
+        ("p.a", "p.b"),
+        ("p.b", "p.a"),
+        ("p.c", "p.d"),
+        ("p.d", "p.e"),
+        ("p.e", "p.c"),
+        ("p.e", "p.f"),
+    ]:
         fake.add_import(importer=a, imported=b)
     assert sorted(_cycles(fake)) == [["p.a", "p.b"], ["p.c", "p.d", "p.e"]]
 
@@ -126,8 +138,12 @@ def test_the_cycle_finder_finds_a_cycle():
 def test_dependencies_point_one_way(graph):
     """harness -> adapters -> cases -> reference_impl; reference_impl imports nothing of
     truestep's other folders, and no folder imports the harness (but for the known arrows)."""
-    against = [(m, w) for m in sorted(graph.modules)
-               for w in sorted(graph.find_modules_directly_imported_by(m))
-               if _layer(w) < _layer(m) and w not in ("truestep", "truestep.numerics")
-               and (m, w) not in LAYER_EXCEPTIONS]
+    against = [
+        (m, w)
+        for m in sorted(graph.modules)
+        for w in sorted(graph.find_modules_directly_imported_by(m))
+        if _layer(w) < _layer(m)
+        and w not in ("truestep", "truestep.numerics")
+        and (m, w) not in LAYER_EXCEPTIONS
+    ]
     assert against == []

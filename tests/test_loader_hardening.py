@@ -42,66 +42,134 @@ def _scene(text: str, extra: str) -> str:
 
 HOSTILE = {
     "nan dt": (_sub(FREE_FALL, r"^dt = .*$", "dt = [nan]"), "run.dt", "finite"),
-    "inf tolerance": (_sub(FREE_FALL, r"^tolerances = .*$", "tolerances = [inf]"), "run.tolerances",
-                      "finite"),
-    "tolerance below float64": (_sub(FREE_FALL, r"^tolerances = .*$", "tolerances = [1e-300]"),
-                                "run.tolerances", "1e-14"),
-    "non-finite quick_dt": (_sub(FREE_FALL, r"^quick_dt = .*$", "quick_dt = [-inf]"),
-                            "run.quick_dt", "finite"),
+    "inf tolerance": (
+        _sub(FREE_FALL, r"^tolerances = .*$", "tolerances = [inf]"),
+        "run.tolerances",
+        "finite",
+    ),
+    "tolerance below float64": (
+        _sub(FREE_FALL, r"^tolerances = .*$", "tolerances = [1e-300]"),
+        "run.tolerances",
+        "1e-14",
+    ),
+    "non-finite quick_dt": (
+        _sub(FREE_FALL, r"^quick_dt = .*$", "quick_dt = [-inf]"),
+        "run.quick_dt",
+        "finite",
+    ),
     "1e8 steps": (_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8]"), "run.dt", "steps, over the limit"),
-    "a step of 1e-12 s": (_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-12]"), "run.dt",
-                          "below the smallest"),
-    "timeout 1e300": (_sub(FREE_FALL, r"^duration = .*$", "duration = 1.0\ntimeout = 1e300"),
-                      "run.timeout", "at most"),
-    "huge integer": (_sub(FREE_FALL, r"^duration = .*$", "duration = 1.0\nmax_records = " + "9" * 400),
-                     "run.max_records", "digits"),
+    "a step of 1e-12 s": (_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-12]"), "run.dt", "below the smallest"),
+    "timeout 1e300": (
+        _sub(FREE_FALL, r"^duration = .*$", "duration = 1.0\ntimeout = 1e300"),
+        "run.timeout",
+        "at most",
+    ),
+    "huge integer": (
+        _sub(FREE_FALL, r"^duration = .*$", "duration = 1.0\nmax_records = " + "9" * 400),
+        "run.max_records",
+        "digits",
+    ),
     "integer beyond the digit limit": (FREE_FALL + "\nx = " + "9" * 5000 + "\n", "<toml>", "digits"),
-    "number beyond float range": (_scene(FREE_FALL, "drag = " + "9" * 400), "scene.drag",
-                                  "beyond the range of a float"),
+    "number beyond float range": (
+        _scene(FREE_FALL, "drag = " + "9" * 400),
+        "scene.drag",
+        "beyond the range of a float",
+    ),
     "deep nesting": (FREE_FALL + "\nx = " + "[" * 3000 + "]" * 3000 + "\n", "<toml>", "nested"),
     "moderate nesting": (FREE_FALL + "\nx = " + "[" * 100 + "]" * 100 + "\n", "<toml>", "nested"),
     "truncated": (FREE_FALL[: FREE_FALL.index("[run]") + 4], "<toml>", ""),
     "unknown top-level key": (FREE_FALL + "\nbogus = 1\n", "bogus", "unknown field"),
-    "unknown reference key": (_sub(FREE_FALL, r"^exact = .*$", 'exact = "uniform-gravity"\nrtol = 1e-9'),
-                              "reference.rtol", "unknown field"),
-    "wrong-kind exact solution": (_sub(FREE_FALL, r'^exact = .*$', 'exact = "kepler"'),
-                                  "reference.exact", "ode cases"),
+    "unknown reference key": (
+        _sub(FREE_FALL, r"^exact = .*$", 'exact = "uniform-gravity"\nrtol = 1e-9'),
+        "reference.rtol",
+        "unknown field",
+    ),
+    "wrong-kind exact solution": (
+        _sub(FREE_FALL, r"^exact = .*$", 'exact = "kepler"'),
+        "reference.exact",
+        "ode cases",
+    ),
     "bounces = []": (_sub(BALL, r"^bounces = .*$", "bounces = []"), "reference.bounces", "integer"),
     "rtol = 1e-300": (_sub(ENCOUNTER, r"^rtol = .*$", "rtol = 1e-300"), "reference.exact", "rtol"),
-    "zero plane normal": (_scene(FREE_FALL, "planes = [{ point = [0, 0, 0], normal = [0, 0, 0] }]"),
-                          "scene.planes[0].normal", "non-zero"),
-    "denormal plane normal": (_scene(FREE_FALL, "planes = [{ point = [0, 0, 0], normal = [0, 1e-320, 0] }]"),
-                              "scene.planes[0].normal", "non-zero"),
-    "vortex centre of strings": (_scene(FREE_FALL, 'fields = [{ kind = "vortex", strength = 1.0, '
-                                        'center = ["a", "b", "c"] }]'), "scene.fields[0].center", "shape"),
-    "vortex without strength": (_scene(FREE_FALL, 'fields = [{ kind = "vortex" }]'),
-                                "scene.fields[0].strength", "missing"),
-    "unknown field parameter": (_scene(FREE_FALL, 'fields = [{ kind = "wind", direction = [1, 0, 0], '
-                                       "gale = 3 }]"), "scene.fields[0].gale", "unknown"),
-    "zero wind direction": (_scene(FREE_FALL, 'fields = [{ kind = "wind", direction = [0, 0, 0] }]'),
-                            "scene.fields[0].direction", "non-zero"),
+    "zero plane normal": (
+        _scene(FREE_FALL, "planes = [{ point = [0, 0, 0], normal = [0, 0, 0] }]"),
+        "scene.planes[0].normal",
+        "non-zero",
+    ),
+    "denormal plane normal": (
+        _scene(FREE_FALL, "planes = [{ point = [0, 0, 0], normal = [0, 1e-320, 0] }]"),
+        "scene.planes[0].normal",
+        "non-zero",
+    ),
+    "vortex centre of strings": (
+        _scene(FREE_FALL, 'fields = [{ kind = "vortex", strength = 1.0, center = ["a", "b", "c"] }]'),
+        "scene.fields[0].center",
+        "shape",
+    ),
+    "vortex without strength": (
+        _scene(FREE_FALL, 'fields = [{ kind = "vortex" }]'),
+        "scene.fields[0].strength",
+        "missing",
+    ),
+    "unknown field parameter": (
+        _scene(FREE_FALL, 'fields = [{ kind = "wind", direction = [1, 0, 0], gale = 3 }]'),
+        "scene.fields[0].gale",
+        "unknown",
+    ),
+    "zero wind direction": (
+        _scene(FREE_FALL, 'fields = [{ kind = "wind", direction = [0, 0, 0] }]'),
+        "scene.fields[0].direction",
+        "non-zero",
+    ),
     "dangling spring": (_sub(CHAIN, r"^pairs = .*$", "pairs = [[0, 99]]"), "pairs", "out of range"),
     "fractional spring index": (_sub(CHAIN, r"^pairs = .*$", "pairs = [[0.5, 1]]"), "pairs", "integers"),
-    "fixed = \"yes\"": (_sub(FREE_FALL, r"^mass = .*$", 'mass = [1.0, 0.5, 2.0]\nfixed = "yes"'),
-                        "scene.particles[0].fixed", "true, false"),
-    "3000 x 3000 cloth": (_sub(_sub(CLOTH, r"^rows = .*$", "rows = 3000"), r"^cols = .*$", "cols = 3000"),
-                          "scene.meshes[0].rows", "particles, over the limit"),
-    "1e8-particle rope": (_sub(ROPE, r"^count = .*$", "count = 100000000"), "scene.meshes[0].count",
-                          "particles, over the limit"),
-    "1e12-particle block": (_sub(RAIN, r"^count = .*$", "count = 1000000000000"), "scene.blocks[0].count",
-                            "particles, over the limit"),
-    "1e12 emitter pool": (_sub(FOUNTAIN, r"^capacity = .*$", "capacity = 1000000000000"),
-                          "scene.emitters[0].capacity", "particles, over the limit"),
-    "emitter rate 1e300": (_sub(FOUNTAIN, r"^rate_n = .*$", "rate_n = 1e300"), "scene.emitters[0].rate_n",
-                           "per frame"),
-    "gate step not swept": (FREE_FALL + '\n[[gates]]\nkind = "error"\nmethod = "rk4"\ndt = 0.123\nmax = 1\n',
-                            "dt", "not a step or tolerance"),
-    "unknown property": (FREE_FALL.replace('family = "particles"',
-                                           'family = "particles"\nproperties = ["nope"]'),
-                         "properties", "not one of"),
-    "100 kB description": (FREE_FALL.replace('kind = "particles"', 'kind = "particles"\n')
-                           .replace('title = "', 'hard = "' + "x" * 100_000 + '"\ntitle = "', 1),
-                           "hard", "characters"),
+    'fixed = "yes"': (
+        _sub(FREE_FALL, r"^mass = .*$", 'mass = [1.0, 0.5, 2.0]\nfixed = "yes"'),
+        "scene.particles[0].fixed",
+        "true, false",
+    ),
+    "3000 x 3000 cloth": (
+        _sub(_sub(CLOTH, r"^rows = .*$", "rows = 3000"), r"^cols = .*$", "cols = 3000"),
+        "scene.meshes[0].rows",
+        "particles, over the limit",
+    ),
+    "1e8-particle rope": (
+        _sub(ROPE, r"^count = .*$", "count = 100000000"),
+        "scene.meshes[0].count",
+        "particles, over the limit",
+    ),
+    "1e12-particle block": (
+        _sub(RAIN, r"^count = .*$", "count = 1000000000000"),
+        "scene.blocks[0].count",
+        "particles, over the limit",
+    ),
+    "1e12 emitter pool": (
+        _sub(FOUNTAIN, r"^capacity = .*$", "capacity = 1000000000000"),
+        "scene.emitters[0].capacity",
+        "particles, over the limit",
+    ),
+    "emitter rate 1e300": (
+        _sub(FOUNTAIN, r"^rate_n = .*$", "rate_n = 1e300"),
+        "scene.emitters[0].rate_n",
+        "per frame",
+    ),
+    "gate step not swept": (
+        FREE_FALL + '\n[[gates]]\nkind = "error"\nmethod = "rk4"\ndt = 0.123\nmax = 1\n',
+        "dt",
+        "not a step or tolerance",
+    ),
+    "unknown property": (
+        FREE_FALL.replace('family = "particles"', 'family = "particles"\nproperties = ["nope"]'),
+        "properties",
+        "not one of",
+    ),
+    "100 kB description": (
+        FREE_FALL.replace('kind = "particles"', 'kind = "particles"\n').replace(
+            'title = "', 'hard = "' + "x" * 100_000 + '"\ntitle = "', 1
+        ),
+        "hard",
+        "characters",
+    ),
     "a long unknown key": (FREE_FALL + "\n" + "k" * 5000 + " = 1\n", "kkk", "unknown field"),
 }
 
@@ -148,8 +216,10 @@ def test_a_case_raises_its_own_limits_and_the_command_line_sets_them_for_a_run(t
     path.write_text(_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8, 0.1, 0.05, 0.02, 0.01]"))  # 1e8 steps
     with pytest.raises(CaseError, match=r"1e\+08 steps, over the limit of 2e\+07"):
         load_case(path)
-    path.write_text(_sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8, 0.1, 0.05, 0.02, 0.01]")
-                    + "\n[limits]\nsteps = 200000000\n")
+    path.write_text(
+        _sub(FREE_FALL, r"^dt = .*$", "dt = [1e-8, 0.1, 0.05, 0.02, 0.01]")
+        + "\n[limits]\nsteps = 200000000\n"
+    )
     assert min(load_case(path).dts) == 1e-8
     with pytest.raises(CaseError, match=r"over the limit of 1e\+07"):
         load_case(path, limits={"steps": 1e7})  # the run's --limit has the last word
@@ -181,8 +251,9 @@ def test_memory_of_the_records_is_a_limit(tmp_path: Path) -> None:
 
 def _coincident_bodies(tmp_path: Path) -> Path:
     """Two of the close encounter's bodies in one place: the force is 1/0 at the start."""
-    text = _sub(ENCOUNTER, r"^position = .*$",
-                "position = [[-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.05, 0.0]]")
+    text = _sub(
+        ENCOUNTER, r"^position = .*$", "position = [[-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.05, 0.0]]"
+    )
     text = re.sub(r"^\[reference\]\n(.+\n)+", "", text, flags=re.M)
     text = re.sub(r"^\[\[gates\]\]\n(.+\n)+", "", text, flags=re.M)
     path = tmp_path / "coincident.toml"
@@ -191,8 +262,9 @@ def _coincident_bodies(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("engine", ["reference", "scipy"])
-def test_a_state_that_goes_non_finite_is_unstable_at_once_for_every_method(tmp_path: Path,
-                                                                         engine: str) -> None:
+def test_a_state_that_goes_non_finite_is_unstable_at_once_for_every_method(
+    tmp_path: Path, engine: str
+) -> None:
     """Division by zero in the compiled loops, dopri5, implicit Euler's Newton solve and
     scipy's three methods: each an ``unstable`` run with its time, within a second, not
     an exception (``crashed``) or a wait for the timeout."""

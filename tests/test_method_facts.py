@@ -62,8 +62,9 @@ def all_facts() -> list[tuple[str, str, MethodFacts]]:
 
 
 FACTS = all_facts()
-WITH_MATRIX = [(e, m, f) for e, m, f in FACTS if f.stability is not None
-               and f.stability.step_matrix is not None]
+WITH_MATRIX = [
+    (e, m, f) for e, m, f in FACTS if f.stability is not None and f.stability.step_matrix is not None
+]
 
 
 def _id(item) -> str:
@@ -123,8 +124,9 @@ def test_nfev_of_a_fixed_step_engine_comes_from_its_facts(case_named):
     assert traj.nfev == 4 * traj.steps
 
 
-@pytest.mark.parametrize("name", [m for m, c in METHODS.items() if not c.adaptive
-                                  and c.facts.evaluations_per_step is not None])
+@pytest.mark.parametrize(
+    "name", [m for m, c in METHODS.items() if not c.adaptive and c.facts.evaluations_per_step is not None]
+)
 def test_counted_evaluations_match_the_declared_ones(name):
     """The solver's own count over 50 steps: the declared number per step, plus Verlet's
     one evaluation at the start (it reuses the last acceleration from then on)."""
@@ -157,8 +159,9 @@ def _ab(omega_h: float, zeta: float) -> tuple[float, float]:
     return omega_h**2, 2.0 * zeta * omega_h
 
 
-def _reference_states(name: str, omega_h: float, zeta: float, q0: float, hv0: float,
-                      steps: int) -> np.ndarray:
+def _reference_states(
+    name: str, omega_h: float, zeta: float, q0: float, hv0: float, steps: int
+) -> np.ndarray:
     """``(q, h v)`` after each of ``steps`` steps of the reference solver, shape (steps + 1, 2)."""
     omega = omega_h / H
     system = DampedOscillator(omega, 2 * zeta * omega, q0, hv0 / H)
@@ -194,8 +197,9 @@ def test_declared_step_matrix_is_one_step_of_the_reference_solver(name, point):
     methods agree to round-off)."""
     m = METHODS[name].facts.stability.step_matrix(*_ab(*point))
     if m.shape == (2, 2):
-        direct = np.column_stack([_reference_states(name, *point, 1.0, 0.0, 1)[1],
-                                  _reference_states(name, *point, 0.0, 1.0, 1)[1]])
+        direct = np.column_stack(
+            [_reference_states(name, *point, 1.0, 0.0, 1)[1], _reference_states(name, *point, 0.0, 1.0, 1)[1]]
+        )
         np.testing.assert_allclose(direct, m, rtol=0, atol=1e-9)
     run = _reference_states(name, *point, 0.8, -0.3, 12)
     assert _satisfies_characteristic_recurrence(run, m) < 1e-9
@@ -207,19 +211,40 @@ def _spring_case(omega_h: float, zeta: float, q0: float, hv0: float, steps: int)
     system exactly, in any engine, for ``steps`` steps of ``H``, every step recorded."""
     omega = omega_h / H
     model = ParticleModel(
-        mass=np.array([1.0]), x0=np.array([[1.0 + q0, 0.0, 0.0]]),
-        v0=np.array([[hv0 / H, 0.0, 0.0]]), radius=np.zeros(1), fixed=np.zeros(1, bool),
-        anchors=Anchors(np.array([0]), np.zeros((1, 3)), np.array([omega**2]),
-                        np.array([2 * zeta * omega]), np.array([1.0])),
+        mass=np.array([1.0]),
+        x0=np.array([[1.0 + q0, 0.0, 0.0]]),
+        v0=np.array([[hv0 / H, 0.0, 0.0]]),
+        radius=np.zeros(1),
+        fixed=np.zeros(1, bool),
+        anchors=Anchors(
+            np.array([0]),
+            np.zeros((1, 3)),
+            np.array([omega**2]),
+            np.array([2 * zeta * omega]),
+            np.array([1.0]),
+        ),
         dimension=2,
     )
-    return Case(name="test-system", file="<test>", title="", description="", kind="particles",
-                duration=steps * H, dts=[H], quick_dts=[H], tolerances=[], quick_tolerances=[],
-                model=model, max_records=steps, timeout_s=60.0)
+    return Case(
+        name="test-system",
+        file="<test>",
+        title="",
+        description="",
+        kind="particles",
+        duration=steps * H,
+        dts=[H],
+        quick_dts=[H],
+        tolerances=[],
+        quick_tolerances=[],
+        model=model,
+        max_records=steps,
+        timeout_s=60.0,
+    )
 
 
-def _engine_states(engine: str, method: str, omega_h: float, zeta: float, q0: float,
-                   hv0: float, steps: int) -> np.ndarray:
+def _engine_states(
+    engine: str, method: str, omega_h: float, zeta: float, q0: float, hv0: float, steps: int
+) -> np.ndarray:
     traj = get_adapter(engine).simulate(_spring_case(omega_h, zeta, q0, hv0, steps), method, H)
     assert traj.steps == steps
     return np.column_stack([traj.x[:, 0, 0] - 1.0, H * traj.v[:, 0, 0]])
@@ -242,8 +267,15 @@ def test_declared_step_matrix_is_one_step_of_the_engine(engine, method, point):
     precision (pymunk's exponential damper, MuJoCo's tendon: round-off is 1e-15)."""
     m = facts_of(get_adapter(engine), method).stability.step_matrix(*_ab(*point))
     amp = 0.1
-    direct = np.column_stack([_engine_states(engine, method, *point, amp, 0.0, 1)[1],
-                              _engine_states(engine, method, *point, 0.0, amp, 1)[1]]) / amp
+    direct = (
+        np.column_stack(
+            [
+                _engine_states(engine, method, *point, amp, 0.0, 1)[1],
+                _engine_states(engine, method, *point, 0.0, amp, 1)[1],
+            ]
+        )
+        / amp
+    )
     np.testing.assert_allclose(direct, m, rtol=0, atol=1e-9)
     run = _engine_states(engine, method, *point, 0.08, -0.03, 12)
     assert _satisfies_characteristic_recurrence(run, m) < 1e-9
@@ -299,9 +331,10 @@ def test_stability_polynomials_and_intervals_of_the_tableaux(cls):
     np.testing.assert_allclose(gamma, taylor, rtol=1e-13, atol=1e-15)
     s = cls.facts.stability
     expected = {
-        "euler": (0.0, 2.0), "midpoint": (0.0, 2.0), "heun": (0.0, 2.0),
-        "rk4": (2 * math.sqrt(2), max(r.real for r in np.roots([1, -4, 12, -24])
-                                      if abs(r.imag) < 1e-12)),
+        "euler": (0.0, 2.0),
+        "midpoint": (0.0, 2.0),
+        "heun": (0.0, 2.0),
+        "rk4": (2 * math.sqrt(2), max(r.real for r in np.roots([1, -4, 12, -24]) if abs(r.imag) < 1e-12)),
     }
     if cls.name in expected:
         assert (s.imaginary, s.real) == pytest.approx(expected[cls.name], rel=1e-12, abs=1e-15)
@@ -311,8 +344,16 @@ def test_undamped_limits_of_the_lecture_methods_by_their_formulas():
     """The old closed forms (trace and determinant of each step matrix) give the same
     limits as the declared data: symplectic Euler and Verlet 2/omega, RK4 2 sqrt(2)/omega,
     explicit Euler, midpoint, Heun and the lecture's update none, implicit Euler all."""
-    want = {"symplectic-euler": 2.0, "verlet": 2.0, "rk4": 2 * math.sqrt(2), "euler": 0.0,
-            "midpoint": 0.0, "heun": 0.0, "lecture": 0.0, "implicit-euler": INF}
+    want = {
+        "symplectic-euler": 2.0,
+        "verlet": 2.0,
+        "rk4": 2 * math.sqrt(2),
+        "euler": 0.0,
+        "midpoint": 0.0,
+        "heun": 0.0,
+        "lecture": 0.0,
+        "implicit-euler": INF,
+    }
     for name, reach in want.items():
         assert METHODS[name].facts.stability.reach(0.0) == pytest.approx(reach, rel=1e-14)
 
@@ -326,7 +367,8 @@ def test_damped_reach_by_closed_forms(zeta):
     ``D = 1 / (1 + b)`` gives ``2 (sqrt(zeta^2 + 1) + zeta)``."""
     assert METHODS["euler"].facts.stability.reach(zeta) == pytest.approx(2 * zeta, rel=1e-12)
     assert METHODS["symplectic-euler"].facts.stability.reach(zeta) == pytest.approx(
-        2 * (math.sqrt(zeta**2 + 1) - zeta), rel=1e-12)
+        2 * (math.sqrt(zeta**2 + 1) - zeta), rel=1e-12
+    )
     if "mujoco" in ENGINES:
         implicit = facts_of(get_adapter("mujoco"), "implicit").stability
         assert implicit.reach(zeta) == pytest.approx(2 * (math.sqrt(zeta**2 + 1) + zeta), rel=1e-12)
@@ -346,9 +388,15 @@ def old_stability_limit(case: Case, scheme: str | None) -> float | None:
     if scheme == "implicit-euler":
         return INF
     if zeta == 0.0:
-        return {"symplectic-euler": 2.0 / omega, "verlet": 2.0 / omega,
-                "rk4": 2.0 * np.sqrt(2.0) / omega, "euler": 0.0, "midpoint": 0.0,
-                "heun": 0.0, "lecture": 0.0}.get(scheme)
+        return {
+            "symplectic-euler": 2.0 / omega,
+            "verlet": 2.0 / omega,
+            "rk4": 2.0 * np.sqrt(2.0) / omega,
+            "euler": 0.0,
+            "midpoint": 0.0,
+            "heun": 0.0,
+            "lecture": 0.0,
+        }.get(scheme)
     if scheme == "euler" and np.isfinite(zeta) and zeta < 1:
         return 2.0 * zeta / omega
     return None
@@ -357,8 +405,12 @@ def old_stability_limit(case: Case, scheme: str | None) -> float | None:
 OLD_SCHEMES = {
     "pymunk": {"default": "symplectic-euler"},
     "pybullet": {"default": "symplectic-euler", "clean": "symplectic-euler"},
-    "mujoco": {"Euler": "symplectic-euler", "implicit": "symplectic-euler",
-               "implicitfast": "symplectic-euler", "RK4": "rk4"},
+    "mujoco": {
+        "Euler": "symplectic-euler",
+        "implicit": "symplectic-euler",
+        "implicitfast": "symplectic-euler",
+        "RK4": "rk4",
+    },
 }
 """The adapters' ``schemes`` before the facts."""
 SEARCHED = [c for c in load_cases("*") if c.stability is not None]
@@ -373,8 +425,15 @@ def _limits():
                 if method in adapter.adaptive_methods:
                     continue
                 old_scheme = method if engine == "reference" else OLD_SCHEMES.get(engine, {}).get(method)
-                out.append((case, engine, method, old_stability_limit(case, old_scheme),
-                            stability_limit(case, facts_of(adapter, method))))
+                out.append(
+                    (
+                        case,
+                        engine,
+                        method,
+                        old_stability_limit(case, old_scheme),
+                        stability_limit(case, facts_of(adapter, method)),
+                    )
+                )
     return out
 
 
@@ -404,14 +463,19 @@ def _grows(case: Case, engine: str, method: str, dt: float, steps: int = 4000) -
     traj = get_adapter(engine).simulate(run, method, dt)
     if traj.status != "ok":
         return True
-    size = np.hypot(np.linalg.norm(traj.x[:, 0] - case.model.anchors.point[0], axis=1),
-                    dt * np.linalg.norm(traj.v[:, 0], axis=1))
+    size = np.hypot(
+        np.linalg.norm(traj.x[:, 0] - case.model.anchors.point[0], axis=1),
+        dt * np.linalg.norm(traj.v[:, 0], axis=1),
+    )
     quarter = len(size) // 4
     return bool(np.max(size[-quarter:]) > np.max(size[:quarter]))
 
 
-NEW_LIMITS = [(c, e, m, new) for c, e, m, old, new in LIMITS
-              if old is None and new is not None and math.isfinite(new) and new > 0]
+NEW_LIMITS = [
+    (c, e, m, new)
+    for c, e, m, old, new in LIMITS
+    if old is None and new is not None and math.isfinite(new) and new > 0
+]
 
 
 @pytest.mark.engine
@@ -437,10 +501,12 @@ def test_velocity_dependence_and_constant_acceleration_from_the_scene():
             continue
         if case.model is not None:
             m = case.model
-            expected = bool(m.drag) or "spring-damping" in case.features or any(
-                f.kind == "wind" for f in m.fields)
-            only_gravity = not (len(m.springs) or len(m.anchors) or m.drag or m.fields
-                                or m.gravitation is not None)
+            expected = (
+                bool(m.drag) or "spring-damping" in case.features or any(f.kind == "wind" for f in m.fields)
+            )
+            only_gravity = not (
+                len(m.springs) or len(m.anchors) or m.drag or m.fields or m.gravitation is not None
+            )
         else:
             expected = case.ode.system == "arenstorf"
             only_gravity = False
@@ -470,8 +536,11 @@ def test_declared_orders_hold_on_a_quick_run(quick_run):
     checked = []
     for case in QUICK_SMOOTH:
         gates = declared_order_gates([case], ENGINES, quick=True)
-        verdicts = [v for v in check_gates([case], quick_run, extra=[(["*"], g) for g in gates])
-                    if v.gate.file == DECLARED_FILE]
+        verdicts = [
+            v
+            for v in check_gates([case], quick_run, extra=[(["*"], g) for g in gates])
+            if v.gate.file == DECLARED_FILE
+        ]
         assert len(verdicts) == len(gates)
         checked += verdicts
     assert len(checked) >= 50
@@ -479,11 +548,13 @@ def test_declared_orders_hold_on_a_quick_run(quick_run):
     # its gate not evaluated; every other gate is evaluated and holds.
     skipped = {(v.case, v.gate.engine, v.gate.method): v for v in checked if not v.evaluated}
     assert set(skipped) == {k for k in UNREADABLE if k[1] in ENGINES}
-    assert all(v.passed for v in checked if v.evaluated), \
-        "\n".join(v.line() for v in checked if v.evaluated and not v.passed)
+    assert all(v.passed for v in checked if v.evaluated), "\n".join(
+        v.line() for v in checked if v.evaluated and not v.passed
+    )
     for (case, engine, method), v in skipped.items():
-        rows = quick_run[(quick_run["case"] == case) & (quick_run["engine"] == engine)
-                         & (quick_run["method"] == method)]
+        rows = quick_run[
+            (quick_run["case"] == case) & (quick_run["engine"] == engine) & (quick_run["method"] == method)
+        ]
         slope = np.polyfit(np.log(rows["dt"].astype(float)), np.log(rows["error"].astype(float)), 1)[0]
         assert abs(slope - v.gate.params["expect"]) <= DECLARED_ORDER_TOL
 
@@ -494,8 +565,10 @@ def test_declared_gates_follow_the_facts_not_method_names():
     cases = {c.name: c for c in load_cases("free-fall,projectile-drag,earth-orbit")}
     pairs = declared_order_pairs(cases.values(), ["reference"], quick=True)
     got = {(names[0], g.method): g.params["expect"] for names, g in pairs}
-    assert all(g.kind == "order" and g.dt is None and g.where == "declared"
-               and g.params["tol"] == DECLARED_ORDER_TOL for _, g in pairs)
+    assert all(
+        g.kind == "order" and g.dt is None and g.where == "declared" and g.params["tol"] == DECLARED_ORDER_TOL
+        for _, g in pairs
+    )
     free = {m for c, m in got if c == "free-fall"}
     assert free == {"euler", "symplectic-euler", "implicit-euler"}
     assert got[("projectile-drag", "verlet")] == 1.0

@@ -21,9 +21,14 @@ G = 9.81
 
 def ball(h0: float, r: float, e: float, *, v0=(0.0, 0.0, 0.0), friction: float = 0.0):
     model = ParticleModel(
-        mass=np.array([1.0]), x0=np.array([[0.0, r + h0, 0.0]]), v0=np.array([v0], float),
-        radius=np.array([r]), fixed=np.zeros(1, bool), gravity=-G * UP,
-        planes=[Plane(np.zeros(3), UP, e, friction)], dimension=2,
+        mass=np.array([1.0]),
+        x0=np.array([[0.0, r + h0, 0.0]]),
+        v0=np.array([v0], float),
+        radius=np.array([r]),
+        fixed=np.zeros(1, bool),
+        gravity=-G * UP,
+        planes=[Plane(np.zeros(3), UP, e, friction)],
+        dimension=2,
     )
     return model, ParticleSystem(model, passes_for(model))
 
@@ -59,10 +64,22 @@ def test_bounce_times_converge_at_first_order():
 def _case(model: ParticleModel, duration: float):
     from truestep.cases.case import Case
 
-    return Case(name="t", file="t", title="t", description="", kind="particles",
-                duration=duration, dts=[0.01], quick_dts=[0.01], tolerances=[1e-6],
-                quick_tolerances=[1e-6], model=model, exact="bouncing-ball",
-                max_records=10000, exact_params={"bounces": 3})
+    return Case(
+        name="t",
+        file="t",
+        title="t",
+        description="",
+        kind="particles",
+        duration=duration,
+        dts=[0.01],
+        quick_dts=[0.01],
+        tolerances=[1e-6],
+        quick_tolerances=[1e-6],
+        model=model,
+        exact="bouncing-ball",
+        max_records=10000,
+        exact_params={"bounces": 3},
+    )
 
 
 @pytest.mark.parametrize("method", ["lecture", "rk4", "verlet", "euler"])
@@ -98,9 +115,15 @@ def test_friction_stops_a_sliding_particle_at_v0_squared_over_2_mu_g():
 def test_static_friction_holds_a_particle_on_a_gentle_slope():
     angle = np.radians(10.0)  # tan 10 deg = 0.18 < mu = 0.3: it must stay
     n = np.array([-np.sin(angle), np.cos(angle), 0.0])
-    model = ParticleModel(mass=np.array([1.0]), x0=np.array([[0.0, 0.0, 0.0]]),
-                          v0=np.zeros((1, 3)), radius=np.zeros(1), fixed=np.zeros(1, bool),
-                          gravity=-G * UP, planes=[Plane(np.zeros(3), n, 0.0, 0.3)])
+    model = ParticleModel(
+        mass=np.array([1.0]),
+        x0=np.array([[0.0, 0.0, 0.0]]),
+        v0=np.zeros((1, 3)),
+        radius=np.zeros(1),
+        fixed=np.zeros(1, bool),
+        gravity=-G * UP,
+        planes=[Plane(np.zeros(3), n, 0.0, 0.3)],
+    )
     system = ParticleSystem(model, passes_for(model))
     integrate(get_solver("lecture")(system), 1.0, 0.01)
     assert np.allclose(system.positions, 0.0, atol=1e-15)
@@ -109,10 +132,15 @@ def test_static_friction_holds_a_particle_on_a_gentle_slope():
 def test_particles_stay_inside_a_box():
     rng = np.random.default_rng(2)
     n = 200
-    model = ParticleModel(mass=np.ones(n), x0=rng.uniform(0.1, 0.9, (n, 3)),
-                          v0=rng.normal(0, 5, (n, 3)), radius=np.full(n, 0.02),
-                          fixed=np.zeros(n, bool), gravity=-G * UP,
-                          planes=box_planes(np.zeros(3), np.ones(3), restitution=0.9))
+    model = ParticleModel(
+        mass=np.ones(n),
+        x0=rng.uniform(0.1, 0.9, (n, 3)),
+        v0=rng.normal(0, 5, (n, 3)),
+        radius=np.full(n, 0.02),
+        fixed=np.zeros(n, bool),
+        gravity=-G * UP,
+        planes=box_planes(np.zeros(3), np.ones(3), restitution=0.9),
+    )
     system = ParticleSystem(model, passes_for(model))
     integrate(get_solver("lecture")(system), 1.0, 0.005)
     x = system.positions

@@ -21,16 +21,33 @@ from truestep.reference_impl.strands import ballistic_deviation, collect_strands
 
 def pool_system(spec: EmitterSpec, gravity=(0.0, 0.0, 0.0)) -> tuple[ParticleSystem, Emitter]:
     n = spec.capacity
-    model = ParticleModel(mass=np.full(n, spec.particle_mass), x0=np.zeros((n, 3)),
-                          v0=np.zeros((n, 3)), radius=np.zeros(n), fixed=np.zeros(n, bool),
-                          gravity=np.array(gravity), emitters=[spec])
+    model = ParticleModel(
+        mass=np.full(n, spec.particle_mass),
+        x0=np.zeros((n, 3)),
+        v0=np.zeros((n, 3)),
+        radius=np.zeros(n),
+        fixed=np.zeros(n, bool),
+        gravity=np.array(gravity),
+        emitters=[spec],
+    )
     passes = passes_for(model)
     return ParticleSystem(model, passes), passes[0]
 
 
 def spec(**kw) -> EmitterSpec:
-    base = dict(shape="cube", center=np.zeros(3), size=0.5, rate_n=7.0, rate_r=5.0, speed=1.0,
-                spread=0.3, lifetime=10, lifetime_jitter=3, capacity=400, seed=1)
+    base = dict(
+        shape="cube",
+        center=np.zeros(3),
+        size=0.5,
+        rate_n=7.0,
+        rate_r=5.0,
+        speed=1.0,
+        spread=0.3,
+        lifetime=10,
+        lifetime_jitter=3,
+        capacity=400,
+        seed=1,
+    )
     base.update(kw)
     return EmitterSpec(**base)
 
@@ -174,11 +191,13 @@ dt = [0.01]
         (('shape = "cube"', 'shape = "sphere"'), "scene.emitters[0].shape", "not one of"),
         (("rate_n = 5.0", "rate_n = -5.0"), "scene.emitters[0].rate_n", "negative"),
         (("lifetime = 10", "lifetime = 0"), "scene.emitters[0].lifetime", "at least 1"),
-        (("lifetime = 10", "lifetime = 10\nlifetime_jitter = 10"),
-         "scene.emitters[0].lifetime_jitter", "below lifetime"),
+        (
+            ("lifetime = 10", "lifetime = 10\nlifetime_jitter = 10"),
+            "scene.emitters[0].lifetime_jitter",
+            "below lifetime",
+        ),
         (("capacity = 100", "capacity = 50"), "scene.emitters[0].capacity", "largest population"),
-        (("size = 0.2", "size = 0.2\nnormal = [0, 1, 0]"), "scene.emitters[0].normal",
-         "only a plane"),
+        (("size = 0.2", "size = 0.2\nnormal = [0, 1, 0]"), "scene.emitters[0].normal", "only a plane"),
         (("speed = 1.0", "speed = 1.0\nspread = 4.0"), "scene.emitters[0].spread", "at most"),
         (("speed = 1.0", "sped = 1.0"), "scene.emitters[0].speed", "missing"),
     ],

@@ -19,15 +19,31 @@ G = np.array([0.0, -9.81, 0.0])
 def free_model(n: int = 3, drag: float = 0.0, seed: int = 0) -> ParticleModel:
     rng = np.random.default_rng(seed)
     return ParticleModel(
-        mass=rng.uniform(0.5, 2.0, n), x0=rng.normal(0, 1, (n, 3)), v0=rng.normal(0, 3, (n, 3)),
-        radius=np.zeros(n), fixed=np.zeros(n, bool), gravity=G, drag=drag,
+        mass=rng.uniform(0.5, 2.0, n),
+        x0=rng.normal(0, 1, (n, 3)),
+        v0=rng.normal(0, 3, (n, 3)),
+        radius=np.zeros(n),
+        fixed=np.zeros(n, bool),
+        gravity=G,
+        drag=drag,
     )
 
 
 def case_of(model: ParticleModel, exact: str, duration: float) -> Case:
-    return Case(name="t", file="t", title="t", description="", kind="particles",
-                duration=duration, dts=[0.1], quick_dts=[0.1], tolerances=[1e-6],
-                quick_tolerances=[1e-6], model=model, exact=exact)
+    return Case(
+        name="t",
+        file="t",
+        title="t",
+        description="",
+        kind="particles",
+        duration=duration,
+        dts=[0.1],
+        quick_dts=[0.1],
+        tolerances=[1e-6],
+        quick_tolerances=[1e-6],
+        model=model,
+        exact=exact,
+    )
 
 
 def run(model: ParticleModel, method: str, t_end: float, dt: float) -> np.ndarray:
@@ -51,8 +67,7 @@ def test_lecture_update_is_exact_under_constant_gravity(dt):
 def test_drag_solution_rk4_converges_to_the_exponential():
     model = free_model(drag=0.7)
     exact = EXACT["linear-drag"](case_of(model, "linear-drag", 2.0), np.array([2.0]))
-    errors = [np.max(np.abs(run(model, "rk4", 2.0, dt)[:9].reshape(3, 3) - exact.x[0]))
-              for dt in (0.1, 0.05)]
+    errors = [np.max(np.abs(run(model, "rk4", 2.0, dt)[:9].reshape(3, 3) - exact.x[0])) for dt in (0.1, 0.05)]
     # RK4 on a linear ODE with |lambda dt| <= 0.14: error ~ (lambda dt)^5 per unit time,
     # well below 1e-5 m; halving dt divides it by 2^4 = 16 (accept 13..19).
     assert errors[0] < 1e-5
@@ -74,8 +89,7 @@ def test_spring_force_follows_the_lecture_formula():
     f1 = forces.spring_forces(dx, dv, np.array([10.0]), np.array([3.0]), np.array([1.0]))
     # f1 = -[k_s (|dx| - r) + k_d (dv . dx) / |dx|] dx / |dx| = -(5 + 0.6) x-hat
     assert np.allclose(f1, [[-5.6, 0.0, 0.0]], rtol=0, atol=1e-15)
-    zero = forces.spring_forces(np.zeros((1, 3)), dv, np.array([10.0]), np.array([3.0]),
-                                np.array([1.0]))
+    zero = forces.spring_forces(np.zeros((1, 3)), dv, np.array([10.0]), np.array([3.0]), np.array([1.0]))
     assert np.all(zero == 0.0)
 
 
@@ -126,20 +140,33 @@ def test_analytic_jacobian_matches_finite_differences():
     rng = np.random.default_rng(5)
     n = 4
     model = ParticleModel(
-        mass=rng.uniform(0.5, 2, n), x0=rng.normal(0, 1, (n, 3)), v0=rng.normal(0, 1, (n, 3)),
-        radius=np.zeros(n), fixed=np.array([False, False, True, False]), gravity=G, drag=0.3,
-        springs=Springs(np.array([0, 1, 2]), np.array([1, 2, 3]), np.array([50.0, 80.0, 20.0]),
-                        np.array([0.5, 0.0, 1.0]), np.array([0.7, 1.0, 1.3])),
-        anchors=Anchors(np.array([0]), np.zeros((1, 3)), np.array([30.0]), np.array([0.2]),
-                        np.array([0.5])),
+        mass=rng.uniform(0.5, 2, n),
+        x0=rng.normal(0, 1, (n, 3)),
+        v0=rng.normal(0, 1, (n, 3)),
+        radius=np.zeros(n),
+        fixed=np.array([False, False, True, False]),
+        gravity=G,
+        drag=0.3,
+        springs=Springs(
+            np.array([0, 1, 2]),
+            np.array([1, 2, 3]),
+            np.array([50.0, 80.0, 20.0]),
+            np.array([0.5, 0.0, 1.0]),
+            np.array([0.7, 1.0, 1.3]),
+        ),
+        anchors=Anchors(np.array([0]), np.zeros((1, 3)), np.array([30.0]), np.array([0.2]), np.array([0.5])),
         gravitation=Gravitation(G=2.0, softening=0.1),
     )
     system = ParticleSystem(model)
     x = system.get_state()
     jac = np.asarray(system.jacobian(x, 0.0))
     h = 1e-6
-    fd = np.array([(system.derivative(x + h * e, 0.0) - system.derivative(x - h * e, 0.0)) / (2 * h)
-                   for e in np.eye(len(x))]).T
+    fd = np.array(
+        [
+            (system.derivative(x + h * e, 0.0) - system.derivative(x - h * e, 0.0)) / (2 * h)
+            for e in np.eye(len(x))
+        ]
+    ).T
     # Central differences: error ~ h^2 * third derivatives (~1e3 here) plus round-off
     # ~ 1e-16 * |f| / h ~ 1e-8.
     assert np.max(np.abs(jac - fd)) < 1e-6 * np.max(np.abs(fd))
@@ -161,9 +188,15 @@ def test_impulse_on_the_triangle_gives_f_dt_with_the_lecture_update():
 
     mesh = meshes.triangle(1.0)
     mass, springs = meshes.mass_spring(mesh, 3.0, 100.0, 0.5)
-    model = ParticleModel(mass=mass, x0=mesh.vertices, v0=np.zeros((3, 3)), radius=np.zeros(3),
-                          fixed=np.zeros(3, bool), springs=springs,
-                          impulses=[(1, np.array([20.0, 0.0, 0.0]), 0.0, 0.0099)])
+    model = ParticleModel(
+        mass=mass,
+        x0=mesh.vertices,
+        v0=np.zeros((3, 3)),
+        radius=np.zeros(3),
+        fixed=np.zeros(3, bool),
+        springs=springs,
+        impulses=[(1, np.array([20.0, 0.0, 0.0]), 0.0, 0.0099)],
+    )
     system = ParticleSystem(model)
     solver = LectureUpdate(system)
     solver.step(0.01)
@@ -171,8 +204,9 @@ def test_impulse_on_the_triangle_gives_f_dt_with_the_lecture_update():
     # One step of the lecture's example: v_2' = a_2 dt = (20 / 1) 0.01, the others at rest.
     assert np.allclose(v[1], [0.2, 0.0, 0.0], rtol=0, atol=1e-15)
     assert np.all(v[[0, 2]] == 0.0)
-    assert np.allclose(system.positions[1] - mesh.vertices[1], [0.5 * 20.0 * 0.01**2, 0, 0],
-                       rtol=0, atol=1e-16)
+    assert np.allclose(
+        system.positions[1] - mesh.vertices[1], [0.5 * 20.0 * 0.01**2, 0, 0], rtol=0, atol=1e-16
+    )
     rk = RK4(ParticleSystem(model))
     for _ in range(100):
         rk.step(0.01)

@@ -36,8 +36,7 @@ def test_signed_volume_of_closed_meshes():
     cube = meshes.cube(2.0, center=np.array([1.0, -3.0, 5.0]))
     assert meshes.signed_volume(cube.vertices, cube.faces) == pytest.approx(8.0, rel=1e-14)
     tet = meshes.tetrahedron(1.0)
-    assert meshes.signed_volume(tet.vertices, tet.faces) == pytest.approx(
-        1 / (6 * np.sqrt(2)), rel=1e-14)
+    assert meshes.signed_volume(tet.vertices, tet.faces) == pytest.approx(1 / (6 * np.sqrt(2)), rel=1e-14)
     mirrored = cube.vertices * np.array([1.0, -1.0, 1.0])  # a reflection turns it inside out
     assert meshes.signed_volume(mirrored, cube.faces) == pytest.approx(-8.0, rel=1e-14)
     flat = cube.vertices * np.array([1.0, 0.0, 1.0])
@@ -89,8 +88,7 @@ dt = [0.01]
         (("size = 1.0", "size = -1.0"), "scene.meshes[0].size", "positive"),
         (("stiffness = 100.0", ""), "scene.meshes[0].stiffness", "missing"),
         (("mass = 1.0", "mass = 1.0\npinned = [8]"), "scene.meshes[0].pinned", "out of range"),
-        (("mass = 1.0", 'mass = 1.0\nbracing = "diagonal"'), "scene.meshes[0].bracing",
-         "not one of"),
+        (("mass = 1.0", 'mass = 1.0\nbracing = "diagonal"'), "scene.meshes[0].bracing", "not one of"),
         (("mass = 1.0", "mass = 1.0\nsides = 4"), "scene.meshes[0].sides", "unknown field"),
     ],
 )

@@ -31,17 +31,30 @@ G = np.array([0.0, -9.81, 0.0])
 def make_case(model: ParticleModel, duration: float, dt: float, max_records: int = 2000) -> Case:
     """A case around ``model`` with one step size, recording at most ``max_records`` states."""
     return Case(
-        name="mujoco-test", file="<test>", title="", description="", kind="particles",
-        duration=duration, dts=[dt], quick_dts=[dt], tolerances=[], quick_tolerances=[],
-        model=model, max_records=max_records,
+        name="mujoco-test",
+        file="<test>",
+        title="",
+        description="",
+        kind="particles",
+        duration=duration,
+        dts=[dt],
+        quick_dts=[dt],
+        tolerances=[],
+        quick_tolerances=[],
+        model=model,
+        max_records=max_records,
     )
 
 
 def particle(x0, v0=(0.0, 0.0, 0.0), **kw) -> ParticleModel:
     """One 1 kg particle (more keywords go to :class:`ParticleModel`)."""
     return ParticleModel(
-        mass=np.array([1.0]), x0=np.array([x0], float), v0=np.array([v0], float),
-        radius=np.array([kw.pop("radius", 0.0)]), fixed=np.array([False]), **kw,
+        mass=np.array([1.0]),
+        x0=np.array([x0], float),
+        v0=np.array([v0], float),
+        radius=np.array([kw.pop("radius", 0.0)]),
+        fixed=np.array([False]),
+        **kw,
     )
 
 
@@ -50,9 +63,19 @@ def test_protocol_and_missing_features():
     assert isinstance(adapter, Adapter)
     assert adapter.methods == ("Euler", "implicit", "implicitfast", "RK4")
     assert adapter.adaptive_methods == ()
-    ode = Case(name="o", file="", title="", description="", kind="ode", duration=1.0, dts=[0.1],
-               quick_dts=[0.1], tolerances=[], quick_tolerances=[],
-               ode=OdeSpec("circle-field", np.array([1.0, 0.0])))
+    ode = Case(
+        name="o",
+        file="",
+        title="",
+        description="",
+        kind="ode",
+        duration=1.0,
+        dts=[0.1],
+        quick_dts=[0.1],
+        tolerances=[],
+        quick_tolerances=[],
+        ode=OdeSpec("circle-field", np.array([1.0, 0.0])),
+    )
     assert adapter.missing(ode, "RK4") == {"ode"}
     assert adapter.missing(load_case(CASES / "harmonic-oscillator.toml"), "Euler") == set()
     with pytest.raises(ValueError, match="method"):
@@ -90,20 +113,20 @@ def test_tendon_is_the_lectures_spring_damper():
     """MuJoCo's passive force of a spatial tendon (stiffness, damping, springlength) equals
     the reference's damped spring at an arbitrary 3-D state, to rounding (1e-12 N)."""
     model = ParticleModel(
-        mass=np.array([1.0, 2.0]), x0=np.array([[0.3, 0.2, -0.1], [1.1, -0.4, 0.5]]),
-        v0=np.array([[0.5, -0.2, 0.3], [-0.1, 0.7, 0.2]]), radius=np.zeros(2),
+        mass=np.array([1.0, 2.0]),
+        x0=np.array([[0.3, 0.2, -0.1], [1.1, -0.4, 0.5]]),
+        v0=np.array([[0.5, -0.2, 0.3], [-0.1, 0.7, 0.2]]),
+        radius=np.zeros(2),
         fixed=np.zeros(2, bool),
-        springs=Springs(np.array([0]), np.array([1]), np.array([100.0]), np.array([3.0]),
-                        np.array([0.6])),
-        anchors=Anchors(np.array([1]), np.array([[-1.0, 0.0, 0.0]]), np.array([40.0]),
-                        np.array([1.5]), np.array([1.2])),
+        springs=Springs(np.array([0]), np.array([1]), np.array([100.0]), np.array([3.0]), np.array([0.6])),
+        anchors=Anchors(
+            np.array([1]), np.array([[-1.0, 0.0, 0.0]]), np.array([40.0]), np.array([1.5]), np.array([1.2])
+        ),
     )
     scene = build(make_case(model, 1.0, 0.01), "Euler", 0.01)
     x, v = model.x0, model.v0
-    f01 = spring_forces(x[:1] - x[1:], v[:1] - v[1:], np.array([100.0]), np.array([3.0]),
-                        np.array([0.6]))[0]
-    fa = spring_forces(x[1:] - [-1.0, 0.0, 0.0], v[1:], np.array([40.0]), np.array([1.5]),
-                       np.array([1.2]))[0]
+    f01 = spring_forces(x[:1] - x[1:], v[:1] - v[1:], np.array([100.0]), np.array([3.0]), np.array([0.6]))[0]
+    fa = spring_forces(x[1:] - [-1.0, 0.0, 0.0], v[1:], np.array([40.0]), np.array([1.5]), np.array([1.2]))[0]
     expected = np.concatenate([f01, -f01 + fa])
     np.testing.assert_allclose(scene.data.qfrc_passive, expected, rtol=0, atol=1e-12)
 
@@ -141,13 +164,16 @@ def test_mujoco_energy_agrees_with_total_energy():
     the two are computed from the same state, so they agree to rounding (1e-10 J).
     """
     model = ParticleModel(
-        mass=np.array([1.0, 0.5]), x0=np.array([[0.0, 1.0, 0.0], [0.3, 0.4, 0.2]]),
-        v0=np.array([[0.2, 0.0, -0.1], [0.0, 0.5, 0.3]]), radius=np.zeros(2),
-        fixed=np.zeros(2, bool), gravity=G,
-        springs=Springs(np.array([0]), np.array([1]), np.array([50.0]), np.zeros(1),
-                        np.array([0.5])),
-        anchors=Anchors(np.array([0]), np.array([[0.0, 2.0, 0.0]]), np.array([80.0]),
-                        np.array([0.5]), np.array([0.8])),
+        mass=np.array([1.0, 0.5]),
+        x0=np.array([[0.0, 1.0, 0.0], [0.3, 0.4, 0.2]]),
+        v0=np.array([[0.2, 0.0, -0.1], [0.0, 0.5, 0.3]]),
+        radius=np.zeros(2),
+        fixed=np.zeros(2, bool),
+        gravity=G,
+        springs=Springs(np.array([0]), np.array([1]), np.array([50.0]), np.zeros(1), np.array([0.5])),
+        anchors=Anchors(
+            np.array([0]), np.array([[0.0, 2.0, 0.0]]), np.array([80.0]), np.array([0.5]), np.array([0.8])
+        ),
     )
     scene = build(make_case(model, 1.0, 1e-3), "RK4", 1e-3)
     m, d = scene.model, scene.data
@@ -169,8 +195,11 @@ def test_drag_is_joint_damping_implicit_in_euler():
     h, n, k = 0.1, 30, 2.0
     case = make_case(particle((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), drag=k), n * h, h)
     z = -h * k
-    for method, factor in (("Euler", 1 / (1 + h * k)), ("implicitfast", 1 / (1 + h * k)),
-                           ("RK4", 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)):
+    for method, factor in (
+        ("Euler", 1 / (1 + h * k)),
+        ("implicitfast", 1 / (1 + h * k)),
+        ("RK4", 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24),
+    ):
         run = MujocoAdapter().simulate(case, method, h)
         np.testing.assert_allclose(run.v[:, 0, 0], factor ** np.arange(n + 1), rtol=0, atol=1e-14)
 
@@ -181,10 +210,13 @@ def test_pinned_particle_and_damped_spring_reach_static_equilibrium():
     has decayed by exp(-zeta omega t) = exp(-25), and semi-implicit Euler's fixed point is
     the exact equilibrium: 1e-8 m."""
     model = ParticleModel(
-        mass=np.array([3.0, 1.0]), x0=np.array([[0.0, 1.0, 0.0], [0.0, 0.6, 0.0]]),
-        v0=np.zeros((2, 3)), radius=np.zeros(2), fixed=np.array([True, False]), gravity=G,
-        springs=Springs(np.array([0]), np.array([1]), np.array([100.0]), np.array([5.0]),
-                        np.array([0.5])),
+        mass=np.array([3.0, 1.0]),
+        x0=np.array([[0.0, 1.0, 0.0], [0.0, 0.6, 0.0]]),
+        v0=np.zeros((2, 3)),
+        radius=np.zeros(2),
+        fixed=np.array([True, False]),
+        gravity=G,
+        springs=Springs(np.array([0]), np.array([1]), np.array([100.0]), np.array([5.0]), np.array([0.5])),
         dimension=2,
     )
     run = MujocoAdapter().simulate(make_case(model, 10.0, 1e-3, max_records=10), "Euler", 1e-3)
@@ -202,15 +234,18 @@ def test_stage_forces_keep_rk4_fourth_order():
     (ratio 2; between 1.6 and 2.4)."""
     speed = np.sqrt(0.5)
     model = ParticleModel(
-        mass=np.ones(2), x0=np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0]]),
-        v0=np.array([[0.0, -speed, 0.0], [0.0, speed, 0.0]]), radius=np.zeros(2),
-        fixed=np.zeros(2, bool), gravitation=Gravitation(G=1.0), dimension=2,
+        mass=np.ones(2),
+        x0=np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0]]),
+        v0=np.array([[0.0, -speed, 0.0], [0.0, speed, 0.0]]),
+        radius=np.zeros(2),
+        fixed=np.zeros(2, bool),
+        gravitation=Gravitation(G=1.0),
+        dimension=2,
     )
     period = np.pi / speed
 
     def error(stage: bool, h: float) -> float:
-        run = MujocoAdapter(stage_forces=stage).simulate(
-            make_case(model, period, h, max_records=4), "RK4", h)
+        run = MujocoAdapter(stage_forces=stage).simulate(make_case(model, period, h, max_records=4), "RK4", h)
         return float(np.max(np.abs(run.x[-1] - model.x0)))
 
     staged = error(True, 0.02), error(True, 0.01)
@@ -267,8 +302,13 @@ def test_ball_bounce_restitution(method):
     resolution of the contact adds O(omega h) to Euler. Tolerance 0.04 on the ratio
     (5% of 0.8). Measured: Euler 0.787, RK4 0.801.
     """
-    model = particle((0.0, 1.0, 0.0), radius=0.05, gravity=G, dimension=2,
-                     planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), restitution=0.8)])
+    model = particle(
+        (0.0, 1.0, 0.0),
+        radius=0.05,
+        gravity=G,
+        dimension=2,
+        planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), restitution=0.8)],
+    )
     h = 1e-3
     run = MujocoAdapter().simulate(make_case(model, 0.7, h, max_records=700), method, h)
     assert run.status == "ok"
@@ -282,8 +322,13 @@ def test_coulomb_friction_stops_a_sliding_particle():
     """A particle slides at 2 m/s on a floor with mu = 0.5 and e = 1: it decelerates at
     mu g and stops after v^2 / (2 mu g) = 0.4077 m. Semi-implicit Euler at h = 1e-3 s
     travels h v / 2 = 1 mm less; tolerance 2 mm."""
-    model = particle((0.0, 0.05, 0.0), (2.0, 0.0, 0.0), radius=0.05, gravity=G,
-                     planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 1.0, 0.5)])
+    model = particle(
+        (0.0, 0.05, 0.0),
+        (2.0, 0.0, 0.0),
+        radius=0.05,
+        gravity=G,
+        planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 1.0, 0.5)],
+    )
     run = MujocoAdapter().simulate(make_case(model, 0.6, 1e-3, max_records=60), "Euler", 1e-3)
     assert run.x[-1, 0, 0] == pytest.approx(4.0 / (2 * 0.5 * 9.81), abs=2e-3)
     assert abs(run.v[-1, 0, 0]) < 1e-9
@@ -301,9 +346,15 @@ def test_force_field_and_impulse_through_applied_forces(stage_forces):
     v_y(0.5) = (F / k) (1 - exp(-0.3 k)), v_y(1) = v_y(0.5) exp(-0.5 k), up to one step's
     worth of impulse, F h = 0.02 m/s, depending on which stage times fall inside the window.
     """
-    model = particle((0.0, 0.0, 0.0), impulses=[(0, np.array([0.0, 2.0, 0.0]), 0.2, 0.5)],
-                     fields=[ForceField("wind", {"direction": [1.0, 0.0, 0.0], "speed": 3.0,
-                                                 "gust": 0.0, "freq": 0.0, "k": 2.0})])
+    model = particle(
+        (0.0, 0.0, 0.0),
+        impulses=[(0, np.array([0.0, 2.0, 0.0]), 0.2, 0.5)],
+        fields=[
+            ForceField(
+                "wind", {"direction": [1.0, 0.0, 0.0], "speed": 3.0, "gust": 0.0, "freq": 0.0, "k": 2.0}
+            )
+        ],
+    )
     adapter = MujocoAdapter(stage_forces=stage_forces)
     run = adapter.simulate(make_case(model, 1.0, 0.01), "RK4", 0.01)
     t = run.t

@@ -29,15 +29,31 @@ from truestep.reference_impl.particles import ParticleSystem
 UP = np.array([0.0, 1.0, 0.0])
 
 
-def scene(x, v, *, g=0.0, r=0.0, e=1.0, mu=0.0, thickness=0.0, fixed=None, mass=None,
-          normal=UP, point=(0.0, 0.0, 0.0)):
+def scene(
+    x,
+    v,
+    *,
+    g=0.0,
+    r=0.0,
+    e=1.0,
+    mu=0.0,
+    thickness=0.0,
+    fixed=None,
+    mass=None,
+    normal=UP,
+    point=(0.0, 0.0, 0.0),
+):
     x, v = np.atleast_2d(np.asarray(x, float)), np.atleast_2d(np.asarray(v, float))
     n = len(x)
     model = ParticleModel(
-        mass=np.ones(n) if mass is None else np.asarray(mass, float), x0=x, v0=v,
-        radius=np.full(n, r), fixed=np.zeros(n, bool) if fixed is None else np.asarray(fixed),
+        mass=np.ones(n) if mass is None else np.asarray(mass, float),
+        x0=x,
+        v0=v,
+        radius=np.full(n, r),
+        fixed=np.zeros(n, bool) if fixed is None else np.asarray(fixed),
         gravity=g * np.asarray(normal, float),
-        planes=[Plane(np.asarray(point, float), np.asarray(normal, float), e, mu, thickness)])
+        planes=[Plane(np.asarray(point, float), np.asarray(normal, float), e, mu, thickness)],
+    )
     system = ParticleSystem(model)
     return system, PlaneCollisions(model.planes, model.radius, model.fixed, model.mass)
 
@@ -61,8 +77,9 @@ def test_box_planes_are_six_inward_walls():
 def test_signed_distance_is_the_contact_points_height():
     p = Plane(np.array([0.0, 2.0, 0.0]), np.array([0.0, 0.6, 0.8]))
     x = np.array([[1.0, 3.0, 1.0], [0.0, 0.0, 0.0]])
-    np.testing.assert_allclose(signed_distances(x, np.array([0.1, 0.5]), p),
-                               [0.6 + 0.8 - 0.1, -1.2 - 0.5], rtol=1e-15)
+    np.testing.assert_allclose(
+        signed_distances(x, np.array([0.1, 0.5]), p), [0.6 + 0.8 - 0.1, -1.2 - 0.5], rtol=1e-15
+    )
 
 
 @pytest.mark.parametrize("e", [1.0, 0.7, 0.0])
@@ -84,8 +101,7 @@ def test_a_single_bounce_reverses_the_normal_speed_times_e(e):
 
 
 def test_a_particle_above_the_tolerance_or_leaving_is_left_alone():
-    system, cr = scene([[0.0, 3 * EPS_DISTANCE, 0.0], [1.0, 0.0, 0.0]], [[0.0, -1.0, 0.0],
-                                                                        [0.0, 1.0, 0.0]])
+    system, cr = scene([[0.0, 3 * EPS_DISTANCE, 0.0], [1.0, 0.0, 0.0]], [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
     cr(system, 0.01)
     np.testing.assert_array_equal(system.velocities, [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
     assert cr.collisions == 0
@@ -179,16 +195,18 @@ def _push(force):
     from truestep.reference_impl.model import ForceField
 
     # a constant force as a wind on a particle at rest with k = 1: f = w - v
-    return ForceField("wind", {"direction": list(force / np.linalg.norm(force)),
-                               "speed": float(np.linalg.norm(force)), "k": 1.0})
+    return ForceField(
+        "wind",
+        {"direction": list(force / np.linalg.norm(force)), "speed": float(np.linalg.norm(force)), "k": 1.0},
+    )
 
 
 def test_add_contact_forces_cancels_the_push_and_adds_coulomb_friction():
     n = UP
-    f = np.array([[3.0, -10.0, 4.0], [3.0, -10.0, 0.0], [1.0, -10.0, 0.0], [2.0, 5.0, 0.0],
-                  [8.0, -10.0, 0.0]])
-    v = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0],
-                  [0.0, 0.0, 0.0]])
+    f = np.array(
+        [[3.0, -10.0, 4.0], [3.0, -10.0, 0.0], [1.0, -10.0, 0.0], [2.0, 5.0, 0.0], [8.0, -10.0, 0.0]]
+    )
+    v = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     contact = np.array([[True, True, True, True, False]])
     out = f.copy()
     add_contact_forces(out, v, contact, [Plane(np.zeros(3), n, 1.0, 0.4)])

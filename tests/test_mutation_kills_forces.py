@@ -44,8 +44,11 @@ def test_gravity_and_drag_add_into_the_accumulator():
 def test_spring_forces_are_the_closed_form_at_chosen_points():
     d = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, -2.0], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
     v = np.array([[1.0, -1.0, 2.0], [0.5, 0.0, 1.0], [-1.0, 2.0, 0.0], [1.0, 1.0, 1.0]])
-    k, c, rest = np.array([10.0, 5.0, 2.0, 9.0]), np.array([0.3, 1.5, 0.0, 1.0]), np.array(
-        [4.0, 3.0, 1.0, 1.0])
+    k, c, rest = (
+        np.array([10.0, 5.0, 2.0, 9.0]),
+        np.array([0.3, 1.5, 0.0, 1.0]),
+        np.array([4.0, 3.0, 1.0, 1.0]),
+    )
     f = forces.spring_forces(d, v, k, c, rest)
     for s in range(3):
         np.testing.assert_allclose(f[s], closed_spring(d[s], v[s], k[s], c[s], rest[s]), rtol=1e-14)
@@ -57,8 +60,13 @@ def test_spring_forces_are_the_closed_form_at_chosen_points():
 def test_the_compiled_spring_loop_adds_equal_and_opposite_forces():
     x = RNG.normal(size=(4, 3))
     v = RNG.normal(size=(4, 3))
-    s = Springs(np.array([0, 1, 3]), np.array([1, 2, 0]), np.array([10.0, 4.0, 7.0]),
-                np.array([0.5, 0.0, 1.2]), np.array([0.3, 2.0, 1.0]))
+    s = Springs(
+        np.array([0, 1, 3]),
+        np.array([1, 2, 0]),
+        np.array([10.0, 4.0, 7.0]),
+        np.array([0.5, 0.0, 1.2]),
+        np.array([0.3, 2.0, 1.0]),
+    )
     f = np.full((4, 3), 0.25)
     forces.add_springs(f, x, v, s)
     expected = np.full((4, 3), 0.25)
@@ -71,8 +79,7 @@ def test_the_compiled_spring_loop_adds_equal_and_opposite_forces():
     f = np.zeros((4, 3))
     same = x.copy()
     same[1] = same[0]
-    forces.add_springs(f, same, v, Springs(np.array([0]), np.array([1]), np.ones(1), np.ones(1),
-                                           np.ones(1)))
+    forces.add_springs(f, same, v, Springs(np.array([0]), np.array([1]), np.ones(1), np.ones(1), np.ones(1)))
     np.testing.assert_array_equal(f, 0.0)
     f = np.zeros((4, 3))
     forces.add_springs(f, x, v, Springs.empty())
@@ -82,8 +89,13 @@ def test_the_compiled_spring_loop_adds_equal_and_opposite_forces():
 def test_anchored_springs_pull_toward_their_fixed_points():
     x = RNG.normal(size=(3, 3))
     v = RNG.normal(size=(3, 3))
-    a = Anchors(np.array([2, 0]), np.array([[1.0, 2.0, 3.0], [-1.0, 0.0, 0.5]]),
-                np.array([6.0, 2.0]), np.array([0.7, 0.2]), np.array([0.5, 0.1]))
+    a = Anchors(
+        np.array([2, 0]),
+        np.array([[1.0, 2.0, 3.0], [-1.0, 0.0, 0.5]]),
+        np.array([6.0, 2.0]),
+        np.array([0.7, 0.2]),
+        np.array([0.5, 0.1]),
+    )
     f = np.zeros((3, 3))
     forces.add_anchors(f, x, v, a)
     expected = np.zeros((3, 3))
@@ -114,11 +126,12 @@ def test_spring_jacobians_are_the_derivatives_of_the_forces():
     k, c, rest = np.array([8.0, 3.0, 1.0]), np.array([1.3, 0.6, 2.0]), np.array([0.5, 1.0, 1.0])
     jx, jv = forces.spring_jacobians(d, v, k, c, rest)
     for s in range(2):
+
         def fx(z, s=s):
-            return forces.spring_forces(z[None], v[s:s + 1], k[s:s + 1], c[s:s + 1], rest[s:s + 1])[0]
+            return forces.spring_forces(z[None], v[s : s + 1], k[s : s + 1], c[s : s + 1], rest[s : s + 1])[0]
 
         def fv(z, s=s):
-            return forces.spring_forces(d[s:s + 1], z[None], k[s:s + 1], c[s:s + 1], rest[s:s + 1])[0]
+            return forces.spring_forces(d[s : s + 1], z[None], k[s : s + 1], c[s : s + 1], rest[s : s + 1])[0]
 
         np.testing.assert_allclose(jx[s], central_jacobian(fx, d[s]), rtol=1e-7, atol=1e-8)
         np.testing.assert_allclose(jv[s], central_jacobian(fv, v[s]), rtol=1e-7, atol=1e-8)
@@ -128,21 +141,23 @@ def test_spring_jacobians_are_the_derivatives_of_the_forces():
 
 def test_spring_and_anchor_energies_are_half_k_stretch_squared():
     x = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0], [0.0, 0.0, 2.0]])
-    s = Springs(np.array([0, 1]), np.array([1, 2]), np.array([2.0, 4.0]), np.zeros(2),
-                np.array([4.0, 1.0]))
+    s = Springs(np.array([0, 1]), np.array([1, 2]), np.array([2.0, 4.0]), np.zeros(2), np.array([4.0, 1.0]))
     d12 = math.sqrt(9 + 16 + 4)
     e = 0.5 * 2.0 * (5 - 4) ** 2 + 0.5 * 4.0 * (d12 - 1) ** 2
     assert forces.spring_energy(x, s) == pytest.approx(e, rel=1e-14)
-    np.testing.assert_allclose(forces.spring_energy(np.stack([x, 2 * x]), s),
-                               [e, 0.5 * 2.0 * 6**2 + 0.5 * 4.0 * (2 * d12 - 1) ** 2], rtol=1e-14)
-    a = Anchors(np.array([1]), np.array([[0.0, 1.0, 0.0]]), np.array([3.0]), np.zeros(1),
-                np.array([2.0]))
+    np.testing.assert_allclose(
+        forces.spring_energy(np.stack([x, 2 * x]), s),
+        [e, 0.5 * 2.0 * 6**2 + 0.5 * 4.0 * (2 * d12 - 1) ** 2],
+        rtol=1e-14,
+    )
+    a = Anchors(np.array([1]), np.array([[0.0, 1.0, 0.0]]), np.array([3.0]), np.zeros(1), np.array([2.0]))
     ea = 0.5 * 3.0 * (math.sqrt(9 + 9) - 2.0) ** 2
     assert forces.anchor_energy(x, a) == pytest.approx(ea, rel=1e-14)
     x2 = x.copy()
     x2[1] = [0.0, 1.0, 0.0]  # on its anchor point: stretch -2
-    np.testing.assert_allclose(forces.anchor_energy(np.stack([x, x2, x]), a),
-                               [ea, 0.5 * 3.0 * 4.0, ea], rtol=1e-14)
+    np.testing.assert_allclose(
+        forces.anchor_energy(np.stack([x, x2, x]), a), [ea, 0.5 * 3.0 * 4.0, ea], rtol=1e-14
+    )
     assert forces.spring_energy(x, Springs.empty()) == 0.0
     assert forces.anchor_energy(x, Anchors.empty()) == 0.0
     # the energy's negative gradient is the (undamped) spring force
@@ -171,12 +186,14 @@ def test_gravitation_is_newtons_law_softened():
     np.testing.assert_allclose(f2[0], 2.0 * 1.5 * 2.0 / 25.0 * np.array([0.6, 0.8, 0.0]), rtol=1e-14)
     np.testing.assert_allclose(f2[1], -f2[0], rtol=1e-14)
     # energy: -sum G m_i m_j / sqrt(r^2 + eps^2); its negative gradient is the force
-    e = sum(-g.G * m[i] * m[j] / math.sqrt((x[i] - x[j]) @ (x[i] - x[j]) + 0.25)
-            for i in range(3) for j in range(i + 1, 3))
+    e = sum(
+        -g.G * m[i] * m[j] / math.sqrt((x[i] - x[j]) @ (x[i] - x[j]) + 0.25)
+        for i in range(3)
+        for j in range(i + 1, 3)
+    )
     assert forces.gravitation_energy(x, m, g) == pytest.approx(e, rel=1e-14)
     np.testing.assert_allclose(forces.gravitation_energy(np.stack([x, x]), m, g), [e, e], rtol=1e-14)
-    grad = central_jacobian(lambda z: np.array([forces.gravitation_energy(z.reshape(3, 3), m, g)]),
-                            x.ravel())
+    grad = central_jacobian(lambda z: np.array([forces.gravitation_energy(z.reshape(3, 3), m, g)]), x.ravel())
     np.testing.assert_allclose(-grad.reshape(3, 3), expected - 0.1, rtol=1e-7, atol=1e-9)
     # its Jacobian blocks are the derivatives of the forces
     jac = forces.gravitation_jacobian(x, m, g)
@@ -192,43 +209,59 @@ def test_gravitation_is_newtons_law_softened():
 
 @pytest.mark.filterwarnings("ignore:overflow encountered in square:RuntimeWarning")  # on the axis
 def test_the_vortex_field_swirls_about_its_axis():
-    fld = ForceField("vortex", {"center": [1.0, 0.0, 0.0], "axis": [0.0, 0.0, 2.0],
-                                "strength": 3.0, "core": 0.5})
+    fld = ForceField(
+        "vortex", {"center": [1.0, 0.0, 0.0], "axis": [0.0, 0.0, 2.0], "strength": 3.0, "core": 0.5}
+    )
     x = np.array([[1.3, 0.0, 5.0], [1.0, 2.0, -1.0], [1.0, 0.0, 0.0]])
     m = np.array([2.0, 0.5, 1.0])
     f = forces.field_force(fld, x, np.zeros((3, 3)), m, 0.0)
     # inside the core: strength m (axis x r_perp) = 3 * 2 * (0, 0.3, 0)
     np.testing.assert_allclose(f[0], [0.0, 1.8, 0.0], atol=1e-15)
     # outside: times (core / |r_perp|)^2; axis x (0, 2, 0) = (-2, 0, 0)
-    np.testing.assert_allclose(f[1], 3.0 * 0.5 * (0.5 / 2.0) ** 2 * np.array([-2.0, 0.0, 0.0]),
-                               rtol=1e-14)
+    np.testing.assert_allclose(f[1], 3.0 * 0.5 * (0.5 / 2.0) ** 2 * np.array([-2.0, 0.0, 0.0]), rtol=1e-14)
     np.testing.assert_array_equal(f[2], 0.0)  # on the axis
     # defaults: centre at the origin, axis y, core 0.5
-    d = forces.field_force(ForceField("vortex", {"strength": 1.0}),
-                           np.array([[0.2, 7.0, 0.0], [2.0, 0.0, 0.0]]), np.zeros((2, 3)),
-                           np.ones(2), 0.0)
+    d = forces.field_force(
+        ForceField("vortex", {"strength": 1.0}),
+        np.array([[0.2, 7.0, 0.0], [2.0, 0.0, 0.0]]),
+        np.zeros((2, 3)),
+        np.ones(2),
+        0.0,
+    )
     np.testing.assert_allclose(d, [[0.0, 0.0, -0.2], [0.0, 0.0, -2.0 * 0.25 / 4.0]], atol=1e-15)
     # an axis but no centre: the axis runs through the origin
-    e = forces.field_force(ForceField("vortex", {"strength": 1.0, "axis": [1.0, 0.0, 0.0]}),
-                           np.array([[5.0, 0.3, 0.0]]), np.zeros((1, 3)), np.ones(1), 0.0)
+    e = forces.field_force(
+        ForceField("vortex", {"strength": 1.0, "axis": [1.0, 0.0, 0.0]}),
+        np.array([[5.0, 0.3, 0.0]]),
+        np.zeros((1, 3)),
+        np.ones(1),
+        0.0,
+    )
     np.testing.assert_allclose(e, [[0.0, 0.0, 0.3]], atol=1e-15)
 
 
 def test_the_wind_field_drags_toward_its_gusting_velocity():
-    fld = ForceField("wind", {"direction": [3.0, 0.0, 4.0], "speed": 2.0, "gust": 0.5,
-                              "freq": 0.75, "k": 1.5})
+    fld = ForceField(
+        "wind", {"direction": [3.0, 0.0, 4.0], "speed": 2.0, "gust": 0.5, "freq": 0.75, "k": 1.5}
+    )
     v = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 2.0]])
     t = 0.4
     w = (2.0 + 0.5 * math.sin(2 * math.pi * 0.75 * t)) * np.array([0.6, 0.0, 0.8])
     f = forces.field_force(fld, np.zeros((2, 3)), v, np.ones(2), t)
     np.testing.assert_allclose(f, 1.5 * (w - v), rtol=1e-14)
     # defaults: no speed, no gust, k = 1
-    f = forces.field_force(ForceField("wind", {"direction": [0.0, 1.0, 0.0]}), np.zeros((2, 3)), v,
-                           np.ones(2), t)
+    f = forces.field_force(
+        ForceField("wind", {"direction": [0.0, 1.0, 0.0]}), np.zeros((2, 3)), v, np.ones(2), t
+    )
     np.testing.assert_allclose(f, -v)
     # a gust without a frequency is a constant wind (sin 0 = 0)
-    f = forces.field_force(ForceField("wind", {"direction": [0.0, 0.0, 1.0], "speed": 1.0, "gust": 3.0}),
-                           np.zeros((2, 3)), np.zeros((2, 3)), np.ones(2), 0.7)
+    f = forces.field_force(
+        ForceField("wind", {"direction": [0.0, 0.0, 1.0], "speed": 1.0, "gust": 3.0}),
+        np.zeros((2, 3)),
+        np.zeros((2, 3)),
+        np.ones(2),
+        0.7,
+    )
     np.testing.assert_allclose(f, [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     with pytest.raises(ValueError, match="unknown kind 'rain'"):
         forces.field_force(ForceField("rain", {}), np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1), 0.0)
@@ -248,8 +281,11 @@ def test_impulses_act_over_their_half_open_window():
     assert not forces.impulse_active(100.0, 200.0, 100.0 - 2e-7)
     assert not forces.impulse_active(0.0, 1.0, -2e-9)
     f = np.zeros((2, 3))
-    imps = [(1, np.array([1.0, 2.0, 3.0]), 0.0, 1.0), (1, np.array([0.5, 0.0, 0.0]), 0.5, 1.0),
-            (0, np.array([9.0, 9.0, 9.0]), 2.0, 3.0)]
+    imps = [
+        (1, np.array([1.0, 2.0, 3.0]), 0.0, 1.0),
+        (1, np.array([0.5, 0.0, 0.0]), 0.5, 1.0),
+        (0, np.array([9.0, 9.0, 9.0]), 2.0, 3.0),
+    ]
     assert forces.add_impulses(f, imps, 0.7) is f
     np.testing.assert_allclose(f, [[0, 0, 0], [1.5, 2.0, 3.0]])
 
@@ -259,12 +295,17 @@ def test_the_force_loop_clears_then_adds_every_force_object():
     v = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     m = np.array([2.0, 3.0])
     model = ParticleModel(
-        mass=m, x0=x, v0=v, radius=np.zeros(2), fixed=np.zeros(2, bool),
-        gravity=np.array([0.0, -10.0, 0.0]), drag=0.5,
-        springs=Springs(np.array([0]), np.array([1]), np.array([4.0]), np.array([0.0]),
-                        np.array([1.0])),
-        anchors=Anchors(np.array([1]), np.array([[2.0, 3.0, 0.0]]), np.array([1.0]), np.zeros(1),
-                        np.zeros(1)),
+        mass=m,
+        x0=x,
+        v0=v,
+        radius=np.zeros(2),
+        fixed=np.zeros(2, bool),
+        gravity=np.array([0.0, -10.0, 0.0]),
+        drag=0.5,
+        springs=Springs(np.array([0]), np.array([1]), np.array([4.0]), np.array([0.0]), np.array([1.0])),
+        anchors=Anchors(
+            np.array([1]), np.array([[2.0, 3.0, 0.0]]), np.array([1.0]), np.zeros(1), np.zeros(1)
+        ),
         gravitation=Gravitation(G=1.0),
         fields=[ForceField("wind", {"direction": [1.0, 0.0, 0.0], "speed": 1.0, "k": 2.0})],
         impulses=[(0, np.array([0.0, 0.0, 7.0]), 0.0, 1.0)],
@@ -274,13 +315,24 @@ def test_the_force_loop_clears_then_adds_every_force_object():
     assert out is f
     spring = -4.0 * (2.0 - 1.0) * np.array([-1.0, 0.0, 0.0])  # on particle 0, pulled toward 1
     grav = 1.0 * 2.0 * 3.0 / 4.0 * np.array([1.0, 0.0, 0.0])
-    expected = np.array([
-        m[0] * np.array([0, -10, 0]) - 0.5 * v[0] + spring + grav + 2.0 * (np.array([1, 0, 0]) - v[0])
-        + np.array([0, 0, 7.0]),
-        m[1] * np.array([0, -10, 0]) - 0.5 * v[1] - spring - grav + np.array([0.0, 2.0, 0.0])
-        + 2.0 * (np.array([1, 0, 0]) - v[1]),
-    ])
+    expected = np.array(
+        [
+            m[0] * np.array([0, -10, 0])
+            - 0.5 * v[0]
+            + spring
+            + grav
+            + 2.0 * (np.array([1, 0, 0]) - v[0])
+            + np.array([0, 0, 7.0]),
+            m[1] * np.array([0, -10, 0])
+            - 0.5 * v[1]
+            - spring
+            - grav
+            + np.array([0.0, 2.0, 0.0])
+            + 2.0 * (np.array([1, 0, 0]) - v[1]),
+        ]
+    )
     np.testing.assert_allclose(f, expected, rtol=1e-13)
     g0 = forces.add_model_forces(np.zeros((2, 3)), model, x, v, 1.5, gravity=False)
-    np.testing.assert_allclose(g0, expected - m[:, None] * np.array([0, -10, 0]) - [[0, 0, 7], [0, 0, 0]],
-                               rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(
+        g0, expected - m[:, None] * np.array([0, -10, 0]) - [[0, 0, 7], [0, 0, 0]], rtol=1e-13, atol=1e-13
+    )

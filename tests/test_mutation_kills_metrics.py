@@ -18,18 +18,31 @@ from truestep.reference_impl.model import Anchors, ParticleModel, Plane, Springs
 
 
 def particles(n=2, **kw):
-    base = dict(mass=np.ones(n), x0=np.zeros((n, 3)), v0=np.zeros((n, 3)), radius=np.zeros(n),
-                fixed=np.zeros(n, bool))
+    base = dict(
+        mass=np.ones(n), x0=np.zeros((n, 3)), v0=np.zeros((n, 3)), radius=np.zeros(n), fixed=np.zeros(n, bool)
+    )
     return ParticleModel(**(base | kw))
 
 
-def case(kind="particles", *, duration=0.3, error_norm="final", conservative=False, model=None,
-         exact=None):
+def case(kind="particles", *, duration=0.3, error_norm="final", conservative=False, model=None, exact=None):
     if kind == "particles" and model is None:
         model = particles()
-    return Case(name="m", file="m", title="m", description="", kind=kind, duration=duration,
-                dts=[0.1], quick_dts=[0.1], tolerances=[1e-6], quick_tolerances=[1e-6],
-                model=model, exact=exact, error_norm=error_norm, conservative=conservative)
+    return Case(
+        name="m",
+        file="m",
+        title="m",
+        description="",
+        kind=kind,
+        duration=duration,
+        dts=[0.1],
+        quick_dts=[0.1],
+        tolerances=[1e-6],
+        quick_tolerances=[1e-6],
+        model=model,
+        exact=exact,
+        error_norm=error_norm,
+        conservative=conservative,
+    )
 
 
 T = np.array([0.0, 0.1, 0.2, 0.3])
@@ -106,19 +119,20 @@ def test_energy_drift_is_over_the_energy_scale_and_every_step():
     flat = Trajectory(t=T, x=traj.x, v=None, energy=np.zeros(4))
     assert metrics.energy_drift(case(conservative=True), flat, None, scale=1.0) == (0.0, 0.0)
     # damped: against the exact energy at the shared times, over the scale
-    exact = Exact(t=np.array([0.0, 0.2, 0.3]), x=np.zeros((3, 1, 3)),
-                  energy=np.array([4.0, 3.0, 1.0]))
+    exact = Exact(t=np.array([0.0, 0.2, 0.3]), x=np.zeros((3, 1, 3)), energy=np.array([4.0, 3.0, 1.0]))
     mine = Trajectory(t=T, x=traj.x, v=None, energy=np.array([4.0, 9.0, 3.5, 2.0]))
     mx, end = metrics.energy_drift(case(), mine, exact, scale=4.0)
     assert mx == pytest.approx(0.25) and end == pytest.approx(0.25)
     # no energy, nothing to compare with, or no scale: NaN
-    for traj_, exact_, scale in [(Trajectory(T, traj.x, None, None), exact, 1.0),
-                                 (Trajectory(T, traj.x, None, np.zeros(0)), exact, 1.0),
-                                 (mine, None, 1.0), (mine, Exact(t=exact.t, x=exact.x), 1.0),
-                                 (mine, Exact(t=exact.t, x=exact.x, energy=np.ones(2)), 1.0),
-                                 (mine, Exact(t=np.array([9.0]), x=exact.x[:1],
-                                              energy=np.ones(1)), 1.0),
-                                 (mine, exact, float("nan"))]:
+    for traj_, exact_, scale in [
+        (Trajectory(T, traj.x, None, None), exact, 1.0),
+        (Trajectory(T, traj.x, None, np.zeros(0)), exact, 1.0),
+        (mine, None, 1.0),
+        (mine, Exact(t=exact.t, x=exact.x), 1.0),
+        (mine, Exact(t=exact.t, x=exact.x, energy=np.ones(2)), 1.0),
+        (mine, Exact(t=np.array([9.0]), x=exact.x[:1], energy=np.ones(1)), 1.0),
+        (mine, exact, float("nan")),
+    ]:
         assert all(np.isnan(metrics.energy_drift(case(), traj_, exact_, scale=scale)))
 
 
@@ -133,9 +147,11 @@ def test_energy_behaviour_reads_the_scene():
     an = Anchors(np.array([0]), np.zeros((1, 3)), np.ones(1), np.array([0.3]), np.ones(1))
     assert metrics.energy_behaviour(case(model=particles(anchors=an))) == "dissipative"
     up = np.array([0.0, 1.0, 0.0])
-    for plane, kind in [(Plane(np.zeros(3), up, 0.9), "dissipative"),
-                        (Plane(np.zeros(3), up, 1.0, 0.2), "dissipative"),
-                        (Plane(np.zeros(3), up, 1.0, 0.0), "conservative")]:
+    for plane, kind in [
+        (Plane(np.zeros(3), up, 0.9), "dissipative"),
+        (Plane(np.zeros(3), up, 1.0, 0.2), "dissipative"),
+        (Plane(np.zeros(3), up, 1.0, 0.0), "conservative"),
+    ]:
         assert metrics.energy_behaviour(case(model=particles(planes=[plane]))) == kind
     kick = particles(drag=0.1, impulses=[(0, np.ones(3), 0.0, 1.0)])
     assert metrics.energy_behaviour(case(model=kick)) == "source"
@@ -168,8 +184,14 @@ def test_motion_failures_read_the_energy_against_its_scale():
     assert motion_failure(damped, overshoot, 1.0) is None
     # ... and a gain kept between the records, seen at every step
     fine = np.linspace(0.0, 4.0, 801)
-    seen = Trajectory(t=t, x=x, v=None, energy=np.ones(81), step_t=fine,
-                      step_energy=np.where((fine > 2.5) & (np.round(fine * 200) % 2 == 1), 1.5, 1.0))
+    seen = Trajectory(
+        t=t,
+        x=x,
+        v=None,
+        energy=np.ones(81),
+        step_t=fine,
+        step_energy=np.where((fine > 2.5) & (np.round(fine * 200) % 2 == 1), 1.5, 1.0),
+    )
     assert motion_failure(damped, seen, 1.0) is None  # half the steps up: the median is not
     seen.step_energy = np.where(fine > 2.0125, 1.5, 1.0)
     assert motion_failure(damped, seen, 1.0).t == fine[np.argmax(fine > 2.0125)]

@@ -289,8 +289,11 @@ def test_implicit_euler_on_a_linear_system_is_the_resolvent(jac):
     assert solver.n_jac == 1 and solver.nfev == 8 + fd
     solver.step(h / 2)  # a new step size (a shorter one too): a new matrix at once
     assert solver.n_jac == 2 and solver.nfev == 12 + 2 * fd
-    np.testing.assert_allclose(system.get_state(), np.linalg.solve(
-        np.eye(3) - h / 2 * A3, np.linalg.solve(np.eye(3) - h * A3, y)), rtol=1e-9)
+    np.testing.assert_allclose(
+        system.get_state(),
+        np.linalg.solve(np.eye(3) - h / 2 * A3, np.linalg.solve(np.eye(3) - h * A3, y)),
+        rtol=1e-9,
+    )
 
 
 @pytest.mark.parametrize("jac", [True, False])
@@ -328,8 +331,9 @@ def test_step_matrices_are_the_one_step_maps():
     z = np.array([[0.0, 1.0], [-a, -b]])
     np.testing.assert_allclose(implicit_euler_step(a, b), np.linalg.inv(np.eye(2) - z), rtol=1e-15)
     rk4 = polynomial_step_matrix(GAMMA[RK4])(a, b)
-    np.testing.assert_allclose(rk4, sum(np.linalg.matrix_power(z, k) / math.factorial(k)
-                                        for k in range(5)), rtol=1e-14)
+    np.testing.assert_allclose(
+        rk4, sum(np.linalg.matrix_power(z, k) / math.factorial(k) for k in range(5)), rtol=1e-14
+    )
     np.testing.assert_allclose(symplectic_euler_step(a, b), [[1 - a, 1 - b], [-a, 1 - b]])
     np.testing.assert_allclose(lecture_step(a, b), [[1 - a / 2, 1 - b / 2], [-a, 1 - b]])
 
@@ -467,7 +471,8 @@ def test_stability_scans_and_validation():
     assert first_growth(lambda y: 1.0 + y, lo=1e-3, hi=1.0) == pytest.approx(1e-12, abs=1e-3)
     assert first_growth(lambda y: 0.5 + y, lo=1e-3, hi=10.0) == pytest.approx(0.5, rel=1e-12)
     assert first_growth(lambda y: 1.0 + max(0.0, y - 2.0), lo=1e-3, hi=10.0) == pytest.approx(
-        2.0 + 1e-12, rel=1e-9)
+        2.0 + 1e-12, rel=1e-9
+    )
     assert spectral_radius(np.array([[0.0, 2.0], [-2.0, 0.0]])) == pytest.approx(2.0)
     with pytest.raises(ValueError, match="non-negative"):
         Stability(imaginary=-1.0, real=1.0)
@@ -481,9 +486,15 @@ def test_stability_scans_and_validation():
     assert bare.reach(0.5) is None and bare.reach(0.0) == 1.0
     with pytest.raises(ValueError, match="no step_matrix"):
         bare.radius(0.1, 0.1)
-    for bad in ({"order": 0}, {"order": True}, {"order": 1.0}, {"velocity_order": 0},
-                {"evaluations_per_step": 0}, {"evaluations_per_step": True},
-                {"evaluations_per_step": 1.5}):
+    for bad in (
+        {"order": 0},
+        {"order": True},
+        {"order": 1.0},
+        {"velocity_order": 0},
+        {"evaluations_per_step": 0},
+        {"evaluations_per_step": True},
+        {"evaluations_per_step": 1.5},
+    ):
         kw = {"order": 1, "evaluations_per_step": 1, "symplectic": False} | bad
         with pytest.raises(ValueError, match="positive integer"):
             MethodFacts(**kw)
@@ -491,8 +502,9 @@ def test_stability_scans_and_validation():
     assert f.order_for(velocity_forces=True) == 1 and f.order_for(velocity_forces=False) == 2
     g = MethodFacts(order=2, evaluations_per_step=1, symplectic=False)
     assert g.order_for(velocity_forces=True) == 2 and g.exact_when_acceleration_is_constant
-    assert not MethodFacts(order=1, evaluations_per_step=1, symplectic=False
-                           ).exact_when_acceleration_is_constant
+    assert not MethodFacts(
+        order=1, evaluations_per_step=1, symplectic=False
+    ).exact_when_acceleration_is_constant
 
 
 def test_the_registry_and_the_evaluation_count():
@@ -500,8 +512,16 @@ def test_the_registry_and_the_evaluation_count():
     with pytest.raises(KeyError, match="unknown method 'nope'; known: euler, midpoint"):
         get_solver("nope")
     assert {cls.name: cls.order for cls in METHODS.values()} == {
-        "euler": 1, "midpoint": 2, "heun": 2, "rk4": 4, "dopri5": 5, "symplectic-euler": 1,
-        "verlet": 2, "implicit-euler": 1, "lecture": 1}
+        "euler": 1,
+        "midpoint": 2,
+        "heun": 2,
+        "rk4": 4,
+        "dopri5": 5,
+        "symplectic-euler": 1,
+        "verlet": 2,
+        "implicit-euler": 1,
+        "lecture": 1,
+    }
     assert [cls.adaptive for cls in METHODS.values()].count(True) == 1
     s = Damped(np.array([1.0]), np.array([0.0]), w2=1.0)
     solver = RK4(s)
@@ -590,5 +610,4 @@ def test_implicit_euler_rebuilds_at_an_iterate_when_the_predictor_s_matrix_is_sl
     solver = ImplicitEuler(Riccati(y0, jac=True))
     solver.step(h)
     assert solver.n_jac == 2
-    assert solver.system.get_state()[0] == pytest.approx(
-        (-1 + math.sqrt(1 + 4 * h * y0)) / (2 * h), rel=1e-9)
+    assert solver.system.get_state()[0] == pytest.approx((-1 + math.sqrt(1 + 4 * h * y0)) / (2 * h), rel=1e-9)

@@ -23,16 +23,21 @@ from truestep.runner import MACHINE_COLUMNS, NOT_REPEATABLE, Timing, simulate_ti
 
 def _python(code: str, **env: str) -> str:
     """Run ``code`` in a fresh interpreter with ``env`` added; its standard output."""
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
-                         text=True, env={**os.environ, **env}, check=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **env},
+        check=True,
+        timeout=120,
+    )
     return out.stdout.strip()
 
 
 def test_importing_truestep_first_pins_threads_kernels_and_dispatch():
     """What a process that imports truestep before numpy computes with: one BLAS thread
     (the machine has more), the Haswell kernels, no AVX-512 dispatch in numpy."""
-    clean = {k: v for k, v in os.environ.items()
-             if k not in numerics.environment() and k != numerics.OPT_OUT}
+    clean = {k: v for k, v in os.environ.items() if k not in numerics.environment() and k != numerics.OPT_OUT}
     code = """
         import json, truestep, numpy, scipy.linalg
         from threadpoolctl import threadpool_info
@@ -41,8 +46,14 @@ def test_importing_truestep_first_pins_threads_kernels_and_dispatch():
                           "arch": sorted({p.get("architecture") for p in threadpool_info()}),
                           "v4": bool(f.get("X86_V4"))}))
     """
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
-                         text=True, env=clean, check=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        env=clean,
+        check=True,
+        timeout=120,
+    )
     seen = json.loads(out.stdout)
     assert seen["threads"] == [1]
     if {"avx2", "fma"} <= numerics._cpu_flags():
@@ -52,14 +63,17 @@ def test_importing_truestep_first_pins_threads_kernels_and_dispatch():
 
 def test_threads_are_pinned_even_when_numpy_came_first():
     """A library user who imported numpy with two BLAS threads: a run still computes on one."""
-    out = _python("""
+    out = _python(
+        """
         import numpy
         from threadpoolctl import threadpool_info
         before = max(p["num_threads"] for p in threadpool_info())
         from truestep.runner import preload
         preload()
         print(before, max(p["num_threads"] for p in threadpool_info()))
-    """, OPENBLAS_NUM_THREADS="2")
+    """,
+        OPENBLAS_NUM_THREADS="2",
+    )
     assert out.split() == ["2", "1"]
 
 
@@ -117,8 +131,7 @@ class Jittery:
         Jittery.runs[0] += 1
         t = np.array([0.0, case.duration])
         x = np.zeros((2, 1, 3)) + 1e-12 * Jittery.runs[0]
-        return Trajectory(t=t, x=x, v=np.zeros((2, 1, 3)), energy=np.zeros(2), wall_s=1e-4,
-                          nfev=1, steps=1)
+        return Trajectory(t=t, x=x, v=np.zeros((2, 1, 3)), energy=np.zeros(2), wall_s=1e-4, nfev=1, steps=1)
 
 
 def test_an_engine_that_is_not_repeatable_says_so(monkeypatch, case_named):
@@ -130,8 +143,7 @@ def test_an_engine_that_is_not_repeatable_says_so(monkeypatch, case_named):
 
 
 def _rows(*runs):
-    cols = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "nfev", "wall_s",
-            "wall_s_spread"]
+    cols = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "nfev", "wall_s", "wall_s_spread"]
     return pd.DataFrame([("harmonic-oscillator", *r) for r in runs], columns=cols)
 
 
@@ -139,9 +151,11 @@ def test_runs_within_noise_are_tied_and_the_fewest_evaluations_is_named(case_nam
     """rk4 at 1.00 ms and heun at 1.10 ms (within 15% of each other) tie; the one named is
     heun's, which needs fewer evaluations; euler at 2 ms is not in the tie."""
     case = case_named("harmonic-oscillator")
-    rows = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 4000, 1.00e-3, 1e-5),
-                 ("reference", "heun", 0.001, "step", "ok", 1e-9, 2000, 1.10e-3, 1e-5),
-                 ("reference", "euler", 1e-5, "step", "ok", 1e-9, 99999, 2.0e-3, 1e-5))
+    rows = _rows(
+        ("reference", "rk4", 0.01, "step", "ok", 1e-9, 4000, 1.00e-3, 1e-5),
+        ("reference", "heun", 0.001, "step", "ok", 1e-9, 2000, 1.10e-3, 1e-5),
+        ("reference", "euler", 1e-5, "step", "ok", 1e-9, 99999, 2.0e-3, 1e-5),
+    )
     assert tied_with_fastest(rows).tolist() == [True, True, False]
     pick = cheapest(rows, [case], targets=(1e-4,)).set_index("by")
     assert pick.loc["wall_s", "method"] == "heun"
@@ -164,26 +178,37 @@ def _gateless(tmp_path: Path) -> str:
 def _write_run(out: Path, rows: pd.DataFrame, cases: list[str], engines: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows.to_csv(out / "results.csv", index=False)
-    (out / "run.json").write_text(json.dumps({
-        "truestep": "x", "cases": cases, "engines": engines, "numerics": numerics.fingerprint()}))
+    (out / "run.json").write_text(
+        json.dumps({"truestep": "x", "cases": cases, "engines": engines, "numerics": numerics.fingerprint()})
+    )
 
 
 def test_a_narrowed_run_compares_with_only_what_it_asked_for(tmp_path, capsys):
     """The baseline ran free-fall and harmonic-oscillator with two engines; the run only
     harmonic-oscillator with the reference: nothing vanished. An edited cell differs."""
-    full = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0),
-                 ("scipy", "RK45", 1e-6, "tolerance", "ok", 1e-7, 90, 1e-3, 0))
+    full = _rows(
+        ("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0),
+        ("scipy", "RK45", 1e-6, "tolerance", "ok", 1e-7, 90, 1e-3, 0),
+    )
     both = pd.concat([full, full.assign(case="free-fall")])
-    _write_run(tmp_path / "base", both, ["harmonic-oscillator", "free-fall"],
-               ["reference", "scipy"])
+    _write_run(tmp_path / "base", both, ["harmonic-oscillator", "free-fall"], ["reference", "scipy"])
     _write_run(tmp_path / "run", full.iloc[:1], ["harmonic-oscillator"], ["reference"])
-    argv = ["gate", "--results", str(tmp_path / "run" / "results.csv"),
-            "--baseline", str(tmp_path / "base"), "--identical", "--cases", _gateless(tmp_path)]
+    argv = [
+        "gate",
+        "--results",
+        str(tmp_path / "run" / "results.csv"),
+        "--baseline",
+        str(tmp_path / "base"),
+        "--identical",
+        "--cases",
+        _gateless(tmp_path),
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "0 vanished" in out and "0 cells differ" in out
     (tmp_path / "run" / "results.csv").write_text(
-        full.iloc[:1].assign(error=1.0000000001e-9).to_csv(index=False))
+        full.iloc[:1].assign(error=1.0000000001e-9).to_csv(index=False)
+    )
     assert main(argv) == 1
     assert "DIFFERS results harmonic-oscillator reference rk4 dt=0.01 error" in capsys.readouterr().out
 
@@ -194,10 +219,22 @@ def test_identical_does_not_apply_across_package_versions(tmp_path, capsys):
     record = json.loads((tmp_path / "base" / "run.json").read_text())
     record["numerics"]["packages"]["scipy"] = "0.1"
     (tmp_path / "base" / "run.json").write_text(json.dumps(record))
-    _write_run(tmp_path / "run", rows.assign(error=1.0000001e-9), ["harmonic-oscillator"],
-               ["reference"])
-    assert main(["gate", "--results", str(tmp_path / "run" / "results.csv"), "--cases",
-                 _gateless(tmp_path), "--baseline", str(tmp_path / "base"), "--identical"]) == 0
+    _write_run(tmp_path / "run", rows.assign(error=1.0000001e-9), ["harmonic-oscillator"], ["reference"])
+    assert (
+        main(
+            [
+                "gate",
+                "--results",
+                str(tmp_path / "run" / "results.csv"),
+                "--cases",
+                _gateless(tmp_path),
+                "--baseline",
+                str(tmp_path / "base"),
+                "--identical",
+            ]
+        )
+        == 0
+    )
     assert "not comparable bit for bit (scipy 0.1 ->" in capsys.readouterr().out
 
 

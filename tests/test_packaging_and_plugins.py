@@ -27,24 +27,34 @@ def _python(code: str, *, path: Path | None = None, cwd: Path | None = None) -> 
     env = dict(os.environ)
     if path is not None:
         env["PYTHONPATH"] = f"{path}{os.pathsep}{env.get('PYTHONPATH', '')}"
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env, cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        env=env,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def _cli(*args: str, path: Path | None = None) -> subprocess.CompletedProcess:
-    return _python(f"import sys; from truestep.cli import main; sys.exit(main({list(args)!r}))",
-                   path=path)
+    return _python(f"import sys; from truestep.cli import main; sys.exit(main({list(args)!r}))", path=path)
 
 
 def test_public_api_names_import_and_version_matches_the_metadata():
     for name in truestep.__all__:
         assert getattr(truestep, name) is not None, name
     assert truestep.__version__ == metadata.version("truestep")
-    done = subprocess.run([sys.executable, "-m", "truestep", "--version"], capture_output=True,
-                          text=True, check=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "truestep", "--version"], capture_output=True, text=True, check=True
+    )
     assert done.stdout.strip() == f"truestep {truestep.__version__}"
-    assert "run" in subprocess.run([sys.executable, "-m", "truestep", "--help"],
-                                   capture_output=True, text=True, check=True).stdout
+    assert (
+        "run"
+        in subprocess.run(
+            [sys.executable, "-m", "truestep", "--help"], capture_output=True, text=True, check=True
+        ).stdout
+    )
 
 
 def test_the_built_engines_are_registered_by_entry_point_as_the_fallback_says():
@@ -63,10 +73,27 @@ def test_the_wheel_holds_one_top_level_package_and_sits_beside_a_users_adapters(
     source.mkdir()
     for part in ("pyproject.toml", "README.md", "truestep", "adapters", "cases", "reference_impl"):
         (shutil.copytree if (ROOT / part).is_dir() else shutil.copy)(
-            ROOT / part, source / part, **({"ignore": shutil.ignore_patterns("__pycache__")}
-                                           if (ROOT / part).is_dir() else {}))
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-                    "-q", "-w", str(wheels), str(source)], check=True, capture_output=True, timeout=300)
+            ROOT / part,
+            source / part,
+            **({"ignore": shutil.ignore_patterns("__pycache__")} if (ROOT / part).is_dir() else {}),
+        )
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(wheels),
+            str(source),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     (wheel,) = wheels.glob("truestep-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     tops = {n.split("/")[0] for n in names}
@@ -74,19 +101,27 @@ def test_the_wheel_holds_one_top_level_package_and_sits_beside_a_users_adapters(
     assert "truestep/cases/harmonic-oscillator.toml" in names
     assert "truestep/reference_impl/solvers/explicit_rk.py" in names
     site = tmp_path / "site"
-    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site),
-                    str(wheel)], check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     user = tmp_path / "user"
     (user / "adapters").mkdir(parents=True)
     (user / "adapters" / "__init__.py").write_text("MINE = 'the user project'\n")
-    done = _python(f"""
+    done = _python(
+        f"""
         import adapters, truestep, truestep.adapters
         from truestep.adapters import get_adapter
         assert adapters.MINE == 'the user project'
         assert truestep.__file__.startswith({str(site)!r}), truestep.__file__
         assert get_adapter('reference').name == 'reference'
         print('ok')
-    """, path=Path(f"{user}{os.pathsep}{site}"), cwd=user)
+    """,
+        path=Path(f"{user}{os.pathsep}{site}"),
+        cwd=user,
+    )
     assert done.stdout.strip() == "ok", done.stderr
 
 
@@ -187,7 +222,8 @@ def fake_site(tmp_path_factory) -> Path:
     info = site / "fakepkg-1.0.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: fakepkg\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text(textwrap.dedent("""
+    (info / "entry_points.txt").write_text(
+        textwrap.dedent("""
         [truestep.adapters]
         drift = fakepkg:Drift
         ghost = ghost_adapter:Ghost
@@ -198,7 +234,8 @@ def fake_site(tmp_path_factory) -> Path:
         exact-decay = fakepkg:exact_decay
         [truestep.systems]
         decay = fakepkg:Decay
-    """))
+    """)
+    )
     return site
 
 
@@ -208,8 +245,7 @@ def test_installed_engines_and_cases_are_listed_and_a_missing_one_says_how_to_ad
     assert "drift      methods: straight" in done.stdout
     assert "drifting-pair" in done.stdout and "decay " in done.stdout
     assert "ghost      not installed (an_engine_nobody_installed is missing)" not in done.stdout
-    assert "ghost      not installed: pip install the package that provides engine 'ghost'" \
-        in done.stdout
+    assert "ghost      not installed: pip install the package that provides engine 'ghost'" in done.stdout
     built_in = _python("""
         import sys
         sys.modules['pymunk'] = None  # as if pymunk were not installed
@@ -229,16 +265,25 @@ def test_installed_engines_and_cases_are_listed_and_a_missing_one_says_how_to_ad
 
 def test_installed_engine_case_exact_and_system_run_and_gate(fake_site, tmp_path):
     out = tmp_path / "out"
-    done = _cli("run", "--cases", "drifting-pair,decay", "--engines", "drift,reference",
-                "--out", str(out), path=fake_site)
+    done = _cli(
+        "run",
+        "--cases",
+        "drifting-pair,decay",
+        "--engines",
+        "drift,reference",
+        "--out",
+        str(out),
+        path=fake_site,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert "engine ghost left out" not in done.stderr  # named engines only
     gate = _cli("gate", "--results", str(out / "results.csv"), "-v", path=fake_site)
     assert gate.returncode == 0, gate.stdout + gate.stderr
     assert "ok   drifting-pair gates[0] error drift/straight dt=0.05" in gate.stdout
     assert "ok   decay gates[0] order reference/rk4" in gate.stdout
-    default = _cli("run", "--quick", "--cases", "drifting-pair", "--out", str(tmp_path / "all"),
-                   path=fake_site)
+    default = _cli(
+        "run", "--quick", "--cases", "drifting-pair", "--out", str(tmp_path / "all"), path=fake_site
+    )
     assert default.returncode == 0, default.stderr[-3000:]
     assert "engine ghost left out: not installed" in default.stderr
 
@@ -246,7 +291,8 @@ def test_installed_engine_case_exact_and_system_run_and_gate(fake_site, tmp_path
 def test_an_adapter_by_module_and_class_runs_unregistered(fake_site, tmp_path):
     out = tmp_path / "out"
     case = fake_site / "fakecases" / "drifting-pair.toml"
-    done = _python(f"""
+    done = _python(
+        f"""
         import sys
         from importlib import metadata
         from truestep.cli import main
@@ -254,7 +300,9 @@ def test_an_adapter_by_module_and_class_runs_unregistered(fake_site, tmp_path):
                                if e.value == 'nothing']
         sys.exit(main(['run', '--quick', '--cases', {str(case)!r}, '--engines',
                        'fakepkg:Drift', '--out', {str(out)!r}]))
-    """, path=fake_site)
+    """,
+        path=fake_site,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "drifting-pair,drift,straight" in (out / "results.csv").read_text()
 

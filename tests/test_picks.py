@@ -9,8 +9,7 @@ import pytest
 
 from truestep.picks import cheapest, survival
 
-COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift",
-           "nfev", "wall_s"]
+COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev", "wall_s"]
 
 
 def test_the_cheapest_run_per_target_is_not_the_most_accurate(case_named):
@@ -19,10 +18,12 @@ def test_the_cheapest_run_per_target_is_not_the_most_accurate(case_named):
     1e-6 (and 1e-10 nobody). By evaluations a fixed-step run can win instead."""
     case = case_named("earth-orbit")  # scale 7e6 m
     s = case.error_scale
-    rows = [(case.name, "scipy", "Radau", 1e-10, "tolerance", "ok", 1e-9 * s, 0, 9000, 0.6),
-            (case.name, "scipy", "DOP853", 1e-6, "tolerance", "ok", 1e-5 * s, 0, 700, 0.03),
-            (case.name, "reference", "rk4", 30.0, "step", "ok", 5e-3 * s, 0, 400, 0.05),
-            (case.name, "reference", "euler", 30.0, "step", "unstable", np.nan, np.nan, 100, 0.01)]
+    rows = [
+        (case.name, "scipy", "Radau", 1e-10, "tolerance", "ok", 1e-9 * s, 0, 9000, 0.6),
+        (case.name, "scipy", "DOP853", 1e-6, "tolerance", "ok", 1e-5 * s, 0, 700, 0.03),
+        (case.name, "reference", "rk4", 30.0, "step", "ok", 5e-3 * s, 0, 400, 0.05),
+        (case.name, "reference", "euler", 30.0, "step", "unstable", np.nan, np.nan, 100, 0.01),
+    ]
     picks = cheapest(pd.DataFrame(rows, columns=COLUMNS), [case], targets=(1e-2, 1e-4, 1e-6, 1e-10))
     pick = picks.set_index(["target", "by"])
     assert pick.loc[(1e-2, "wall_s"), "method"] == "DOP853"
@@ -37,11 +38,13 @@ def test_survival_needs_accuracy_and_a_physical_energy(case_named):
     energy of a bound system gone positive (drift 222), is not surviving."""
     case = case_named("close-encounter")
     s = case.error_scale
-    rows = [(case.name, "reference", "euler", 1e-3, "step", "ok", 43 * s, 222.0, 0, 0),
-            (case.name, "reference", "euler", 5e-4, "step", "ok", 0.05 * s, 0.2, 0, 0),
-            (case.name, "reference", "rk4", 1e-3, "step", "ok", 0.01 * s, 5.0, 0, 0),
-            (case.name, "reference", "rk4", 5e-4, "step", "ok", 0.001 * s, 0.01, 0, 0),
-            (case.name, "reference", "verlet", 1e-3, "step", "unstable", np.nan, np.nan, 0, 0)]
+    rows = [
+        (case.name, "reference", "euler", 1e-3, "step", "ok", 43 * s, 222.0, 0, 0),
+        (case.name, "reference", "euler", 5e-4, "step", "ok", 0.05 * s, 0.2, 0, 0),
+        (case.name, "reference", "rk4", 1e-3, "step", "ok", 0.01 * s, 5.0, 0, 0),
+        (case.name, "reference", "rk4", 5e-4, "step", "ok", 0.001 * s, 0.01, 0, 0),
+        (case.name, "reference", "verlet", 1e-3, "step", "unstable", np.nan, np.nan, 0, 0),
+    ]
     table = survival(case, pd.DataFrame(rows, columns=COLUMNS)).set_index("method")
     assert table.loc["euler", "dt_survived"] == 5e-4 and table.loc["euler", "failure"] == "inaccurate"
     assert table.loc["rk4", "dt_survived"] == 5e-4 and table.loc["rk4", "failure"] == "energy"
@@ -56,21 +59,30 @@ def test_scorecard_cost_and_stability_ratios(case_named):
     from truestep.picks import restitution_fidelity, scorecard
 
     kepler, earth = case_named("kepler-orbit"), case_named("earth-orbit")
-    rows = [(kepler.name, "e", "A", 0.1, "step", "ok", 1e-5 * kepler.error_scale, 0, 10, 1.0),
-            (earth.name, "e", "A", 0.1, "step", "ok", 1e-5 * earth.error_scale, 0, 10, 2.0),
-            (earth.name, "e", "B", 0.1, "step", "ok", 1e-5 * earth.error_scale, 0, 10, 6.0),
-            (kepler.name, "e", "B", 0.1, "step", "ok", 1e-2 * kepler.error_scale, 0, 10, 0.1),
-            (kepler.name, "e", "C", 0.1, "step", "ok", 1.0, 0, 10, 0.1)]
-    stab = pd.DataFrame([(earth.name, "e", "A", 0.19, 0.2, "ok"), (kepler.name, "e", "C", 0.1, np.nan, "ok"),
-                         (kepler.name, "e", "D", 0.4, np.nan, "ok")],
-                        columns=["case", "engine", "method", "dt_limit", "dt_limit_exact", "status"])
+    rows = [
+        (kepler.name, "e", "A", 0.1, "step", "ok", 1e-5 * kepler.error_scale, 0, 10, 1.0),
+        (earth.name, "e", "A", 0.1, "step", "ok", 1e-5 * earth.error_scale, 0, 10, 2.0),
+        (earth.name, "e", "B", 0.1, "step", "ok", 1e-5 * earth.error_scale, 0, 10, 6.0),
+        (kepler.name, "e", "B", 0.1, "step", "ok", 1e-2 * kepler.error_scale, 0, 10, 0.1),
+        (kepler.name, "e", "C", 0.1, "step", "ok", 1.0, 0, 10, 0.1),
+    ]
+    stab = pd.DataFrame(
+        [
+            (earth.name, "e", "A", 0.19, 0.2, "ok"),
+            (kepler.name, "e", "C", 0.1, np.nan, "ok"),
+            (kepler.name, "e", "D", 0.4, np.nan, "ok"),
+        ],
+        columns=["case", "engine", "method", "dt_limit", "dt_limit_exact", "status"],
+    )
     card = scorecard(pd.DataFrame(rows, columns=COLUMNS), [kepler, earth], stab).set_index("method")
     assert card.loc["A", "cost_ratio"] == 1.0 and card.loc["A", "cases_reached"] == 2
     assert card.loc["B", "cost_ratio"] == 3.0 and card.loc["B", "cases_reached"] == 1
     assert card.loc["A", "stability_ratio"] == pytest.approx(0.95)
     assert card.loc["C", "stability_ratio"] == pytest.approx(0.25)
     assert np.isnan(card.loc["C", "cost_ratio"]) and card.loc["C", "cases_run"] == 1
-    rest = pd.DataFrame([("e", "A", 0.5, 0.48, "ok"), ("e", "A", 0.8, 0.86, "ok")],
-                        columns=["engine", "method", "e_set", "e_measured", "status"])
+    rest = pd.DataFrame(
+        [("e", "A", 0.5, 0.48, "ok"), ("e", "A", 0.8, 0.86, "ok")],
+        columns=["engine", "method", "e_set", "e_measured", "status"],
+    )
     fid = restitution_fidelity(rest).iloc[0]
     assert fid["median"] == pytest.approx(0.04) and fid["worst"] == pytest.approx(0.06)

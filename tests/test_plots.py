@@ -11,18 +11,32 @@ from truestep import plots
 
 
 def _stability_rows() -> pd.DataFrame:
-    rows = [("ok", 0.1, 0.2, 0.1001, ""), ("ok", 0.5, math.nan, math.inf, "stable at every step tried"),
-            ("ok", 0.0, math.nan, 0.001, "unstable at every step tried"),
-            ("solver-failed", math.nan, math.nan, math.nan, "the solver failed at dt 0.03 s"),
-            ("timeout", math.nan, math.nan, math.nan, "still searching"),
-            ("unsupported", math.nan, math.nan, math.nan, "3d")]
-    return pd.DataFrame([{"case": "c", "engine": "reference", "method": f"m{i}", "status": st,
-                          "dt_limit": lim, "dt_limit_exact": ex, "dt_unstable": un, "note": note}
-                         for i, (st, lim, ex, un, note) in enumerate(rows)])
+    rows = [
+        ("ok", 0.1, 0.2, 0.1001, ""),
+        ("ok", 0.5, math.nan, math.inf, "stable at every step tried"),
+        ("ok", 0.0, math.nan, 0.001, "unstable at every step tried"),
+        ("solver-failed", math.nan, math.nan, math.nan, "the solver failed at dt 0.03 s"),
+        ("timeout", math.nan, math.nan, math.nan, "still searching"),
+        ("unsupported", math.nan, math.nan, math.nan, "3d"),
+    ]
+    return pd.DataFrame(
+        [
+            {
+                "case": "c",
+                "engine": "reference",
+                "method": f"m{i}",
+                "status": st,
+                "dt_limit": lim,
+                "dt_limit_exact": ex,
+                "dt_unstable": un,
+                "note": note,
+            }
+            for i, (st, lim, ex, un, note) in enumerate(rows)
+        ]
+    )
 
 
-def test_a_search_without_a_limit_keeps_its_row_and_a_lower_bound_is_hatched(tmp_path,
-                                                                              monkeypatch):
+def test_a_search_without_a_limit_keeps_its_row_and_a_lower_bound_is_hatched(tmp_path, monkeypatch):
     shown = {}
 
     def keep(fig, path, dpi=plots.REPORT_DPI):
@@ -44,8 +58,18 @@ def test_a_search_without_a_limit_keeps_its_row_and_a_lower_bound_is_hatched(tmp
 
 
 def test_a_run_whose_cases_are_in_no_family_draws_no_scorecard(tmp_path, recwarn):
-    card = pd.DataFrame([{"engine": "reference", "method": "euler", "family": "orbits",
-                          "cost_ratio": 1.0, "cases_run": 1, "stability_ratio": 1.0}])
+    card = pd.DataFrame(
+        [
+            {
+                "engine": "reference",
+                "method": "euler",
+                "family": "orbits",
+                "cost_ratio": 1.0,
+                "cases_run": 1,
+                "stability_ratio": 1.0,
+            }
+        ]
+    )
     fidelity = pd.DataFrame(columns=["engine", "method", "median"])
     assert plots.scorecard(card, fidelity, [], 1e-4, tmp_path / "card.png") is None
     assert not (tmp_path / "card.png").exists()

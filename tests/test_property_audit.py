@@ -212,8 +212,9 @@ def adapter_of(engine: str):
         pytest.skip(str(err))
 
 
-def case_of(name: str, duration: float | None = None, particles: int | None = None,
-            records: int | None = None):
+def case_of(
+    name: str, duration: float | None = None, particles: int | None = None, records: int | None = None
+):
     """A case of the library, shortened to ``duration`` s and, for a block of particles,
     cut to its first ``particles`` (the runs must stay short); ``records``: its
     ``max_records``."""
@@ -227,9 +228,17 @@ def case_of(name: str, duration: float | None = None, particles: int | None = No
         if particles is not None:
             m = case.model
             keep = slice(0, particles)
-            case = dataclasses.replace(case, model=dataclasses.replace(
-                m, mass=m.mass[keep], x0=m.x0[keep], v0=m.v0[keep], radius=m.radius[keep],
-                fixed=m.fixed[keep]))
+            case = dataclasses.replace(
+                case,
+                model=dataclasses.replace(
+                    m,
+                    mass=m.mass[keep],
+                    x0=m.x0[keep],
+                    v0=m.v0[keep],
+                    radius=m.radius[keep],
+                    fixed=m.fixed[keep],
+                ),
+            )
         _CASES[key] = case
     return _CASES[key]
 
@@ -260,8 +269,20 @@ def run(case, engine: str, method: str, dt: float) -> Run:
         engine_status = traj.status  # before row_from judges the motion
         row = runner.row_from(case, engine, method, dt, adaptive=adaptive, outcome=traj)
         call = timed[0] if timed else measured[0]
-        _RUNS[key] = Run(case, engine, method, dt, adaptive, traj, measured[0].counted,
-                         measured[0].steps, call, call.wall, row, engine_status)
+        _RUNS[key] = Run(
+            case,
+            engine,
+            method,
+            dt,
+            adaptive,
+            traj,
+            measured[0].counted,
+            measured[0].steps,
+            call,
+            call.wall,
+            row,
+            engine_status,
+        )
     return _RUNS[key]
 
 
@@ -300,8 +321,14 @@ def _on_axis(case, t):
     d0 = m.x0[0] - a.point[0]
     length = float(np.linalg.norm(d0))
     axis = d0 / length
-    u, du = ar.oscillator(float(m.mass[0]), float(a.stiffness[0]), float(a.damping[0]),
-                          length - float(a.rest[0]), float(m.v0[0] @ axis), t)
+    u, du = ar.oscillator(
+        float(m.mass[0]),
+        float(a.stiffness[0]),
+        float(a.damping[0]),
+        length - float(a.rest[0]),
+        float(m.v0[0] @ axis),
+        t,
+    )
     return (a.point[0] + (a.rest[0] + u)[:, None] * axis)[:, None, :], (du[:, None] * axis)[:, None, :]
 
 
@@ -313,8 +340,14 @@ def _spring_pair(case, t):
     sep = m.x0[1] - m.x0[0]
     length = float(np.linalg.norm(sep))
     axis = sep / length
-    u, du = ar.oscillator(reduced, float(s.stiffness[0]), float(s.damping[0]),
-                          length - float(s.rest[0]), float((m.v0[1] - m.v0[0]) @ axis), t)
+    u, du = ar.oscillator(
+        reduced,
+        float(s.stiffness[0]),
+        float(s.damping[0]),
+        length - float(s.rest[0]),
+        float((m.v0[1] - m.v0[0]) @ axis),
+        t,
+    )
     cm_v = (m1 * m.v0[0] + m2 * m.v0[1]) / total
     cm = (m1 * m.x0[0] + m2 * m.x0[1]) / total + np.outer(t, cm_v)
     rel = (s.rest[0] + u)[:, None] * axis
@@ -386,8 +419,9 @@ def _my_reference(case, tol: float = 1e-12):
 
 EXACT = {
     "free-fall": lambda c, t: ar.free_flight(c.model.x0, c.model.v0, c.model.gravity, t),
-    "projectile-drag": lambda c, t: ar.drag_flight(c.model.x0, c.model.v0, c.model.gravity,
-                                                   c.model.drag, c.model.mass, t),
+    "projectile-drag": lambda c, t: ar.drag_flight(
+        c.model.x0, c.model.v0, c.model.gravity, c.model.drag, c.model.mass, t
+    ),
     "harmonic-oscillator": _on_axis,
     "damped-oscillator": _on_axis,
     "stiff-spring": _on_axis,
@@ -462,8 +496,17 @@ def _error_params():
         for engine, method in methods_for(case, adaptive=not again):
             if dt is None and method not in get_adapter(engine).adaptive_methods:
                 continue
-            out.append(pytest.param(name, duration, particles, engine, method, dt,
-                                    id=f"{name}-{engine}-{method}" + (f"-{dt:g}" if again else "")))
+            out.append(
+                pytest.param(
+                    name,
+                    duration,
+                    particles,
+                    engine,
+                    method,
+                    dt,
+                    id=f"{name}-{engine}-{method}" + (f"-{dt:g}" if again else ""),
+                )
+            )
     return out
 
 
@@ -546,8 +589,12 @@ def _documented_reference(case):
             s = np.clip(t / h - j, 0.0, 1.0)[:, None]
             a, b = states[j], states[j + 1]
             xa, va, xb, vb = a[:, : 3 * n], a[:, 3 * n :], b[:, : 3 * n], b[:, 3 * n :]
-            x = ((2 * s**3 - 3 * s**2 + 1) * xa + (s**3 - 2 * s**2 + s) * h * va
-                 + (-2 * s**3 + 3 * s**2) * xb + (s**3 - s**2) * h * vb)
+            x = (
+                (2 * s**3 - 3 * s**2 + 1) * xa
+                + (s**3 - 2 * s**2 + s) * h * va
+                + (-2 * s**3 + 3 * s**2) * xb
+                + (s**3 - s**2) * h * vb
+            )
             return x.reshape(-1, n, 3), ((1 - s) * va + s * vb).reshape(-1, n, 3)
 
         _REFERENCES[key] = at
@@ -564,8 +611,10 @@ def _error_tolerance(r: Run) -> tuple[float, float]:
         t = r.traj.t
         x12, v12 = _my_reference(case)(t)
         xr, vr = _documented_reference(case)(t)
-        return (2.0 * float(np.max(np.linalg.norm(xr - x12, axis=2))) + 1e-12,
-                2.0 * float(np.max(np.linalg.norm(vr - v12, axis=2))) + 1e-12)
+        return (
+            2.0 * float(np.max(np.linalg.norm(xr - x12, axis=2))) + 1e-12,
+            2.0 * float(np.max(np.linalg.norm(vr - v12, axis=2))) + 1e-12,
+        )
     floor = ROUNDOFF_ABS * max(1.0, float(case.error_scale))
     return floor, floor
 
@@ -725,7 +774,8 @@ def _check_t_fail(r: Run, when: float | None) -> None:
     earliest = when if first_record is None else min(when, first_record)
     assert earliest * (1 - 1e-12) <= t_fail <= latest * (1 + 1e-12), (
         f"{r.engine}/{r.method}: t_fail {t_fail:.6g} s, the motion failed at {when:.6g} s"
-        + ("" if first_record is None else f" and a record shows it at {first_record:.6g} s"))
+        + ("" if first_record is None else f" and a record shows it at {first_record:.6g} s")
+    )
 
 
 def _require_ok(r: Run) -> None:
@@ -736,7 +786,8 @@ def _require_ok(r: Run) -> None:
         return
     mine, _ = my_verdict(r)
     assert mine == r.row["status"], (
-        f"published status {r.row['status']!r} ({r.row.get('message')}), the motion says {mine!r}")
+        f"published status {r.row['status']!r} ({r.row.get('message')}), the motion says {mine!r}"
+    )
     pytest.skip(f"run {r.row['status']}: nothing else is published for it")
 
 
@@ -750,11 +801,15 @@ def test_error(name, duration, particles, engine, method, dt):
     r = _run_from(name, duration, particles, engine, method, dt)
     _require_ok(r)
     (error, final, error_v), (slack_x, slack_v) = _my_errors(r), _error_tolerance(r)
-    for column, mine, slack in (("error", error, slack_x), ("error_final", final, slack_x),
-                                ("error_v", error_v, slack_v)):
+    for column, mine, slack in (
+        ("error", error, slack_x),
+        ("error_final", final, slack_x),
+        ("error_v", error_v, slack_v),
+    ):
         published = float(r.row[column])
         assert _close(published, mine, floor=slack), (
-            f"{engine}/{method} {column} published {published:.10g}, recomputed {mine:.10g}")
+            f"{engine}/{method} {column} published {published:.10g}, recomputed {mine:.10g}"
+        )
 
 
 def _my_energy(r: Run) -> tuple[float, float]:
@@ -793,10 +848,12 @@ def test_energy_drift(name, duration, particles, engine, method, dt):
     rel = ROUNDOFF_REL + scale_slack(r.case)
     # ROUNDOFF_ABS: the drift of a conserved energy is itself round-off for exact schemes
     assert _close(float(r.row["energy_drift"]), drift, rel=rel), (
-        f"{engine}/{method} energy_drift published {r.row['energy_drift']:.10g}, recomputed {drift:.10g}")
+        f"{engine}/{method} energy_drift published {r.row['energy_drift']:.10g}, recomputed {drift:.10g}"
+    )
     assert _close(float(r.row["energy_drift_final"]), final, rel=rel), (
         f"{engine}/{method} energy_drift_final published {r.row['energy_drift_final']:.10g}, "
-        f"recomputed {final:.10g}")
+        f"recomputed {final:.10g}"
+    )
 
 
 @pytest.mark.engine
@@ -813,14 +870,17 @@ def test_status_of_the_motion(name, duration, particles, engine, method, dt):
     published = r.row["status"]
     assert published == mine, (
         f"{engine}/{method}: published {published!r} ({r.row.get('message')}), the motion says {mine!r}"
-        + (f" at t = {when:.6g} s" if when is not None else ""))
+        + (f" at t = {when:.6g} s" if when is not None else "")
+    )
     if published == "unstable":
         _check_t_fail(r, when)
 
 
 @pytest.mark.engine
-@pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"),
-                         [p for p in ERROR_PARAMS if p.values[4] == "implicit-euler"])
+@pytest.mark.parametrize(
+    ("name", "duration", "particles", "engine", "method", "dt"),
+    [p for p in ERROR_PARAMS if p.values[4] == "implicit-euler"],
+)
 def test_solver_failed_where_backward_euler_has_no_solution(name, duration, particles, engine, method, dt):
     """``solver-failed`` (implicit Euler's damped Newton finding no solution) only where
     backward Euler's equation itself has none: at the state the failing step started from
@@ -831,12 +891,20 @@ def test_solver_failed_where_backward_euler_has_no_solution(name, duration, part
     if r.row["status"] != "solver-failed":
         return
     m = r.case.model
-    if m is None or m.gravitation is None or m.gravitation.softening or np.any(m.gravity) or len(
-            m.springs.i) or len(m.anchors.i) or m.planes:
+    if (
+        m is None
+        or m.gravitation is None
+        or m.gravitation.softening
+        or np.any(m.gravity)
+        or len(m.springs.i)
+        or len(m.anchors.i)
+        or m.planes
+    ):
         pytest.skip("no route here to whether backward Euler has a solution in this scene")
     traj = r.traj
     assert traj.t[-1] == pytest.approx(float(r.row["t_fail"]), rel=1e-12), (
-        "the failing step's start is recorded")
+        "the failing step's start is recorded"
+    )
     x, v = traj.x[-1], traj.v[-1]
     h = r.case.steps_for(r.dt)[1]
     gap = np.linalg.norm(x[:, None] - x[None, :], axis=2) + np.diag(np.full(len(x), np.inf))
@@ -844,14 +912,22 @@ def test_solver_failed_where_backward_euler_has_no_solution(name, duration, part
     others = float(np.min(gap[gap > 2 * gap.min()], initial=np.inf))
     assert h * float(np.max(np.linalg.norm(v, axis=1))) < 0.1 * others
     none, numbers = ar.backward_euler_has_no_solution(m, x, v, h)
-    assert none, (f"{engine}/{method}: published solver-failed at t = {r.row['t_fail']}, but a "
-                  f"solution exists ({numbers})")
+    assert none, (
+        f"{engine}/{method}: published solver-failed at t = {r.row['t_fail']}, but a "
+        f"solution exists ({numbers})"
+    )
 
 
 @pytest.mark.engine
-@pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"),
-                         [p for p in ERROR_PARAMS if p.values[4] == "implicit-euler"
-                          and p.values[0] in ("harmonic-oscillator", "damped-oscillator", "stiff-spring")])
+@pytest.mark.parametrize(
+    ("name", "duration", "particles", "engine", "method", "dt"),
+    [
+        p
+        for p in ERROR_PARAMS
+        if p.values[4] == "implicit-euler"
+        and p.values[0] in ("harmonic-oscillator", "damped-oscillator", "stiff-spring")
+    ],
+)
 def test_implicit_euler_solves_its_step(name, duration, particles, engine, method, dt):
     """The damped Newton solve of implicit Euler lands on backward Euler's own step: on a
     linear oscillator the step is one linear solve (``ar.step_matrix``), iterated here from
@@ -864,13 +940,21 @@ def test_implicit_euler_solves_its_step(name, duration, particles, engine, metho
     d0 = m.x0[0] - a.point[0]
     axis = d0 / np.linalg.norm(d0)
     n, h = r.case.steps_for(dt)
-    u, w = ar.oscillator_run("implicit-euler", float(m.mass[0]), float(a.stiffness[0]),
-                             float(a.damping[0]), h, float(np.linalg.norm(d0) - a.rest[0]),
-                             float(m.v0[0] @ axis), n)
+    u, w = ar.oscillator_run(
+        "implicit-euler",
+        float(m.mass[0]),
+        float(a.stiffness[0]),
+        float(a.damping[0]),
+        h,
+        float(np.linalg.norm(d0) - a.rest[0]),
+        float(m.v0[0] @ axis),
+        n,
+    )
     k = np.rint(r.traj.t / h).astype(int)
     amplitude = float(np.linalg.norm(d0))
-    np.testing.assert_allclose((r.traj.x[:, 0] - a.point[0]) @ axis, u[k] + a.rest[0], rtol=0,
-                               atol=1e-11 * amplitude)
+    np.testing.assert_allclose(
+        (r.traj.x[:, 0] - a.point[0]) @ axis, u[k] + a.rest[0], rtol=0, atol=1e-11 * amplitude
+    )
     speed = amplitude * math.sqrt(float(a.stiffness[0] / m.mass[0]))
     np.testing.assert_allclose(r.traj.v[:, 0] @ axis, w[k], rtol=0, atol=1e-11 * speed)
 
@@ -899,8 +983,17 @@ def _thinned_params():
             adaptive = method in get_adapter(engine).adaptive_methods
             if adaptive != (dt is None):
                 continue
-            out.append(pytest.param(name, duration, records, engine, method, dt,
-                                    id=f"{name}-{records}-records-{engine}-{method}"))
+            out.append(
+                pytest.param(
+                    name,
+                    duration,
+                    records,
+                    engine,
+                    method,
+                    dt,
+                    id=f"{name}-{records}-records-{engine}-{method}",
+                )
+            )
     return out
 
 
@@ -922,14 +1015,16 @@ def test_energy_and_status_between_records(name, duration, records, engine, meth
     mine, when = my_verdict(r)
     assert r.row["status"] == mine, (
         f"{engine}/{method}: published {r.row['status']!r} ({r.row.get('message')}), the motion "
-        f"says {mine!r}" + (f" at t = {when:.6g} s" if when is not None else ""))
+        f"says {mine!r}" + (f" at t = {when:.6g} s" if when is not None else "")
+    )
     if mine != "ok":
         _check_t_fail(r, when)
         return
     drift, final = _my_energy(r)
     rel = ROUNDOFF_REL + scale_slack(r.case)
     assert _close(float(r.row["energy_drift"]), drift, rel=rel), (
-        f"{engine}/{method} energy_drift published {r.row['energy_drift']:.10g}, recomputed {drift:.10g}")
+        f"{engine}/{method} energy_drift published {r.row['energy_drift']:.10g}, recomputed {drift:.10g}"
+    )
     assert _close(float(r.row["energy_drift_final"]), final, rel=rel)
 
 
@@ -948,8 +1043,9 @@ def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
     base = case_of("hanging-cloth", 1.0)
     m = base.model
     shift = np.array([0.0, lift, 0.0])
-    model = dataclasses.replace(m, x0=m.x0 + shift,
-                                anchors=dataclasses.replace(m.anchors, point=m.anchors.point + shift))
+    model = dataclasses.replace(
+        m, x0=m.x0 + shift, anchors=dataclasses.replace(m.anchors, point=m.anchors.point + shift)
+    )
     key = ("no-reference", lift)
     if key not in _CASES:
         _CASES[key] = dataclasses.replace(base, model=model, exact=None)
@@ -962,11 +1058,11 @@ def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
     r = run(case, "reference", "heun", 4e-3)
     mine, when = my_verdict(r)
     assert mine == "unstable" and r.row["status"] == mine, (
-        f"lift {lift} m: published {r.row['status']!r} ({r.row.get('message')}), the motion says {mine!r}")
+        f"lift {lift} m: published {r.row['status']!r} ({r.row.get('message')}), the motion says {mine!r}"
+    )
     assert float(r.row["t_fail"]) == pytest.approx(when, rel=1e-12), (
-        f"lift {lift} m: t_fail {r.row['t_fail']} s, the first step past 0.1 of the scale is at "
-        f"{when} s")
-
+        f"lift {lift} m: t_fail {r.row['t_fail']} s, the first step past 0.1 of the scale is at {when} s"
+    )
 
 
 @pytest.mark.engine
@@ -980,7 +1076,8 @@ def test_an_escape_is_dated_at_its_step():
     mine, when = my_verdict(r)
     assert r.row["status"] == mine == "unstable"
     assert float(r.row["t_fail"]) == pytest.approx(when, rel=1e-12), (
-        f"t_fail {r.row['t_fail']} s, the energy reached the escape energy at the step ending {when} s")
+        f"t_fail {r.row['t_fail']} s, the energy reached the escape energy at the step ending {when} s"
+    )
 
 
 MUJOCO_EVALUATIONS = {"Euler": 1, "implicit": 1, "implicitfast": 1, "RK4": 4}
@@ -1005,7 +1102,8 @@ def test_nfev_and_steps(name, duration, particles, engine, method, dt):
     assert row["dt_kind"] == ("tolerance" if r.adaptive else "step")
     if r.adaptive:
         assert row["steps"] == r.counted_steps, (
-            f"{engine}/{method}: {row['steps']} steps published, {r.counted_steps} accepted steps counted")
+            f"{engine}/{method}: {row['steps']} steps published, {r.counted_steps} accepted steps counted"
+        )
         assert r.timed.steps == r.counted_steps, "the timed run takes the same steps"
     else:
         assert row["steps"] == n_steps, f"{engine}/{method}: {row['steps']} steps published, {n_steps} taken"
@@ -1036,8 +1134,10 @@ def test_nfev_and_steps(name, duration, particles, engine, method, dt):
 
 
 @pytest.mark.engine
-@pytest.mark.parametrize(("name", "duration", "particles", "engine", "method", "dt"),
-                         [p for p in ERROR_PARAMS if p.values[4] in ("dopri5", "RK45", "DOP853", "Radau")])
+@pytest.mark.parametrize(
+    ("name", "duration", "particles", "engine", "method", "dt"),
+    [p for p in ERROR_PARAMS if p.values[4] in ("dopri5", "RK45", "DOP853", "Radau")],
+)
 def test_adaptive_records(name, duration, particles, engine, method, dt):
     """Where an adaptive run is recorded (README "Contact and adaptive steps"): the
     reference's Dormand-Prince on the case's grid of ``max_records + 1`` evenly spaced
@@ -1084,7 +1184,8 @@ def test_every_swept_step_is_the_step_taken(path):
     for dt in list(case.dts) + list(case.quick_dts):
         n, h = case.steps_for(dt)
         assert abs(n * dt - case.duration) <= 1e-9 * case.duration, (
-            f"{path.stem}: dt {dt!r} s is {case.duration / dt:.6f} steps of its {case.duration} s")
+            f"{path.stem}: dt {dt!r} s is {case.duration / dt:.6f} steps of its {case.duration} s"
+        )
         assert h == pytest.approx(dt, rel=1e-9)
 
 
@@ -1094,8 +1195,10 @@ def test_every_swept_step_is_the_step_taken(path):
 def _prop_params(name, duration=None, dt=None, *, adaptive=True, only=None):
     case = case_of(name, duration)
     dt = case.quick_dts[0] if dt is None else dt
-    return [pytest.param(name, duration, engine, method, dt, id=f"{name}-{engine}-{method}-{dt:g}")
-            for engine, method in methods_for(case, adaptive=adaptive, only=only)]
+    return [
+        pytest.param(name, duration, engine, method, dt, id=f"{name}-{engine}-{method}-{dt:g}")
+        for engine, method in methods_for(case, adaptive=adaptive, only=only)
+    ]
 
 
 def _prop_run(name, duration, engine, method, dt) -> Run:
@@ -1133,7 +1236,8 @@ def _vertex_check(t, u, w, found, upto: int, label: str) -> None:
         # round-off of a least-squares vertex over ~100 samples of metre-scale heights: 1e-9
         assert fit["apex"] - G_FLOOR * near**2 / 8 - 1e-9 <= contact["apex"] <= fit["apex"] + 1e-9, (
             f"{label} flight {k}: highest sample {contact['apex']:.9f} m, the flight's vertex "
-            f"{fit['apex']:.9f} m (spacing {near:.3g} s)")
+            f"{fit['apex']:.9f} m (spacing {near:.3g} s)"
+        )
 
 
 BOUNCE_PARAMS = _prop_params("bouncing-ball")
@@ -1174,7 +1278,8 @@ def test_apex_height_error(name, duration, engine, method, dt):
     assert _close(published, mine), (
         f"{engine}/{method}: apex_height_error published {published:.6g}, the heights reached "
         f"give {mine:.6g} (apexes {np.round(apexes[:bounces], 5).tolist()} m against "
-        f"{np.round(exact, 5).tolist()} m)")
+        f"{np.round(exact, 5).tolist()} m)"
+    )
 
 
 @pytest.mark.engine
@@ -1202,14 +1307,18 @@ def test_bounce_time_error(name, duration, engine, method, dt):
     assert _close(published, mine), (
         f"{engine}/{method}: bounce_time_error published {published:.6g} s, the contacts' lowest "
         f"samples give {mine:.6g} s (at {np.round(lows[:bounces], 5).tolist()} against "
-        f"{np.round(times, 5).tolist()})")
+        f"{np.round(times, 5).tolist()})"
+    )
 
 
 SPARSE_BOUNCE_PARAMS = [
     pytest.param(engine, method, id=f"bouncing-ball-100-records-{engine}-{method}")
-    for engine, method in methods_for(case_of("bouncing-ball", None, None, 100), adaptive=False,
-                                      only=(("reference", "lecture"), ("pymunk", "default"),
-                                            ("pybullet", "default"), ("mujoco", "Euler")))]
+    for engine, method in methods_for(
+        case_of("bouncing-ball", None, None, 100),
+        adaptive=False,
+        only=(("reference", "lecture"), ("pymunk", "default"), ("pybullet", "default"), ("mujoco", "Euler")),
+    )
+]
 
 
 @pytest.mark.engine
@@ -1226,8 +1335,11 @@ def test_apexes_need_every_step(engine, method):
     assert r.row["status"] == "ok" and np.isfinite(float(r.row["error"]))
 
 
-PENETRATION_PARAMS = (BOUNCE_PARAMS + _prop_params("sliding-contact")
-                      + _prop_params("particle-fountain", only=("lecture", "symplectic-euler")))
+PENETRATION_PARAMS = (
+    BOUNCE_PARAMS
+    + _prop_params("sliding-contact")
+    + _prop_params("particle-fountain", only=("lecture", "symplectic-euler"))
+)
 
 
 @pytest.mark.engine
@@ -1274,10 +1386,14 @@ def test_final_speed(name, duration, engine, method, dt):
     assert _close(float(r.row["final_speed"]), float(speed.max()))
 
 
-STRAIN_PARAMS = (_prop_params("triangle-impulse") + _prop_params("cube-inside-out")
-                 + _prop_params("cube-braced") + _prop_params("rope-pendulum", 0.5, adaptive=False)
-                 + _prop_params("hanging-cloth", 0.5, adaptive=False)
-                 + _prop_params("stiff-cloth", 0.05, 2.5e-4, adaptive=False))
+STRAIN_PARAMS = (
+    _prop_params("triangle-impulse")
+    + _prop_params("cube-inside-out")
+    + _prop_params("cube-braced")
+    + _prop_params("rope-pendulum", 0.5, adaptive=False)
+    + _prop_params("hanging-cloth", 0.5, adaptive=False)
+    + _prop_params("stiff-cloth", 0.05, 2.5e-4, adaptive=False)
+)
 
 
 @pytest.mark.engine
@@ -1310,8 +1426,12 @@ def test_min_signed_volume(name, duration, engine, method, dt):
     assert _close(float(r.row["min_signed_volume"]), float(np.min(volume / volume[0])))
 
 
-MOMENTUM_PARAMS = (_prop_params("spring-damper-pair") + _prop_params("earth-orbit")
-                   + _prop_params("triangle-impulse") + _prop_params("triangle-impulse", dt=0.0025))
+MOMENTUM_PARAMS = (
+    _prop_params("spring-damper-pair")
+    + _prop_params("earth-orbit")
+    + _prop_params("triangle-impulse")
+    + _prop_params("triangle-impulse", dt=0.0025)
+)
 
 
 @pytest.mark.engine
@@ -1339,7 +1459,8 @@ def test_momentum_drift(name, duration, engine, method, dt):
     # orders of magnitude. Round-off of a conserved sum: 1e-12 (of the scale).
     assert abs(published - mine) <= 0.05 * mine + 1e-12, (
         f"{engine}/{method}: momentum_drift published {published:.3g}, recomputed {mine:.3g} "
-        f"(P after the impulses {p[-1][:2].round(6).tolist()}, expected {expected[:2].round(6).tolist()})")
+        f"(P after the impulses {p[-1][:2].round(6).tolist()}, expected {expected[:2].round(6).tolist()})"
+    )
 
 
 TUNNEL_PARAMS = _prop_params("high-speed-impact", dt=1e-3) + _prop_params("high-speed-impact", dt=5e-5)
@@ -1367,8 +1488,9 @@ def _pool(case, traj):
     return spec, traj.alive[:, first:], first
 
 
-EMITTER_PARAMS = (_prop_params("hair-strands", only=("lecture", "euler", "rk4"))
-                  + _prop_params("particle-fountain", only=("lecture", "symplectic-euler")))
+EMITTER_PARAMS = _prop_params("hair-strands", only=("lecture", "euler", "rk4")) + _prop_params(
+    "particle-fountain", only=("lecture", "symplectic-euler")
+)
 
 
 @pytest.mark.engine
@@ -1387,8 +1509,10 @@ def test_spawn_rate_z(name, duration, engine, method, dt):
 
 
 @pytest.mark.engine
-@pytest.mark.parametrize(("name", "duration", "engine", "method", "dt"),
-                         [p for p in EMITTER_PARAMS if p.values[0] == "particle-fountain"])
+@pytest.mark.parametrize(
+    ("name", "duration", "engine", "method", "dt"),
+    [p for p in EMITTER_PARAMS if p.values[0] == "particle-fountain"],
+)
 def test_population_z(name, duration, engine, method, dt):
     """``population_z``: the summed live population at the last record of every frame from
     ``lifetime + jitter`` on, against its distribution under the emitter's law, by Monte
@@ -1406,7 +1530,8 @@ def test_population_z(name, duration, engine, method, dt):
     # Monte Carlo error of 4000 replays: the mean to sd / 63, the sd to 1.1%; four of each
     published = float(r.row["population_z"])
     assert abs(published - mine) <= 4 * (1 / math.sqrt(4000) + abs(mine) / math.sqrt(2 * 4000)), (
-        f"population_z published {published:.3f}, Monte Carlo {mine:.3f}")
+        f"population_z published {published:.3f}, Monte Carlo {mine:.3f}"
+    )
 
 
 HAIR_PARAMS = [p for p in EMITTER_PARAMS if p.values[0] == "hair-strands"]
@@ -1452,13 +1577,20 @@ def test_strand_error(name, duration, engine, method, dt):
 # -- stability.csv ----------------------------------------------------------------------------
 
 SCHEME = {
-    ("reference", "euler"): "euler", ("reference", "midpoint"): "midpoint",
-    ("reference", "heun"): "heun", ("reference", "rk4"): "rk4",
-    ("reference", "symplectic-euler"): "symplectic-euler", ("reference", "verlet"): "verlet",
-    ("reference", "implicit-euler"): "implicit-euler", ("reference", "lecture"): "lecture",
-    ("pymunk", "default"): "pymunk", ("pybullet", "default"): "symplectic-euler",
-    ("pybullet", "clean"): "symplectic-euler", ("mujoco", "Euler"): "symplectic-euler",
-    ("mujoco", "implicit"): "mujoco-implicit", ("mujoco", "implicitfast"): "mujoco-implicit",
+    ("reference", "euler"): "euler",
+    ("reference", "midpoint"): "midpoint",
+    ("reference", "heun"): "heun",
+    ("reference", "rk4"): "rk4",
+    ("reference", "symplectic-euler"): "symplectic-euler",
+    ("reference", "verlet"): "verlet",
+    ("reference", "implicit-euler"): "implicit-euler",
+    ("reference", "lecture"): "lecture",
+    ("pymunk", "default"): "pymunk",
+    ("pybullet", "default"): "symplectic-euler",
+    ("pybullet", "clean"): "symplectic-euler",
+    ("mujoco", "Euler"): "symplectic-euler",
+    ("mujoco", "implicit"): "mujoco-implicit",
+    ("mujoco", "implicitfast"): "mujoco-implicit",
     ("mujoco", "RK4"): "rk4",
 }
 """Each engine's step on an oscillator, from its adapter's documentation (see
@@ -1533,9 +1665,11 @@ def _installed(engine: str) -> bool:
 
 
 FIXED_STEP_ENGINES = ("reference", "pymunk", "pybullet", "mujoco")
-SEARCH_PARAMS = [pytest.param(name, engine, method, id=f"{name}-{engine}-{method}")
-                 for name in ("harmonic-oscillator", "damped-oscillator")
-                 for engine, method in methods_for(case_of(name), FIXED_STEP_ENGINES, adaptive=False)]
+SEARCH_PARAMS = [
+    pytest.param(name, engine, method, id=f"{name}-{engine}-{method}")
+    for name in ("harmonic-oscillator", "damped-oscillator")
+    for engine, method in methods_for(case_of(name), FIXED_STEP_ENGINES, adaptive=False)
+]
 
 
 def my_stable(case, engine: str, method: str, dt: float, min_steps: int) -> bool:
@@ -1576,7 +1710,8 @@ def _check_search(row, case, engine, method, *, min_steps: int, rel_tol: float) 
 
     if row.dt_limit == 0.0:
         assert not stable(spec.dt_lo), (
-            f"{label}: published unstable at every step, stable here at {spec.dt_lo}")
+            f"{label}: published unstable at every step, stable here at {spec.dt_lo}"
+        )
         return
     assert stable(row.dt_limit), f"{label}: dt_limit {row.dt_limit:.6g} s is unstable here"
     if row.dt_limit == spec.dt_hi:
@@ -1584,7 +1719,8 @@ def _check_search(row, case, engine, method, *, min_steps: int, rel_tol: float) 
     else:
         assert not stable(row.dt_unstable), f"{label}: dt_unstable {row.dt_unstable:.6g} s is stable here"
         assert row.dt_limit < row.dt_unstable <= row.dt_limit * (1 + rel_tol) * (1 + 1e-9), (
-            f"{label}: bracket {row.dt_limit:.6g} .. {row.dt_unstable:.6g} s wider than {rel_tol:g}")
+            f"{label}: bracket {row.dt_limit:.6g} .. {row.dt_unstable:.6g} s wider than {rel_tol:g}"
+        )
     note = row.note if isinstance(row.note, str) else ""
     if "not monotone" in note:
         import re
@@ -1595,13 +1731,15 @@ def _check_search(row, case, engine, method, *, min_steps: int, rel_tol: float) 
         for fraction in (0.9, 0.5):
             if fraction * row.dt_limit > spec.dt_lo:
                 assert stable(fraction * row.dt_limit), (
-                    f"{label}: unstable here at {fraction} of dt_limit, the note says nothing of it")
+                    f"{label}: unstable here at {fraction} of dt_limit, the note says nothing of it"
+                )
     exact = my_limit(case, engine, method)
     # A step matrix of spectral radius rho > 1 grows by rho^n over a run's n >= 2000 steps:
     # at 0.2% above a limit that still shows (test_dt_limit's old bound, measured).
     if exact is not None and exact < spec.dt_hi:
         assert row.dt_limit <= exact * 1.002, (
-            f"{label}: dt_limit {row.dt_limit:.6g} s above the step matrix's limit {exact:.6g} s")
+            f"{label}: dt_limit {row.dt_limit:.6g} s above the step matrix's limit {exact:.6g} s"
+        )
 
 
 @pytest.mark.engine
@@ -1619,26 +1757,41 @@ def test_dt_limit(stability_rows, name, engine, method):
     case = cases[name]
     from truestep.stability import QUICK_MIN_STEPS  # the quick search's documented run length
 
-    _check_search(row, case, engine, method, min_steps=min(QUICK_MIN_STEPS, case.stability.min_steps),
-                  rel_tol=max(case.stability.rel_tol, 1e-2))
+    _check_search(
+        row,
+        case,
+        engine,
+        method,
+        min_steps=min(QUICK_MIN_STEPS, case.stability.min_steps),
+        rel_tol=max(case.stability.rel_tol, 1e-2),
+    )
     exact = my_limit(case, engine, method)
     hi = case.stability.dt_hi
     if ar.energy_behaviour(case.model) == "conservative" and 0 < exact < hi:
         # a bounded oscillation of energy is stable: the limit lies within the bracket
         assert exact / 1.01 * (1 - 1e-9) <= row.dt_limit, (
-            f"{engine}/{method}: dt_limit {row.dt_limit:.6g} s, exact {exact:.6g} s")
+            f"{engine}/{method}: dt_limit {row.dt_limit:.6g} s, exact {exact:.6g} s"
+        )
     assert row.runs == runs[(name, engine, method)], "runs: the searches' simulations, counted here"
     published_exact = row.dt_limit_exact
     if not np.isnan(published_exact):
         assert _close(published_exact, exact, rel=1e-9, floor=0.0), (
-            f"{engine}/{method}: dt_limit_exact {published_exact:.9g} s, exact {exact:.9g} s")
+            f"{engine}/{method}: dt_limit_exact {published_exact:.9g} s, exact {exact:.9g} s"
+        )
 
 
-EXACT_LIMIT_CASES = ("harmonic-oscillator", "damped-oscillator", "stiff-spring", "spring-chain",
-                     "mass-ratio-chain")
-EXACT_LIMIT_PARAMS = [pytest.param(name, engine, method, id=f"{name}-{engine}-{method}")
-                      for name in EXACT_LIMIT_CASES
-                      for engine, method in methods_for(case_of(name), FIXED_STEP_ENGINES, adaptive=False)]
+EXACT_LIMIT_CASES = (
+    "harmonic-oscillator",
+    "damped-oscillator",
+    "stiff-spring",
+    "spring-chain",
+    "mass-ratio-chain",
+)
+EXACT_LIMIT_PARAMS = [
+    pytest.param(name, engine, method, id=f"{name}-{engine}-{method}")
+    for name in EXACT_LIMIT_CASES
+    for engine, method in methods_for(case_of(name), FIXED_STEP_ENGINES, adaptive=False)
+]
 
 
 @pytest.fixture(scope="module")
@@ -1669,7 +1822,8 @@ def test_dt_limit_exact(exact_limit_rows, name, engine, method):
         pytest.skip("no exact limit published for this method")
     # the same number by two routes (closed forms, 60-halving bisections): round-off
     assert _close(float(published), exact, rel=1e-9, floor=0.0), (
-        f"{engine}/{method}: published exact limit {published:.9g} s, this file's {exact:.9g} s")
+        f"{engine}/{method}: published exact limit {published:.9g} s, this file's {exact:.9g} s"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -1729,7 +1883,6 @@ def test_a_search_that_meets_a_solver_failure(kepler_implicit_search):
     np.testing.assert_allclose(traj.x[:, 0], mine, rtol=0, atol=1e-7)
 
 
-
 @pytest.mark.engine
 def test_a_failed_search_counts_its_runs(kepler_implicit_search):
     """``runs`` of a search that ended in a solver failure: the simulations it made."""
@@ -1763,8 +1916,10 @@ def test_published_dt_limit(name, engine, method):
     if not PUBLISHED.exists():
         pytest.skip("no published stability.csv")
     if not _published_under_these_definitions():
-        pytest.skip("the committed report predates issue 19's definitions (results.csv has no "
-                    "error_final): its limits are the old growth test's; rerun truestep run")
+        pytest.skip(
+            "the committed report predates issue 19's definitions (results.csv has no "
+            "error_final): its limits are the old growth test's; rerun truestep run"
+        )
     table = pd.read_csv(PUBLISHED)
     rows = table[(table.case == name) & (table.engine == engine) & (table.method == method)]
     if not len(rows) or rows.iloc[0].status != "ok":
@@ -1784,12 +1939,14 @@ def test_published_dt_limit(name, engine, method):
         # the bracket of a full search (rel_tol), and a step at most 0.1% above the limit
         # grows too slowly to show (the damped ones: measured +0.08% for explicit Euler)
         assert exact / (1 + spec.rel_tol) * (1 - 1e-9) <= row.dt_limit <= exact * 1.001, (
-            f"{engine}/{method}: published dt_limit {row.dt_limit:.6g} s, exact {exact:.6g} s")
+            f"{engine}/{method}: published dt_limit {row.dt_limit:.6g} s, exact {exact:.6g} s"
+        )
 
 
-STATUS_PARAMS = [pytest.param(engine, method, id=f"stiff-spring-{engine}-{method}")
-                 for engine, method in methods_for(case_of("stiff-spring"), FIXED_STEP_ENGINES,
-                                                   adaptive=False)]
+STATUS_PARAMS = [
+    pytest.param(engine, method, id=f"stiff-spring-{engine}-{method}")
+    for engine, method in methods_for(case_of("stiff-spring"), FIXED_STEP_ENGINES, adaptive=False)
+]
 
 
 @pytest.mark.engine
@@ -1803,11 +1960,25 @@ def test_status(engine, method):
     dt = 2.5e-3
     r = run(case, engine, method, dt)
     m, a = case.model, case.model.anchors
-    radius = float(np.max(np.abs(np.linalg.eigvals(ar.step_matrix(
-        SCHEME[(engine, method)], float(m.mass[0]), float(a.stiffness[0]), float(a.damping[0]), dt)))))
+    radius = float(
+        np.max(
+            np.abs(
+                np.linalg.eigvals(
+                    ar.step_matrix(
+                        SCHEME[(engine, method)],
+                        float(m.mass[0]),
+                        float(a.stiffness[0]),
+                        float(a.damping[0]),
+                        dt,
+                    )
+                )
+            )
+        )
+    )
     expected = "unstable" if radius > 1 + 1e-9 else "ok"
     assert r.row["status"] == expected, (
-        f"{engine}/{method}: status {r.row['status']} ({r.row.get('message')}), spectral radius {radius:.4g}")
+        f"{engine}/{method}: status {r.row['status']} ({r.row.get('message')}), spectral radius {radius:.4g}"
+    )
     if expected == "unstable":
         assert 0.0 <= float(r.row["t_fail"]) <= case.duration * (1 + 1e-9)
 
@@ -1815,13 +1986,23 @@ def test_status(engine, method):
 # -- fit_order --------------------------------------------------------------------------------
 
 ORDER_DTS = (2e-3, 1e-3, 5e-4)
-ORDER_PARAMS = [pytest.param(engine, method, id=f"harmonic-oscillator-{engine}-{method}")
-                for engine, method in methods_for(case_of("harmonic-oscillator", 0.5), adaptive=False)]
+ORDER_PARAMS = [
+    pytest.param(engine, method, id=f"harmonic-oscillator-{engine}-{method}")
+    for engine, method in methods_for(case_of("harmonic-oscillator", 0.5), adaptive=False)
+]
 
 
 KNOWN_ORDER = {
-    "euler": 1, "midpoint": 2, "heun": 2, "rk4": 4, "symplectic-euler": 1, "verlet": 2,
-    "implicit-euler": 1, "lecture": 1, "pymunk": 1, "mujoco-implicit": 1,
+    "euler": 1,
+    "midpoint": 2,
+    "heun": 2,
+    "rk4": 4,
+    "symplectic-euler": 1,
+    "verlet": 2,
+    "implicit-euler": 1,
+    "lecture": 1,
+    "pymunk": 1,
+    "mujoco-implicit": 1,
 }
 """The global order of each documented step (``SCHEME``) in the positions: the order of its
 truncation error (Taylor terms matched, ``ar._one_step``); the lecture's update is explicit
@@ -1872,7 +2053,8 @@ def test_fit_order(engine, method):
     if known is not None:
         # 0.1: the next Taylor term moves a local order by ~ (omega dt) = 0.02 at these steps
         assert abs(slope - known) <= 0.1, (
-            f"{engine}/{method}: converges at order {slope:.3f}, its step is of order {known}")
+            f"{engine}/{method}: converges at order {slope:.3f}, its step is of order {known}"
+        )
 
 
 # -- restitution.csv --------------------------------------------------------------------------
@@ -1958,7 +2140,8 @@ def test_restitution_rows(engine, method, e, dt):
         penetration = max(0.0, -float(np.min(u[before : end + 1])))
         # the deepest sample of the contact: the band adds samples above the floor only
         assert _close(row["penetration"], penetration), (
-            f"bounce {k}: penetration {row['penetration']:.6f} m, here {penetration:.6f} m")
+            f"bounce {k}: penetration {row['penetration']:.6f} m, here {penetration:.6f} m"
+        )
         v_in = -float(w[before])
         # A flight sample within the table's 1 mm contact band counts as contact there: the
         # sample before or after is then one step further out, where the normal speed
@@ -1968,18 +2151,21 @@ def test_restitution_rows(engine, method, e, dt):
             # no flight after this contact: the ball stays on the floor (and no more rows)
             assert row["v_out"] == 0.0 and row["apex"] == 0.0, (
                 f"bounce {k}: the ball never left the floor here, published v_out {row['v_out']}, "
-                f"apex {row['apex']}")
+                f"apex {row['apex']}"
+            )
             assert all(np.isnan(r.get("e_measured", np.nan)) for r in rows[k:])
             break
         v_out = float(w[after])
         assert abs(row["v_out"] - v_out) <= kick * (1 + 1e-9), f"bounce {k}: v_out {row['v_out']} vs {v_out}"
         e_here = v_out / v_in
         assert abs(row["e_measured"] - e_here) <= kick * (1 + e_here) / v_in * (1 + 1e-9) + 1e-12, (
-            f"bounce {k}: e_measured {row['e_measured']:.5f}, here {e_here:.5f}")
+            f"bounce {k}: e_measured {row['e_measured']:.5f}, here {e_here:.5f}"
+        )
         # the highest sample of the flight: the same sample, by two detectors
         apex = contact["apex"]
         assert _close(row["apex"], apex), (
-            f"bounce {k}: apex {row['apex']:.6f} m, highest sample here {apex:.6f} m")
+            f"bounce {k}: apex {row['apex']:.6f} m, highest sample here {apex:.6f} m"
+        )
         e_apex = math.sqrt(apex / apex_prev) if apex_prev > 0 else math.nan
         assert _close(row["e_apex"], e_apex), f"bounce {k}: e_apex {row['e_apex']:.6f}, here {e_apex:.6f}"
         apex_prev = apex

@@ -34,8 +34,9 @@ RUN = ["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--ou
 POINTS = ("report-csv", "report-figures", "report-index", "report-swap", "report-swapped")
 
 
-def fork_main(argv: list[str], cwd: Path, env: dict[str, str],
-              before: Callable[[], None] | None = None) -> int:
+def fork_main(
+    argv: list[str], cwd: Path, env: dict[str, str], before: Callable[[], None] | None = None
+) -> int:
     """Start ``main(argv)`` in a forked copy of this process, in ``cwd`` with ``env``
     added, printing into ``cwd/log.txt``; return its pid."""
     pid = os.fork()
@@ -60,16 +61,18 @@ def exit_code(pid: int) -> int:
     return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
 
 
-def forked(argv: list[str], cwd: Path, env: dict[str, str],
-           before: Callable[[], None] | None = None) -> tuple[int, str]:
+def forked(
+    argv: list[str], cwd: Path, env: dict[str, str], before: Callable[[], None] | None = None
+) -> tuple[int, str]:
     """:func:`fork_main` and wait: the exit code and what the run printed."""
     code = exit_code(fork_main(argv, cwd, env, before))
     log = cwd / "log.txt"
     return code, log.read_text() if log.exists() else ""
 
 
-def forked_all(jobs: dict[str, tuple[Path, dict[str, str], Callable[[], None] | None]],
-               argv: list[str], at_once: int = 3) -> dict[str, int]:
+def forked_all(
+    jobs: dict[str, tuple[Path, dict[str, str], Callable[[], None] | None]], argv: list[str], at_once: int = 3
+) -> dict[str, int]:
     """Several forked runs, ``at_once`` at a time: their exit codes by name."""
     pending, running, codes = list(jobs), {}, {}
     while pending or running:
@@ -88,8 +91,16 @@ def _old_report(where: Path) -> Path:
     gone once it is replaced)."""
     where.mkdir(parents=True)
     (where / "figures").mkdir()
-    for name in ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
-                 "index.html", "figures/free-fall-work-precision.png", "figures/old.png"):
+    for name in (
+        "results.csv",
+        "stability.csv",
+        "restitution.csv",
+        "scaling.csv",
+        "index.md",
+        "index.html",
+        "figures/free-fall-work-precision.png",
+        "figures/old.png",
+    ):
         (where / name).write_text(f"old {name}\n")
     (where / MARKER).write_text(MARKER_TEXT)
     return where
@@ -118,18 +129,24 @@ def journal(tmp_path_factory) -> dict:
     new = snapshot(ref / "rep")
     assert MARKER in new and "scaling.csv" not in new and "figures/old.png" not in new
     jobs = {}
-    for name, env, before in [*((f"{p}:{s}", {KILL_AT: f"{p}:{s}"}, None)
-                                for p in POINTS for s in ("KILL", "TERM")),
-                              ("report-half:KILL", {KILL_AT: "report-half"}, _no_exchange),
-                              ("no-exchange", {}, _no_exchange)]:
+    for name, env, before in [
+        *((f"{p}:{s}", {KILL_AT: f"{p}:{s}"}, None) for p in POINTS for s in ("KILL", "TERM")),
+        ("report-half:KILL", {KILL_AT: "report-half"}, _no_exchange),
+        ("no-exchange", {}, _no_exchange),
+    ]:
         work = base / name.replace(":", "-")
         shutil.copytree(old, work / "rep")
         shutil.copytree(first / ".rep.partial", work / ".rep.partial")
         jobs[name] = (work, {**env, CHILD_PIDS: str(work / "pids")}, before)
     codes = forked_all(jobs, [*RUN, "--resume"])
-    return {"old": snapshot(old), "new": new,
-            "runs": {name: (work / "rep", codes[name], (work / "log.txt").read_text())
-                     for name, (work, _, _) in jobs.items()}}
+    return {
+        "old": snapshot(old),
+        "new": new,
+        "runs": {
+            name: (work / "rep", codes[name], (work / "log.txt").read_text())
+            for name, (work, _, _) in jobs.items()
+        },
+    }
 
 
 def _no_exchange() -> None:
@@ -194,8 +211,7 @@ with handled():
 
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
 def test_no_child_outlives_its_parent(sig):
-    parent = subprocess.Popen([sys.executable, "-c", CHILD_SCRIPT], stdout=subprocess.PIPE,
-                              text=True)
+    parent = subprocess.Popen([sys.executable, "-c", CHILD_SCRIPT], stdout=subprocess.PIPE, text=True)
     child = int(parent.stdout.readline())
     assert _running(child)
     parent.send_signal(sig)

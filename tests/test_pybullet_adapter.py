@@ -41,17 +41,30 @@ def adapter() -> PybulletAdapter:
 def make_case(model: ParticleModel, duration: float, dt: float, max_records: int = 2000) -> Case:
     """A case around ``model`` with one step size, recording at most ``max_records`` states."""
     return Case(
-        name="pybullet-test", file="<test>", title="", description="", kind="particles",
-        duration=duration, dts=[dt], quick_dts=[dt], tolerances=[], quick_tolerances=[],
-        model=model, max_records=max_records,
+        name="pybullet-test",
+        file="<test>",
+        title="",
+        description="",
+        kind="particles",
+        duration=duration,
+        dts=[dt],
+        quick_dts=[dt],
+        tolerances=[],
+        quick_tolerances=[],
+        model=model,
+        max_records=max_records,
     )
 
 
 def particle(x0, v0=(0.0, 0.0, 0.0), **kw) -> ParticleModel:
     """One 1 kg particle (more keywords go to :class:`ParticleModel`)."""
     return ParticleModel(
-        mass=np.array([1.0]), x0=np.array([x0], float), v0=np.array([v0], float),
-        radius=np.array([kw.pop("radius", 0.0)]), fixed=np.array([False]), **kw,
+        mass=np.array([1.0]),
+        x0=np.array([x0], float),
+        v0=np.array([v0], float),
+        radius=np.array([kw.pop("radius", 0.0)]),
+        fixed=np.array([False]),
+        **kw,
     )
 
 
@@ -60,18 +73,43 @@ def test_protocol_and_missing_features(adapter, case_named):
     assert adapter.methods == ("default", "clean") and adapter.adaptive_methods == ()
     for method in adapter.methods:
         assert adapter.missing(case_named("harmonic-oscillator"), method) == set()
-    emitter = EmitterSpec(shape="cube", center=np.zeros(3), size=0.1, rate_n=1.0, rate_r=0.0,
-                          speed=1.0, spread=0.1, lifetime=10, capacity=2)
-    pool = ParticleModel(mass=np.ones(2), x0=np.zeros((2, 3)), v0=np.zeros((2, 3)),
-                         radius=np.zeros(2), fixed=np.zeros(2, bool), gravity=GRAVITY,
-                         emitters=[emitter])
+    emitter = EmitterSpec(
+        shape="cube",
+        center=np.zeros(3),
+        size=0.1,
+        rate_n=1.0,
+        rate_r=0.0,
+        speed=1.0,
+        spread=0.1,
+        lifetime=10,
+        capacity=2,
+    )
+    pool = ParticleModel(
+        mass=np.ones(2),
+        x0=np.zeros((2, 3)),
+        v0=np.zeros((2, 3)),
+        radius=np.zeros(2),
+        fixed=np.zeros(2, bool),
+        gravity=GRAVITY,
+        emitters=[emitter],
+    )
     case = make_case(pool, 1.0, 0.01)
     assert adapter.missing(case, "clean") == {"emitters"}
     with pytest.raises(ValueError, match="emitters"):
         adapter.simulate(case, "clean", 0.01)
-    ode = Case(name="o", file="", title="", description="", kind="ode", duration=1.0,
-               dts=[0.1], quick_dts=[0.1], tolerances=[], quick_tolerances=[],
-               ode=OdeSpec("circle-field", np.array([1.0, 0.0])))
+    ode = Case(
+        name="o",
+        file="",
+        title="",
+        description="",
+        kind="ode",
+        duration=1.0,
+        dts=[0.1],
+        quick_dts=[0.1],
+        tolerances=[],
+        quick_tolerances=[],
+        ode=OdeSpec("circle-field", np.array([1.0, 0.0])),
+    )
     assert adapter.missing(ode, "default") == {"ode"}
     with pytest.raises(ValueError, match="method"):
         adapter.simulate(case_named("harmonic-oscillator"), "Euler", 1e-3)
@@ -80,8 +118,7 @@ def test_protocol_and_missing_features(adapter, case_named):
 @pytest.mark.parametrize("method", ["default", "clean"])
 def test_free_fall_is_velocity_first_symplectic_euler(adapter, method):
     h = 0.01
-    run = adapter.simulate(make_case(particle([0.0, 10.0, 0.0], gravity=GRAVITY), 1.0, h),
-                           method, h)
+    run = adapter.simulate(make_case(particle([0.0, 10.0, 0.0], gravity=GRAVITY), 1.0, h), method, h)
     assert run.status == "ok" and run.steps == run.nfev == 100
     n = np.arange(101)
     np.testing.assert_allclose(run.t, n * h, rtol=0, atol=1e-12)
@@ -90,8 +127,7 @@ def test_free_fall_is_velocity_first_symplectic_euler(adapter, method):
     # double precision, with room. This holds only because the adapter zeroes the
     # multibody's default linearDamping of 0.04: left there, the same fall at h = 1/240
     # ends 0.35 m higher after 1 s (measured), 3e8 times this tolerance.
-    np.testing.assert_allclose(run.x[:, 0, 1], 10.0 - G * h**2 * n * (n + 1) / 2,
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.x[:, 0, 1], 10.0 - G * h**2 * n * (n + 1) / 2, rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.v[:, 0, 1], -G * n * h, rtol=0, atol=1e-9)
     assert np.all(run.x[:, 0, [0, 2]] == 0) and np.all(run.v[:, 0, [0, 2]] == 0)
 
@@ -101,8 +137,9 @@ def test_no_velocity_clamp(adapter, method):
     # A btMultiBody clamps each velocity coordinate to 100 m/s unless maxJointVelocity is
     # lifted (measured: a 15 s fall ended at -100 m/s). Exact: v = -g t at 15 s, 1e-9 m/s
     # for the rounding of 1500 additions.
-    run = adapter.simulate(make_case(particle([0.0, 0.0, 0.0], (150.0, 0.0, 0.0),
-                                              gravity=GRAVITY), 15.0, 0.01), method, 0.01)
+    run = adapter.simulate(
+        make_case(particle([0.0, 0.0, 0.0], (150.0, 0.0, 0.0), gravity=GRAVITY), 15.0, 0.01), method, 0.01
+    )
     np.testing.assert_allclose(run.v[-1, 0], [150.0, -G * 15.0, 0.0], rtol=0, atol=1e-9)
 
 
@@ -137,17 +174,29 @@ def busy_scene() -> ParticleModel:
         mass=np.array([1.0, 2.0, 0.5, 1.5]),
         x0=np.array([[0.3, 0.0, 0.2], [1.0, 0.2, 0.1], [2.0, -0.1, 0.0], [0.5, 1.0, -0.3]]),
         v0=np.array([[0.1, 0.0, 0.0], [0.1, 0.0, 0.2], [0.0, 0.3, 0.0], [-0.2, 0.0, 0.1]]),
-        radius=np.zeros(4), fixed=np.array([True, False, False, False]), gravity=GRAVITY,
+        radius=np.zeros(4),
+        fixed=np.array([True, False, False, False]),
+        gravity=GRAVITY,
         drag=0.1,
-        springs=Springs(np.array([0, 1, 2]), np.array([1, 2, 3]), np.array([50.0, 80.0, 30.0]),
-                        np.array([0.5, 0.0, 0.2]), np.array([1.0, 1.0, 1.2])),
-        anchors=Anchors(np.array([3]), np.array([[0.5, 2.0, 0.0]]), np.array([20.0]),
-                        np.array([0.3]), np.array([0.8])),
+        springs=Springs(
+            np.array([0, 1, 2]),
+            np.array([1, 2, 3]),
+            np.array([50.0, 80.0, 30.0]),
+            np.array([0.5, 0.0, 0.2]),
+            np.array([1.0, 1.0, 1.2]),
+        ),
+        anchors=Anchors(
+            np.array([3]), np.array([[0.5, 2.0, 0.0]]), np.array([20.0]), np.array([0.3]), np.array([0.8])
+        ),
         gravitation=Gravitation(G=0.05, softening=0.1),
-        fields=[ForceField("vortex", {"center": [0.0, 0.0, 0.0], "axis": [0.0, 1.0, 0.0],
-                                      "strength": 0.5, "core": 0.5}),
-                ForceField("wind", {"direction": [1.0, 0.0, 0.0], "speed": 0.5, "gust": 0.2,
-                                    "freq": 1.0, "k": 0.2})],
+        fields=[
+            ForceField(
+                "vortex", {"center": [0.0, 0.0, 0.0], "axis": [0.0, 1.0, 0.0], "strength": 0.5, "core": 0.5}
+            ),
+            ForceField(
+                "wind", {"direction": [1.0, 0.0, 0.0], "speed": 0.5, "gust": 0.2, "freq": 1.0, "k": 0.2}
+            ),
+        ],
         impulses=[(2, np.array([0.0, 0.0, 3.0]), 0.2, 0.4)],
     )
 
@@ -165,15 +214,20 @@ def test_forces_match_reference_symplectic_euler(adapter, method):
     np.testing.assert_allclose(run.x, ref.x, rtol=0, atol=1e-12)
     np.testing.assert_allclose(run.v, ref.v, rtol=0, atol=1e-11)
     np.testing.assert_allclose(run.energy, ref.energy, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(run.x[:, 0], busy_scene().x0[0] + np.outer(run.t, [0.1, 0, 0]),
-                               rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        run.x[:, 0], busy_scene().x0[0] + np.outer(run.t, [0.1, 0, 0]), rtol=0, atol=1e-14
+    )
 
 
 def bounce(adapter: PybulletAdapter, method: str, e: float, h: float, radius: float = 0.05):
     """Drop a ball from 1 m onto the floor y = 0; return (v_in, v_out, depth_in, y) at the
     first contact step: velocities before and after it, the depth at its start, positions."""
-    model = particle([0.0, 1.0, 0.0], radius=radius, gravity=GRAVITY,
-                     planes=[Plane(np.zeros(3), FLOOR, restitution=e, friction=0.0)])
+    model = particle(
+        [0.0, 1.0, 0.0],
+        radius=radius,
+        gravity=GRAVITY,
+        planes=[Plane(np.zeros(3), FLOOR, restitution=e, friction=0.0)],
+    )
     run = adapter.simulate(make_case(model, 0.6, h), method, h)
     assert run.status == "ok" and run.steps == len(run.t) - 1
     y, vy = run.x[:, 0, 1], run.v[:, 0, 1]
@@ -225,8 +279,13 @@ def test_sliding_friction_is_coulomb(adapter, method):
     # 5e-6 m more (the first step's 10 um contact settling); 2e-5 m allows for it.
     h, mu, v0 = 1e-3, 0.5, 2.0
     vel = v0 / np.sqrt(2) * np.array([1.0, 0.0, 1.0])
-    model = particle([0.0, 0.05, 0.0], vel, radius=0.05, gravity=GRAVITY,
-                     planes=[Plane(np.zeros(3), FLOOR, restitution=0.0, friction=mu)])
+    model = particle(
+        [0.0, 0.05, 0.0],
+        vel,
+        radius=0.05,
+        gravity=GRAVITY,
+        planes=[Plane(np.zeros(3), FLOOR, restitution=0.0, friction=mu)],
+    )
     run = adapter.simulate(make_case(model, 0.6, h), method, h)
     steps = int(np.floor(v0 / (mu * G * h)))
     exact = h * (steps * v0 - mu * G * h * steps * (steps + 1) / 2)
@@ -239,8 +298,10 @@ def test_sliding_friction_is_coulomb(adapter, method):
 def test_blow_up_is_unstable_not_clamped(adapter, method):
     # k = 1e4 N/m (omega = 100 rad/s) at h = 0.05 s: omega h = 5 > 2, the map's eigenvalue
     # is about -23, so |x| passes 1e12 m within 10 steps (t = 0.5 s); the run must say so.
-    model = particle([0.1, 0.0, 0.0], anchors=Anchors(np.array([0]), np.array([[-1.0, 0, 0]]),
-                                                      np.array([1e4]), np.zeros(1), np.ones(1)))
+    model = particle(
+        [0.1, 0.0, 0.0],
+        anchors=Anchors(np.array([0]), np.array([[-1.0, 0, 0]]), np.array([1e4]), np.zeros(1), np.ones(1)),
+    )
     run = adapter.simulate(make_case(model, 5.0, 0.05), method, 0.05)
     assert run.status == "unstable" and run.t_fail is not None and run.t_fail <= 0.5 + 1e-12
     assert run.steps < 100

@@ -34,7 +34,10 @@ def write_case(tmp_path: Path, name: str, text: str):
 
 
 def test_free_fall_is_position_first_symplectic_euler(adapter, tmp_path):
-    case = write_case(tmp_path, "free-fall", """
+    case = write_case(
+        tmp_path,
+        "free-fall",
+        """
 title = "free fall"
 kind = "particles"
 [scene]
@@ -46,7 +49,8 @@ mass = 1.0
 [run]
 duration = 1.0
 dt = [0.01]
-""")
+""",
+    )
     run = adapter.simulate(case, "default", 0.01)
     assert run.status == "ok" and run.steps == 100 and run.nfev == 100
     n = np.arange(101)
@@ -84,8 +88,9 @@ def test_harmonic_oscillator_energy_bounded_and_first_order_phase(adapter):
     # cos(theta) = 1 - omega^2 h^2 / 2 (x_1 = x_0: the first step moves nothing).
     theta = math.acos(1 - (omega * h) ** 2 / 2)
     n = np.round(run.t / h)
-    np.testing.assert_allclose(run.x[:, 0, 0], x0 * np.cos(theta * (n - 0.5)) / math.cos(theta / 2),
-                               rtol=0, atol=1e-11)  # rounding over 2000 steps
+    np.testing.assert_allclose(
+        run.x[:, 0, 0], x0 * np.cos(theta * (n - 0.5)) / math.cos(theta / 2), rtol=0, atol=1e-11
+    )  # rounding over 2000 steps
     # Against the exact 0.1 cos(10 t) at t = 2 s: the half-step phase lag is the first-order
     # error, x0 (cos(omega t - omega h / 2) - cos(omega t)) = 4.56e-4 m; the second-order
     # terms (phase drift omega^3 h^2 t / 24, amplitude omega^2 h^2 / 8) bound the rest.
@@ -94,8 +99,10 @@ def test_harmonic_oscillator_energy_bounded_and_first_order_phase(adapter):
     predicted = x0 * (math.cos(omega * t - omega * h / 2) - math.cos(omega * t))
     second_order = x0 * (omega**3 * h**2 * t / 24 + omega**2 * h**2 / 8)
     assert abs(error - predicted) <= second_order
-    print(f"pymunk oscillator h={h}: x(2)-exact={error:.3e}, predicted {predicted:.3e}, "
-          f"max |E-E0|/E0={drift:.5f}")
+    print(
+        f"pymunk oscillator h={h}: x(2)-exact={error:.3e}, predicted {predicted:.3e}, "
+        f"max |E-E0|/E0={drift:.5f}"
+    )
 
 
 BALL = """
@@ -127,8 +134,10 @@ def test_ball_rebound_ratio(adapter, tmp_path):
     k = int(np.argmax(vy > 0))
     assert k > 0
     ratio = vy[k] / -vy[k - 1]
-    print(f"pymunk first rebound at t={run.t[k]:.3f} s: v- = {vy[k - 1]:.4f}, "
-          f"v+ = {vy[k]:.4f}, ratio {ratio:.12f}")
+    print(
+        f"pymunk first rebound at t={run.t[k]:.3f} s: v- = {vy[k - 1]:.4f}, "
+        f"v+ = {vy[k]:.4f}, ratio {ratio:.12f}"
+    )
     # Chipmunk's bounce target is -e times the normal velocity at the start of the contact
     # step, and one contact with a static plane is solved exactly in the first sweep: the
     # ratio of consecutive recorded velocities is e to rounding.
@@ -143,7 +152,10 @@ def test_ball_rebound_ratio(adapter, tmp_path):
 
 
 def test_3d_scene_is_unsupported(adapter, tmp_path):
-    case = write_case(tmp_path, "fall-3d", """
+    case = write_case(
+        tmp_path,
+        "fall-3d",
+        """
 title = "3-D fall"
 kind = "particles"
 [scene]
@@ -155,7 +167,8 @@ mass = 1.0
 [run]
 duration = 1.0
 dt = [0.01]
-""")
+""",
+    )
     assert adapter.missing(case, "default") == {"3d"}
 
 
@@ -163,7 +176,10 @@ def test_spring_damper_is_integrated_exactly(adapter, tmp_path):
     # A pure damper (stiffness 0) on an anchored spring: m v' = -c v, v = v0 exp(-c t / m).
     # pymunk multiplies the velocity along the spring by exp(-c h / m) each step, which is
     # that solution at every step (rounding only), unlike the lecture's explicit force.
-    case = write_case(tmp_path, "damper", """
+    case = write_case(
+        tmp_path,
+        "damper",
+        """
 title = "damper"
 kind = "particles"
 [scene]
@@ -181,7 +197,8 @@ rest = 1.0
 [run]
 duration = 1.0
 dt = [0.01]
-""")
+""",
+    )
     run = adapter.simulate(case, "default", 0.01)
     np.testing.assert_allclose(run.v[:, 0, 0], np.exp(-3.0 * run.t / 2.0), rtol=1e-12, atol=0)
 
@@ -189,7 +206,10 @@ dt = [0.01]
 def test_per_step_forces_follow_the_stated_scheme(adapter, tmp_path):
     # Drag, gravitation, a vortex and an impulse are evaluated at x_n + h v_n, v_n and t_n;
     # the engine then steps x_{n+1} = x_n + h v_n, v_{n+1} = v_n + h (g + f / m).
-    case = write_case(tmp_path, "forced", """
+    case = write_case(
+        tmp_path,
+        "forced",
+        """
 title = "forced"
 kind = "particles"
 [scene]
@@ -217,7 +237,8 @@ force = [1.0, 0.5, 0.0]
 [run]
 duration = 0.5
 dt = [0.01]
-""")
+""",
+    )
     run = adapter.simulate(case, "default", 0.01)
     m = case.model
     h = 0.01
@@ -252,7 +273,11 @@ mass = 0.5
 duration = 1.0
 dt = [0.005]
 """
-    pinned = write_case(tmp_path, "pinned", scene.format(extra="""
+    pinned = write_case(
+        tmp_path,
+        "pinned",
+        scene.format(
+            extra="""
 [[scene.particles]]
 position = [[0.0, 1.0, 0.0]]
 mass = 1.0
@@ -262,15 +287,23 @@ pairs = [[0, 1]]
 stiffness = 50.0
 damping = 0.5
 rest = 0.8
-"""))
-    anchored = write_case(tmp_path, "anchored", scene.format(extra="""
+"""
+        ),
+    )
+    anchored = write_case(
+        tmp_path,
+        "anchored",
+        scene.format(
+            extra="""
 [[scene.anchors]]
 particle = 0
 point = [0.0, 1.0, 0.0]
 stiffness = 50.0
 damping = 0.5
 rest = 0.8
-"""))
+"""
+        ),
+    )
     a = adapter.simulate(pinned, "default", 0.005)
     b = adapter.simulate(anchored, "default", 0.005)
     assert {"pinned-particles", "springs"} <= pinned.features
@@ -280,7 +313,10 @@ rest = 0.8
 
 
 def test_coulomb_friction_decelerates_at_mu_g(adapter, tmp_path):
-    case = write_case(tmp_path, "slide", """
+    case = write_case(
+        tmp_path,
+        "slide",
+        """
 title = "slide"
 kind = "particles"
 [scene]
@@ -299,7 +335,8 @@ friction = 0.5
 [run]
 duration = 0.6
 dt = [1e-3]
-""")
+""",
+    )
     run = adapter.simulate(case, "default", 1e-3)
     vx = run.v[:, 0, 0]
     # Resting contact: the normal impulse per step is m g h, friction takes mu m g h of the
@@ -314,7 +351,10 @@ dt = [1e-3]
 
 def test_blow_up_is_reported_unstable(adapter, tmp_path):
     # omega h = 10 * 0.5 = 5 > 2: the scheme's oscillator is unstable.
-    case = write_case(tmp_path, "unstable", """
+    case = write_case(
+        tmp_path,
+        "unstable",
+        """
 title = "unstable"
 kind = "particles"
 [scene]
@@ -330,7 +370,8 @@ rest = 1.0
 [run]
 duration = 200.0
 dt = [0.5]
-""")
+""",
+    )
     run = adapter.simulate(case, "default", 0.5)
     assert run.status == "unstable"
     assert run.t_fail is not None and 0.0 < run.t_fail <= 200.0

@@ -33,8 +33,9 @@ ROUND_OFF = 1e-15
 
 def particles(mass: np.ndarray, fixed: np.ndarray | None = None) -> Particles:
     fixed = np.zeros(len(mass), bool) if fixed is None else fixed
-    return Particles(mass, np.where(fixed, 0.0, 1.0 / mass), np.zeros(len(mass)), ~fixed,
-                     np.where(fixed, 0.0, mass))
+    return Particles(
+        mass, np.where(fixed, 0.0, 1.0 / mass), np.zeros(len(mass)), ~fixed, np.where(fixed, 0.0, mass)
+    )
 
 
 def tup(a) -> tuple:
@@ -90,18 +91,32 @@ def test_force_kinds_and_their_energies_match_the_numpy_scene():
     n = 6
     x, v = RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3))
     mass, fixed = RNG.uniform(0.5, 2, n), np.array([False] * 5 + [True])
-    springs = Springs(np.array([0, 2, 4]), np.array([1, 3, 5]), RNG.uniform(1, 5, 3),
-                      RNG.uniform(0, 1, 3), RNG.uniform(0.2, 1, 3))
-    anchors = Anchors(np.array([1]), RNG.normal(size=(1, 3)), np.array([4.0]), np.array([0.3]),
-                      np.array([0.5]))
-    model = ParticleModel(mass=mass, x0=x, v0=v, radius=np.zeros(n), fixed=fixed,
-                          gravity=np.array([0.0, -9.81, 0.0]), drag=0.2, springs=springs,
-                          anchors=anchors, gravitation=Gravitation(G=0.5, softening=0.1))
+    springs = Springs(
+        np.array([0, 2, 4]),
+        np.array([1, 3, 5]),
+        RNG.uniform(1, 5, 3),
+        RNG.uniform(0, 1, 3),
+        RNG.uniform(0.2, 1, 3),
+    )
+    anchors = Anchors(
+        np.array([1]), RNG.normal(size=(1, 3)), np.array([4.0]), np.array([0.3]), np.array([0.5])
+    )
+    model = ParticleModel(
+        mass=mass,
+        x0=x,
+        v0=v,
+        radius=np.zeros(n),
+        fixed=fixed,
+        gravity=np.array([0.0, -9.81, 0.0]),
+        drag=0.2,
+        springs=springs,
+        anchors=anchors,
+        gravitation=Gravitation(G=0.5, softening=0.1),
+    )
     from truestep.reference_impl.compiled import forces_of
 
     kinds = forces_of(model)
-    assert [type(k).__name__ for k in kinds] == ["Gravity", "Drag", "Springs", "Anchors",
-                                                 "Gravitation"]
+    assert [type(k).__name__ for k in kinds] == ["Gravity", "Drag", "Springs", "Anchors", "Gravitation"]
     par = particles(mass, fixed)
     X, V = np.ascontiguousarray(x.T), np.ascontiguousarray(v.T)
     F = np.zeros((3, n))
@@ -115,10 +130,19 @@ def test_force_kinds_and_their_energies_match_the_numpy_scene():
 
 @pytest.mark.parametrize("t", [0.0, 0.1, 0.2 - 1e-12, 0.2, 0.35])
 def test_impulse_kernel_is_add_impulses_with_its_round_off_margin(t):
-    imp = [(1, np.array([1.0, 2.0, 0.0]), 0.1, 0.2), (0, np.array([0.0, 0.0, 5.0]), 0.0, 0.3),
-           (1, np.array([-3.0, 0.0, 1.0]), 0.2, 0.4)]
-    model = ParticleModel(mass=np.ones(3), x0=np.zeros((3, 3)), v0=np.zeros((3, 3)),
-                          radius=np.zeros(3), fixed=np.zeros(3, bool), impulses=imp)
+    imp = [
+        (1, np.array([1.0, 2.0, 0.0]), 0.1, 0.2),
+        (0, np.array([0.0, 0.0, 5.0]), 0.0, 0.3),
+        (1, np.array([-3.0, 0.0, 1.0]), 0.2, 0.4),
+    ]
+    model = ParticleModel(
+        mass=np.ones(3),
+        x0=np.zeros((3, 3)),
+        v0=np.zeros((3, 3)),
+        radius=np.zeros(3),
+        fixed=np.zeros(3, bool),
+        impulses=imp,
+    )
     from truestep.reference_impl.compiled import impulses_of
 
     kind = impulses_of(model)
@@ -136,8 +160,9 @@ def planes_and_states(count: int):
     for k in range(count):
         normal = RNG.normal(size=3) if k % 2 else np.eye(3)[k % 3] * (-1) ** k
         normal /= np.linalg.norm(normal)
-        yield ModelPlane(RNG.normal(size=3), normal, RNG.uniform(0, 1), [0.0, 0.4][k % 2],
-                         [0.0, 0.05][k % 3 == 2])
+        yield ModelPlane(
+            RNG.normal(size=3), normal, RNG.uniform(0, 1), [0.0, 0.4][k % 2], [0.0, 0.05][k % 3 == 2]
+        )
 
 
 @pytest.mark.parametrize("k", range(6))
@@ -151,8 +176,7 @@ def test_contact_force_kernel_is_add_contact_forces(k):
     f[6:8] *= 50.0
     spec = f.copy()
     add_contact_forces(spec, v, np.ones((1, n), bool), [plane])
-    kp = Plane(tup(plane.point), tup(plane.normal), plane.restitution, plane.friction,
-               plane.thickness)
+    kp = Plane(tup(plane.point), tup(plane.normal), plane.restitution, plane.friction, plane.thickness)
     got = np.array([contact_force(tup(f[p]), tup(v[p]), kp) for p in range(n)])
     np.testing.assert_allclose(got, spec, rtol=1e-14, atol=1e-14)
 
@@ -171,12 +195,10 @@ def test_collide_kernel_is_the_plane_collision_pass(k, dt):
     v[8:12] -= np.outer(v[8:12] @ plane.normal, plane.normal)  # resting candidates
     f = RNG.normal(size=(n, 3)) - 20.0 * plane.normal  # pushed into the plane
     mass = RNG.uniform(0.5, 2, n)
-    model = ParticleModel(mass=mass, x0=x, v0=v, radius=radius, fixed=np.zeros(n, bool),
-                          planes=[plane])
+    model = ParticleModel(mass=mass, x0=x, v0=v, radius=radius, fixed=np.zeros(n, bool), planes=[plane])
     system = ParticleSystem(model)
     pass_ = PlaneCollisions([plane], radius, model.fixed, mass)
-    kp = Plane(tup(plane.point), tup(plane.normal), plane.restitution, plane.friction,
-               plane.thickness)
+    kp = Plane(tup(plane.point), tup(plane.normal), plane.restitution, plane.friction, plane.thickness)
     d_spec = (x - plane.point) @ plane.normal - radius
     inside = d_spec < 1e-9
     if plane.thickness > 0:
@@ -200,11 +222,17 @@ def test_anchors_of_one_particle_are_the_anchor_loop_on_it():
     RNG = np.random.default_rng(5)
     n = 4
     x, v = RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3))
-    anchors = Anchors(np.array([2, 0, 2, 3]), RNG.normal(size=(4, 3)), RNG.uniform(1, 5, 4),
-                      RNG.uniform(0, 1, 4), RNG.uniform(0.1, 1, 4))
+    anchors = Anchors(
+        np.array([2, 0, 2, 3]),
+        RNG.normal(size=(4, 3)),
+        RNG.uniform(1, 5, 4),
+        RNG.uniform(0, 1, 4),
+        RNG.uniform(0.1, 1, 4),
+    )
     anchors.point[3] = x[3]  # a zero-length anchor exerts nothing
-    model = ParticleModel(mass=np.ones(n), x0=x, v0=v, radius=np.zeros(n),
-                          fixed=np.zeros(n, bool), anchors=anchors)
+    model = ParticleModel(
+        mass=np.ones(n), x0=x, v0=v, radius=np.zeros(n), fixed=np.zeros(n, bool), anchors=anchors
+    )
     from truestep.reference_impl.compiled import forces_of
 
     (kind,) = forces_of(model)
@@ -229,11 +257,13 @@ def test_friction_stops_a_particle_in_contact_as_the_numpy_pass_does(slide, spee
     plane = ModelPlane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.3, mu)
     x, v = np.array([[0.0, 0.0, 0.0]]), np.array([[speed, 0.0, 0.0]])
     f = np.array([[slide * mu * 9.81 * mass, -9.81 * mass, 0.0]])
-    model = ParticleModel(mass=np.array([mass]), x0=x, v0=v, radius=np.zeros(1),
-                          fixed=np.zeros(1, bool), planes=[plane])
+    model = ParticleModel(
+        mass=np.array([mass]), x0=x, v0=v, radius=np.zeros(1), fixed=np.zeros(1, bool), planes=[plane]
+    )
     system = ParticleSystem(model)
     on = PlaneCollisions([plane], model.radius, model.fixed, model.mass)._collide(
-        system, plane, np.array([0]), f, dt)
+        system, plane, np.array([0]), f, dt
+    )
     kp = Plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 0.3, mu, 0.0)
     y, u, resting = collide(tup(x[0]), tup(v[0]), tup(f[0]), 1.0 / mass, 0.0, kp, dt)
     assert resting == bool(on[0]) is True

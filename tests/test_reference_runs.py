@@ -24,10 +24,10 @@ def test_the_fine_rk4_run_of_the_cloth_agrees_with_dormand_prince(case_named):
     np.testing.assert_allclose(fine.x, tight.x, rtol=0, atol=1e-8)
 
 
-@pytest.mark.parametrize(("name", "method", "order"), [("rope-pendulum", "rk4", 4.0),
-                                                      ("hanging-cloth", "symplectic-euler", 1.0)])
-def test_errors_against_the_reference_run_fall_with_the_methods_order(case_named, name, method,
-                                                                    order):
+@pytest.mark.parametrize(
+    ("name", "method", "order"), [("rope-pendulum", "rk4", 4.0), ("hanging-cloth", "symplectic-euler", 1.0)]
+)
+def test_errors_against_the_reference_run_fall_with_the_methods_order(case_named, name, method, order):
     case = case_named(name)
     dts = np.array([case.dts[-1] * 2, case.dts[-1]])
     errors = []

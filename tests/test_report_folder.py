@@ -52,10 +52,11 @@ def test_absent_empty_and_marked_folders_may_be_replaced(tmp_path):
 REFUSED = {
     "a folder of other files": (lambda t: _mine(t / "x"), "not a report truestep wrote"),
     "a file": (lambda t: (t / "x").write_text("mine") and t / "x", "is a file"),
-    "a link to other files": (lambda t: (t / "x").symlink_to(_mine(t / "mine")) or t / "x",
-                              "symbolic link"),
-    "a report with a file of someone's": (lambda t: (_report(t / "x") / "notes.txt").write_text(
-        "mine") and t / "x", "notes.txt"),
+    "a link to other files": (lambda t: (t / "x").symlink_to(_mine(t / "mine")) or t / "x", "symbolic link"),
+    "a report with a file of someone's": (
+        lambda t: (_report(t / "x") / "notes.txt").write_text("mine") and t / "x",
+        "notes.txt",
+    ),
     "a report whose figures are a link": (lambda t: _linked_figures(t), "not a directory"),
     "a report with a link in its figures": (lambda t: _link_in_figures(t), "figures/b.png"),
     "a forged marker that is a link": (lambda t: _forged_marker(t), "not a report"),
@@ -89,8 +90,11 @@ def test_anything_else_is_refused_with_one_line_and_nothing_touched(tmp_path, ca
     before = snapshot(tmp_path)
     with pytest.raises(OutRefused, match=reason):
         check_out(out)
-    for argv in (["run", "--quick", "--engines", "reference", "--cases", "free-fall"],
-                 ["figures"], ["bench", "--engines", "reference", "--sizes", "100"]):
+    for argv in (
+        ["run", "--quick", "--engines", "reference", "--cases", "free-fall"],
+        ["figures"],
+        ["bench", "--engines", "reference", "--sizes", "100"],
+    ):
         assert main([*argv, "--out", str(out)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and reason in err[0]
@@ -104,8 +108,7 @@ def test_home_and_current_directories_are_refused(tmp_path, monkeypatch, capsys)
     monkeypatch.chdir(home)
     before = snapshot(home)
     for out in (".", str(home), os.path.expanduser("~")):
-        assert main(["run", "--quick", "--engines", "reference", "--cases", "free-fall",
-                     "--out", out]) == 2
+        assert main(["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", out]) == 2
         assert "not a report truestep wrote" in capsys.readouterr().err
     assert snapshot(home) == before
 
@@ -122,8 +125,7 @@ def test_the_new_report_takes_its_owner_and_mode_from_the_run(tmp_path):
     os.chmod(rep, 0o777)
     if os.geteuid() == 0:
         os.chown(rep / "figures", 65534, 65534)
-    assert main(["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out",
-                 str(rep)]) == 0
+    assert main(["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", str(rep)]) == 0
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE(os.stat(rep).st_mode) == 0o777 & ~umask

@@ -23,8 +23,7 @@ from truestep.report import write_report
 from truestep.runner import run_matrix
 
 CHROMIUM = Path("/usr/bin/chromium")
-VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source",
-        "track", "wbr"}
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
 """HTML elements that never have a closing tag."""
 
 
@@ -38,14 +37,17 @@ def report(tmp_path_factory) -> Path:
     traces: dict = {}
     results = run_matrix(cases, engines, quick=True, traces=traces, progress=lambda _: None)
     tables = run_analyses(cases, engines, results, quick=True)
-    write_report(out, cases, results, tables, quick=True, argv=["run"], traces=traces,
-                 with_lecture_figures=True)
+    write_report(
+        out, cases, results, tables, quick=True, argv=["run"], traces=traces, with_lecture_figures=True
+    )
     return out
 
 
 def test_the_cli_writes_the_same_files(tmp_path):
-    assert main(["run", "--quick", "--cases", "circle-field", "--engines", "reference",
-                 "--out", str(tmp_path)]) == 0
+    assert (
+        main(["run", "--quick", "--cases", "circle-field", "--engines", "reference", "--out", str(tmp_path)])
+        == 0
+    )
     page = (tmp_path / "index.html").read_text()
     assert "circle-field" in page and "Not redrawn in a <code>--quick</code> run" in page
 
@@ -139,7 +141,7 @@ def test_every_image_is_an_embedded_png_that_decodes(page):
         assert src.startswith(prefix), f"not an embedded PNG: {src[:60]!r}"
         assert img.get("alt"), "an image without alt text"
         try:
-            data = base64.b64decode(src[len(prefix):], validate=True)
+            data = base64.b64decode(src[len(prefix) :], validate=True)
         except binascii.Error as err:
             pytest.fail(f"bad base64 in {img.get('alt')!r}: {err}")
         pixels = _decode_png(data)
@@ -159,8 +161,9 @@ def test_every_case_in_the_results_appears_in_the_page(report, page):
 
 def test_the_lecture_figures_are_embedded_with_their_captions(page):
     _, parser = page
-    lecture = [img for img in parser.images
-               if (img.get("alt") or "").startswith("Reproduces the lecture slide")]
+    lecture = [
+        img for img in parser.images if (img.get("alt") or "").startswith("Reproduces the lecture slide")
+    ]
     assert len(lecture) == len(FIGURES)
     shown = " ".join(parser.texts)
     for img in lecture:
@@ -168,16 +171,27 @@ def test_the_lecture_figures_are_embedded_with_their_captions(page):
         assert img["alt"] in shown, img["alt"][:80]
 
 
-@pytest.mark.skipif(not CHROMIUM.exists(),
-                    reason=f"no headless browser: {CHROMIUM} is not installed (Debian package "
-                           "'chromium'); the HTML is still parsed and its images decoded above")
+@pytest.mark.skipif(
+    not CHROMIUM.exists(),
+    reason=f"no headless browser: {CHROMIUM} is not installed (Debian package "
+    "'chromium'); the HTML is still parsed and its images decoded above",
+)
 def test_the_page_renders_in_headless_chromium(report, tmp_path):
     shot = tmp_path / "page.png"
     cmd = [
-        str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-        "--no-first-run", "--disable-background-networking", "--disable-component-update",
-        "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
-        "--window-size=1200,2000", (report / "index.html").resolve().as_uri(),
+        str(CHROMIUM),
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--screenshot={shot}",
+        "--window-size=1200,2000",
+        (report / "index.html").resolve().as_uri(),
     ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
     assert shot.is_file(), f"no screenshot (exit {proc.returncode}): {proc.stderr[-2000:]}"
@@ -193,11 +207,17 @@ def test_hard_case_summary_counts_tunnelling_as_failure():
     from truestep.report import hard_case_line, survival
 
     case = load_cases("high-speed-impact")[0]
-    rows = [("reference", "lecture", 1e-3, "ok", 1.0), ("reference", "lecture", 5e-5, "ok", 0.0),
-            ("mujoco", "Euler", 1e-3, "unstable", np.nan), ("mujoco", "Euler", 5e-5, "ok", 1.0),
-            ("pymunk", "default", 1e-3, "ok", 0.0), ("pymunk", "default", 5e-5, "ok", 0.0)]
+    rows = [
+        ("reference", "lecture", 1e-3, "ok", 1.0),
+        ("reference", "lecture", 5e-5, "ok", 0.0),
+        ("mujoco", "Euler", 1e-3, "unstable", np.nan),
+        ("mujoco", "Euler", 5e-5, "ok", 1.0),
+        ("pymunk", "default", 1e-3, "ok", 0.0),
+        ("pymunk", "default", 5e-5, "ok", 0.0),
+    ]
     results = pd.DataFrame(rows, columns=["engine", "method", "dt", "status", "tunnelled"]).assign(
-        case=case.name, dt_kind="step")
+        case=case.name, dt_kind="step"
+    )
     s = survival(case, results).set_index("engine")
     assert s.loc["reference", "dt_survived"] == 5e-5 and s.loc["reference", "failure"] == "tunnelled"
     assert np.isnan(s.loc["mujoco", "dt_survived"]) and s.loc["mujoco", "failure"] == "unstable"
@@ -212,11 +232,14 @@ def test_speed_table_gives_particle_steps_per_second_and_ratios():
 
     case = load_cases("particle-rain")[0]
     n = case.model.n
-    rows = [("reference", "lecture", 1e-3, 0.004, 1500, 2.8e-3),
-            ("pymunk", "default", 1e-3, 0.4, 1500, 2.7e-3),
-            ("mujoco", "Euler", 1e-3, 0.6, 1500, 9.9e-2)]
-    results = pd.DataFrame(rows, columns=["engine", "method", "dt", "wall_s", "steps", "error"]
-                           ).assign(case=case.name, dt_kind="step", status="ok")
+    rows = [
+        ("reference", "lecture", 1e-3, 0.004, 1500, 2.8e-3),
+        ("pymunk", "default", 1e-3, 0.4, 1500, 2.7e-3),
+        ("mujoco", "Euler", 1e-3, 0.6, 1500, 9.9e-2),
+    ]
+    results = pd.DataFrame(rows, columns=["engine", "method", "dt", "wall_s", "steps", "error"]).assign(
+        case=case.name, dt_kind="step", status="ok"
+    )
     t = speed_table(case, results, "reference", "lecture").set_index("engine")
     assert t.loc["reference", "particle_steps_per_s"] == pytest.approx(n * 1500 / 0.004)
     assert t.loc["pymunk", "slower_by"] == pytest.approx(100.0)
@@ -237,8 +260,9 @@ def test_an_image_line_from_case_text_reads_nothing(tmp_path):
     secret.write_bytes(b"not for the report")
     (tmp_path / "figures").mkdir()
     (tmp_path / "figures" / "ok.png").write_bytes(b"\x89PNG drawn")
-    md = "\n".join([f"![x]({secret})", "![y](../secret.png)", "![z](figures/missing.png)",
-                    "![w](figures/ok.png)"])
+    md = "\n".join(
+        [f"![x]({secret})", "![y](../secret.png)", "![z](figures/missing.png)", "![w](figures/ok.png)"]
+    )
     page = markdown_to_html(md, tmp_path)
     assert page.count("data:image/png;base64,") == 1  # only the report's own figure
     assert "bm90IGZvciB0aGUgcmVwb3J0" not in page  # base64 of the secret

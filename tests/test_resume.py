@@ -19,25 +19,40 @@ from truestep.cli import main
 from truestep.faults import CHILD_PIDS, KILL_AT
 from truestep.journal import Journal, fingerprint
 
-RUN = ["run", "--quick", "--engines", "reference", "--cases",
-       "harmonic-oscillator,bouncing-ball"]
+RUN = ["run", "--quick", "--engines", "reference", "--cases", "harmonic-oscillator,bouncing-ball"]
 """A stability search (the oscillator) and restitution drops (the ball)."""
 
 
-def truestep(cwd: Path, *args: str, env: dict[str, str] | None = None,
-             ) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "truestep", *RUN, *args], cwd=cwd,
-                          env={**os.environ, **(env or {})}, capture_output=True, text=True,
-                          timeout=600, check=False)
+def truestep(
+    cwd: Path,
+    *args: str,
+    env: dict[str, str] | None = None,
+) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "truestep", *RUN, *args],
+        cwd=cwd,
+        env={**os.environ, **(env or {})},
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
 
 
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> list[Path]:
     """Two uninterrupted runs, side by side."""
     base = tmp_path_factory.mktemp("uninterrupted")
-    runs = [subprocess.Popen([sys.executable, "-m", "truestep", *RUN, "--out", name], cwd=base,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-            for name in ("a", "b")]
+    runs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "truestep", *RUN, "--out", name],
+            cwd=base,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name in ("a", "b")
+    ]
     for run in runs:
         assert run.wait(600) == 0, run.stderr.read()
         run.stderr.close()
@@ -65,8 +80,9 @@ def test_killed_in_the_sweep_then_in_the_analyses_then_resumed(tmp_path, uninter
     kept = len(list(journal.glob("sweep-*.json")))  # whole sweeps before the fifth row's
     assert kept >= 1
 
-    run = truestep(tmp_path, "--out", "rep", "--resume",
-                   env={KILL_AT: "analyses:1:TERM", CHILD_PIDS: str(pids)})
+    run = truestep(
+        tmp_path, "--out", "rep", "--resume", env={KILL_AT: "analyses:1:TERM", CHILD_PIDS: str(pids)}
+    )
     said = [line for line in run.stderr.splitlines() if line.startswith("truestep:")]
     assert run.returncode == 128 + signal.SIGTERM, run.stderr
     assert "Traceback" not in run.stderr and len(said) == 1 and "SIGTERM" in said[0]
@@ -84,8 +100,16 @@ def test_killed_in_the_sweep_then_in_the_analyses_then_resumed(tmp_path, uninter
 def test_resume_refuses_another_run_or_none(tmp_path, capsys):
     cases = load_cases("free-fall")
     Journal(tmp_path / "rep").start(fingerprint(cases, ["reference"], quick=True))
-    argv = ["run", "--cases", "free-fall", "--engines", "reference", "--out",
-            str(tmp_path / "rep"), "--resume"]
+    argv = [
+        "run",
+        "--cases",
+        "free-fall",
+        "--engines",
+        "reference",
+        "--out",
+        str(tmp_path / "rep"),
+        "--resume",
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--quick" in err[0] and "without --resume" in err[0]

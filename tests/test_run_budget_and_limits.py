@@ -10,8 +10,20 @@ from truestep.isolation import BUDGET_SPENT
 
 def test_a_spent_budget_makes_timeout_rows_and_the_report_is_still_written(tmp_path, capsys):
     out = tmp_path / "out"
-    code = main(["run", "--quick", "--cases", "free-fall,harmonic-oscillator", "--engines",
-                 "reference", "--budget", "0.5", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--quick",
+            "--cases",
+            "free-fall,harmonic-oscillator",
+            "--engines",
+            "reference",
+            "--budget",
+            "0.5",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     results = pd.read_csv(out / "results.csv")
     spent = results[results["message"] == BUDGET_SPENT]
@@ -23,16 +35,52 @@ def test_a_spent_budget_makes_timeout_rows_and_the_report_is_still_written(tmp_p
 
 
 def test_limits_on_the_command_line_refuse_a_case_with_exit_2(tmp_path, capsys):
-    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
-                 "--limit", "steps=10", "--out", str(tmp_path / "out")])
+    code = main(
+        [
+            "run",
+            "--quick",
+            "--cases",
+            "free-fall",
+            "--engines",
+            "reference",
+            "--limit",
+            "steps=10",
+            "--out",
+            str(tmp_path / "out"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "steps, over the limit of 10" in err and "Traceback" not in err
-    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
-                 "--limit", "stepz=10", "--out", str(tmp_path / "out")])
+    code = main(
+        [
+            "run",
+            "--quick",
+            "--cases",
+            "free-fall",
+            "--engines",
+            "reference",
+            "--limit",
+            "stepz=10",
+            "--out",
+            str(tmp_path / "out"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "--limit" in err and len(err.strip().splitlines()) == 1
-    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
-                 "--budget", "-1", "--out", str(tmp_path / "out")])
+    code = main(
+        [
+            "run",
+            "--quick",
+            "--cases",
+            "free-fall",
+            "--engines",
+            "reference",
+            "--budget",
+            "-1",
+            "--out",
+            str(tmp_path / "out"),
+        ]
+    )
     assert code == 2 and "--budget" in capsys.readouterr().err
     assert not (tmp_path / "out" / "results.csv").exists()
 
@@ -68,8 +116,9 @@ def test_too_little_space_beside_out_fails_before_the_sweep(tmp_path, capsys, mo
 
     usage = namedtuple("usage", "total used free")
     monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 2**20, 2**20))
-    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
-                 "--out", str(tmp_path / "out")])
+    code = main(
+        ["run", "--quick", "--cases", "free-fall", "--engines", "reference", "--out", str(tmp_path / "out")]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "MiB free beside" in err and "sweep" not in err
     assert not (tmp_path / "out").exists()

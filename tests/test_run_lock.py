@@ -30,8 +30,9 @@ time.sleep(60)
 @pytest.fixture()
 def held(tmp_path):
     """``tmp_path/rep`` locked by another process, as a running truestep run locks it."""
-    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(tmp_path / "rep")],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(tmp_path / "rep")], stdout=subprocess.PIPE, text=True
+    )
     assert proc.stdout.readline().strip() == "held"
     yield proc
     proc.kill()

@@ -24,10 +24,10 @@ class Oscillator(SecondOrderSystem):
         self.omega = omega
 
     def acceleration(self, q, v, t):
-        return -self.omega**2 * q
+        return -(self.omega**2) * q
 
     def jacobian(self, x, t):
-        return np.array([[0.0, 1.0], [-self.omega**2, 0.0]])
+        return np.array([[0.0, 1.0], [-(self.omega**2), 0.0]])
 
     def energy(self, x, t):
         return 0.5 * (x[1] ** 2 + self.omega**2 * x[0] ** 2)
@@ -67,9 +67,14 @@ def test_implicit_euler_decays_at_every_step(omega_dt):
 
 
 def test_lecture_update_is_exact_under_constant_gravity():
-    model = ParticleModel(mass=np.array([2.0]), x0=np.array([[0.0, 10.0, 0.0]]),
-                          v0=np.array([[1.0, 3.0, 0.0]]), radius=np.zeros(1),
-                          fixed=np.zeros(1, bool), gravity=np.array([0.0, -9.81, 0.0]))
+    model = ParticleModel(
+        mass=np.array([2.0]),
+        x0=np.array([[0.0, 10.0, 0.0]]),
+        v0=np.array([[1.0, 3.0, 0.0]]),
+        radius=np.zeros(1),
+        fixed=np.zeros(1, bool),
+        gravity=np.array([0.0, -9.81, 0.0]),
+    )
     system = ParticleSystem(model)
     dt = 0.37
     run = integrate(METHODS["lecture"](system), 37 * dt, dt)
@@ -89,8 +94,16 @@ def final_error(method: str, n: int) -> float:
 
 @pytest.mark.parametrize(
     ("method", "order"),
-    [("euler", 1), ("midpoint", 2), ("heun", 2), ("rk4", 4), ("symplectic-euler", 1),
-     ("verlet", 2), ("implicit-euler", 1), ("lecture", 1)],
+    [
+        ("euler", 1),
+        ("midpoint", 2),
+        ("heun", 2),
+        ("rk4", 4),
+        ("symplectic-euler", 1),
+        ("verlet", 2),
+        ("implicit-euler", 1),
+        ("lecture", 1),
+    ],
 )
 def test_convergence_order(method, order):
     ns = np.array([4000, 8000, 16000]) if order == 1 else np.array([500, 1000, 2000])
@@ -103,11 +116,12 @@ def test_convergence_order(method, order):
 @pytest.mark.parametrize(
     ("system", "t_end", "exact"),
     [
-        (lambda: Arenstorf(np.array([0.994, 0, 0, -2.00158510637908252240537862224])),
-         17.0652165601579625588917206249,
-         np.array([0.994, 0, 0, -2.00158510637908252240537862224])),
-        (lambda: KeplerProblem(np.array([0.4, 0.0, 0.0, 2.0])), 2 * np.pi,
-         np.array([0.4, 0.0, 0.0, 2.0])),
+        (
+            lambda: Arenstorf(np.array([0.994, 0, 0, -2.00158510637908252240537862224])),
+            17.0652165601579625588917206249,
+            np.array([0.994, 0, 0, -2.00158510637908252240537862224]),
+        ),
+        (lambda: KeplerProblem(np.array([0.4, 0.0, 0.0, 2.0])), 2 * np.pi, np.array([0.4, 0.0, 0.0, 2.0])),
     ],
     ids=["arenstorf", "kepler"],
 )
@@ -118,8 +132,9 @@ def test_dopri5_matches_scipy_rk45(system, t_end, exact):
     run = integrate(solver, t_end, t_end)
     ours = np.max(np.abs(run.x[-1] - exact))
     s2 = system()
-    ref = solve_ivp(lambda t, y: s2.derivative(y, t), (0, t_end), s2.get_state(),
-                    method="RK45", rtol=tol, atol=tol)
+    ref = solve_ivp(
+        lambda t, y: s2.derivative(y, t), (0, t_end), s2.get_state(), method="RK45", rtol=tol, atol=tol
+    )
     theirs = np.max(np.abs(ref.y[:, -1] - exact))
     # Same tableau, norm and controller as scipy's RK45: within 10% in error and cost.
     assert ours == pytest.approx(theirs, rel=0.10)

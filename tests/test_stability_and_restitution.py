@@ -30,8 +30,7 @@ T = np.linspace(0.0, 100.0, 20001)
         # an error below the start that touches it only at t = 0, like Verlet's
         1.0 - 7e-4 * np.sin(5 * T) ** 2 + 2e-5 * np.sin(0.05 * T) ** 2,
     ],
-    ids=["oscillating", "slow-oscillating", "decaying", "constant", "roundoff", "beating",
-         "below-start"],
+    ids=["oscillating", "slow-oscillating", "decaying", "constant", "roundoff", "beating", "below-start"],
 )
 def test_bounded_energy_is_stable(energy):
     assert not energy_grows(T, energy)
@@ -93,10 +92,14 @@ def test_a_slow_machine_finds_the_same_limit_and_only_the_safety_valve_is_a_time
         time.sleep(0.02)
         return dt <= 0.2
 
-    quick, patient = (bisect_limit(f, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=60.0)
-                      for f in (fast, slow))
+    quick, patient = (
+        bisect_limit(f, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=60.0) for f in (fast, slow)
+    )
     assert (quick.dt_limit, quick.dt_unstable, quick.runs) == (
-        patient.dt_limit, patient.dt_unstable, patient.runs)
+        patient.dt_limit,
+        patient.dt_unstable,
+        patient.runs,
+    )
     with pytest.raises(SearchTimeout, match="safety limit"):
         bisect_limit(slow, 1e-3, 0.5, rel_tol=1e-3, max_runs=30, budget_s=0.1)
 

@@ -32,8 +32,7 @@ def test_order_conditions(cls):
         1: [b.sum() - 1],
         2: [b @ c - 1 / 2],
         3: [b @ c**2 - 1 / 3, b @ A @ c - 1 / 6],
-        4: [b @ c**3 - 1 / 4, b @ (c * (A @ c)) - 1 / 8, b @ A @ c**2 - 1 / 12,
-            b @ A @ A @ c - 1 / 24],
+        4: [b @ c**3 - 1 / 4, b @ (c * (A @ c)) - 1 / 8, b @ A @ c**2 - 1 / 12, b @ A @ A @ c - 1 / 24],
     }
     for order in range(1, min(cls.order, 4) + 1):
         assert np.allclose(conditions[order], 0.0, atol=1e-14), f"order {order} condition"

@@ -33,19 +33,24 @@ def _header(path: Path) -> str:
     return path.read_text().splitlines()[0]
 
 
-@pytest.mark.parametrize(("table", "damage"), [
-    ("results.csv", lambda p: p.write_text("")),
-    ("results.csv", lambda p: p.write_text(_header(p) + "\n")),  # header only
-    ("results.csv", lambda p: p.write_bytes(b"\0" * 64)),
-    ("results.csv", lambda p: p.write_bytes(b"case,engine\n\xff\xfe,x\n")),
-    ("results.csv", lambda p: p.write_text(p.read_text() + "a,b\n")),  # ragged
-    ("results.csv", lambda p: p.write_text(p.read_text().replace(",ok,", ",7,", 1)
-                                           .replace(",ok,", ",fine,", 1))),
-    ("results.csv", lambda p: p.write_text(p.read_text().replace(",step,ok,", ",step,ok,x", 1))),
-    ("stability.csv", lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n\0\0")),
-    ("stability.csv", lambda p: p.write_text("case,engine\nx,y\n")),  # missing columns
-    ("restitution.csv", lambda p: (p.unlink(), p.mkdir())),  # a directory
-])
+@pytest.mark.parametrize(
+    ("table", "damage"),
+    [
+        ("results.csv", lambda p: p.write_text("")),
+        ("results.csv", lambda p: p.write_text(_header(p) + "\n")),  # header only
+        ("results.csv", lambda p: p.write_bytes(b"\0" * 64)),
+        ("results.csv", lambda p: p.write_bytes(b"case,engine\n\xff\xfe,x\n")),
+        ("results.csv", lambda p: p.write_text(p.read_text() + "a,b\n")),  # ragged
+        (
+            "results.csv",
+            lambda p: p.write_text(p.read_text().replace(",ok,", ",7,", 1).replace(",ok,", ",fine,", 1)),
+        ),
+        ("results.csv", lambda p: p.write_text(p.read_text().replace(",step,ok,", ",step,ok,x", 1))),
+        ("stability.csv", lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n\0\0")),
+        ("stability.csv", lambda p: p.write_text("case,engine\nx,y\n")),  # missing columns
+        ("restitution.csv", lambda p: (p.unlink(), p.mkdir())),  # a directory
+    ],
+)
 def test_malformed_tables_are_exit_2_and_one_line(run_dir, capsys, table, damage):
     damage(run_dir / table)
     code, err = _gate(run_dir, capsys)
@@ -58,16 +63,14 @@ def test_malformed_tables_are_exit_2_and_one_line(run_dir, capsys, table, damage
 def test_an_unusable_out_fails_before_the_sweep(tmp_path, capsys):
     target = tmp_path / "a-file"
     target.write_text("kept")
-    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference",
-                 "--out", str(target)])
+    code = main(["run", "--quick", "--cases", "free-fall", "--engines", "reference", "--out", str(target)])
     err = capsys.readouterr().err
     assert code == 2 and "is a file" in err and "sweep" not in err
     assert target.read_text() == "kept"
 
 
 @pytest.mark.parametrize("table", ["results.csv", "stability.csv", "restitution.csv"])
-def test_a_malformed_baseline_is_exit_2_and_one_line_and_an_api_error(run_dir, tmp_path, capsys,
-                                                                      table):
+def test_a_malformed_baseline_is_exit_2_and_one_line_and_an_api_error(run_dir, tmp_path, capsys, table):
     """The baseline directory is read as strictly as the results: by ``truestep gate
     --baseline`` (exit 2) and by ``truestep.compare`` (:class:`TableError`)."""
     import truestep
@@ -155,8 +158,7 @@ def test_an_all_nan_baseline_is_refused(run_dir, tmp_path, capsys):
     base = tmp_path / "base"
     shutil.copytree(run_dir, base)
     _edit(base / "results.csv", _blank_numbers)
-    assert main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(base),
-                 "-q"]) == 2
+    assert main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(base), "-q"]) == 2
     assert "column nfev: empty in an ok row" in capsys.readouterr().err
 
 
@@ -175,9 +177,21 @@ def test_a_method_named_nan_is_a_name(run_dir, tmp_path, capsys):
     assert (table["method"] == "nan").sum() > 0 and table["method"].notna().all()
     dt = table.loc[(table["method"] == "nan") & (table["status"] == "ok"), "dt"].iloc[0]
     gates = tmp_path / "gates.toml"
-    gates.write_text(f'[[gates]]\ncases = "free-fall"\nkind = "status"\nmethod = "nan"\n'
-                     f'dt = {float(dt)!r}\nexpect = "ok"\n')
-    code = main(["gate", "--results", str(run_dir / "results.csv"), "--cases", "free-fall",
-                 "--gates", str(gates), "-v"])
+    gates.write_text(
+        f'[[gates]]\ncases = "free-fall"\nkind = "status"\nmethod = "nan"\n'
+        f'dt = {float(dt)!r}\nexpect = "ok"\n'
+    )
+    code = main(
+        [
+            "gate",
+            "--results",
+            str(run_dir / "results.csv"),
+            "--cases",
+            "free-fall",
+            "--gates",
+            str(gates),
+            "-v",
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0 and "ok   free-fall gates[0] status reference/nan" in out, out

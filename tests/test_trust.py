@@ -28,14 +28,17 @@ def test_a_good_trajectory_is_measured(good):
     assert row["status"] == "ok" and np.isfinite(row["error"])
 
 
-@pytest.mark.parametrize("change", [
-    {"status": "splendid"},
-    {"x": "not an array"},
-    {"x": np.zeros((3, 1, 3))},  # records that do not match t
-    {"x": np.zeros((626, 2, 3))},  # the wrong number of particles
-    {"energy": np.zeros(5)},
-    {"t": np.zeros((2, 2))},
-])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"status": "splendid"},
+        {"x": "not an array"},
+        {"x": np.zeros((3, 1, 3))},  # records that do not match t
+        {"x": np.zeros((626, 2, 3))},  # the wrong number of particles
+        {"energy": np.zeros(5)},
+        {"t": np.zeros((2, 2))},
+    ],
+)
 def test_a_breach_of_the_contract_is_that_row_crashed(good, change):
     case, traj = good
     row = _row(case, dataclasses.replace(traj, **change))
@@ -45,8 +48,13 @@ def test_a_breach_of_the_contract_is_that_row_crashed(good, change):
 
 def test_one_record_is_not_ok(good):
     case, traj = good
-    one = dataclasses.replace(traj, t=traj.t[:1], x=traj.x[:1], v=traj.v[:1],
-                              energy=None if traj.energy is None else traj.energy[:1])
+    one = dataclasses.replace(
+        traj,
+        t=traj.t[:1],
+        x=traj.x[:1],
+        v=traj.v[:1],
+        energy=None if traj.energy is None else traj.energy[:1],
+    )
     assert _row(case, one)["status"] == "crashed"
 
 
@@ -58,17 +66,20 @@ def test_a_non_finite_state_is_unstable_at_its_time_whatever_the_adapter_said(go
     assert row["status"] == "unstable" and row["t_fail"] == traj.t[400]
 
 
-@pytest.mark.parametrize(("change", "reason"), [
-    (lambda t: {"t": t.t - 10.0}, "not from the case's start"),
-    (lambda t: {"t": np.zeros_like(t.t)}, "do not increase"),
-    (lambda t: {"t": t.t[::-1].copy()}, "not from the case's start"),
-    (lambda t: {"t": t.t * 1e6}, "past the case's"),
-    (lambda t: {"wall_s": -5.0}, "wall time of -5 s"),
-    (lambda t: {"wall_s": float("nan")}, "wall time of nan"),
-    (lambda t: {"wall_s": float("inf")}, "wall time of inf"),
-    (lambda t: {"wall_s": 0.0}, "wall time of 0"),
-    (lambda t: {"nfev": -3}, "nfev = -3"),
-])
+@pytest.mark.parametrize(
+    ("change", "reason"),
+    [
+        (lambda t: {"t": t.t - 10.0}, "not from the case's start"),
+        (lambda t: {"t": np.zeros_like(t.t)}, "do not increase"),
+        (lambda t: {"t": t.t[::-1].copy()}, "not from the case's start"),
+        (lambda t: {"t": t.t * 1e6}, "past the case's"),
+        (lambda t: {"wall_s": -5.0}, "wall time of -5 s"),
+        (lambda t: {"wall_s": float("nan")}, "wall time of nan"),
+        (lambda t: {"wall_s": float("inf")}, "wall time of inf"),
+        (lambda t: {"wall_s": 0.0}, "wall time of 0"),
+        (lambda t: {"nfev": -3}, "nfev = -3"),
+    ],
+)
 def test_clocks_that_do_not_start_at_the_start_and_advance_are_crashed_rows(good, change, reason):
     case, traj = good
     row = _row(case, dataclasses.replace(traj, **change(traj)))

@@ -22,12 +22,14 @@ ONE_RUN = Timing(long_run_s=0.0)
 def _search_run(case, method: str, dt: float) -> Trajectory:
     spec = case.stability
     n = max(spec.min_steps, math.ceil(spec.horizon / dt))
-    return get_adapter("reference").simulate(dataclasses.replace(case, duration=n * dt,
-                                                                 max_records=n), method, dt)
+    return get_adapter("reference").simulate(
+        dataclasses.replace(case, duration=n * dt, max_records=n), method, dt
+    )
 
 
-@pytest.mark.parametrize("method", ["rk4", "verlet", "symplectic-euler", "midpoint", "heun",
-                                    "implicit-euler"])
+@pytest.mark.parametrize(
+    "method", ["rk4", "verlet", "symplectic-euler", "midpoint", "heun", "implicit-euler"]
+)
 def test_a_kepler_orbit_that_escapes_is_unstable(case_named, method):
     """At dt 1 the energy of every method goes from -0.5 to positive (the radius to
     thousands, against 0.4-1.6): the body has left its orbit. The energy jumps once and
@@ -39,9 +41,10 @@ def test_a_kepler_orbit_that_escapes_is_unstable(case_named, method):
     assert not is_stable(run, case=case, scale=energy_scale(case))
 
 
-@pytest.mark.parametrize(("name", "dt"), [("stiff-cloth", 4 * 0.00449),
-                                          ("hanging-cloth", 4 * 0.0102),
-                                          ("rope-pendulum", 4 * 0.00231)])
+@pytest.mark.parametrize(
+    ("name", "dt"),
+    [("stiff-cloth", 4 * 0.00449), ("hanging-cloth", 4 * 0.0102), ("rope-pendulum", 4 * 0.00231)],
+)
 def test_implicit_euler_is_stable_where_its_newton_solve_used_to_fail(case_named, name, dt):
     """The published limits 0.00449, 0.0102, 0.00231 s were Newton failures, not blow-ups:
     with the damped Newton solve, backward Euler runs at four times them, its energy only
@@ -62,14 +65,22 @@ def _translated(case, shift):
     return dataclasses.replace(case, model=model, exact=None)
 
 
-@pytest.mark.parametrize(("name", "method", "dt"), [
-    ("rope-pendulum", "verlet", 0.002), ("rope-pendulum", "rk4", 0.001),
-    ("hanging-cloth", "heun", 0.004), ("hanging-cloth", "midpoint", 0.004),
-    ("hanging-cloth", "symplectic-euler", 0.002)])
-@pytest.mark.parametrize("shift", [(0.0, -1.5, 0.0), (0.0, 15.0, 0.0), (3.0, 20.0, 0.0)],
-                         ids=["anchor-at-zero", "lifted-15", "moved-20"])
-def test_moving_the_scene_changes_no_energy_number_and_no_status(case_named, name, method, dt,
-                                                                 shift):
+@pytest.mark.parametrize(
+    ("name", "method", "dt"),
+    [
+        ("rope-pendulum", "verlet", 0.002),
+        ("rope-pendulum", "rk4", 0.001),
+        ("hanging-cloth", "heun", 0.004),
+        ("hanging-cloth", "midpoint", 0.004),
+        ("hanging-cloth", "symplectic-euler", 0.002),
+    ],
+)
+@pytest.mark.parametrize(
+    "shift",
+    [(0.0, -1.5, 0.0), (0.0, 15.0, 0.0), (3.0, 20.0, 0.0)],
+    ids=["anchor-at-zero", "lifted-15", "moved-20"],
+)
+def test_moving_the_scene_changes_no_energy_number_and_no_status(case_named, name, method, dt, shift):
     """Energy drift is read against the energy the motion exchanges, which does not move
     with the origin: the rope with its anchor at the origin (E(0) = 0), the cloth lifted
     15-20 m (|E(0)| tens of times larger), give the same drift and verdict as the case.
@@ -87,8 +98,9 @@ def test_moving_the_scene_changes_no_energy_number_and_no_status(case_named, nam
     assert (fa is None) == (fb is None), (fa, fb)
     if fa is None:
         scale = energy_scale(case)
-        np.testing.assert_allclose(energy_drift(case, b, None, scale=scale),
-                                   energy_drift(case, a, None, scale=scale), rtol=1e-6)
+        np.testing.assert_allclose(
+            energy_drift(case, b, None, scale=scale), energy_drift(case, a, None, scale=scale), rtol=1e-6
+        )
 
 
 def test_the_energy_scale_is_what_the_motion_exchanges(case_named):
@@ -102,11 +114,11 @@ def test_the_energy_scale_is_what_the_motion_exchanges(case_named):
     v_end = m.v0 + m.gravity * fall.duration
     kinetic = 0.5 * float(np.sum(m.mass * np.sum(v_end**2, axis=1)))
     assert energy_scale(fall) == pytest.approx(
-        max(kinetic, 0.5 * float(np.sum(m.mass * np.sum(m.v0**2, axis=1)))), rel=1e-6)
+        max(kinetic, 0.5 * float(np.sum(m.mass * np.sum(m.v0**2, axis=1)))), rel=1e-6
+    )
 
 
-@pytest.mark.parametrize("engine,method", [("reference", "dopri5"), ("scipy", "RK45"),
-                                           ("scipy", "DOP853")])
+@pytest.mark.parametrize("engine,method", [("reference", "dopri5"), ("scipy", "RK45"), ("scipy", "DOP853")])
 def test_adaptive_steps_locate_every_impact(case_named, engine, method):
     """bouncing-ball: with each impact located on the continuous extension the flight is
     integrated exactly (it is a parabola) and the error is round-off at every tolerance,
@@ -124,8 +136,10 @@ def test_sliding_to_a_stop_converges_with_the_tolerance(case_named, engine, meth
     """sliding-contact: the stop where friction holds the puck is located, so the error
     falls as the tolerance tightens (it rose from 0.0012 to 0.187 before)."""
     case = case_named("sliding-contact")
-    errors = [run_one(case, engine, method, tol, adaptive=True, timing=ONE_RUN)["error"]
-              for tol in (1e-3, 1e-4, 1e-6)]
+    errors = [
+        run_one(case, engine, method, tol, adaptive=True, timing=ONE_RUN)["error"]
+        for tol in (1e-3, 1e-4, 1e-6)
+    ]
     assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-5 * case.error_scale
 
 
@@ -135,8 +149,9 @@ def test_a_boundary_that_is_not_monotone_is_searched_below_its_first_break(case_
     the search goes again below it and says so. (The probes are at 0.9 and 0.5 of the
     limit found: a window of instability elsewhere below it goes unseen.)"""
     case = case_named("harmonic-oscillator")
-    case = dataclasses.replace(case, stability=dataclasses.replace(
-        case.stability, dt_lo=1e-3, dt_hi=0.5, rel_tol=1e-3))
+    case = dataclasses.replace(
+        case, stability=dataclasses.replace(case.stability, dt_lo=1e-3, dt_hi=0.5, rel_tol=1e-3)
+    )
 
     def simulate(trial, dt):
         t = np.linspace(0.0, trial.duration, 101)
@@ -155,8 +170,14 @@ def test_a_solver_failure_is_no_stability_limit(case_named):
     def simulate(trial, dt):
         t = np.linspace(0.0, trial.duration, 11)
         status = "solver-failed" if dt > 0.1 else "ok"
-        return Trajectory(t=t, x=np.zeros((11, 1, 3)), v=np.zeros((11, 1, 3)),
-                          energy=0.5 * np.ones(11), status=status, message="Newton found none")
+        return Trajectory(
+            t=t,
+            x=np.zeros((11, 1, 3)),
+            v=np.zeros((11, 1, 3)),
+            energy=0.5 * np.ones(11),
+            status=status,
+            message="Newton found none",
+        )
 
     result = search_case(case, simulate)
     assert result.status == "solver-failed" and np.isnan(result.dt_limit)

@@ -18,8 +18,23 @@ from truestep.report_html import markdown_to_html
 from truestep.report_markdown import md_table, text
 from truestep.visible import visible
 
-HIDDEN = ["\u202e", "\u202d", "\u2066", "\u200b", "\u200f", "\ufeff", "\x1b", "\x07", "\x00",
-          "\x7f", "\u2028", "\u2029", "\ud800", "\ue000", "\U000e0041"]
+HIDDEN = [
+    "\u202e",
+    "\u202d",
+    "\u2066",
+    "\u200b",
+    "\u200f",
+    "\ufeff",
+    "\x1b",
+    "\x07",
+    "\x00",
+    "\x7f",
+    "\u2028",
+    "\u2029",
+    "\ud800",
+    "\ue000",
+    "\U000e0041",
+]
 ENGINE = "evil<script>alert(1)</script>\u202e"
 METHOD = "<img src=x onerror=alert(1)>|`nan`\x1b[2J"
 
@@ -50,15 +65,27 @@ def test_markdown_and_html_show_names_as_text():
 
 def _verdicts() -> list[GateResult]:
     gate = Gate("error", ENGINE, METHOD, 0.01, {"max": 0.0}, "gates[0]", file="g\u202e.toml")
-    return [GateResult("free-fall\x1b", gate, False, "1e-3 \u202e", "<= 0"),
-            GateResult("free-fall", gate, True, "0", "<= 1", evaluated=False)]
+    return [
+        GateResult("free-fall\x1b", gate, False, "1e-3 \u202e", "<= 0"),
+        GateResult("free-fall", gate, True, "0", "<= 1", evaluated=False),
+    ]
 
 
 def test_ci_outputs_show_names_as_text():
     verdicts = _verdicts()
-    base = pd.DataFrame({"case": ["c"], "engine": [ENGINE], "method": [METHOD], "dt": [0.01],
-                         "dt_kind": ["step"], "status": ["ok"], "error": [1.0],
-                         "energy_drift": [0.0], "nfev": [10.0]})
+    base = pd.DataFrame(
+        {
+            "case": ["c"],
+            "engine": [ENGINE],
+            "method": [METHOD],
+            "dt": [0.01],
+            "dt_kind": ["step"],
+            "status": ["ok"],
+            "error": [1.0],
+            "energy_drift": [0.0],
+            "nfev": [10.0],
+        }
+    )
     worse = base.assign(error=2.0)
     comparison = compare({"results": base}, {"results": worse})
     xml = ci_outputs.junit(verdicts, comparison, ["nothing \u202e"])

@@ -19,10 +19,32 @@ from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
 from truestep.stability import SearchTimeout, search_case
 
-STABILITY_COLUMNS = ["case", "engine", "method", "dt_limit", "dt_limit_exact", "dt_unstable",
-                     "runs", "status", "note"]
-RESTITUTION_COLUMNS = ["engine", "method", "dt", "e_set", "bounce", "e_measured", "e_apex",
-                       "v_in", "v_out", "apex", "penetration", "status", "note"]
+STABILITY_COLUMNS = [
+    "case",
+    "engine",
+    "method",
+    "dt_limit",
+    "dt_limit_exact",
+    "dt_unstable",
+    "runs",
+    "status",
+    "note",
+]
+RESTITUTION_COLUMNS = [
+    "engine",
+    "method",
+    "dt",
+    "e_set",
+    "bounce",
+    "e_measured",
+    "e_apex",
+    "v_in",
+    "v_out",
+    "apex",
+    "penetration",
+    "status",
+    "note",
+]
 
 RESTITUTION_SET = (0.0, 0.5, 0.8, 0.9, 1.0)
 RESTITUTION_DTS = (1 / 240, 1 / 1000)
@@ -60,8 +82,7 @@ def _say(msg: str) -> None:
     print(visible(msg), file=sys.stderr)
 
 
-def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
-                    workers: int = 1) -> pd.DataFrame:
+def stability_table(cases: list[Case], engines: list[str], *, quick: bool, workers: int = 1) -> pd.DataFrame:
     """Bisect the largest stable step for every case that declares a search.
 
     ``--quick`` searches only cases whose search says ``quick = true``, to 1%. Searches
@@ -83,15 +104,15 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
                 if missing:
                     rows.append({**row, "status": "unsupported", "note": ",".join(sorted(missing))})
                 elif adaptive:
-                    rows.append({**row, "status": "skipped",
-                                 "note": "adaptive: chooses its own step"})
+                    rows.append({**row, "status": "skipped", "note": "adaptive: chooses its own step"})
                 elif (same := duplicate_of(adapter, case, method)) is not None:
                     rows.append({**row, "status": "skipped", "note": same})
                 else:
                     rows.append(row)
                     slots.append(row)
-                    calls.append((_search, (engine, case, method, quick),
-                                  case.timeout_s * case.stability.max_runs))
+                    calls.append(
+                        (_search, (engine, case, method, quick), case.timeout_s * case.stability.max_runs)
+                    )
 
     def done(k: int, out) -> None:
         row = slots[k]
@@ -104,15 +125,17 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool,
             row.update(status="timeout", note=r)
             _say(f"stability {row['case']} {row['engine']}/{row['method']}: timeout ({r})")
             return
-        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs,
-                   status=r.status, note=r.note)
-        _say(f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
-             f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
-             f"{seconds:.1f} s")
+        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status=r.status, note=r.note)
+        _say(
+            f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
+            f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
+            f"{seconds:.1f} s"
+        )
 
     # Longest first, so that no long search starts last while the other cores idle.
-    order = sorted(range(len(calls)),
-                   key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2]))
+    order = sorted(
+        range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
+    )
     run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
 
@@ -151,10 +174,19 @@ def bounce_case(e: float, dt: float) -> Case:
     steps = int(np.ceil((t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25) / dt))
     duration = steps * dt  # whole steps: the run steps exactly the dt its rows are labelled with
     return Case(
-        name=f"bounce-e{e:g}", file="<restitution sweep>", title="restitution sweep",
-        description="", kind="particles", duration=duration, dts=[dt], quick_dts=[dt],
-        tolerances=[], quick_tolerances=[], model=model,
-        max_records=int(np.ceil(duration / dt)) + 1, timeout_s=60.0,
+        name=f"bounce-e{e:g}",
+        file="<restitution sweep>",
+        title="restitution sweep",
+        description="",
+        kind="particles",
+        duration=duration,
+        dts=[dt],
+        quick_dts=[dt],
+        tolerances=[],
+        quick_tolerances=[],
+        model=model,
+        max_records=int(np.ceil(duration / dt)) + 1,
+        timeout_s=60.0,
     )
 
 
@@ -171,9 +203,20 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
     for k in range(1, BOUNCES + 1):
         if k <= len(found):
             b = found[k - 1]
-            rows.append({**base, "bounce": k, "e_measured": b.e_velocity, "e_apex": b.e_apex,
-                         "v_in": b.v_in, "v_out": b.v_out, "apex": b.apex,
-                         "penetration": b.penetration, "status": "ok", "note": ""})
+            rows.append(
+                {
+                    **base,
+                    "bounce": k,
+                    "e_measured": b.e_velocity,
+                    "e_apex": b.e_apex,
+                    "v_in": b.v_in,
+                    "v_out": b.v_out,
+                    "apex": b.apex,
+                    "penetration": b.penetration,
+                    "status": "ok",
+                    "note": "",
+                }
+            )
         else:
             why = "ball at rest after the previous contact" if found else "no contact found"
             rows.append({**base, "bounce": k, "status": "ok", "note": why})
@@ -198,8 +241,7 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
             missing = adapter.missing(probe, method)
             if missing or method in adapter.adaptive_methods:
                 why = ",".join(sorted(missing)) or "adaptive integrator: no collision events"
-                groups.append([{"engine": engine, "method": method, "status": "unsupported",
-                                "note": why}])
+                groups.append([{"engine": engine, "method": method, "status": "unsupported", "note": why}])
                 continue
             for dt in dts:
                 for e in e_set:
@@ -213,15 +255,25 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
         if out.status == "ok":
             groups[g].extend(out.value)
         else:
-            groups[g].append({"engine": engine, "method": method, "dt": dt, "e_set": e,
-                              "bounce": 1, "status": out.status, "note": out.message})
+            groups[g].append(
+                {
+                    "engine": engine,
+                    "method": method,
+                    "dt": dt,
+                    "e_set": e,
+                    "bounce": 1,
+                    "status": out.status,
+                    "note": out.message,
+                }
+            )
 
     run_untimed(calls, workers, done)
     return pd.DataFrame([r for g in groups for r in g], columns=RESTITUTION_COLUMNS)
 
 
-def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *,
-                 quick: bool) -> dict[str, pd.DataFrame]:
+def run_analyses(
+    cases: list[Case], engines: list[str], results: pd.DataFrame, *, quick: bool
+) -> dict[str, pd.DataFrame]:
     """Every table besides ``results``: ``stability`` (for the cases with a search),
     ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
     and ``scaling`` (particle-steps per second against n, :func:`truestep.bench.scaling_table`
@@ -240,12 +292,14 @@ def run_analyses(cases: list[Case], engines: list[str], results: pd.DataFrame, *
     bouncing = any("restitution" in c.tags for c in cases)
     tables = {
         "stability": stability_table(cases, engines, quick=quick, workers=workers),
-        "restitution": restitution_table(engines, quick=quick, workers=workers) if bouncing
+        "restitution": restitution_table(engines, quick=quick, workers=workers)
+        if bouncing
         else pd.DataFrame(columns=RESTITUTION_COLUMNS),
     }
     rain = next((c for c in cases if c.name == RAIN_CASE), None)
-    tables["scaling"] = (scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S,
-                                         case=rain)
-                         if rain is not None and not quick
-                         else pd.DataFrame(columns=SCALING_COLUMNS))
+    tables["scaling"] = (
+        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain)
+        if rain is not None and not quick
+        else pd.DataFrame(columns=SCALING_COLUMNS)
+    )
     return tables

@@ -45,8 +45,9 @@ class Tables:
     scaling: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
-def select_engines(engines: str | Iterable[str] | None = None, *,
-                   say: Callable[[str], None] | None = None) -> list[str]:
+def select_engines(
+    engines: str | Iterable[str] | None = None, *, say: Callable[[str], None] | None = None
+) -> list[str]:
     """Engine names to run: each item of ``engines`` (a registered name or
     ``module:Class``), or by default every registered engine that is installed; an
     engine left out because its library is missing is named through ``say``.
@@ -81,9 +82,15 @@ def _cases(cases: str | Iterable[str] | Iterable[Case]) -> list[Case]:
     return load_cases([str(c) for c in items])
 
 
-def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterable[str] | None = None,
-        *, quick: bool = False, analyses: bool = True, out: str | Path | None = None,
-        progress: Callable[[str], None] | None = None) -> Tables:
+def run(
+    cases: str | Iterable[str] | Iterable[Case] = "*",
+    engines: str | Iterable[str] | None = None,
+    *,
+    quick: bool = False,
+    analyses: bool = True,
+    out: str | Path | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Tables:
     """Run the matrix (and, with ``analyses``, the stability searches and the restitution
     sweep) and return the tables; with ``out``, also write the report there as
     ``truestep run --out`` does (a folder truestep may replace, locked for the run, else
@@ -105,28 +112,43 @@ def run(cases: str | Iterable[str] | Iterable[Case] = "*", engines: str | Iterab
         return _run(chosen, names, quick=quick, analyses=analyses, out=Path(out), say=say)
 
 
-def _run(chosen: list[Case], names: list[str], *, quick: bool, analyses: bool,
-         out: Path | None, say: Callable[[str], None]) -> Tables:
+def _run(
+    chosen: list[Case],
+    names: list[str],
+    *,
+    quick: bool,
+    analyses: bool,
+    out: Path | None,
+    say: Callable[[str], None],
+) -> Tables:
     """:func:`run` once its cases and engines are chosen (and ``out``, if any, locked)."""
     from truestep.analyses import run_analyses
     from truestep.runner import run_matrix
 
     traces: dict = {}
     results = run_matrix(chosen, names, quick=quick, progress=say, traces=traces)
-    tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame(),
-              "scaling": pd.DataFrame()}
+    tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame(), "scaling": pd.DataFrame()}
     if analyses:
         tables = run_analyses(chosen, names, results, quick=quick)
     if out is not None:
         from truestep.report import write_report
 
-        write_report(out, chosen, results, tables, quick=quick, argv=["run"],
-                     traces=None if quick else traces, with_lecture_figures=False)
+        write_report(
+            out,
+            chosen,
+            results,
+            tables,
+            quick=quick,
+            argv=["run"],
+            traces=None if quick else traces,
+            with_lecture_figures=False,
+        )
     return Tables(results, tables["stability"], tables["restitution"], chosen, tables["scaling"])
 
 
-def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
-                 case_gates: bool = True) -> list[GateResult]:
+def gate_results(
+    tables: Tables, *, gates: str | Path | Iterable | None = None, case_gates: bool = True
+) -> list[GateResult]:
     """Every gate's verdict (:class:`~truestep.gates.GateResult`) on ``tables``.
 
     ``gates``: a gates file, several, or gate dictionaries (the keys of a ``[[gates]]``
@@ -135,35 +157,47 @@ def gate_results(tables: Tables, *, gates: str | Path | Iterable | None = None,
     (:class:`~truestep.cases.CaseError`), as ``truestep gate`` refuses it.
     """
     extra = []
-    for g in ([] if gates is None else [gates] if isinstance(gates, str | Path | dict) else gates):
+    for g in [] if gates is None else [gates] if isinstance(gates, str | Path | dict) else gates:
         if isinstance(g, dict):
             from truestep.cases.fields import Fields
 
             table = dict(g)
             patterns = table.pop("cases", "*")
-            extra.append(([patterns] if isinstance(patterns, str) else list(patterns),
-                          read_gate(Fields("<gate>", table), f"gates[{len(extra)}]")))
+            extra.append(
+                (
+                    [patterns] if isinstance(patterns, str) else list(patterns),
+                    read_gate(Fields("<gate>", table), f"gates[{len(extra)}]"),
+                )
+            )
         else:
             extra += load_gates_file(g)
     engines = set(registered()) | set(tables.results["engine"].astype(str))
     for _, g in extra:
         if g.engine != "*" and g.engine not in engines:
-            raise CaseError(g.file, f"{g.where}.engine", f"unknown engine {short(g.engine)} "
-                            "(not registered, not in the results)")
+            raise CaseError(
+                g.file,
+                f"{g.where}.engine",
+                f"unknown engine {short(g.engine)} (not registered, not in the results)",
+            )
     cases = tables.cases if case_gates else [dataclasses.replace(c, gates=[]) for c in tables.cases]
     return check_gates(cases, tables.results, tables.stability, tables.restitution, extra=extra)
 
 
-def check(tables: Tables, *, gates: str | Path | Iterable | None = None,
-          case_gates: bool = True) -> pd.DataFrame:
+def check(
+    tables: Tables, *, gates: str | Path | Iterable | None = None, case_gates: bool = True
+) -> pd.DataFrame:
     """The gate verdicts as a table: one row per gate and engine/method
     (:data:`~truestep.gates.GATE_COLUMNS`; ``verdict`` is ``pass``, ``fail`` or ``skip``)."""
     return verdict_table(gate_results(tables, gates=gates, case_gates=case_gates))
 
 
-def compare(baseline: str | Path | Tables, current: str | Path | Tables, *,
-            tolerances: dict[str, float] | None = None, time_against: str | None = None
-            ) -> pd.DataFrame:
+def compare(
+    baseline: str | Path | Tables,
+    current: str | Path | Tables,
+    *,
+    tolerances: dict[str, float] | None = None,
+    time_against: str | None = None,
+) -> pd.DataFrame:
     """What got worse or better from ``baseline`` to ``current`` (output directories or
     :class:`Tables`), one row per finding (see :mod:`truestep.baseline`)."""
     from truestep.baseline import compare as _compare
@@ -171,9 +205,16 @@ def compare(baseline: str | Path | Tables, current: str | Path | Tables, *,
 
     def tables_of(x: str | Path | Tables) -> dict:
         if isinstance(x, Tables):
-            return {name: table if len(table.columns) else None for name, table in (
-                ("results", x.results), ("stability", x.stability), ("restitution", x.restitution))}
+            return {
+                name: table if len(table.columns) else None
+                for name, table in (
+                    ("results", x.results),
+                    ("stability", x.stability),
+                    ("restitution", x.restitution),
+                )
+            }
         return read_tables(Path(x))
 
-    return _compare(tables_of(baseline), tables_of(current), tolerances=tolerances,
-                    time_against=time_against).table()
+    return _compare(
+        tables_of(baseline), tables_of(current), tolerances=tolerances, time_against=time_against
+    ).table()

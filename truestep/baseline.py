@@ -77,12 +77,19 @@ class Finding:
     note: str = ""
 
     def line(self) -> str:
-        head = {"worse": "WORSE", "better": "better", "appeared": "new", "vanished": "GONE",
-                "differs": "DIFFERS"}[self.change]
+        head = {
+            "worse": "WORSE",
+            "better": "better",
+            "appeared": "new",
+            "vanished": "GONE",
+            "differs": "DIFFERS",
+        }[self.change]
         if self.change in ("appeared", "vanished"):
             return f"{head:6s} {self.table} {self.key}"
-        return (f"{head:6s} {self.table} {self.key} {self.quantity}: {_show(self.baseline)} -> "
-                f"{_show(self.current)}" + (f" ({self.note})" if self.note else ""))
+        return (
+            f"{head:6s} {self.table} {self.key} {self.quantity}: {_show(self.baseline)} -> "
+            f"{_show(self.current)}" + (f" ({self.note})" if self.note else "")
+        )
 
 
 def _show(x: object) -> str:
@@ -142,8 +149,9 @@ def _as_float(x: object) -> float:
         return float("nan")
 
 
-def _moved(quantity: str, old: float, new: float, tol: float, *, higher_is_worse: bool = True,
-           relative: bool = True) -> str | None:
+def _moved(
+    quantity: str, old: float, new: float, tol: float, *, higher_is_worse: bool = True, relative: bool = True
+) -> str | None:
     """``worse``, ``better`` or ``None`` for a quantity that went from ``old`` to ``new``."""
     if not (np.isfinite(old) and np.isfinite(new)):
         if np.isfinite(old) != np.isfinite(new):
@@ -159,9 +167,15 @@ def _moved(quantity: str, old: float, new: float, tol: float, *, higher_is_worse
     return None
 
 
-def _compare_rows(table: str, old: pd.DataFrame, new: pd.DataFrame, keys: list[str],
-                  quantities: list[tuple[str, bool, bool]], tol: Mapping[str, float],
-                  findings: list[Finding]) -> int:
+def _compare_rows(
+    table: str,
+    old: pd.DataFrame,
+    new: pd.DataFrame,
+    keys: list[str],
+    quantities: list[tuple[str, bool, bool]],
+    tol: Mapping[str, float],
+    findings: list[Finding],
+) -> int:
     """Match rows on ``keys``; compare status and each (quantity, higher_is_worse, relative)."""
     if old is None or new is None:
         return 0
@@ -175,8 +189,13 @@ def _compare_rows(table: str, old: pd.DataFrame, new: pd.DataFrame, keys: list[s
         label = _key(ra, keys)
         sa, sb = str(ra.get("status", "ok")), str(rb.get("status", "ok"))
         if sa != sb and sa in STATUS_RANK and sb in STATUS_RANK:
-            change = "worse" if STATUS_RANK[sb] > STATUS_RANK[sa] else "better" \
-                if STATUS_RANK[sb] < STATUS_RANK[sa] else None
+            change = (
+                "worse"
+                if STATUS_RANK[sb] > STATUS_RANK[sa]
+                else "better"
+                if STATUS_RANK[sb] < STATUS_RANK[sa]
+                else None
+            )
             if change:
                 findings.append(Finding(change, table, label, "status", sa, sb))
             continue
@@ -197,9 +216,11 @@ def orders(results: pd.DataFrame, scales: Mapping[str, float] | None = None) -> 
     rows = []
     steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
     for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
-        order = fit_order(pd.to_numeric(g["dt"], errors="coerce"),
-                          pd.to_numeric(g["error"], errors="coerce"),
-                          scale=(scales or {}).get(case, 1.0))
+        order = fit_order(
+            pd.to_numeric(g["dt"], errors="coerce"),
+            pd.to_numeric(g["error"], errors="coerce"),
+            scale=(scales or {}).get(case, 1.0),
+        )
         rows.append({"case": case, "engine": engine, "method": method, "order": order})
     return pd.DataFrame(rows, columns=[*ORDER_KEYS, "order"])
 
@@ -208,51 +229,93 @@ def _wall_ratios(results: pd.DataFrame, against: tuple[str, str]) -> pd.DataFram
     """Each ok row's wall time over the named engine/method's at the same case and dt."""
     e, m = against
     ref = results[(results["engine"] == e) & (results["method"] == m) & (results["status"] == "ok")]
-    ref = {(r["case"], r["dt_kind"], _key_value("dt", r["dt"])): float(r["wall_s"])
-           for r in ref.to_dict("records")}
+    ref = {
+        (r["case"], r["dt_kind"], _key_value("dt", r["dt"])): float(r["wall_s"])
+        for r in ref.to_dict("records")
+    }
     out = results[results["status"] == "ok"].copy()
     out["wall_ratio"] = [
-        float(r["wall_s"]) / ref[k] if (k := (r["case"], r["dt_kind"], _key_value("dt", r["dt"]))) in ref
-        and ref[k] > 0 else np.nan for r in out.to_dict("records")]
+        float(r["wall_s"]) / ref[k]
+        if (k := (r["case"], r["dt_kind"], _key_value("dt", r["dt"]))) in ref and ref[k] > 0
+        else np.nan
+        for r in out.to_dict("records")
+    ]
     return out[np.isfinite(out["wall_ratio"].to_numpy(float))]
 
 
-def compare(baseline: Mapping[str, pd.DataFrame | None], current: Mapping[str, pd.DataFrame | None],
-            *, tolerances: Mapping[str, float] | None = None, time_against: str | None = None,
-            scales: Mapping[str, float] | None = None) -> Comparison:
+def compare(
+    baseline: Mapping[str, pd.DataFrame | None],
+    current: Mapping[str, pd.DataFrame | None],
+    *,
+    tolerances: Mapping[str, float] | None = None,
+    time_against: str | None = None,
+    scales: Mapping[str, float] | None = None,
+) -> Comparison:
     """Compare ``current`` tables (``results``, ``stability``, ``restitution``; any may be
     ``None``) with ``baseline``'s. ``tolerances`` override :data:`TOLERANCES`;
     ``time_against`` (``engine/method``) turns on the wall-time comparison."""
     tol = {**TOLERANCES, **(tolerances or {})}
     findings: list[Finding] = []
     old_r, new_r = baseline.get("results"), current.get("results")
-    compared = _compare_rows("results", old_r, new_r, RESULT_KEYS,
-                             [("error", True, True), ("energy_drift", True, True),
-                              ("nfev", True, True)], tol, findings)
+    compared = _compare_rows(
+        "results",
+        old_r,
+        new_r,
+        RESULT_KEYS,
+        [("error", True, True), ("energy_drift", True, True), ("nfev", True, True)],
+        tol,
+        findings,
+    )
     if old_r is not None and new_r is not None:
-        compared += _compare_rows("orders", orders(old_r, scales), orders(new_r, scales),
-                                  ORDER_KEYS, [("order", False, False)], tol, findings)
+        compared += _compare_rows(
+            "orders",
+            orders(old_r, scales),
+            orders(new_r, scales),
+            ORDER_KEYS,
+            [("order", False, False)],
+            tol,
+            findings,
+        )
         if time_against:
             e, _, m = time_against.partition("/")
-            compared += _compare_rows("timing", _wall_ratios(old_r, (e, m)),
-                                      _wall_ratios(new_r, (e, m)), RESULT_KEYS,
-                                      [("wall_ratio", True, True)], tol, findings)
-    compared += _compare_rows("stability", baseline.get("stability"), current.get("stability"),
-                              STABILITY_KEYS, [("dt_limit", False, True)], tol, findings)
-    old_e, new_e = (_restitution_error(baseline.get("restitution")),
-                    _restitution_error(current.get("restitution")))
-    compared += _compare_rows("restitution", old_e, new_e, RESTITUTION_KEYS,
-                              [("e_error", True, False)], tol, findings)
+            compared += _compare_rows(
+                "timing",
+                _wall_ratios(old_r, (e, m)),
+                _wall_ratios(new_r, (e, m)),
+                RESULT_KEYS,
+                [("wall_ratio", True, True)],
+                tol,
+                findings,
+            )
+    compared += _compare_rows(
+        "stability",
+        baseline.get("stability"),
+        current.get("stability"),
+        STABILITY_KEYS,
+        [("dt_limit", False, True)],
+        tol,
+        findings,
+    )
+    old_e, new_e = (
+        _restitution_error(baseline.get("restitution")),
+        _restitution_error(current.get("restitution")),
+    )
+    compared += _compare_rows(
+        "restitution", old_e, new_e, RESTITUTION_KEYS, [("e_error", True, False)], tol, findings
+    )
     return Comparison(findings, compared, tol, time_against)
 
 
-TABLE_KEYS = {"results": RESULT_KEYS, "stability": STABILITY_KEYS,
-              "restitution": RESTITUTION_KEYS}
+TABLE_KEYS = {"results": RESULT_KEYS, "stability": STABILITY_KEYS, "restitution": RESTITUTION_KEYS}
 """The columns that name a row, per table."""
 
 
-def narrow(tables: Mapping[str, pd.DataFrame | None], *, cases: set[str] | None = None,
-           engines: set[str] | None = None) -> dict[str, pd.DataFrame | None]:
+def narrow(
+    tables: Mapping[str, pd.DataFrame | None],
+    *,
+    cases: set[str] | None = None,
+    engines: set[str] | None = None,
+) -> dict[str, pd.DataFrame | None]:
     """``tables`` with only the rows of ``cases`` and ``engines`` (``None``: all): a run that
     was asked for fewer cases or engines is compared with the baseline's rows of those
     only, and the others are not "vanished". ``restitution`` has no case column: it is
@@ -274,15 +337,17 @@ def narrow(tables: Mapping[str, pd.DataFrame | None], *, cases: set[str] | None 
 def _same_cell(a: object, b: object) -> bool:
     fa, fb = _as_float(a), _as_float(b)
     if isinstance(a, float | int | np.floating | np.integer) or isinstance(
-            b, float | int | np.floating | np.integer):
+        b, float | int | np.floating | np.integer
+    ):
         return (np.isnan(fa) and np.isnan(fb)) or fa == fb
     if pd.isna(a) and pd.isna(b):
         return True
     return str(a) == str(b)
 
 
-def identical(baseline: Mapping[str, pd.DataFrame | None],
-              current: Mapping[str, pd.DataFrame | None]) -> tuple[list[Finding], int]:
+def identical(
+    baseline: Mapping[str, pd.DataFrame | None], current: Mapping[str, pd.DataFrame | None]
+) -> tuple[list[Finding], int]:
     """Every cell of every non-timing column, compared exactly (the promise of
     :mod:`truestep.numerics`: the same revision and package versions give the same
     numbers on any machine). Returns a ``differs`` finding per differing cell (and
@@ -319,8 +384,9 @@ def _restitution_error(table: pd.DataFrame | None) -> pd.DataFrame | None:
     if table is None:
         return None
     t = table.copy()
-    t["e_error"] = (pd.to_numeric(t["e_measured"], errors="coerce")
-                       - pd.to_numeric(t["e_set"], errors="coerce")).abs()
+    t["e_error"] = (
+        pd.to_numeric(t["e_measured"], errors="coerce") - pd.to_numeric(t["e_set"], errors="coerce")
+    ).abs()
     return t.dropna(subset=["dt", "e_set", "bounce"])
 
 

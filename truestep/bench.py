@@ -122,8 +122,19 @@ BYTES_PER_PARTICLE_STEP = 2 * 2 * 3 * 8
 """Bytes one particle-step moves at least: positions and velocities (3 float64 each),
 each read and written once."""
 
-COLUMNS = ["engine", "method", "n", "steps", "repeats", "wall_s", "particle_steps_per_s",
-           "bandwidth_fraction", "untimed_s", "status", "note"]
+COLUMNS = [
+    "engine",
+    "method",
+    "n",
+    "steps",
+    "repeats",
+    "wall_s",
+    "particle_steps_per_s",
+    "bandwidth_fraction",
+    "untimed_s",
+    "status",
+    "note",
+]
 """The columns of ``scaling.csv``."""
 
 
@@ -204,8 +215,17 @@ def _warm_up(engine: str, method: str, dt: float, warm: Case, max_steps: int) ->
     return _calibrate(adapter, warm, method, dt, max_steps)
 
 
-def _timed_run(engine: str, method: str, dt: float, case: Case, warm: Case, steps: int,
-               probe: bool, target_s: float, max_steps: int) -> dict:
+def _timed_run(
+    engine: str,
+    method: str,
+    dt: float,
+    case: Case,
+    warm: Case,
+    steps: int,
+    probe: bool,
+    target_s: float,
+    max_steps: int,
+) -> dict:
     """In a timed child: warm up on ``warm`` (2 steps); probe at ``case``'s n if asked
     (:data:`PROBE_FRACTION` of ``steps``; the steps then come from it); then run ``case``
     timed, once, or again (each run built afresh) while the runs so far are shorter than
@@ -219,8 +239,9 @@ def _timed_run(engine: str, method: str, dt: float, case: Case, warm: Case, step
     adapter.simulate(_with_steps(warm, MIN_STEPS, dt), method, dt)
     began = time.perf_counter()
     if probe:
-        trial = adapter.simulate(_with_steps(case, max(MIN_STEPS, round(PROBE_FRACTION * steps)),
-                                             dt), method, dt)
+        trial = adapter.simulate(
+            _with_steps(case, max(MIN_STEPS, round(PROBE_FRACTION * steps)), dt), method, dt
+        )
         if trial.status == "ok" and trial.steps > 0 and trial.wall_s > 0:
             steps = _steps_for(trial.wall_s / trial.steps, target_s, max_steps)
     probed = time.perf_counter()
@@ -231,12 +252,22 @@ def _timed_run(engine: str, method: str, dt: float, case: Case, warm: Case, step
         if traj.status != "ok":  # a run that stopped early is the row, alone
             walls = walls[-1:]
             break
-        if (sum(walls) >= target_s or len(walls) >= MAX_REPEATS
-                or time.perf_counter() - probed >= 3 * target_s):
+        if (
+            sum(walls) >= target_s
+            or len(walls) >= MAX_REPEATS
+            or time.perf_counter() - probed >= 3 * target_s
+        ):
             break
-    return {"steps": int(traj.steps), "wall_s": float(np.median(walls)), "repeats": len(walls),
-            "wall_total_s": float(sum(walls)), "status": traj.status, "message": traj.message,
-            "run_s": time.perf_counter() - probed, "probe_s": probed - began}
+    return {
+        "steps": int(traj.steps),
+        "wall_s": float(np.median(walls)),
+        "repeats": len(walls),
+        "wall_total_s": float(sum(walls)),
+        "status": traj.status,
+        "message": traj.message,
+        "run_s": time.perf_counter() - probed,
+        "probe_s": probed - began,
+    }
 
 
 def _extrapolate(points: dict[int, float], n: int) -> float:
@@ -257,8 +288,9 @@ def _extrapolate(points: dict[int, float], n: int) -> float:
     return max(affine, tb * (n / nb) ** exponent)
 
 
-def _prepare_and_warm_up(pair: _Pair, adapter, dt: float, warm: Case, max_steps: int,
-                         first_timeout: float) -> tuple:
+def _prepare_and_warm_up(
+    pair: _Pair, adapter, dt: float, warm: Case, max_steps: int, first_timeout: float
+) -> tuple:
     """Compile what the pair's engine needs in this process (``adapter.prepare``, where it
     has one), then its warm-up child (:func:`_warm_up`), both out of its share; returns the
     warm-up's outcome and a note for its first row when they took long."""
@@ -271,15 +303,18 @@ def _prepare_and_warm_up(pair: _Pair, adapter, dt: float, warm: Case, max_steps:
         pair.stop = f"budget: the {pair.budget_s:g} s budget ended before the warm-up"
         warm_up = Outcome("ok", math.nan)
     else:
-        warm_up = run_isolated(_warm_up, (pair.engine, pair.method, dt, warm, max_steps),
-                               min(first_timeout, left))
+        warm_up = run_isolated(
+            _warm_up, (pair.engine, pair.method, dt, warm, max_steps), min(first_timeout, left)
+        )
     pair.spent = time.perf_counter() - began
     note = ""
     if warm_up.status == "ok" and not pair.stop:
         pair.per_step[warm.model.n] = warm_up.value
         if pair.spent > 1.0:
-            note = (f"compiling and the warm-up (n={_fmt_n(warm.model.n)}, untimed) took "
-                    f"{pair.spent:.2g} s of the pair's share")
+            note = (
+                f"compiling and the warm-up (n={_fmt_n(warm.model.n)}, untimed) took "
+                f"{pair.spent:.2g} s of the pair's share"
+            )
     return warm_up, note
 
 
@@ -289,8 +324,9 @@ def _static_reason(adapter, case: Case, engine: str, method: str) -> tuple[str, 
     if missing:
         return "unsupported", "needs " + ", ".join(sorted(missing))
     if method in adapter.adaptive_methods:
-        return "skipped", ("adaptive: its dt is a tolerance and it chooses its own steps, so "
-                           "steps per run cannot be set")
+        return "skipped", (
+            "adaptive: its dt is a tolerance and it chooses its own steps, so steps per run cannot be set"
+        )
     reasons = [r for e, m, r in case.skip if e == engine and m in (method, "*")]
     duplicate = getattr(adapter, "duplicate", None)
     if duplicate is not None and (why := duplicate(case, method)):
@@ -307,8 +343,7 @@ def _fmt_n(n: int) -> str:
 class _Pair:
     """What one (engine, method) has measured and spent while its sizes run, smallest first."""
 
-    def __init__(self, engine: str, method: str, share: float, budget_s: float,
-                 deadline: float) -> None:
+    def __init__(self, engine: str, method: str, share: float, budget_s: float, deadline: float) -> None:
         self.engine, self.method, self.share, self.budget_s = engine, method, share, budget_s
         self.deadline = deadline  # time.perf_counter() when the budget ends
         self.spent = 0.0  # seconds of this pair's compiling, warm-up and children so far
@@ -318,15 +353,27 @@ class _Pair:
         self.stop = ""  # why the larger sizes are not run
 
     def _left(self) -> str:
-        return (f"{max(self.share - self.spent, 0):.2g} s were left of this pair's "
-                f"{self.share:.2g} s share of the {self.budget_s:g} s budget")
+        return (
+            f"{max(self.share - self.spent, 0):.2g} s were left of this pair's "
+            f"{self.share:.2g} s share of the {self.budget_s:g} s budget"
+        )
 
     def budget_left(self) -> float:
         """Seconds until the budget ends, less :data:`RESERVE_S`."""
         return self.deadline - time.perf_counter() - RESERVE_S
 
-    def run(self, n: int, dt: float, target_s: float, max_steps: int, bandwidth: float, scene,
-            warm_n: int, first_timeout: float, engine_build: dict[int, float]) -> dict:
+    def run(
+        self,
+        n: int,
+        dt: float,
+        target_s: float,
+        max_steps: int,
+        bandwidth: float,
+        scene,
+        warm_n: int,
+        first_timeout: float,
+        engine_build: dict[int, float],
+    ) -> dict:
         """Predict the row at ``n``; skip it, or run it in a child; the row's fields."""
         t_step = _extrapolate(self.per_step, n)
         steps = _steps_for(t_step, target_s, max_steps)
@@ -334,24 +381,32 @@ class _Pair:
         own = _extrapolate(self.build, n) if self.build else 0.0
         t_build = max(own, engine_build.get(n, 0.0))
         probe = t_build <= PROBE_BUILD * target_s
-        predicted = (self.fixed + t_build * (repeats + probe)
-                     + steps * t_step * (repeats + PROBE_FRACTION * probe))
+        predicted = (
+            self.fixed + t_build * (repeats + probe) + steps * t_step * (repeats + PROBE_FRACTION * probe)
+        )
         first = not self.build
         if not first and self.spent + MARGIN * predicted > self.share:
             source = "this engine's other methods" if t_build > own else "smaller n"
-            self.stop = (f"budget: the run at n={_fmt_n(n)} would take ~{predicted:.2g} s "
-                         f"({steps} steps of ~{t_step:.2g} s, building the scene and other untimed "
-                         f"work ~{predicted - repeats * steps * t_step:.2g} s, extrapolated from "
-                         f"{source}); " + self._left())
+            self.stop = (
+                f"budget: the run at n={_fmt_n(n)} would take ~{predicted:.2g} s "
+                f"({steps} steps of ~{t_step:.2g} s, building the scene and other untimed "
+                f"work ~{predicted - repeats * steps * t_step:.2g} s, extrapolated from "
+                f"{source}); " + self._left()
+            )
             return {"status": "skipped", "note": self.stop}
-        timeout = min(max(self.share - self.spent, TIMEOUT_FACTOR * predicted,
-                          first_timeout if first else 0.0), self.budget_left())
+        timeout = min(
+            max(self.share - self.spent, TIMEOUT_FACTOR * predicted, first_timeout if first else 0.0),
+            self.budget_left(),
+        )
         if timeout <= 0:
             self.stop = f"budget: the {self.budget_s:g} s budget ended before the run at n={_fmt_n(n)}"
             return {"status": "skipped", "note": self.stop}
         began = time.perf_counter()
-        outcome = run_isolated(_timed_run, (self.engine, self.method, dt, scene(n), scene(warm_n),
-                                            steps, probe, target_s, max_steps), timeout)
+        outcome = run_isolated(
+            _timed_run,
+            (self.engine, self.method, dt, scene(n), scene(warm_n), steps, probe, target_s, max_steps),
+            timeout,
+        )
         elapsed = time.perf_counter() - began
         self.spent += elapsed
         if outcome.status != "ok":
@@ -359,9 +414,11 @@ class _Pair:
             self.stop = f"the run at n={_fmt_n(n)} {what}"
             note = outcome.message
             if outcome.status == "timeout":
-                note = (f"did not finish within {timeout:.2g} s (predicted ~{predicted:.2g} s; "
-                        f"the pair had {max(self.share - self.spent + elapsed, 0):.2g} s of its "
-                        f"{self.share:.2g} s share left)")
+                note = (
+                    f"did not finish within {timeout:.2g} s (predicted ~{predicted:.2g} s; "
+                    f"the pair had {max(self.share - self.spent + elapsed, 0):.2g} s of its "
+                    f"{self.share:.2g} s share left)"
+                )
                 # building at this n takes at least this long, whatever the method: say twice
                 engine_build[n] = max(engine_build.get(n, 0.0), 2 * (elapsed - self.fixed))
             return {"status": outcome.status, "untimed_s": elapsed, "note": note}
@@ -372,11 +429,16 @@ class _Pair:
         self.build[n] = max((r["run_s"] - r["wall_total_s"]) / r["repeats"], 0.0)
         engine_build[n] = max(engine_build.get(n, 0.0), self.build[n])
         self.fixed = max(elapsed - r["run_s"] - r["probe_s"], 0.0)
-        return {"steps": r["steps"], "repeats": r["repeats"], "wall_s": r["wall_s"],
-                "particle_steps_per_s": rate,
-                "bandwidth_fraction": rate * BYTES_PER_PARTICLE_STEP / bandwidth,
-                "untimed_s": max(elapsed - r["wall_total_s"], 0.0),
-                "status": r["status"], "note": r["message"]}
+        return {
+            "steps": r["steps"],
+            "repeats": r["repeats"],
+            "wall_s": r["wall_s"],
+            "particle_steps_per_s": rate,
+            "bandwidth_fraction": rate * BYTES_PER_PARTICLE_STEP / bandwidth,
+            "untimed_s": max(elapsed - r["wall_total_s"], 0.0),
+            "status": r["status"],
+            "note": r["message"],
+        }
 
 
 def scaling_table(
@@ -442,8 +504,9 @@ def scaling_table(
             if why is None:
                 pairs.append((engine, method))
             else:
-                rows += [{"engine": engine, "method": method, "n": n, "status": why[0],
-                          "note": why[1]} for n in ns]
+                rows += [
+                    {"engine": engine, "method": method, "n": n, "status": why[0], "note": why[1]} for n in ns
+                ]
 
     scenes: dict[int, Case] = {}
 
@@ -461,27 +524,43 @@ def scaling_table(
         for k, (engine, method) in enumerate(pairs):
             share = max(0.0, deadline - time.perf_counter()) / (len(pairs) - k)
             pair = _Pair(engine, method, share, budget_s, deadline)
-            warm, warm_note = _prepare_and_warm_up(pair, adapters[engine], dt, scene(warm_n),
-                                                   max_steps, first_timeout)
+            warm, warm_note = _prepare_and_warm_up(
+                pair, adapters[engine], dt, scene(warm_n), max_steps, first_timeout
+            )
             warmups_s += pair.spent
             for n in ns:
                 row = {"engine": engine, "method": method, "n": n}
                 if warm.status != "ok" and not pair.stop:
                     what = "timed out" if warm.status == "timeout" else "crashed"
-                    row.update(status=warm.status, note=f"in the warm-up (n={_fmt_n(warm_n)}, "
-                               f"untimed): {warm.message}")
+                    row.update(
+                        status=warm.status,
+                        note=f"in the warm-up (n={_fmt_n(warm_n)}, untimed): {warm.message}",
+                    )
                     pair.stop = f"the warm-up at n={_fmt_n(warm_n)} {what}"
                 elif pair.stop:
                     row.update(status="skipped", note=pair.stop)
                 else:
-                    row.update(pair.run(n, dt, target_s, max_steps, bandwidth, scene, warm_n,
-                                        first_timeout, engine_build.setdefault(engine, {})))
+                    row.update(
+                        pair.run(
+                            n,
+                            dt,
+                            target_s,
+                            max_steps,
+                            bandwidth,
+                            scene,
+                            warm_n,
+                            first_timeout,
+                            engine_build.setdefault(engine, {}),
+                        )
+                    )
                     if warm_note and n == ns[0]:
                         row["note"] = "; ".join(x for x in (row["note"], warm_note) if x)
                 rows.append(row)
-                bar.done(f"{engine:9s} {method:17s} n={n:>9,d} {row['status']:8s} "
-                         f"steps={row.get('steps', 0):<7d} wall={row.get('wall_s', math.nan):.3g}s "
-                         f"rate={row.get('particle_steps_per_s', math.nan):.3g}/s")
+                bar.done(
+                    f"{engine:9s} {method:17s} n={n:>9,d} {row['status']:8s} "
+                    f"steps={row.get('steps', 0):<7d} wall={row.get('wall_s', math.nan):.3g}s "
+                    f"rate={row.get('particle_steps_per_s', math.nan):.3g}/s"
+                )
 
     table = pd.DataFrame(rows)
     for col in COLUMNS:
@@ -489,16 +568,24 @@ def scaling_table(
             table[col] = np.nan
     order = {e: i for i, e in enumerate(engines)}
     methods = {(e, m): i for e in engines for i, m in enumerate(adapters[e].methods)}
-    table = table.assign(_e=table["engine"].map(order),
-                         _m=[methods[(e, m)] for e, m in zip(table["engine"], table["method"], strict=True)])
+    table = table.assign(
+        _e=table["engine"].map(order),
+        _m=[methods[(e, m)] for e, m in zip(table["engine"], table["method"], strict=True)],
+    )
     table = table.sort_values(["_e", "_m", "n"], kind="stable")[COLUMNS].reset_index(drop=True)
     table["n"] = table["n"].astype(int)
     table["steps"] = table["steps"].astype("Int64")
     table["repeats"] = table["repeats"].astype("Int64")
     table["note"] = table["note"].fillna("").astype(str)
-    table.attrs.update(bandwidth_bytes_per_s=bandwidth, bytes_per_particle_step=BYTES_PER_PARTICLE_STEP,
-                       dt=dt, budget_s=budget_s, target_s=target_s,
-                       elapsed_s=time.perf_counter() - start_all, warmup_s=warmups_s)
+    table.attrs.update(
+        bandwidth_bytes_per_s=bandwidth,
+        bytes_per_particle_step=BYTES_PER_PARTICLE_STEP,
+        dt=dt,
+        budget_s=budget_s,
+        target_s=target_s,
+        elapsed_s=time.perf_counter() - start_all,
+        warmup_s=warmups_s,
+    )
     return table
 
 
@@ -534,17 +621,27 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
         if len(after):
             first = after.iloc[0]
             note = str(first["note"])
-            why = ("budget" if note.startswith("budget") else
-                   "a run timed out" if "timed out" in note or first["status"] == "timeout" else
-                   "a run crashed" if "crashed" in note or first["status"] == "crashed" else
-                   first["status"])
+            why = (
+                "budget"
+                if note.startswith("budget")
+                else "a run timed out"
+                if "timed out" in note or first["status"] == "timeout"
+                else "a run crashed"
+                if "crashed" in note or first["status"] == "crashed"
+                else first["status"]
+            )
             label += f"  (none from n = {_short_n(first['n'])}: {why})"
         ax.plot(ok["n"], ok["particle_steps_per_s"], label=label, **series_style(engine, method))
     ax.axhline(per_s, color="black", linewidth=1.0, linestyle=(0, (6, 3)))
-    ax.annotate(f"copy bandwidth {bandwidth / 1e9:.1f} GB/s at {BYTES_PER_PARTICLE_STEP} B per "
-                f"particle-step = {per_s:.2g} particle-steps/s", xy=(0.01, per_s),
-                xycoords=("axes fraction", "data"), xytext=(0, 4), textcoords="offset points",
-                fontsize=8)
+    ax.annotate(
+        f"copy bandwidth {bandwidth / 1e9:.1f} GB/s at {BYTES_PER_PARTICLE_STEP} B per "
+        f"particle-step = {per_s:.2g} particle-steps/s",
+        xy=(0.01, per_s),
+        xycoords=("axes fraction", "data"),
+        xytext=(0, 4),
+        textcoords="offset points",
+        fontsize=8,
+    )
     ax.set_xscale("log")
     ax.set_yscale("log")
     lo, hi = ax.get_ylim()
@@ -554,8 +651,11 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
     right = ax.secondary_yaxis("right", functions=(lambda y: y / per_s, lambda f: f * per_s))
     right.set_ylabel("fraction of the copy bandwidth")
     ax.grid(True, which="major", alpha=0.3)
-    ax.set_title("Particle rain: particle-steps per second against n, one engine per colour, "
-                 "one method per line style", fontsize=10)
+    ax.set_title(
+        "Particle rain: particle-steps per second against n, one engine per colour, "
+        "one method per line style",
+        fontsize=10,
+    )
     if ax.get_legend_handles_labels()[0]:  # none when every row failed
         ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.11, 1.0), frameon=False)
     fig.tight_layout()

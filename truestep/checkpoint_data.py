@@ -27,8 +27,7 @@ MAX_POINTS = 1_000_000
 """The most points of an energy trace (runs keep 400)."""
 COLUMN = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 """What a column name is."""
-DTYPES = frozenset({"float64", "int64", "bool", "object", "str", "string", "Int64", "Float64",
-                    "boolean"})
+DTYPES = frozenset({"float64", "int64", "bool", "object", "str", "string", "Int64", "Float64", "boolean"})
 """Column types a checkpointed table may have."""
 DT_KINDS = frozenset({"step", "tolerance"})
 _TAGS = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
@@ -52,15 +51,13 @@ def _finite_float(text: str) -> float:
 def dump_json(value: Any) -> str:
     """``value`` (already encoded: dicts, lists, finite floats, ints, text) as compact
     strict JSON."""
-    return json.dumps(value, allow_nan=False, ensure_ascii=True, separators=(",", ":"),
-                      sort_keys=True)
+    return json.dumps(value, allow_nan=False, ensure_ascii=True, separators=(",", ":"), sort_keys=True)
 
 
 def load_json(data: bytes) -> Any:
     """Strict JSON (UTF-8) as Python values; :class:`DataError` if it is anything else."""
     try:
-        return json.loads(data.decode("utf-8"), parse_constant=_refuse_constant,
-                          parse_float=_finite_float)
+        return json.loads(data.decode("utf-8"), parse_constant=_refuse_constant, parse_float=_finite_float)
     except DataError:
         raise
     except (ValueError, RecursionError) as err:
@@ -144,9 +141,13 @@ def traces_to(traces: dict) -> list[dict]:
     """Energy traces ``{(case, engine, method, dt_kind, dt): (t, energy)}``, encoded."""
     out = []
     for (case, engine, method, kind, dt), (t, energy) in traces.items():
-        out.append({"key": [case, engine, method, kind, encode_scalar(dt)],
-                    "t": [encode_scalar(v) for v in np.asarray(t, float)],
-                    "energy": [encode_scalar(v) for v in np.asarray(energy, float)]})
+        out.append(
+            {
+                "key": [case, engine, method, kind, encode_scalar(dt)],
+                "t": [encode_scalar(v) for v in np.asarray(t, float)],
+                "energy": [encode_scalar(v) for v in np.asarray(energy, float)],
+            }
+        )
     return out
 
 
@@ -189,17 +190,22 @@ def tables_to(tables: dict[str, pd.DataFrame]) -> dict[str, dict]:
 def tables_from(data: Any) -> dict[str, pd.DataFrame]:
     """The analyses' tables decoded and checked: named columns of known types, all of
     one length, ``attrs`` of numbers and text."""
-    if not isinstance(data, dict) or not all(isinstance(k, str) and COLUMN.fullmatch(k)
-                                             for k in data):
+    if not isinstance(data, dict) or not all(isinstance(k, str) and COLUMN.fullmatch(k) for k in data):
         raise DataError("the analyses are not named tables")
     tables = {}
     for name, t in data.items():
         if not isinstance(t, dict) or set(t) != {"columns", "dtypes", "data", "rows", "attrs"}:
             raise DataError(f"table {name} is not columns, types, data, rows and attrs")
         columns, dtypes, columns_data, rows = t["columns"], t["dtypes"], t["data"], t["rows"]
-        if not (isinstance(columns, list) and isinstance(dtypes, list) and isinstance(columns_data, list)
-                and len(columns) == len(dtypes) == len(columns_data) <= MAX_COLUMNS
-                and isinstance(rows, int) and not isinstance(rows, bool) and 0 <= rows <= MAX_POINTS):
+        if not (
+            isinstance(columns, list)
+            and isinstance(dtypes, list)
+            and isinstance(columns_data, list)
+            and len(columns) == len(dtypes) == len(columns_data) <= MAX_COLUMNS
+            and isinstance(rows, int)
+            and not isinstance(rows, bool)
+            and 0 <= rows <= MAX_POINTS
+        ):
             raise DataError(f"table {name} has columns, types and data that do not match")
         named = all(isinstance(c, str) and COLUMN.fullmatch(c) for c in columns)
         if not named or len(set(columns)) != len(columns):
@@ -213,8 +219,9 @@ def tables_from(data: Any) -> dict[str, pd.DataFrame]:
             try:
                 series[c] = pd.Series([decode_scalar(v) for v in values], dtype=d)
             except (TypeError, ValueError) as err:
-                raise DataError(f"table {name} column {c} does not hold {d} values "
-                                f"({type(err).__name__})") from None
+                raise DataError(
+                    f"table {name} column {c} does not hold {d} values ({type(err).__name__})"
+                ) from None
         table = pd.DataFrame(series, columns=columns) if columns else pd.DataFrame(index=range(rows))
         attrs = t["attrs"]
         if not isinstance(attrs, dict) or len(attrs) > MAX_COLUMNS:

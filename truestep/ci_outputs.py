@@ -35,15 +35,25 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
     """The JUnit XML document (as text)."""
     suites = ET.Element("testsuites", name="truestep")
     counts = _counts(verdicts)
-    gates = ET.SubElement(suites, "testsuite", name="truestep.gates", tests=str(len(verdicts)),
-                          failures=str(counts["fail"]), skipped=str(counts["skip"]), errors="0",
-                          hostname=platform.node())
+    gates = ET.SubElement(
+        suites,
+        "testsuite",
+        name="truestep.gates",
+        tests=str(len(verdicts)),
+        failures=str(counts["fail"]),
+        skipped=str(counts["skip"]),
+        errors="0",
+        hostname=platform.node(),
+    )
     for v in verdicts:
-        case = ET.SubElement(gates, "testcase", classname=visible(v.case),
-                             name=visible(f"{v.gate.where} {v.gate.kind} {v.gate.engine}/"
-                                          f"{v.gate.method}")
-                             + (f" dt={v.gate.dt:g}" if v.gate.dt is not None else ""),
-                             file=visible(v.gate.file or ""))
+        case = ET.SubElement(
+            gates,
+            "testcase",
+            classname=visible(v.case),
+            name=visible(f"{v.gate.where} {v.gate.kind} {v.gate.engine}/{v.gate.method}")
+            + (f" dt={v.gate.dt:g}" if v.gate.dt is not None else ""),
+            file=visible(v.gate.file or ""),
+        )
         text = visible(f"measured {v.measured}, required {v.required}")
         if v.verdict == "fail":
             ET.SubElement(case, "failure", message=text, type="GateFailed").text = visible(v.line())
@@ -52,23 +62,34 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
         else:
             ET.SubElement(case, "system-out").text = text
     if reasons:
-        strict = ET.SubElement(suites, "testsuite", name="truestep.strict", tests="1",
-                               failures="1", skipped="0", errors="0")
+        strict = ET.SubElement(
+            suites, "testsuite", name="truestep.strict", tests="1", failures="1", skipped="0", errors="0"
+        )
         case = ET.SubElement(strict, "testcase", classname="truestep", name="something was checked")
-        ET.SubElement(case, "failure", message=visible(reasons[0]),
-                      type="NothingChecked").text = "\n".join(visible(r) for r in reasons)
+        ET.SubElement(case, "failure", message=visible(reasons[0]), type="NothingChecked").text = "\n".join(
+            visible(r) for r in reasons
+        )
     if comparison is not None:
         tables = ["results", "orders", "stability", "restitution"] + (
-            ["timing"] if comparison.time_against else [])
+            ["timing"] if comparison.time_against else []
+        )
         worse = comparison.worse()
-        base = ET.SubElement(suites, "testsuite", name="truestep.baseline", tests=str(len(tables)),
-                             failures=str(len({f.table for f in worse})), skipped="0", errors="0")
+        base = ET.SubElement(
+            suites,
+            "testsuite",
+            name="truestep.baseline",
+            tests=str(len(tables)),
+            failures=str(len({f.table for f in worse})),
+            skipped="0",
+            errors="0",
+        )
         for table in tables:
             case = ET.SubElement(base, "testcase", classname="baseline", name=table)
             bad = [f for f in worse if f.table == table]
             if bad:
-                ET.SubElement(case, "failure", message=f"{len(bad)} row(s) worse or gone",
-                              type="Regression").text = "\n".join(visible(f.line()) for f in bad)
+                ET.SubElement(
+                    case, "failure", message=f"{len(bad)} row(s) worse or gone", type="Regression"
+                ).text = "\n".join(visible(f.line()) for f in bad)
     ET.indent(suites)
     return ET.tostring(suites, encoding="unicode", xml_declaration=True) + "\n"
 
@@ -79,30 +100,48 @@ def _cell(value: object) -> str:
     return text(value)
 
 
-def markdown(verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str],
-             *, passed: bool) -> str:
+def markdown(
+    verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str], *, passed: bool
+) -> str:
     """A markdown summary: counts, failed gates, regressions."""
     c = _counts(verdicts)
-    lines = [f"### truestep gate: {'passed' if passed else 'FAILED'}", "",
-             f"{c['pass']} gates held, {c['fail']} failed, {c['skip']} not evaluated."]
+    lines = [
+        f"### truestep gate: {'passed' if passed else 'FAILED'}",
+        "",
+        f"{c['pass']} gates held, {c['fail']} failed, {c['skip']} not evaluated.",
+    ]
     lines += [f"- **{text(r)}**" for r in reasons]
     failed = [v for v in verdicts if v.verdict == "fail"]
     if failed:
-        lines += ["", "| case | gate | engine/method | dt | measured | required |",
-                  "|---|---|---|---|---|---|"]
-        lines += [f"| {_cell(v.case)} | {_cell(v.gate.where)} {_cell(v.gate.kind)} | {_cell(v.gate.engine)}/"
-                  f"{_cell(v.gate.method)} | {'' if v.gate.dt is None else f'{v.gate.dt:g}'} | "
-                  f"{_cell(v.measured)} | {_cell(v.required)} |" for v in failed]
+        lines += [
+            "",
+            "| case | gate | engine/method | dt | measured | required |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {_cell(v.case)} | {_cell(v.gate.where)} {_cell(v.gate.kind)} | {_cell(v.gate.engine)}/"
+            f"{_cell(v.gate.method)} | {'' if v.gate.dt is None else f'{v.gate.dt:g}'} | "
+            f"{_cell(v.measured)} | {_cell(v.required)} |"
+            for v in failed
+        ]
     if comparison is not None:
-        n = {k: sum(f.change == k for f in comparison.findings)
-             for k in ("worse", "better", "appeared", "vanished")}
-        lines += ["", f"Baseline: {comparison.compared} rows compared; {n['worse']} worse, "
-                  f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished."]
+        n = {
+            k: sum(f.change == k for f in comparison.findings)
+            for k in ("worse", "better", "appeared", "vanished")
+        }
+        lines += [
+            "",
+            f"Baseline: {comparison.compared} rows compared; {n['worse']} worse, "
+            f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished.",
+        ]
         worse = comparison.worse()
         if worse:
             lines += ["", "| change | table | row | quantity | baseline | now |", "|---|---|---|---|---|---|"]
-            lines += [f"| {f.change} | {f.table} | {_cell(f.key)} | {_cell(f.quantity)} | "
-                      f"{_cell(_fmt(f.baseline))} | {_cell(_fmt(f.current))} |" for f in worse[:200]]
+            lines += [
+                f"| {f.change} | {f.table} | {_cell(f.key)} | {_cell(f.quantity)} | "
+                f"{_cell(_fmt(f.baseline))} | {_cell(_fmt(f.current))} |"
+                for f in worse[:200]
+            ]
             if len(worse) > 200:
                 lines.append(f"\n... and {len(worse) - 200} more (see the JSON output).")
     return "\n".join(lines) + "\n"
@@ -120,17 +159,29 @@ def _clean(x: object) -> object:
     return x
 
 
-def as_json(verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str],
-            *, passed: bool) -> str:
+def as_json(
+    verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str], *, passed: bool
+) -> str:
     """Everything as one JSON document."""
     doc = {
         "passed": passed,
         "counts": _counts(verdicts),
         "reasons": reasons,
-        "gates": [{"case": v.case, "source": v.gate.file, "gate": v.gate.where,
-                   "kind": v.gate.kind, "engine": v.gate.engine, "method": v.gate.method,
-                   "dt": v.gate.dt, "verdict": v.verdict, "measured": v.measured,
-                   "required": v.required} for v in verdicts],
+        "gates": [
+            {
+                "case": v.case,
+                "source": v.gate.file,
+                "gate": v.gate.where,
+                "kind": v.gate.kind,
+                "engine": v.gate.engine,
+                "method": v.gate.method,
+                "dt": v.gate.dt,
+                "verdict": v.verdict,
+                "measured": v.measured,
+                "required": v.required,
+            }
+            for v in verdicts
+        ],
     }
     if comparison is not None:
         doc["baseline"] = {
@@ -149,8 +200,7 @@ def write(path: str | Path, text: str, *, append: bool = False) -> None:
     path = Path(path)
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-    flags = (os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_CLOEXEC
-             | (os.O_APPEND if append else 0))
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_CLOEXEC | (os.O_APPEND if append else 0)
     if os.path.lexists(path) and not stat.S_ISREG(os.stat(path).st_mode):
         raise OSError(errno.EINVAL, "not a regular file", str(path))
     fd = os.open(path, flags, 0o644)

@@ -59,8 +59,7 @@ def _quoted(value: object) -> str:
     return repr(text if len(text) <= 60 else text[:57] + "...")
 
 
-def _load(selection: str, limit_items: list[str] | None = None, *,
-          trust_limits: bool = False) -> list[Case]:
+def _load(selection: str, limit_items: list[str] | None = None, *, trust_limits: bool = False) -> list[Case]:
     from truestep.cases.limits import parse_override
 
     try:
@@ -99,19 +98,28 @@ def cmd_run(args: argparse.Namespace) -> int:
             return _run(args)
         except Interrupted as err:
             out = args.out or args.resume or "reports"
-            where = (f"the new report is in {out}/" if err.published
-                     else f"{out}/ holds the previous report, untouched")
+            where = (
+                f"the new report is in {out}/"
+                if err.published
+                else f"{out}/ holds the previous report, untouched"
+            )
             kept = Journal(Path(args.resume or out))
-            then = (f"; the same command with --resume continues from the {kept.finished()} "
-                    f"finished sweeps in {kept.dir}" if kept.holds_run() else "")
+            then = (
+                f"; the same command with --resume continues from the {kept.finished()} "
+                f"finished sweeps in {kept.dir}"
+                if kept.holds_run()
+                else ""
+            )
             _say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}{then}")
             return 128 + err.signum
         except OSError as err:  # a full disk, a file too large, a folder gone: one line
             out = args.out or args.resume or "reports"
             what = visible(err.filename) if err.filename else "the report or its checkpoints"
-            raise UsageError(f"cannot write {what}: {err.strerror or err}; {out}/ holds the "
-                             "previous report, untouched (finished sweeps are kept for "
-                             "--resume)") from None
+            raise UsageError(
+                f"cannot write {what}: {err.strerror or err}; {out}/ holds the "
+                "previous report, untouched (finished sweeps are kept for "
+                "--resume)"
+            ) from None
         finally:
             set_run_budget(None)
 
@@ -137,8 +145,11 @@ def _run(args: argparse.Namespace) -> int:
     try:
         for lock in locks:
             lock.acquire()
-        stale = [f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which "
-                 "is gone" for lock in locks if lock.took_over is not None]
+        stale = [
+            f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which is gone"
+            for lock in locks
+            if lock.took_over is not None
+        ]
         return _run_locked(args, cases, engines, out, resuming, said=stale)
     except LockBusy as err:
         raise UsageError(str(err)) from None
@@ -147,8 +158,15 @@ def _run(args: argparse.Namespace) -> int:
             lock.release()
 
 
-def _run_locked(args: argparse.Namespace, cases: list[Case], engines: list[str], out: Path,
-                resuming: bool, *, said: list[str]) -> int:
+def _run_locked(
+    args: argparse.Namespace,
+    cases: list[Case],
+    engines: list[str],
+    out: Path,
+    resuming: bool,
+    *,
+    said: list[str],
+) -> int:
     """The run itself, once it holds the lock of ``out`` (:mod:`truestep.run_lock`);
     ``said``: lines to print once the run is sure to go ahead."""
     from truestep import faults, publish
@@ -183,8 +201,9 @@ def _run_locked(args: argparse.Namespace, cases: list[Case], engines: list[str],
 
     traces: dict = {}
     with _cluster(args.scheduler, journal) as cluster:
-        results = run_matrix(cases, engines, quick=args.quick, traces=traces, journal=journal,
-                             cluster=cluster)
+        results = run_matrix(
+            cases, engines, quick=args.quick, traces=traces, journal=journal, cluster=cluster
+        )
         t_sweep = lap()
         tables = journal.analyses() if resuming else None
         if tables is None:
@@ -192,12 +211,22 @@ def _run_locked(args: argparse.Namespace, cases: list[Case], engines: list[str],
                 tables = run_analyses(cases, engines, results, quick=args.quick)
             journal.put_analyses(tables)
         t_analyses = lap()
-    write_report(out, cases, results, tables, quick=args.quick, argv=_reproduce(args),
-                 traces=None if args.quick else traces, with_lecture_figures=not args.quick)
+    write_report(
+        out,
+        cases,
+        results,
+        tables,
+        quick=args.quick,
+        argv=_reproduce(args),
+        traces=None if args.quick else traces,
+        with_lecture_figures=not args.quick,
+    )
     journal.remove()
     t_report = lap()
-    print(f"wrote {visible(out)}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
-          f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s")
+    print(
+        f"wrote {visible(out)}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
+        f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s"
+    )
     return 0
 
 
@@ -220,8 +249,10 @@ def _cluster(address: str | None, journal) -> Iterator[object]:
             finally:
                 set_untimed_runner(None)
     except ClusterError as err:
-        raise UsageError(f"{err}; {journal.finished()} finished sweeps are kept in {journal.dir} "
-                         "(the same command with --resume continues from them)") from None
+        raise UsageError(
+            f"{err}; {journal.finished()} finished sweeps are kept in {journal.dir} "
+            "(the same command with --resume continues from them)"
+        ) from None
 
 
 def _check_out(out: Path) -> None:
@@ -249,8 +280,10 @@ def _check_out(out: Path) -> None:
     need = 2 * old + REPORT_SPACE_MB * 2**20  # the staged report beside the old one
     free = shutil.disk_usage(real.parent).free
     if free < need:
-        raise UsageError(f"--out: {free / 2**20:.0f} MiB free beside {out}; staging the report "
-                         f"there needs about {need / 2**20:.0f} MiB")
+        raise UsageError(
+            f"--out: {free / 2**20:.0f} MiB free beside {out}; staging the report "
+            f"there needs about {need / 2**20:.0f} MiB"
+        )
 
 
 def _read_csv(path: Path, needs: set[str], kind: str = "results") -> pd.DataFrame:
@@ -290,9 +323,11 @@ def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Cas
         elif name in lib:
             cases.append(load_case(lib[name], engines=engines))
         else:
-            raise UsageError(f"{where}: case {_quoted(name)} is not in the case library and its "
-                             f"file {_quoted(src)} is not here; name its file or directory with "
-                             "--cases")
+            raise UsageError(
+                f"{where}: case {_quoted(name)} is not in the case library and its "
+                f"file {_quoted(src)} is not here; name its file or directory with "
+                "--cases"
+            )
     return cases
 
 
@@ -301,8 +336,11 @@ def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
     ran, each on its own case."""
     from truestep.declared import declared_order_pairs
 
-    ran = [e for e in dict.fromkeys(results["engine"].astype(str))
-           if e in registered() and engine_status(e) == "installed"]
+    ran = [
+        e
+        for e in dict.fromkeys(results["engine"].astype(str))
+        if e in registered() and engine_status(e) == "installed"
+    ]
     return declared_order_pairs(cases, ran)
 
 
@@ -319,13 +357,16 @@ def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
         except ValueError:
             number = float("nan")
         if not sep or key not in TOLERANCES or not number >= 0:
-            raise UsageError(f"--tolerance: expected QUANTITY=NUMBER >= 0 with QUANTITY one of "
-                             f"{', '.join(TOLERANCES)}, got {item!r}")
+            raise UsageError(
+                f"--tolerance: expected QUANTITY=NUMBER >= 0 with QUANTITY one of "
+                f"{', '.join(TOLERANCES)}, got {item!r}"
+            )
         tol[key] = number
     unknown = set(tol) - set(TOLERANCES)
     if unknown:
-        raise UsageError(f"[baseline]: unknown quantity {sorted(unknown)[0]!r}; "
-                         f"known: {', '.join(TOLERANCES)}")
+        raise UsageError(
+            f"[baseline]: unknown quantity {sorted(unknown)[0]!r}; known: {', '.join(TOLERANCES)}"
+        )
     return tol
 
 
@@ -335,8 +376,9 @@ def _narrowed(tables: dict, cases: set[str] | None, engines: set[str] | None) ->
     return narrow(tables, cases=cases, engines=engines)
 
 
-def _baseline_scope(run_dir: Path, results: pd.DataFrame, args: argparse.Namespace,
-                    cases: list[Case]) -> tuple[set[str], set[str]]:
+def _baseline_scope(
+    run_dir: Path, results: pd.DataFrame, args: argparse.Namespace, cases: list[Case]
+) -> tuple[set[str], set[str]]:
     """The cases and engines a baseline is compared on: those the current run was asked
     for (its ``run.json``; else those in its results), narrowed by ``--cases`` and
     ``--engines``. Baseline rows outside them are not "vanished": the run never asked
@@ -353,8 +395,7 @@ def _baseline_scope(run_dir: Path, results: pd.DataFrame, args: argparse.Namespa
     return ran_cases, ran_engines
 
 
-def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path,
-                     run_dir: Path) -> None:
+def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path, run_dir: Path) -> None:
     """``--identical``: every non-timing cell equal to the baseline's, when both runs had
     the same packages and floating-point environment (their ``run.json``); else one line
     saying why the promise does not apply, and the tolerances alone decide."""
@@ -365,96 +406,145 @@ def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path,
     old, new = read_run_record(base_dir), read_run_record(run_dir)
     if old is None or new is None:
         missing = base_dir if old is None else run_dir
-        print(f"--identical: {missing}/run.json is missing: cannot tell whether both runs "
-              "had the same packages; compared with tolerances only")
+        print(
+            f"--identical: {missing}/run.json is missing: cannot tell whether both runs "
+            "had the same packages; compared with tolerances only"
+        )
         return
     diff = differences(old.get("numerics", {}), new.get("numerics", {}))
     if old.get("truestep") != new.get("truestep"):
         diff.insert(0, f"truestep {old.get('truestep')} -> {new.get('truestep')}")
     if diff:
-        print(f"--identical: not comparable bit for bit ({'; '.join(diff)[:300]}); "
-              "compared with tolerances only")
+        print(
+            f"--identical: not comparable bit for bit ({'; '.join(diff)[:300]}); "
+            "compared with tolerances only"
+        )
         return
     findings, cells = identical(baseline, current)
     comparison.findings += findings
-    print(f"--identical: {cells} non-timing cells compared, "
-          f"{sum(f.change == 'differs' for f in findings)} differ")
+    print(
+        f"--identical: {cells} non-timing cells compared, "
+        f"{sum(f.change == 'differs' for f in findings)} differ"
+    )
 
 
 def cmd_gate(args: argparse.Namespace) -> int:
-    from truestep import ci_outputs
-    from truestep.baseline import compare
-    from truestep.gates import check_gates
-
     results_path = Path(args.results)
     tables = _run_tables(results_path)
-    asked_engines = ({e.strip() for e in args.engines.split(",") if e.strip()}
-                     if args.engines else None)
+    asked_engines = {e.strip() for e in args.engines.split(",") if e.strip()} if args.engines else None
     if asked_engines is not None:
         tables = _narrowed(tables, None, asked_engines)
-    results = tables["results"]
-    engines = set(registered()) | set(results["engine"].astype(str))
-    cases = (load_cases(args.cases, engines=engines) if args.cases
-             else _cases_of(results, results_path, engines))
-    extra = [item for f in args.gates for item in load_gates_file(f)]
-    for _, g in extra:
-        if g.engine != "*" and g.engine not in engines:
-            raise CaseError(g.file, f"{g.where}.engine", f"unknown engine {_quoted(g.engine)} "
-                            f"(not registered, not in {results_path})")
-    if args.declared_orders:
-        extra += declared_gates(cases, results)
-    verdicts = check_gates(cases, results, tables["stability"], tables["restitution"], extra=extra)
-
-    comparison = None
-    if args.baseline:
-        base_dir = Path(args.baseline)
-        if not os.path.lexists(base_dir / "results.csv"):
-            raise UsageError(f"--baseline: {base_dir}/results.csv: no such file")
-        baseline = _run_tables(base_dir / "results.csv")
-        if args.time_against and "/" not in args.time_against:
-            raise UsageError(f"--time-against: expected ENGINE/METHOD, got {_quoted(args.time_against)}")
-        scope_cases, scope_engines = _baseline_scope(results_path.parent, results, args, cases)
-        baseline = _narrowed(baseline, scope_cases, scope_engines)
-        current = _narrowed(tables, scope_cases, scope_engines)
-        comparison = compare(baseline, current, tolerances=_tolerances(args.tolerance, args.gates),
-                             time_against=args.time_against,
-                             scales={c.name: c.error_scale for c in cases})
-        if args.identical:
-            _check_identical(comparison, baseline, current, base_dir, results_path.parent)
-    elif args.tolerance or args.time_against or args.identical:
-        raise UsageError("--tolerance, --time-against and --identical compare against a "
-                         "baseline: add --baseline DIR")
-
-    failed = [v for v in verdicts if v.verdict == "fail"]
+    cases, verdicts = _gate_verdicts(args, tables, results_path)
+    comparison = _gate_comparison(args, tables, results_path, cases)
     held = [v for v in verdicts if v.verdict == "pass"]
+    failed = [v for v in verdicts if v.verdict == "fail"]
     skipped = [v for v in verdicts if v.verdict == "skip"]
     reasons = []
     if not held and not failed and (comparison is None or not comparison.compared):
-        reasons.append("nothing was checked: no gate was evaluated"
-                       + ("" if comparison is None else " and no baseline row matched")
-                       + f" ({len(skipped)} gates name cases or engines this run left out)")
-    for v in verdicts:
-        if args.verbose or v.verdict == "fail" or (v.verdict == "skip" and not args.quiet):
-            print(visible(v.line()))
+        reasons.append(
+            "nothing was checked: no gate was evaluated"
+            + ("" if comparison is None else " and no baseline row matched")
+            + f" ({len(skipped)} gates name cases or engines this run left out)"
+        )
+    _print_gate_lines(args, verdicts, comparison)
     worse = comparison.worse() if comparison is not None else []
-    if comparison is not None:
-        shown = 0
-        for f in comparison.findings:
-            if args.verbose or f.change in ("worse", "vanished") or (
-                    f.change == "differs" and shown < 20):
-                shown += f.change == "differs"
-                print(visible(f.line()))
     passed = not failed and not reasons and not worse
     summary = f"{len(held)} gates held, {len(failed)} failed, {len(skipped)} not evaluated"
     if comparison is not None:
-        n = {k: sum(f.change == k for f in comparison.findings)
-             for k in ("worse", "better", "appeared", "vanished", "differs")}
-        summary += (f"; baseline: {comparison.compared} rows compared, {n['worse']} worse, "
-                    f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished"
-                    + (f", {n['differs']} cells differ" if args.identical else ""))
+        n = {
+            k: sum(f.change == k for f in comparison.findings)
+            for k in ("worse", "better", "appeared", "vanished", "differs")
+        }
+        summary += (
+            f"; baseline: {comparison.compared} rows compared, {n['worse']} worse, "
+            f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished"
+            + (f", {n['differs']} cells differ" if args.identical else "")
+        )
     for r in reasons:
         print(visible(f"FAIL {r}"))
     print(summary)
+    _write_ci_outputs(args, verdicts, comparison, reasons, passed)
+    return 0 if passed else 1
+
+
+def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -> tuple[list, list]:
+    """The cases a ``truestep gate`` checks and every gate's verdict (the cases' own, the
+    ``--gates`` files' and, with ``--declared-orders``, the methods' declared orders)."""
+    from truestep.gates import check_gates
+
+    results = tables["results"]
+    engines = set(registered()) | set(results["engine"].astype(str))
+    cases = (
+        load_cases(args.cases, engines=engines) if args.cases else _cases_of(results, results_path, engines)
+    )
+    extra = [item for f in args.gates for item in load_gates_file(f)]
+    for _, g in extra:
+        if g.engine != "*" and g.engine not in engines:
+            raise CaseError(
+                g.file,
+                f"{g.where}.engine",
+                f"unknown engine {_quoted(g.engine)} (not registered, not in {results_path})",
+            )
+    if args.declared_orders:
+        extra += declared_gates(cases, results)
+    verdicts = check_gates(cases, results, tables["stability"], tables["restitution"], extra=extra)
+    return cases, verdicts
+
+
+def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path, cases: list):
+    """The comparison with ``--baseline`` (:func:`truestep.baseline.compare`), or ``None``."""
+    from truestep.baseline import compare
+
+    if not args.baseline:
+        if args.tolerance or args.time_against or args.identical:
+            raise UsageError(
+                "--tolerance, --time-against and --identical compare against a baseline: add --baseline DIR"
+            )
+        return None
+    base_dir = Path(args.baseline)
+    if not os.path.lexists(base_dir / "results.csv"):
+        raise UsageError(f"--baseline: {base_dir}/results.csv: no such file")
+    baseline = _run_tables(base_dir / "results.csv")
+    if args.time_against and "/" not in args.time_against:
+        raise UsageError(f"--time-against: expected ENGINE/METHOD, got {_quoted(args.time_against)}")
+    scope_cases, scope_engines = _baseline_scope(results_path.parent, tables["results"], args, cases)
+    baseline = _narrowed(baseline, scope_cases, scope_engines)
+    current = _narrowed(tables, scope_cases, scope_engines)
+    comparison = compare(
+        baseline,
+        current,
+        tolerances=_tolerances(args.tolerance, args.gates),
+        time_against=args.time_against,
+        scales={c.name: c.error_scale for c in cases},
+    )
+    if args.identical:
+        _check_identical(comparison, baseline, current, base_dir, results_path.parent)
+    return comparison
+
+
+def _print_gate_lines(args: argparse.Namespace, verdicts: list, comparison) -> None:
+    """The verdicts and baseline findings ``truestep gate`` prints: every one with
+    ``--verbose``; else failures, gates not evaluated (unless ``--quiet``), what got worse or
+    vanished, and the first 20 cells that differ."""
+    for v in verdicts:
+        if args.verbose or v.verdict == "fail" or (v.verdict == "skip" and not args.quiet):
+            print(visible(v.line()))
+    if comparison is None:
+        return
+    shown = 0
+    for f in comparison.findings:
+        if args.verbose or f.change in ("worse", "vanished") or (f.change == "differs" and shown < 20):
+            shown += f.change == "differs"
+            print(visible(f.line()))
+
+
+def _write_ci_outputs(
+    args: argparse.Namespace, verdicts: list, comparison, reasons: list[str], passed: bool
+) -> None:
+    """The JUnit, Markdown and JSON files ``truestep gate`` was asked for, and the GitHub
+    step summary when ``GITHUB_STEP_SUMMARY`` is set."""
+    from truestep import ci_outputs
+
     md = ci_outputs.markdown(verdicts, comparison, reasons, passed=passed)
     try:
         if args.junit:
@@ -464,12 +554,11 @@ def cmd_gate(args: argparse.Namespace) -> int:
         if os.environ.get("GITHUB_STEP_SUMMARY"):
             ci_outputs.write(os.environ["GITHUB_STEP_SUMMARY"], md, append=True)
         if args.json:
-            ci_outputs.write(args.json, ci_outputs.as_json(verdicts, comparison, reasons,
-                                                           passed=passed))
+            ci_outputs.write(args.json, ci_outputs.as_json(verdicts, comparison, reasons, passed=passed))
     except OSError as err:
-        raise UsageError(f"cannot write {visible(err.filename or 'an output')}: "
-                         f"{err.strerror or err}") from None
-    return 0 if passed else 1
+        raise UsageError(
+            f"cannot write {visible(err.filename or 'an output')}: {err.strerror or err}"
+        ) from None
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -512,8 +601,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     except ValueError:
         sizes = []
     if not sizes or min(sizes) < 1:
-        raise UsageError(f"--sizes: expected particle counts of 1 or more, comma-separated, "
-                         f"got {args.sizes!r}")
+        raise UsageError(
+            f"--sizes: expected particle counts of 1 or more, comma-separated, got {args.sizes!r}"
+        )
     if not args.budget > 0:
         raise UsageError(f"--budget: expected seconds > 0, got {args.budget:g}")
     engines = select_engines(args.engines, say=_say)
@@ -535,17 +625,29 @@ def cmd_bench(args: argparse.Namespace) -> int:
     table.to_csv(out / "scaling.csv", index=False, columns=COLUMNS)
     figure = scaling_plot(table, bandwidth, out / "figures" / "scaling.png")
     shown = table.assign(note=table["note"].str.slice(0, 100))
-    with pd.option_context("display.width", 250, "display.max_rows", None,
-                           "display.max_colwidth", 100, "display.float_format", "{:.4g}".format):
+    with pd.option_context(
+        "display.width",
+        250,
+        "display.max_rows",
+        None,
+        "display.max_colwidth",
+        100,
+        "display.float_format",
+        "{:.4g}".format,
+    ):
         print("\n".join(visible(line) for line in shown.to_string(index=False).splitlines()))
     per_step = table.attrs["bytes_per_particle_step"]
-    print(f"copy bandwidth {bandwidth / 1e9:.2f} GB/s (numpy copy, best of 5, measured in this "
-          f"run) = {bandwidth / per_step:.3g} particle-steps/s at {per_step} B per particle-step "
-          f"(positions and velocities, float64, read and written)")
+    print(
+        f"copy bandwidth {bandwidth / 1e9:.2f} GB/s (numpy copy, best of 5, measured in this "
+        f"run) = {bandwidth / per_step:.3g} particle-steps/s at {per_step} B per particle-step "
+        f"(positions and velocities, float64, read and written)"
+    )
     warm = table.attrs["warmup_s"]
-    print(f"wrote {out / 'scaling.csv'} and {figure} in {time.perf_counter() - start:.1f} s: "
-          f"the table took {table.attrs['elapsed_s']:.1f} s of the {args.budget:g} s budget "
-          f"(compiling and warm-ups {warm:.1f} s of it)")
+    print(
+        f"wrote {out / 'scaling.csv'} and {figure} in {time.perf_counter() - start:.1f} s: "
+        f"the table took {table.attrs['elapsed_s']:.1f} s of the {args.budget:g} s budget "
+        f"(compiling and warm-ups {warm:.1f} s of it)"
+    )
     return 0
 
 
@@ -581,144 +683,250 @@ def cmd_compile(args: argparse.Namespace) -> int:
     return 0
 
 
-CASES_HELP = ("cases: names or shell globs of the case library, case files and directories, "
-              "comma-separated (default: every case of the library); each item must match")
-ENGINES_HELP = ("engines: registered names or module:Class of an adapter, comma-separated "
-                "(default: every installed engine)")
+CASES_HELP = (
+    "cases: names or shell globs of the case library, case files and directories, "
+    "comma-separated (default: every case of the library); each item must match"
+)
+ENGINES_HELP = (
+    "engines: registered names or module:Class of an adapter, comma-separated "
+    "(default: every installed engine)"
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="truestep", description="truestep: a verification and benchmark harness for "
+        prog="truestep",
+        description="truestep: a verification and benchmark harness for "
         "physically based animation. Exit codes: 0 success, 1 a gate failed or nothing was "
-        "checked, 2 bad input.")
+        "checked, 2 bad input.",
+    )
     parser.add_argument("--version", action="version", version=f"truestep {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    run = sub.add_parser("run", help="run the matrix and the analyses, write the tables and the report",
-                         description="Run every case with every engine and method that can model "
-                         "it, the stability searches and the restitution sweep; write results.csv, "
-                         "stability.csv, restitution.csv, index.md, index.html and figures/. The "
-                         "report is put in place as a whole: a run that fails or is killed leaves "
-                         "the previous one as it was. SIGTERM or SIGINT stops the run (exit 128 + "
-                         "the signal); its finished sweeps are kept for --resume.")
-    run.add_argument("--quick", action="store_true",
-                     help="short sweeps of the quick cases, no energy or lecture figures (CI smoke run)")
+    run = sub.add_parser(
+        "run",
+        help="run the matrix and the analyses, write the tables and the report",
+        description="Run every case with every engine and method that can model "
+        "it, the stability searches and the restitution sweep; write results.csv, "
+        "stability.csv, restitution.csv, index.md, index.html and figures/. The "
+        "report is put in place as a whole: a run that fails or is killed leaves "
+        "the previous one as it was. SIGTERM or SIGINT stops the run (exit 128 + "
+        "the signal); its finished sweeps are kept for --resume.",
+    )
+    run.add_argument(
+        "--quick",
+        action="store_true",
+        help="short sweeps of the quick cases, no energy or lecture figures (CI smoke run)",
+    )
     run.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)
     run.add_argument("--engines", default=None, metavar="NAMES", help=ENGINES_HELP)
-    run.add_argument("--out", default=None, metavar="DIR",
-                     help="output directory (default: reports, or the --resume DIR)")
-    run.add_argument("--resume", nargs="?", const="", default=None, metavar="DIR",
-                     help="continue the interrupted run whose --out was DIR (default: --out): "
-                     "take its finished sweeps (and analyses) from .DIR.partial beside it and "
-                     "run the rest; the cases, engines, --quick and truestep version must be "
-                     "the same (else exit 2). Without --resume a run starts afresh")
-    run.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE",
-                     help="set a cost limit for every case, over the defaults and the case "
-                     "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable")
-    run.add_argument("--trust-limits", action="store_true",
-                     help="the cases of this run are trusted: --limit may raise a limit beyond "
-                     "the ceiling a case file cannot pass (" + ", ".join(
-                         f"{k} {getattr(CEILING, k):.3g}" for k in LIMIT_KEYS) + ")")
-    run.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                     help="run the sweeps and the untimed analyses on a Dask cluster: "
-                     "tcp://HOST:PORT of a running `dask scheduler`, or local:N for a "
-                     "LocalCluster of N single-threaded worker processes; one timed run per "
-                     "host at a time (needs truestep[dask])")
-    run.add_argument("--budget", type=float, default=RUN_BUDGET_S, metavar="S",
-                     help=f"wall-clock budget of the whole run, s (default {RUN_BUDGET_S:g}): work "
-                     "still running when it ends, and work not started, are timeout rows that say "
-                     "so, and the report is written")
+    run.add_argument(
+        "--out", default=None, metavar="DIR", help="output directory (default: reports, or the --resume DIR)"
+    )
+    run.add_argument(
+        "--resume",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="DIR",
+        help="continue the interrupted run whose --out was DIR (default: --out): "
+        "take its finished sweeps (and analyses) from .DIR.partial beside it and "
+        "run the rest; the cases, engines, --quick and truestep version must be "
+        "the same (else exit 2). Without --resume a run starts afresh",
+    )
+    run.add_argument(
+        "--limit",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set a cost limit for every case, over the defaults and the case "
+        "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable",
+    )
+    run.add_argument(
+        "--trust-limits",
+        action="store_true",
+        help="the cases of this run are trusted: --limit may raise a limit beyond "
+        "the ceiling a case file cannot pass ("
+        + ", ".join(f"{k} {getattr(CEILING, k):.3g}" for k in LIMIT_KEYS)
+        + ")",
+    )
+    run.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the sweeps and the untimed analyses on a Dask cluster: "
+        "tcp://HOST:PORT of a running `dask scheduler`, or local:N for a "
+        "LocalCluster of N single-threaded worker processes; one timed run per "
+        "host at a time (needs truestep[dask])",
+    )
+    run.add_argument(
+        "--budget",
+        type=float,
+        default=RUN_BUDGET_S,
+        metavar="S",
+        help=f"wall-clock budget of the whole run, s (default {RUN_BUDGET_S:g}): work "
+        "still running when it ends, and work not started, are timeout rows that say "
+        "so, and the report is written",
+    )
     run.set_defaults(func=cmd_run)
 
-    gate = sub.add_parser("gate", help="check gates (and a baseline) against a run's tables",
-                          description="Check the gates of the case files, and of --gates files, "
-                          "against a run's tables; with --baseline, compare the run with an earlier "
-                          "one row by row. Exit 0 when everything checked holds and something was "
-                          "checked, 1 otherwise, 2 on bad input.")
-    gate.add_argument("--results", default="reports/results.csv", metavar="FILE",
-                      help="the run's results.csv; stability.csv and restitution.csv are read from "
-                      "beside it (default: reports/results.csv)")
-    gate.add_argument("--cases", default=None, metavar="ITEMS",
-                      help=CASES_HELP.replace("every case of the library", "the cases of the results"))
-    gate.add_argument("--gates", action="append", default=[], metavar="FILE",
-                      help="a gates file ([[gates]] tables with a `cases` pattern; optional "
-                      "[baseline] tolerances); repeatable")
-    gate.add_argument("--declared-orders", action="store_true",
-                      help="also gate every fixed-step method's fitted order against the order "
-                      "its engine declares, on every smooth case with an exact solution")
-    gate.add_argument("--baseline", default=None, metavar="DIR",
-                      help="an earlier run's output directory to compare with, row by row")
-    gate.add_argument("--engines", default=None, metavar="NAMES",
-                      help="only the rows of these engines (comma-separated), for the gates and "
-                      "the baseline")
-    gate.add_argument("--identical", action="store_true",
-                      help="with --baseline: also require every non-timing cell to equal the "
-                      "baseline's, bit for bit (when both runs' run.json name the same packages "
-                      "and floating-point environment; else says why not and uses tolerances)")
-    gate.add_argument("--tolerance", action="append", default=[], metavar="QUANTITY=X",
-                      help="override a baseline tolerance (error, energy_drift, nfev, order, "
-                      "dt_limit, e_error, wall_ratio); repeatable")
-    gate.add_argument("--time-against", default=None, metavar="ENGINE/METHOD",
-                      help="compare wall time with the baseline as a ratio to this engine/method's "
-                      "rows of the same case and step (off by default)")
+    gate = sub.add_parser(
+        "gate",
+        help="check gates (and a baseline) against a run's tables",
+        description="Check the gates of the case files, and of --gates files, "
+        "against a run's tables; with --baseline, compare the run with an earlier "
+        "one row by row. Exit 0 when everything checked holds and something was "
+        "checked, 1 otherwise, 2 on bad input.",
+    )
+    gate.add_argument(
+        "--results",
+        default="reports/results.csv",
+        metavar="FILE",
+        help="the run's results.csv; stability.csv and restitution.csv are read from "
+        "beside it (default: reports/results.csv)",
+    )
+    gate.add_argument(
+        "--cases",
+        default=None,
+        metavar="ITEMS",
+        help=CASES_HELP.replace("every case of the library", "the cases of the results"),
+    )
+    gate.add_argument(
+        "--gates",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a gates file ([[gates]] tables with a `cases` pattern; optional "
+        "[baseline] tolerances); repeatable",
+    )
+    gate.add_argument(
+        "--declared-orders",
+        action="store_true",
+        help="also gate every fixed-step method's fitted order against the order "
+        "its engine declares, on every smooth case with an exact solution",
+    )
+    gate.add_argument(
+        "--baseline",
+        default=None,
+        metavar="DIR",
+        help="an earlier run's output directory to compare with, row by row",
+    )
+    gate.add_argument(
+        "--engines",
+        default=None,
+        metavar="NAMES",
+        help="only the rows of these engines (comma-separated), for the gates and the baseline",
+    )
+    gate.add_argument(
+        "--identical",
+        action="store_true",
+        help="with --baseline: also require every non-timing cell to equal the "
+        "baseline's, bit for bit (when both runs' run.json name the same packages "
+        "and floating-point environment; else says why not and uses tolerances)",
+    )
+    gate.add_argument(
+        "--tolerance",
+        action="append",
+        default=[],
+        metavar="QUANTITY=X",
+        help="override a baseline tolerance (error, energy_drift, nfev, order, "
+        "dt_limit, e_error, wall_ratio); repeatable",
+    )
+    gate.add_argument(
+        "--time-against",
+        default=None,
+        metavar="ENGINE/METHOD",
+        help="compare wall time with the baseline as a ratio to this engine/method's "
+        "rows of the same case and step (off by default)",
+    )
     gate.add_argument("--junit", default=None, metavar="FILE", help="write a JUnit XML report")
-    gate.add_argument("--markdown", default=None, metavar="FILE",
-                      help="write a markdown summary (also appended to $GITHUB_STEP_SUMMARY when set)")
+    gate.add_argument(
+        "--markdown",
+        default=None,
+        metavar="FILE",
+        help="write a markdown summary (also appended to $GITHUB_STEP_SUMMARY when set)",
+    )
     gate.add_argument("--json", default=None, metavar="FILE", help="write every verdict as JSON")
-    gate.add_argument("-v", "--verbose", action="store_true",
-                      help="print gates that held and baseline rows that got better or appeared")
+    gate.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="print gates that held and baseline rows that got better or appeared",
+    )
     gate.add_argument("-q", "--quiet", action="store_true", help="do not print gates not evaluated")
     gate.set_defaults(func=cmd_gate)
 
-    lst = sub.add_parser("list", help="print cases, engines (installed or not), capabilities and methods",
-                         description="Print the cases with their features and the engines with "
-                         "their methods and capabilities; an engine that is not installed is listed "
-                         "with the pip line that adds it.")
+    lst = sub.add_parser(
+        "list",
+        help="print cases, engines (installed or not), capabilities and methods",
+        description="Print the cases with their features and the engines with "
+        "their methods and capabilities; an engine that is not installed is listed "
+        "with the pip line that adds it.",
+    )
     lst.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)
     lst.add_argument("--engines", default=None, metavar="NAMES", help="engine names, comma-separated")
     lst.set_defaults(func=cmd_list)
 
-    fig = sub.add_parser("figures", help="reproduce the lecture's figures",
-                         description="Draw the lecture's figures into DIR/figures.")
+    fig = sub.add_parser(
+        "figures",
+        help="reproduce the lecture's figures",
+        description="Draw the lecture's figures into DIR/figures.",
+    )
     fig.add_argument("--out", default="reports", metavar="DIR", help="output directory (default: reports)")
     fig.set_defaults(func=cmd_figures)
 
-    env = sub.add_parser("env", help="print the environment that gives truestep's numbers",
-                         description="Print, as shell export lines, the variables truestep sets "
-                         "in its own processes so that every machine computes the same numbers "
-                         "(one BLAS thread, the same OpenBLAS kernels, numpy's SIMD dispatch up "
-                         "to AVX2). Start Dask workers after `eval \"$(truestep env)\"`.")
+    env = sub.add_parser(
+        "env",
+        help="print the environment that gives truestep's numbers",
+        description="Print, as shell export lines, the variables truestep sets "
+        "in its own processes so that every machine computes the same numbers "
+        "(one BLAS thread, the same OpenBLAS kernels, numpy's SIMD dispatch up "
+        'to AVX2). Start Dask workers after `eval "$(truestep env)"`.',
+    )
     env.set_defaults(func=cmd_env)
 
-    comp = sub.add_parser("compile", help="compile the reference's loops ahead (a build step)",
-                          description="Compile the reference implementation's loops for every "
-                          "case of the library and of the figures and every fixed-step method, "
-                          "on every core, into numba's on-disk cache, as a first `truestep run` "
-                          "does before its first timed run (about 80 s on 2 cores when the cache "
-                          "is empty; a second call only loads them).")
+    comp = sub.add_parser(
+        "compile",
+        help="compile the reference's loops ahead (a build step)",
+        description="Compile the reference implementation's loops for every "
+        "case of the library and of the figures and every fixed-step method, "
+        "on every core, into numba's on-disk cache, as a first `truestep run` "
+        "does before its first timed run (about 80 s on 2 cores when the cache "
+        "is empty; a second call only loads them).",
+    )
     comp.set_defaults(func=cmd_compile)
 
     from truestep.bench import BUDGET_S, SIZES
 
     sizes = ",".join(f"{n:.0e}".replace("e+0", "e") for n in SIZES)
-    bench = sub.add_parser("bench", help="particle-steps per second against n on the rain scene",
-                           description="How cost grows with work: run the particle-rain scene with "
-                           "n particles (1e2 to 1e6) through every fixed-step method of every engine, "
-                           "one timed run at a time in a process of its own, and print "
-                           "particle-steps per second with the fraction of the copy bandwidth "
-                           "measured in the same run; write DIR/scaling.csv and "
-                           "DIR/figures/scaling.png. Sizes that do not fit in the budget are "
-                           "rows that say so.")
+    bench = sub.add_parser(
+        "bench",
+        help="particle-steps per second against n on the rain scene",
+        description="How cost grows with work: run the particle-rain scene with "
+        "n particles (1e2 to 1e6) through every fixed-step method of every engine, "
+        "one timed run at a time in a process of its own, and print "
+        "particle-steps per second with the fraction of the copy bandwidth "
+        "measured in the same run; write DIR/scaling.csv and "
+        "DIR/figures/scaling.png. Sizes that do not fit in the budget are "
+        "rows that say so.",
+    )
     bench.add_argument("--engines", default=None, metavar="NAMES", help=ENGINES_HELP)
-    bench.add_argument("--out", default="bench", metavar="DIR",
-                       help="output directory (default: bench)")
-    bench.add_argument("--budget", default=BUDGET_S, type=float, metavar="S",
-                       help=f"seconds for the timed runs (default: {BUDGET_S:g}; one warm-up per "
-                       "engine/method comes on top); each engine/method gets an equal share of "
-                       "what is left, and skips the sizes that would not fit")
-    bench.add_argument("--sizes", default=sizes, metavar="N,N,...",
-                       help=f"particle counts, comma-separated (default: {sizes})")
+    bench.add_argument("--out", default="bench", metavar="DIR", help="output directory (default: bench)")
+    bench.add_argument(
+        "--budget",
+        default=BUDGET_S,
+        type=float,
+        metavar="S",
+        help=f"seconds for the timed runs (default: {BUDGET_S:g}; one warm-up per "
+        "engine/method comes on top); each engine/method gets an equal share of "
+        "what is left, and skips the sizes that would not fit",
+    )
+    bench.add_argument(
+        "--sizes",
+        default=sizes,
+        metavar="N,N,...",
+        help=f"particle counts, comma-separated (default: {sizes})",
+    )
     bench.set_defaults(func=cmd_bench)
     return parser
 
@@ -727,8 +935,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (CaseError, UsageError, SelectionError, UnknownEngine, EngineNotInstalled,
-            PluginError) as err:
+    except (CaseError, UsageError, SelectionError, UnknownEngine, EngineNotInstalled, PluginError) as err:
         print(f"truestep: error: {visible(err)}", file=sys.stderr)
         return 2
 

@@ -87,8 +87,15 @@ def sweep_task(job: SweepJob) -> tuple[int, list[dict], dict, str]:
     host = host_name()
     traces: dict = {}
     with Semaphore(max_leases=1, name=SEMAPHORE_PREFIX + host):
-        rows = run_sweep(job.case, job.engine, job.method, job.dts, adaptive=job.adaptive,
-                         timing=job.timing, traces=traces if job.want_traces else None)
+        rows = run_sweep(
+            job.case,
+            job.engine,
+            job.method,
+            job.dts,
+            adaptive=job.adaptive,
+            timing=job.timing,
+            traces=traces if job.want_traces else None,
+        )
     for row in rows:
         row["host"] = host
     return job.index, rows, traces, host
@@ -138,16 +145,18 @@ class Cluster:
         try:
             from distributed import Client, LocalCluster
         except ImportError:
-            raise ClusterError("--scheduler needs Dask's distributed scheduler: "
-                               "pip install 'truestep[dask]'") from None
+            raise ClusterError(
+                "--scheduler needs Dask's distributed scheduler: pip install 'truestep[dask]'"
+            ) from None
         self.address = address
         self._local = None
         _quiet_distributed_logs()
         try:
             if address.startswith(LOCAL_PREFIX):
                 n = _workers(address)
-                self._local = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=50)
+                self._local = LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
+                )
                 self.client = Client(self._local, timeout=CONNECT_TIMEOUT_S)
             else:
                 self.client = Client(address, timeout=CONNECT_TIMEOUT_S)
@@ -155,8 +164,9 @@ class Cluster:
             raise
         except Exception as err:  # any failure to connect is the one error
             self.close()
-            raise ClusterError(f"--scheduler {address}: cannot connect: "
-                               f"{type(err).__name__}: {str(err)[:160]}") from None
+            raise ClusterError(
+                f"--scheduler {address}: cannot connect: {type(err).__name__}: {str(err)[:160]}"
+            ) from None
         try:
             self._check_numerics()
         except BaseException:
@@ -174,15 +184,18 @@ class Cluster:
         try:
             theirs = self.client.run(worker_numerics)
         except Exception as err:  # a worker that cannot answer is a connection failure
-            raise ClusterError(f"--scheduler {self.address}: cannot ask the workers for their "
-                               f"numerics: {type(err).__name__}: {str(err)[:120]}") from None
+            raise ClusterError(
+                f"--scheduler {self.address}: cannot ask the workers for their "
+                f"numerics: {type(err).__name__}: {str(err)[:120]}"
+            ) from None
         for worker, fp in sorted(theirs.items()):
             diff = differences(here, fp)
             if diff:
                 raise ClusterError(
                     f"--scheduler {self.address}: worker {worker} would not give this "
                     f"machine's numbers ({'; '.join(diff)[:200]}); install the same packages "
-                    "there and start its workers after `eval \"$(truestep env)\"`")
+                    'there and start its workers after `eval "$(truestep env)"`'
+                )
 
     def __enter__(self) -> Cluster:
         return self
@@ -235,8 +248,13 @@ class Cluster:
             def submit(host: str):
                 job = queues[host].pop()
                 future = self.client.submit(
-                    sweep_task, job, key=f"sweep-{job.index}-{job.case.name}-{job.engine}-"
-                    f"{job.method}", workers=[host], allow_other_workers=True, pure=False)
+                    sweep_task,
+                    job,
+                    key=f"sweep-{job.index}-{job.case.name}-{job.engine}-{job.method}",
+                    workers=[host],
+                    allow_other_workers=True,
+                    pure=False,
+                )
                 running[future] = (job, host)
                 return future
 
@@ -258,18 +276,17 @@ class Cluster:
         except ClusterError:
             raise
         except Exception as err:  # the scheduler went away mid-run
-            raise ClusterError(f"--scheduler {self.address}: lost the scheduler: "
-                               f"{type(err).__name__}: {str(err)[:120]}") from None
+            raise ClusterError(
+                f"--scheduler {self.address}: lost the scheduler: {type(err).__name__}: {str(err)[:120]}"
+            ) from None
 
-    def untimed(self, calls: Sequence[Call], done: Callable[[int, Outcome], None] | None
-                ) -> list[Outcome]:
+    def untimed(self, calls: Sequence[Call], done: Callable[[int, Outcome], None] | None) -> list[Outcome]:
         """Every call as a task on any worker; outcomes in the order of ``calls``."""
         from distributed import as_completed
 
         outcomes: list[Outcome | None] = [None] * len(calls)
         try:
-            futures = {self.client.submit(untimed_task, call, pure=False): k
-                       for k, call in enumerate(calls)}
+            futures = {self.client.submit(untimed_task, call, pure=False): k for k, call in enumerate(calls)}
             for future in as_completed(futures):
                 k = futures[future]
                 try:
@@ -281,8 +298,9 @@ class Cluster:
                 if done is not None:
                     done(k, outcomes[k])
         except Exception as err:  # the scheduler went away mid-run
-            raise ClusterError(f"--scheduler {self.address}: lost the scheduler: "
-                               f"{type(err).__name__}: {str(err)[:120]}") from None
+            raise ClusterError(
+                f"--scheduler {self.address}: lost the scheduler: {type(err).__name__}: {str(err)[:120]}"
+            ) from None
         return outcomes  # type: ignore[return-value]
 
 
@@ -303,10 +321,11 @@ def _host_of(address: str) -> str:
 
 
 def _workers(address: str) -> int:
-    raw = address[len(LOCAL_PREFIX):]
+    raw = address[len(LOCAL_PREFIX) :]
     if not raw.isdigit() or not 1 <= int(raw) <= 256:
-        raise ClusterError(f"--scheduler: expected tcp://HOST:PORT or local:N (N from 1 to "
-                           f"256), got {address[:60]!r}")
+        raise ClusterError(
+            f"--scheduler: expected tcp://HOST:PORT or local:N (N from 1 to 256), got {address[:60]!r}"
+        )
     return int(raw)
 
 
@@ -321,12 +340,24 @@ def _killed(err: BaseException) -> str:
     from distributed.scheduler import KilledWorker
 
     if isinstance(err, KilledWorker):
-        return (f"the task's worker died each time it ran (distributed's allowed-failures "
-                f"reached): {str(err)[:120]}")
+        return (
+            f"the task's worker died each time it ran (distributed's allowed-failures "
+            f"reached): {str(err)[:120]}"
+        )
     return f"{type(err).__name__}: {str(err)[:160]}"
 
 
 def _crashed_rows(job: SweepJob, err: BaseException) -> list[dict]:
-    return [{"case": job.case.name, "engine": job.engine, "method": job.method, "dt": dt,
-             "dt_kind": "tolerance" if job.adaptive else "step", "status": "crashed",
-             "message": _killed(err), "host": ""} for dt in job.dts]
+    return [
+        {
+            "case": job.case.name,
+            "engine": job.engine,
+            "method": job.method,
+            "dt": dt,
+            "dt_kind": "tolerance" if job.adaptive else "step",
+            "status": "crashed",
+            "message": _killed(err),
+            "host": "",
+        }
+        for dt in job.dts
+    ]

@@ -101,11 +101,14 @@ def constant_acceleration(case: Case) -> bool:
     a0 = system.acceleration(q, v, t)
     dq = PROBE_STEP * (1.0 + np.max(np.abs(q), initial=0.0)) * pattern
     dv = PROBE_STEP * (1.0 + np.max(np.abs(v), initial=0.0)) * pattern
-    return not any(_changes(a0, a) for a in (
-        system.acceleration(q + dq, v, t),
-        system.acceleration(q, v + dv, t),
-        system.acceleration(q, v, t + case.duration),
-    ))
+    return not any(
+        _changes(a0, a)
+        for a in (
+            system.acceleration(q + dq, v, t),
+            system.acceleration(q, v + dv, t),
+            system.acceleration(q, v, t + case.duration),
+        )
+    )
 
 
 def declared_order(facts: MethodFacts, case: Case) -> int | None:
@@ -116,8 +119,7 @@ def declared_order(facts: MethodFacts, case: Case) -> int | None:
     return facts.order_for(velocity_forces=velocity_dependent(case))
 
 
-def declared_order_gates(cases: Iterable[Case], engines: Iterable[str], *,
-                         quick: bool = False) -> list[Gate]:
+def declared_order_gates(cases: Iterable[Case], engines: Iterable[str], *, quick: bool = False) -> list[Gate]:
     """``order`` gates with the declared order of every engine method on every smooth case
     that has an exact solution.
 
@@ -141,8 +143,9 @@ def declared_order_gates(cases: Iterable[Case], engines: Iterable[str], *,
     return [g for _, g in declared_order_pairs(cases, engines, quick=quick)]
 
 
-def declared_order_pairs(cases: Iterable[Case], engines: Iterable[str], *,
-                         quick: bool = False) -> list[tuple[list[str], Gate]]:
+def declared_order_pairs(
+    cases: Iterable[Case], engines: Iterable[str], *, quick: bool = False
+) -> list[tuple[list[str], Gate]]:
     """:func:`declared_order_gates` as ``([case name], gate)`` pairs, the form
     :func:`truestep.gates.check_gates` takes as ``extra``: each gate on its own case."""
     engines = list(engines)
@@ -153,16 +156,29 @@ def declared_order_pairs(cases: Iterable[Case], engines: Iterable[str], *,
         for engine in engines:
             adapter = get_adapter(engine)
             for method in adapter.methods:
-                if (method in adapter.adaptive_methods or adapter.missing(case, method)
-                        or any(e == engine and m in (method, "*") for e, m, _ in case.skip)
-                        or duplicate_of(adapter, case, method) is not None):
+                if (
+                    method in adapter.adaptive_methods
+                    or adapter.missing(case, method)
+                    or any(e == engine and m in (method, "*") for e, m, _ in case.skip)
+                    or duplicate_of(adapter, case, method) is not None
+                ):
                     continue
                 facts = facts_of(adapter, method)
                 order = None if facts is None else declared_order(facts, case)
                 if order is None:
                     continue
-                out.append(([case.name], Gate(
-                    kind="order", engine=engine, method=method, dt=None,
-                    params={"expect": float(order), "tol": DECLARED_ORDER_TOL},
-                    where=DECLARED_WHERE, file=DECLARED_FILE)))
+                out.append(
+                    (
+                        [case.name],
+                        Gate(
+                            kind="order",
+                            engine=engine,
+                            method=method,
+                            dt=None,
+                            params={"expect": float(order), "tol": DECLARED_ORDER_TOL},
+                            where=DECLARED_WHERE,
+                            file=DECLARED_FILE,
+                        ),
+                    )
+                )
     return out

@@ -51,8 +51,7 @@ def _scale(case: Case) -> float:
     return _particle_scale(case, x, v, alive)
 
 
-def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None
-                    ) -> float:
+def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None) -> float:
     from truestep.reference_impl.particles import total_energy
 
     m = np.where(case.model.fixed, 0.0, case.model.mass)
@@ -111,8 +110,7 @@ def _run_scale(case: Case) -> float:
     return _particle_scale(case, run.x, run.v, run.alive)
 
 
-def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,
-                                        np.ndarray | None] | None:
+def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
     """The case's motion as truestep knows it best, at :data:`GRID` times or the reference
     run's records: ``(t, x, v, alive)`` with ``x``, ``v`` of shape (T, n, 3) (an ODE's
     states as ``x`` of shape (T, dim), ``v`` None); ``None`` without an exact solution."""

@@ -49,8 +49,10 @@ def run_reference(case: Case, method: str, dt: float | None = None) -> Trajector
         case = replace(case, max_records=max(case.max_records, case.steps_for(dt)[0]))
     traj = adapter.simulate(case, method, dt)
     if traj.status != "ok":
-        raise RuntimeError(f"figure case {case.name}: reference / {method} at {dt:g} ended "
-                           f"{traj.status} (t = {traj.t_fail}) {traj.message}".rstrip())
+        raise RuntimeError(
+            f"figure case {case.name}: reference / {method} at {dt:g} ended "
+            f"{traj.status} (t = {traj.t_fail}) {traj.message}".rstrip()
+        )
     return traj
 
 

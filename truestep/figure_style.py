@@ -46,16 +46,20 @@ def reference_style(method: str, k: int = 0, count: int = 1, **over: object) -> 
 
 def exact_style(**over: object) -> dict:
     """Exact solutions: a wide light band drawn under the runs, so a run on it stays visible."""
-    style = {"color": EXACT_COLOUR, "linestyle": "-", "linewidth": 5.0, "solid_capstyle": "round",
-             "zorder": 1}
+    style = {
+        "color": EXACT_COLOUR,
+        "linestyle": "-",
+        "linewidth": 5.0,
+        "solid_capstyle": "round",
+        "zorder": 1,
+    }
     style.update(over)
     return style
 
 
 def legend_below(ax: plt.Axes, ncol: int = 2, **kw: object) -> None:
     """A legend under the axes, where it cannot cover the data."""
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=ncol, fontsize=8,
-              frameon=False, **kw)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=ncol, fontsize=8, frameon=False, **kw)
 
 
 def save_figure(fig: plt.Figure, path: Path) -> None:

@@ -101,8 +101,11 @@ def _collision_diagram(ax: plt.Axes, vb: np.ndarray, v_out: float, n: np.ndarray
     ax.set_aspect("equal")
     ax.set_xlabel("velocity along the wall (m/s)")
     ax.set_ylabel("velocity along N (m/s)")
-    ax.set_title(f"The first floor collision at k_r = {e:g}, velocities from the run:\n"
-                 f"{-b_n:.2f} m/s in along N, {a_n:.2f} m/s out (ratio {a_n / -b_n:.3f})", fontsize=10)
+    ax.set_title(
+        f"The first floor collision at k_r = {e:g}, velocities from the run:\n"
+        f"{-b_n:.2f} m/s in along N, {a_n:.2f} m/s out (ratio {a_n / -b_n:.3f})",
+        fontsize=10,
+    )
 
 
 # -- 11. bouncing off the walls ---------------------------------------------------------------------
@@ -116,8 +119,9 @@ def fig_bounce(path: Path) -> str:
     for k, e in enumerate(BOX_RESTITUTIONS):
         case = with_restitution(base, e)
         traj = run_reference(case, "lecture")
-        axes[0].plot(traj.x[:, 0, 0], traj.x[:, 0, 1], color=SCENE_COLOURS[k], linewidth=1.5,
-                     label=f"k_r = {e:g}")
+        axes[0].plot(
+            traj.x[:, 0, 0], traj.x[:, 0, 1], color=SCENE_COLOURS[k], linewidth=1.5, label=f"k_r = {e:g}"
+        )
         found = floor_bounces(case, traj)
         measured += [(k, pb.bounce) for pb in found if pb.bounce.v_out > 0]
         floors = [pb for pb in found if -(case.model.gravity @ case.model.planes[pb.plane].normal) > 0]
@@ -133,8 +137,11 @@ def fig_bounce(path: Path) -> str:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m, up)")
-    ax.set_title(f"A particle in a {bx[1] - bx[0]:g} m box under gravity, {base.duration:g} s\n"
-                 f"(lecture update, dt = {1000 * dt:g} ms)", fontsize=10)
+    ax.set_title(
+        f"A particle in a {bx[1] - bx[0]:g} m box under gravity, {base.duration:g} s\n"
+        f"(lecture update, dt = {1000 * dt:g} ms)",
+        fontsize=10,
+    )
     legend_below(ax, ncol=4)
 
     _collision_diagram(axes[1], *diagram)
@@ -146,15 +153,24 @@ def fig_bounce(path: Path) -> str:
     top = 1.1 * v_in.max()
     for k, e in enumerate(BOX_RESTITUTIONS):
         sel = k_of == k
-        ax.plot(v_in[sel], v_out[sel], "o", color=SCENE_COLOURS[k], markersize=6,
-                label=f"measured, k_r = {e:g} ({sel.sum()} bounces)")
+        ax.plot(
+            v_in[sel],
+            v_out[sel],
+            "o",
+            color=SCENE_COLOURS[k],
+            markersize=6,
+            label=f"measured, k_r = {e:g} ({sel.sum()} bounces)",
+        )
         ax.plot([0, top], [0, e * top], color=SCENE_COLOURS[k], linewidth=0.9, linestyle=":")
     ax.plot([], [], color="0.3", linewidth=0.9, linestyle=":", label="|V'_N| = k_r |V_N| (the lecture)")
     worst = np.max(np.abs(v_out - np.array(BOX_RESTITUTIONS)[k_of] * v_in))
     ax.set_xlabel("normal speed before, −N·V (m/s)")
     ax.set_ylabel("normal speed after, N·V' (m/s)")
-    ax.set_title(f"Every bounce off floor and walls, three runs:\nrebound within {worst:.3f} "
-                 "m/s of k_r x impact speed", fontsize=10)
+    ax.set_title(
+        f"Every bounce off floor and walls, three runs:\nrebound within {worst:.3f} "
+        "m/s of k_r x impact speed",
+        fontsize=10,
+    )
     ax.set_xlim(0, top)
     ax.set_ylim(0, top)
     ax.set_aspect("equal")
@@ -165,19 +181,21 @@ def fig_bounce(path: Path) -> str:
     planes = len(base.model.planes)
     g = float(np.linalg.norm(base.model.gravity))
     restitutions = ", ".join(f"{e:g}" for e in BOX_RESTITUTIONS[:-1]) + f" and {BOX_RESTITUTIONS[-1]:g}"
-    return ('Reproduces the lecture slides "Bouncing off the Walls", "Normal and Tangential '
-            'Components", "Collision Detection" and "Collision Response" (coefficient of '
-            f"restitution): a point particle in a {bx[1] - bx[0]:g} m box of {planes} planes under "
-            f"gravity, for k_r = {restitutions}, stepped by the lecture's update at "
-            f"{1000 * dt:g} ms with the reference collision pass between steps. Middle: one "
-            "floor collision's V, V_N, V_T and V' = V_T − k_r V_N, taken from the run (the records "
-            "either side of the contact); right: the normal speed after against before for "
-            f"every bounce off the floor and the side walls ({len(measured)}, found by the "
-            "harness's bounce detector, "
-            "truestep.restitution, from the records before and after each contact, which lasts "
-            f"while the particle is within {1000 * CONTACT_BAND:g} mm of the floor), on the lines "
-            f"of slope k_r: every rebound speed is within {worst:.3f} m/s of k_r times the impact "
-            f"speed (gravity changes the speed by g dt = {g * dt:.3f} m/s per step).")
+    return (
+        'Reproduces the lecture slides "Bouncing off the Walls", "Normal and Tangential '
+        'Components", "Collision Detection" and "Collision Response" (coefficient of '
+        f"restitution): a point particle in a {bx[1] - bx[0]:g} m box of {planes} planes under "
+        f"gravity, for k_r = {restitutions}, stepped by the lecture's update at "
+        f"{1000 * dt:g} ms with the reference collision pass between steps. Middle: one "
+        "floor collision's V, V_N, V_T and V' = V_T − k_r V_N, taken from the run (the records "
+        "either side of the contact); right: the normal speed after against before for "
+        f"every bounce off the floor and the side walls ({len(measured)}, found by the "
+        "harness's bounce detector, "
+        "truestep.restitution, from the records before and after each contact, which lasts "
+        f"while the particle is within {1000 * CONTACT_BAND:g} mm of the floor), on the lines "
+        f"of slope k_r: every rebound speed is within {worst:.3f} m/s of k_r times the impact "
+        f"speed (gravity changes the speed by g dt = {g * dt:.3f} m/s per step)."
+    )
 
 
 # -- 12. contact: a particle moving along the wall ------------------------------------------------
@@ -217,44 +235,77 @@ def fig_contact(path: Path) -> str:
     hops = [b for b in bounces(t, d, vn, g * np.cos(angle)) if b.v_out > 0]
 
     fig = plt.figure(figsize=(15, 5.6))
-    grid = fig.add_gridspec(2, 3, width_ratios=[1.5, 1, 1], hspace=0.08, wspace=0.3, left=0.05,
-                            right=0.98, bottom=0.1, top=0.88)
+    grid = fig.add_gridspec(
+        2, 3, width_ratios=[1.5, 1, 1], hspace=0.08, wspace=0.3, left=0.05, right=0.98, bottom=0.1, top=0.88
+    )
     ax = fig.add_subplot(grid[:, 0])
     along = x @ down
     span = np.array([-0.3, along[-1] + 0.3])
-    ax.fill([span[0] * down[0], span[1] * down[0], span[0] * down[0]],
-            [span[0] * down[1], span[1] * down[1], span[1] * down[1]], color="0.88", zorder=0)
+    ax.fill(
+        [span[0] * down[0], span[1] * down[0], span[0] * down[0]],
+        [span[0] * down[1], span[1] * down[1], span[1] * down[1]],
+        color="0.88",
+        zorder=0,
+    )
     ax.plot(span * down[0], span * down[1], color="black", linewidth=1.5)
-    ax.plot(x[: first + 1, 0], x[: first + 1, 1], color=SCENE_COLOURS[0], linewidth=1.4,
-            label=f"bouncing: collision response, k_r = {plane.restitution:g}")
-    ax.plot(x[first:, 0], x[first:, 1], color=SCENE_COLOURS[1], linewidth=4.0, alpha=0.8,
-            label=f"in contact from t = {t[first]:.2f} s: sliding along the wall")
+    ax.plot(
+        x[: first + 1, 0],
+        x[: first + 1, 1],
+        color=SCENE_COLOURS[0],
+        linewidth=1.4,
+        label=f"bouncing: collision response, k_r = {plane.restitution:g}",
+    )
+    ax.plot(
+        x[first:, 0],
+        x[first:, 1],
+        color=SCENE_COLOURS[1],
+        linewidth=4.0,
+        alpha=0.8,
+        label=f"in contact from t = {t[first]:.2f} s: sliding along the wall",
+    )
     f = m.mass[0] * gravity
     fn = (f @ normal) * normal
     sc = 0.04
     lo_x, hi_x = span[1] * down[0] - 0.05, span[0] * down[0] + 0.05
     q = np.array([lo_x + 0.3 * (hi_x - lo_x), 0.4, 0.0])  # free space above the wall
-    ax.plot(*np.stack([q - 0.3 * down, q + 0.3 * down])[:, :2].T, color="black", linewidth=0.8,
-            linestyle="--")
+    ax.plot(
+        *np.stack([q - 0.3 * down, q + 0.3 * down])[:, :2].T, color="black", linewidth=0.8, linestyle="--"
+    )
     arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.007, "zorder": 5}
     ax.quiver(*q[:2], *(sc * f[:2]), color="black", **arrow)
     ax.quiver(*q[:2], *(sc * fn[:2]), color=SCENE_COLOURS[2], **arrow)
     ax.quiver(*q[:2], *(sc * (f - fn)[:2]), color=SCENE_COLOURS[3], **arrow)
     ax.plot(*q[:2], "o", color=SCENE_COLOURS[1], markersize=7, zorder=6)
     ax.annotate("F = m g", q[:2] + sc * f[:2] + np.array([-0.03, -0.02]), fontsize=10, ha="right")
-    ax.annotate("F_N: the wall cancels it", q[:2] + sc * fn[:2] + np.array([0.04, -0.02]),
-                fontsize=10, color=SCENE_COLOURS[2])
-    ax.annotate("F' = F_T", q[:2] + sc * (f - fn)[:2] + np.array([-0.04, 0.03]), fontsize=10,
-                color=SCENE_COLOURS[3], ha="right")
-    ax.annotate("forces on the particle in contact\n(dashed: parallel to the wall)",
-                q[:2] + np.array([0.0, 0.1]), fontsize=9, ha="center")
+    ax.annotate(
+        "F_N: the wall cancels it",
+        q[:2] + sc * fn[:2] + np.array([0.04, -0.02]),
+        fontsize=10,
+        color=SCENE_COLOURS[2],
+    )
+    ax.annotate(
+        "F' = F_T",
+        q[:2] + sc * (f - fn)[:2] + np.array([-0.04, 0.03]),
+        fontsize=10,
+        color=SCENE_COLOURS[3],
+        ha="right",
+    )
+    ax.annotate(
+        "forces on the particle in contact\n(dashed: parallel to the wall)",
+        q[:2] + np.array([0.0, 0.1]),
+        fontsize=9,
+        ha="center",
+    )
     ax.set_xlim(lo_x, hi_x)
     ax.set_ylim(span[1] * down[1] - 0.05, 0.75)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m, up)")
-    ax.set_title(f"A point dropped {drop:g} m onto a frictionless {np.degrees(angle):.0f}° wall\n"
-                 f"(force arrows for m = {m.mass[0]:g} kg, {sc:g} m per N)", fontsize=10)
+    ax.set_title(
+        f"A point dropped {drop:g} m onto a frictionless {np.degrees(angle):.0f}° wall\n"
+        f"(force arrows for m = {m.mass[0]:g} kg, {sc:g} m per N)",
+        fontsize=10,
+    )
     ax.legend(loc="lower right", fontsize=8, frameon=False)
 
     ax_d = fig.add_subplot(grid[0, 1])
@@ -265,8 +316,9 @@ def fig_contact(path: Path) -> str:
         a_.axvspan(t[first], t[-1], color=SCENE_COLOURS[1], alpha=0.15)
         a_.axhline(0.0, color="0.5", linewidth=0.6)
         a_.grid(True, alpha=0.3)
-    ax_d.text(t[first] + 0.02, 0.85 * 1000 * d.max(), "contact:\n(X − P)·N = 0\nN·V = 0",
-              fontsize=9, va="top")
+    ax_d.text(
+        t[first] + 0.02, 0.85 * 1000 * d.max(), "contact:\n(X − P)·N = 0\nN·V = 0", fontsize=9, va="top"
+    )
     ax_d.set_ylabel("(X − P)·N (mm)")
     ax_v.set_ylabel("N·V (m/s)")
     ax_v.set_xlabel("time (s)")
@@ -280,21 +332,26 @@ def fig_contact(path: Path) -> str:
     ax.axvspan(t[first], t[-1], color=SCENE_COLOURS[1], alpha=0.15)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("distance down the slope (m)")
-    ax.set_title(f"Along the wall: a = g sin θ = {g_t:.2f} m/s² throughout\n"
-                 f"(largest deviation from exact {err:.0e} m)", fontsize=10)
+    ax.set_title(
+        f"Along the wall: a = g sin θ = {g_t:.2f} m/s² throughout\n"
+        f"(largest deviation from exact {err:.0e} m)",
+        fontsize=10,
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper left", fontsize=8, frameon=False)
     save_figure(fig, path)
     ratios = [b.e_velocity for b in hops]
-    return ('Reproduces the lecture slides "Conditions for Contact" and "Contact Force" '
-            "(F' = F_T: the wall pushes back, cancelling the normal component of F): a point "
-            f"mass dropped {drop:g} m onto a frictionless plane inclined at "
-            f"{np.degrees(angle):.0f}° (k_r = {plane.restitution:g}), stepped by the lecture's "
-            f"update at {1000 * dt:g} ms. Its bounces shrink (the harness's bounce detector finds "
-            f"{len(hops)} that rise above its {1000 * CONTACT_BAND:g} mm contact band, rebounding "
-            f"at {min(ratios):.2f} to {max(ratios):.2f} times the impact speed) until, at "
-            f"t = {t[first]:.2f} s, it is on the wall, moving along it and "
-            "pushing against it; the reference contact pass then holds its normal distance and "
-            "velocity at zero to the end and the force becomes F_T, so it slides with "
-            f"a = g sin θ. Neither the collisions nor the contact touch the tangential motion, "
-            f"which follows ½ g sin θ t² throughout (to {err:.0e} m).")
+    return (
+        'Reproduces the lecture slides "Conditions for Contact" and "Contact Force" '
+        "(F' = F_T: the wall pushes back, cancelling the normal component of F): a point "
+        f"mass dropped {drop:g} m onto a frictionless plane inclined at "
+        f"{np.degrees(angle):.0f}° (k_r = {plane.restitution:g}), stepped by the lecture's "
+        f"update at {1000 * dt:g} ms. Its bounces shrink (the harness's bounce detector finds "
+        f"{len(hops)} that rise above its {1000 * CONTACT_BAND:g} mm contact band, rebounding "
+        f"at {min(ratios):.2f} to {max(ratios):.2f} times the impact speed) until, at "
+        f"t = {t[first]:.2f} s, it is on the wall, moving along it and "
+        "pushing against it; the reference contact pass then holds its normal distance and "
+        "velocity at zero to the end and the force becomes F_T, so it slides with "
+        f"a = g sin θ. Neither the collisions nor the contact touch the tangential motion, "
+        f"which follows ½ g sin θ t² throughout (to {err:.0e} m)."
+    )

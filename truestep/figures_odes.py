@@ -86,8 +86,17 @@ def fig_vector_field(path: Path) -> str:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.6))
     for ax, grey in zip(axes, ("0.3", "0.7"), strict=True):
-        ax.quiver(pts[:, 0], pts[:, 1], f[:, 0], f[:, 1], color=grey, angles="xy",
-                  scale_units="xy", scale=10.0, width=0.004)
+        ax.quiver(
+            pts[:, 0],
+            pts[:, 1],
+            f[:, 0],
+            f[:, 1],
+            color=grey,
+            angles="xy",
+            scale_units="xy",
+            scale=10.0,
+            width=0.004,
+        )
         ax.set_aspect("equal")
         ax.set_xlim(-2.25, 2.25)
         ax.set_ylim(-2.25, 2.25)
@@ -96,23 +105,40 @@ def fig_vector_field(path: Path) -> str:
     axes[0].set_title("Vector Field: x' = f(x) = (−y, x) at every point")
     for k, (r, s) in enumerate(zip(runs, starts, strict=True)):
         y = ode_states(r)
-        axes[1].plot(y[:, 0], y[:, 1], markevery=4,
-                     label=f"integral curve: reference / dopri5, tolerance {tol:g}" if k == 0 else None,
-                     **reference_style("dopri5", linewidth=2.0))
-        axes[1].plot(*s, "o", color=SCENE_COLOURS[0], markersize=8, zorder=5,
-                     label="starting point" if k == 0 else None)
-    axes[1].annotate("Start Here", starts[2], xytext=(0.45, -2.05), fontsize=10,
-                     arrowprops={"arrowstyle": "->", "color": "black"})
+        axes[1].plot(
+            y[:, 0],
+            y[:, 1],
+            markevery=4,
+            label=f"integral curve: reference / dopri5, tolerance {tol:g}" if k == 0 else None,
+            **reference_style("dopri5", linewidth=2.0),
+        )
+        axes[1].plot(
+            *s,
+            "o",
+            color=SCENE_COLOURS[0],
+            markersize=8,
+            zorder=5,
+            label="starting point" if k == 0 else None,
+        )
+    axes[1].annotate(
+        "Start Here",
+        starts[2],
+        xytext=(0.45, -2.05),
+        fontsize=10,
+        arrowprops={"arrowstyle": "->", "color": "black"},
+    )
     axes[1].set_title("Integral Curves: pick any starting point, follow the vectors")
     legend_below(axes[1])
     fig.tight_layout()
     save_figure(fig, path)
-    return ('Reproduces the lecture slides "Vector Field", "Integral Curves" and "Initial Value '
-            "Problems\" (Differential Equation Basics): the field x' = (−y, x) drawn as arrows, "
-            f"and the integral curves through {len(starts)} starting points, followed over one "
-            f"period ({case.duration:.4g}) by the reference's adaptive Dormand-Prince solver "
-            f"(tolerance {tol:g}); each closes into a circle: back within {closure:.0e} of its "
-            f"start, its radius kept to {drift:.0e} relative.")
+    return (
+        'Reproduces the lecture slides "Vector Field", "Integral Curves" and "Initial Value '
+        "Problems\" (Differential Equation Basics): the field x' = (−y, x) drawn as arrows, "
+        f"and the integral curves through {len(starts)} starting points, followed over one "
+        f"period ({case.duration:.4g}) by the reference's adaptive Dormand-Prince solver "
+        f"(tolerance {tol:g}); each closes into a circle: back within {closure:.0e} of its "
+        f"start, its radius kept to {drift:.0e} relative."
+    )
 
 
 # -- 2. Euler's spiral ----------------------------------------------------------------------
@@ -135,9 +161,12 @@ def fig_euler_spiral(path: Path) -> str:
         every = max(1, len(traj.t) // 30)
         axes[0].plot(y[:, 0], y[:, 1], markevery=every, label=f"Euler, h = {dt:g}", **style)
         axes[1].plot(traj.t[1:], r[1:] - 1.0, markevery=every, label=f"Euler, h = {dt:g}", **style)
-        axes[1].plot(traj.t[1:], growth[1:] - 1, label=(
-            "(1 + h²)^(n/2) − 1: Euler's growth per step, exact" if k == 0 else None),
-            **exact_style())
+        axes[1].plot(
+            traj.t[1:],
+            growth[1:] - 1,
+            label=("(1 + h²)^(n/2) − 1: Euler's growth per step, exact" if k == 0 else None),
+            **exact_style(),
+        )
     turns = case.duration / (2 * np.pi)
     axes[0].set_aspect("equal")
     axes[0].set_xlabel("x (dimensionless)")
@@ -147,8 +176,9 @@ def fig_euler_spiral(path: Path) -> str:
     axes[1].set_yscale("log")
     axes[1].set_xlabel(f"time t ({case.duration:g}: {turns:.2f} periods of 2π)")
     axes[1].set_ylabel("radius error r(t) − 1")
-    axes[1].set_title("Smaller steps: slower growth, still growing" if growing
-                      else "Radius error of every run")
+    axes[1].set_title(
+        "Smaller steps: slower growth, still growing" if growing else "Radius error of every run"
+    )
     axes[1].grid(True, which="major", alpha=0.3)
     legend_below(axes[1])
     fig.tight_layout()
@@ -156,14 +186,19 @@ def fig_euler_spiral(path: Path) -> str:
     shown = ", ".join(f"{r:.2f} at h = {h:g}" for h, r in zip(steps, finals, strict=True))
     excess = np.array(finals) - 1.0
     cuts = " and ".join(f"{a / b:.1f}" for a, b in pairwise(excess))
-    still = ("it still grows at every step of every run" if growing
-             else "it does not grow at every step of every run")
-    return ('Reproduces the lecture slide "Problem I: Inaccuracy" (Euler\'s method): explicit '
-            f"Euler on the circle field for {len(steps)} step sizes turns the circle into a spiral; "
-            f"the radius after {turns:.2f} turns is {shown} (exact: 1). Each halving of the step "
-            f"divides the excess r − 1 only by {cuts}: it slows the error's growth, but {still}. "
-            "Every run follows Euler's exact growth factor sqrt(1 + h²) per step (to "
-            f"{worst:.0e} relative, round-off).")
+    still = (
+        "it still grows at every step of every run"
+        if growing
+        else "it does not grow at every step of every run"
+    )
+    return (
+        'Reproduces the lecture slide "Problem I: Inaccuracy" (Euler\'s method): explicit '
+        f"Euler on the circle field for {len(steps)} step sizes turns the circle into a spiral; "
+        f"the radius after {turns:.2f} turns is {shown} (exact: 1). Each halving of the step "
+        f"divides the excess r − 1 only by {cuts}: it slows the error's growth, but {still}. "
+        "Every run follows Euler's exact growth factor sqrt(1 + h²) per step (to "
+        f"{worst:.0e} relative, round-off)."
+    )
 
 
 # -- 3. Euler's instability -------------------------------------------------------------------
@@ -200,8 +235,13 @@ def fig_euler_instability(path: Path) -> str:
     axes[0].set_xlim(0, 15)
     axes[0].set_ylim(-4, 4)
     axes[0].axhline(0, color="0.6", linewidth=0.6)
-    axes[0].annotate("to Neptune!", xy=(9.75, 3.85), xytext=(3.2, 3.0), fontsize=11,
-                     arrowprops={"arrowstyle": "->", "color": "black"})
+    axes[0].annotate(
+        "to Neptune!",
+        xy=(9.75, 3.85),
+        xytext=(3.2, 3.0),
+        fontsize=11,
+        arrowprops={"arrowstyle": "->", "color": "black"},
+    )
     axes[0].set_title(f"v' = −k v, k = b/m = {k_rate:g}/s, from v = {v0:g} m/s")
     axes[0].set_ylabel("velocity v (m/s)")
     axes[1].set_yscale("log")
@@ -215,13 +255,16 @@ def fig_euler_instability(path: Path) -> str:
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.1, 1, 1))
     save_figure(fig, path)
-    runs = "; ".join(f"at kh = {kh:g} it multiplies v by {f:+g} per step and {verdict}"
-                     for kh, f, verdict in said)
-    return ('Reproduces the lecture slide "Problem II: Instability" ("to Neptune!"): the test '
-            f"equation x' = −kx as the velocity of a {m.mass[0]:g} kg particle under viscous drag "
-            f"b = {m.drag:g} N s/m (v' = −(b/m) v, k = {k_rate:g}/s), stepped by explicit Euler, "
-            f"which multiplies v by (1 − kh) per step: {runs}, while the exact solution decays "
-            "(the stability limit of Euler on this equation is kh = 2).")
+    runs = "; ".join(
+        f"at kh = {kh:g} it multiplies v by {f:+g} per step and {verdict}" for kh, f, verdict in said
+    )
+    return (
+        'Reproduces the lecture slide "Problem II: Instability" ("to Neptune!"): the test '
+        f"equation x' = −kx as the velocity of a {m.mass[0]:g} kg particle under viscous drag "
+        f"b = {m.drag:g} N s/m (v' = −(b/m) v, k = {k_rate:g}/s), stepped by explicit Euler, "
+        f"which multiplies v by (1 − kh) per step: {runs}, while the exact solution decays "
+        "(the stability limit of Euler on this equation is kh = 2)."
+    )
 
 
 # -- 4. midpoint against Euler -----------------------------------------------------------------
@@ -244,12 +287,15 @@ def _midpoint_diagram(ax: plt.Axes, case) -> None:
     ax.plot(*xm, "o", color=SCENE_COLOURS[0], markersize=7, zorder=5)
     ax.plot(*x0, "o", color="black", markersize=7, zorder=5)
     ax.annotate("x(t)", x0 + np.array([0.05, -0.03]), fontsize=10)
-    ax.annotate("a", x0 + 0.75 * dx + np.array([0.04, 0.0]), fontsize=12, color=euler_c,
-                weight="bold")
-    ax.annotate("b", xm + 0.25 * hs * f_mid + np.array([0.05, 0.03]), fontsize=12,
-                color=SCENE_COLOURS[0], weight="bold")
-    ax.annotate("c", 0.5 * (x0 + x_mid) + np.array([-0.1, 0.0]), fontsize=12, color=mid_c,
-                weight="bold")
+    ax.annotate("a", x0 + 0.75 * dx + np.array([0.04, 0.0]), fontsize=12, color=euler_c, weight="bold")
+    ax.annotate(
+        "b",
+        xm + 0.25 * hs * f_mid + np.array([0.05, 0.03]),
+        fontsize=12,
+        color=SCENE_COLOURS[0],
+        weight="bold",
+    )
+    ax.annotate("c", 0.5 * (x0 + x_mid) + np.array([-0.1, 0.0]), fontsize=12, color=mid_c, weight="bold")
     ax.set_xlim(0.0, 1.5)
     ax.set_ylim(-0.2, 1.2)
     ax.set_aspect("equal")
@@ -258,13 +304,20 @@ def _midpoint_diagram(ax: plt.Axes, case) -> None:
     ax.set_ylabel("y (dimensionless)")
     handles = [
         plt.Line2D([], [], color=euler_c, lw=3, label="a. Euler step Δx = Δt f(x, t)"),
-        plt.Line2D([], [], color=SCENE_COLOURS[0], lw=3, marker="o",
-                   label="b. f_mid = f(x + Δx/2, t + Δt/2) (drawn × Δt/2)"),
+        plt.Line2D(
+            [],
+            [],
+            color=SCENE_COLOURS[0],
+            lw=3,
+            marker="o",
+            label="b. f_mid = f(x + Δx/2, t + Δt/2) (drawn × Δt/2)",
+        ),
         plt.Line2D([], [], color=mid_c, lw=3, label="c. x(t + Δt) = x(t) + Δt f_mid"),
         plt.Line2D([], [], **exact_style(), label="exact integral curve"),
     ]
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=1, fontsize=8,
-              frameon=False)
+    ax.legend(
+        handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=1, fontsize=8, frameon=False
+    )
 
 
 def fig_midpoint(path: Path) -> str:
@@ -295,8 +348,13 @@ def fig_midpoint(path: Path) -> str:
             r = _radius(traj)
             final[method, hh] = abs(r[-1] - 1.0)
             every = max(1, len(traj.t) // 15)
-            ax.plot(traj.t[1:], r[1:] - 1.0, markevery=every, label=f"{method}, h = {hh:g}",
-                    **reference_style(method, k, len(MIDPOINT_STEPS)))
+            ax.plot(
+                traj.t[1:],
+                r[1:] - 1.0,
+                markevery=every,
+                label=f"{method}, h = {hh:g}",
+                **reference_style(method, k, len(MIDPOINT_STEPS)),
+            )
     ax.set_yscale("log")
     ax.grid(True, which="major", alpha=0.3)
     ax.set_xlabel(f"time t ({case.duration:g}: {case.duration / (2 * np.pi):.2f} periods of 2π)")
@@ -306,12 +364,16 @@ def fig_midpoint(path: Path) -> str:
     legend_below(ax)
     fig.tight_layout()
     save_figure(fig, path)
-    ratios = " and ".join(f"{final['euler', hh] / final['midpoint', hh]:.0f} times smaller at "
-                          f"h = {hh:g}" for hh in MIDPOINT_STEPS)
-    return ('Reproduces the lecture slide "The Midpoint Method": (a) an Euler step, (b) the '
-            "field evaluated at the midpoint, (c) a full step with the midpoint slope, here "
-            "one step of the reference midpoint solver drawn with the field values it uses "
-            "(the slide's (x + Δx)/2 means x + Δx/2). Left and right: Euler's spiral against "
-            f"midpoint on the circle field (orders {orders['euler']} and {orders['midpoint']}); "
-            f"after {case.duration / (2 * np.pi):.2f} turns midpoint's radius error is {ratios} "
-            "than Euler's.")
+    ratios = " and ".join(
+        f"{final['euler', hh] / final['midpoint', hh]:.0f} times smaller at h = {hh:g}"
+        for hh in MIDPOINT_STEPS
+    )
+    return (
+        'Reproduces the lecture slide "The Midpoint Method": (a) an Euler step, (b) the '
+        "field evaluated at the midpoint, (c) a full step with the midpoint slope, here "
+        "one step of the reference midpoint solver drawn with the field values it uses "
+        "(the slide's (x + Δx)/2 means x + Δx/2). Left and right: Euler's spiral against "
+        f"midpoint on the circle field (orders {orders['euler']} and {orders['midpoint']}); "
+        f"after {case.duration / (2 * np.pi):.2f} turns midpoint's radius error is {ratios} "
+        "than Euler's."
+    )

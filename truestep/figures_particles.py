@@ -87,8 +87,15 @@ def _lives(case: Case, alive: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.where(ever, np.argmax(alive, axis=0), -1), alive.sum(axis=0)
 
 
-def _render_attributes(spec: EmitterSpec, gravity: np.ndarray, age: np.ndarray, lifespan: np.ndarray,
-                       x: np.ndarray, v: np.ndarray, alive: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _render_attributes(
+    spec: EmitterSpec,
+    gravity: np.ndarray,
+    age: np.ndarray,
+    lifespan: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    alive: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """The lecture's particle attributes at one record, as the reference emitter computes
     them (:meth:`Emitter.colors`, :meth:`Emitter.shapes`): RGBA (n, 4) and ellipse
     semi-axes (n, 2) m, from ages and lifespans (frames) and the recorded state (n, 3)."""
@@ -121,10 +128,23 @@ def simulate_fountain(case: Case | None = None, *, target: int = FOUNTAIN_TARGET
     if np.any(whole & alive[-1]):
         raise RuntimeError(f"{case.name}: particles the figures draw outlive the run; lengthen it")
     spawned = np.bincount(born[born >= 0], minlength=len(traj.t))
-    colors, shapes = _render_attributes(spec, case.model.gravity, s - born, lifespan,
-                                        traj.x[s], traj.v[s], alive[s])
-    return Fountain(case, spec, EmitterCounts(population, spawned, 0), traj.t, traj.x, traj.v,
-                    alive, born, lifespan, s, colors, shapes)
+    colors, shapes = _render_attributes(
+        spec, case.model.gravity, s - born, lifespan, traj.x[s], traj.v[s], alive[s]
+    )
+    return Fountain(
+        case,
+        spec,
+        EmitterCounts(population, spawned, 0),
+        traj.t,
+        traj.x,
+        traj.v,
+        alive,
+        born,
+        lifespan,
+        s,
+        colors,
+        shapes,
+    )
 
 
 def _night(ax: plt.Axes, view: tuple = FOUNTAIN_VIEW) -> None:
@@ -163,8 +183,12 @@ def _add_night_3d(fig: plt.Figure, spec: object) -> plt.Axes:
 def _emitter_outline(ax: plt.Axes, spec: EmitterSpec) -> None:
     h = spec.size / 2
     cx, cy = spec.center[:2]
-    ax.plot([cx - h, cx + h, cx + h, cx - h, cx - h], [cy - h, cy - h, cy + h, cy + h, cy - h],
-            color="white", linewidth=0.8)
+    ax.plot(
+        [cx - h, cx + h, cx + h, cx - h, cx - h],
+        [cy - h, cy - h, cy + h, cy + h, cy - h],
+        color="white",
+        linewidth=0.8,
+    )
 
 
 def fig_fountain(path: Path, fountain: Fountain) -> str:
@@ -175,17 +199,30 @@ def fig_fountain(path: Path, fountain: Fountain) -> str:
     pos, vel = f.x[s][live], f.v[s][live]
     rgba, semi = f.colors[live], f.shapes[live]
     fig = plt.figure(figsize=(15, 6.0))
-    grid = fig.add_gridspec(1, 3, width_ratios=[1, 1.1, 1], left=0.05, right=0.98, bottom=0.1,
-                            top=0.88, wspace=0.22)
+    grid = fig.add_gridspec(
+        1, 3, width_ratios=[1, 1.1, 1], left=0.05, right=0.98, bottom=0.1, top=0.88, wspace=0.22
+    )
     ax = fig.add_subplot(grid[0])
     angles = np.degrees(np.arctan2(vel[:, 1], vel[:, 0]))
-    ax.add_collection(EllipseCollection(2 * semi[:, 0], 2 * semi[:, 1], angles, units="xy",
-                                        offsets=pos[:, :2], offset_transform=ax.transData,
-                                        facecolors=rgba, edgecolors="none"))
+    ax.add_collection(
+        EllipseCollection(
+            2 * semi[:, 0],
+            2 * semi[:, 1],
+            angles,
+            units="xy",
+            offsets=pos[:, :2],
+            offset_transform=ax.transData,
+            facecolors=rgba,
+            edgecolors="none",
+        )
+    )
     _night(ax)
     _emitter_outline(ax, spec)
-    ax.set_title(f"Side view at frame {s} (t = {f.t[s]:.2f} s): {live.sum()} live particles,\n"
-                 "ellipses stretched along the velocity by one frame's travel", fontsize=10)
+    ax.set_title(
+        f"Side view at frame {s} (t = {f.t[s]:.2f} s): {live.sum()} live particles,\n"
+        "ellipses stretched along the velocity by one frame's travel",
+        fontsize=10,
+    )
 
     ax3 = _add_night_3d(fig, grid[1])
     p3 = _up(pos)
@@ -200,32 +237,49 @@ def fig_fountain(path: Path, fountain: Fountain) -> str:
     expected = mean * np.cumsum([(lives > a).mean() for a in frames])
     steady = frames >= lives.max()
     off = np.max(np.abs(population[steady] / expected[steady] - 1)) if steady.any() else np.nan
-    ax.plot(frames, population, color=SCENE_COLOURS[0], linewidth=1.8, marker="o", markersize=3,
-            label="live particles (reference emitter)")
+    ax.plot(
+        frames,
+        population,
+        color=SCENE_COLOURS[0],
+        linewidth=1.8,
+        marker="o",
+        markersize=3,
+        label="live particles (reference emitter)",
+    )
     ax.plot(frames, expected, label="expected: (n + r/2) Σ P(lifetime > age)", **exact_style())
     ax.axvline(s, color="0.5", linewidth=0.8, linestyle=":")
     ax.axhline(FOUNTAIN_TARGET, color="0.5", linewidth=0.8, linestyle=":")
-    ax.annotate("the snapshot", (s, FOUNTAIN_TARGET), xytext=(s - 8, FOUNTAIN_TARGET / 2), fontsize=9,
-                arrowprops={"arrowstyle": "->", "color": "0.3"})
+    ax.annotate(
+        "the snapshot",
+        (s, FOUNTAIN_TARGET),
+        xytext=(s - 8, FOUNTAIN_TARGET / 2),
+        fontsize=9,
+        arrowprops={"arrowstyle": "->", "color": "0.3"},
+    )
     ax.set_xlabel(f"frame (1/{1 / spec.frame_dt:.0f} s each)")
     ax.set_ylabel("particles alive")
-    ax.set_title(f"# new per frame = n + Rand() r, n = {spec.rate_n:g}, r = {spec.rate_r:g};\n"
-                 f"lifetime {spec.lifetime} ± {spec.lifetime_jitter} frames", fontsize=10)
+    ax.set_title(
+        f"# new per frame = n + Rand() r, n = {spec.rate_n:g}, r = {spec.rate_r:g};\n"
+        f"lifetime {spec.lifetime} ± {spec.lifetime_jitter} frames",
+        fontsize=10,
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(loc="lower right", fontsize=8, frameon=False)
     save_figure(fig, path)
     g = float(np.linalg.norm(f.case.model.gravity))
-    return ('Reproduces the lecture slide "A cube emitting 5000 animated particles, obeying a '
-            "'gravitational' force in -Y direction\" (Snowflakes vs Hair): the reference emitter "
-            f"sprays from all six faces of a {spec.size:g} m cube along the face normals "
-            f"({spec.speed:g} m/s ± {100 * spec.speed_jitter:g} %, within {spec.spread:g} rad), "
-            f"one lecture-update step per frame at {1 / spec.frame_dt:.0f} frames/s under "
-            f"g = {g:g} m/s² along −y; drawn at the first frame with at least {FOUNTAIN_TARGET} "
-            f"particles alive ({live.sum()} at frame {s}). Colour goes from yellow at birth to red "
-            f"at death; opacity falls with age and with height (e-folding {spec.fade_height:g} m); "
-            "each particle is an ellipse stretched along its velocity: the lecture's particle "
-            "attributes, drawn as point light sources. Right: the population against its "
-            f"expectation, which it follows to {100 * off:.1f} % once the first particles expire.")
+    return (
+        'Reproduces the lecture slide "A cube emitting 5000 animated particles, obeying a '
+        "'gravitational' force in -Y direction\" (Snowflakes vs Hair): the reference emitter "
+        f"sprays from all six faces of a {spec.size:g} m cube along the face normals "
+        f"({spec.speed:g} m/s ± {100 * spec.speed_jitter:g} %, within {spec.spread:g} rad), "
+        f"one lecture-update step per frame at {1 / spec.frame_dt:.0f} frames/s under "
+        f"g = {g:g} m/s² along −y; drawn at the first frame with at least {FOUNTAIN_TARGET} "
+        f"particles alive ({live.sum()} at frame {s}). Colour goes from yellow at birth to red "
+        f"at death; opacity falls with age and with height (e-folding {spec.fade_height:g} m); "
+        "each particle is an ellipse stretched along its velocity: the lecture's particle "
+        "attributes, drawn as point light sources. Right: the population against its "
+        f"expectation, which it follows to {100 * off:.1f} % once the first particles expire."
+    )
 
 
 def _strand_segments(st: Strands) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -246,8 +300,9 @@ def _draw_strands(ax: plt.Axes, seg: np.ndarray, thick: np.ndarray, colours: np.
     ax.apply_aspect()
     width_in = ax.get_position().width * fig.get_figwidth()
     pt_per_m = width_in * 72 / np.ptp(ax.get_xlim())
-    ax.add_collection(LineCollection(seg[:, :, :2], linewidths=thick * pt_per_m, colors=colours,
-                                     alpha=0.6, capstyle="butt"))
+    ax.add_collection(
+        LineCollection(seg[:, :, :2], linewidths=thick * pt_per_m, colors=colours, alpha=0.6, capstyle="butt")
+    )
 
 
 def fig_strands(path: Path, fountain: Fountain) -> str:
@@ -268,30 +323,44 @@ def fig_strands(path: Path, fountain: Fountain) -> str:
     _draw_strands(ax, seg, thick, colours)
     _emitter_outline(ax, spec)
     (zx0, zx1), (zy0, zy1) = zoom
-    ax.plot([zx0, zx1, zx1, zx0, zx0], [zy0, zy0, zy1, zy1, zy0], color="white", linewidth=0.8,
-            linestyle="--")
-    ax.set_title(f"{len(sub)} strands: every particle born in the first {STRAND_FRAMES} frames,\n"
-                 "its whole life drawn at once", fontsize=10)
+    ax.plot(
+        [zx0, zx1, zx1, zx0, zx0], [zy0, zy0, zy1, zy1, zy0], color="white", linewidth=0.8, linestyle="--"
+    )
+    ax.set_title(
+        f"{len(sub)} strands: every particle born in the first {STRAND_FRAMES} frames,\n"
+        "its whole life drawn at once",
+        fontsize=10,
+    )
     ax = fig.add_subplot(grid[1])
     _night(ax, zoom)
     margin = 0.5  # m, longer than any segment (one frame's travel), so none is cut off
-    inside = np.any((seg[:, :, 0] > zx0 - margin) & (seg[:, :, 0] < zx1 + margin)
-                    & (seg[:, :, 1] > zy0 - margin) & (seg[:, :, 1] < zy1 + margin), axis=1)
+    inside = np.any(
+        (seg[:, :, 0] > zx0 - margin)
+        & (seg[:, :, 0] < zx1 + margin)
+        & (seg[:, :, 1] > zy0 - margin)
+        & (seg[:, :, 1] < zy1 + margin),
+        axis=1,
+    )
     _draw_strands(ax, seg[inside], thick[inside], colours[inside])
     _emitter_outline(ax, spec)
-    ax.set_title(f"Zoom on the dashed box, thickness to scale: {1000 * root:.0f} mm at the root "
-                 f"(twice the particle size),\ntapering to {100 * (1 - STRAND_TAPER):.0f} % of it "
-                 "at the tip", fontsize=10)
+    ax.set_title(
+        f"Zoom on the dashed box, thickness to scale: {1000 * root:.0f} mm at the root "
+        f"(twice the particle size),\ntapering to {100 * (1 - STRAND_TAPER):.0f} % of it "
+        "at the tip",
+        fontsize=10,
+    )
     sm = plt.cm.ScalarMappable(norm=mcolors.Normalize(0, 1), cmap=cmap)
     fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, label="fraction of the particle's life")
     fig.tight_layout()
     save_figure(fig, path)
     lengths = sub.lengths()
-    return ('Reproduces the lecture slide "The same cube emitter rendered using static particles, '
-            'or strands" (Snowflakes vs Hair): the emitter and forces of the fountain figure, but '
-            f"each of the {len(sub)} particles born in its first {STRAND_FRAMES} frames drawn over "
-            "its whole life at once, as a polyline through its positions frame by frame "
-            f"(truestep.reference_impl.strands), {lengths.min():.1f} to {lengths.max():.1f} m long. "
-            f"Each strand is {1000 * root:.0f} mm thick at the root (twice the emitter's particle "
-            f"size), tapering linearly along the strand to {100 * (1 - STRAND_TAPER):.0f} %; colour "
-            "runs from birth to death as in the fountain.")
+    return (
+        'Reproduces the lecture slide "The same cube emitter rendered using static particles, '
+        'or strands" (Snowflakes vs Hair): the emitter and forces of the fountain figure, but '
+        f"each of the {len(sub)} particles born in its first {STRAND_FRAMES} frames drawn over "
+        "its whole life at once, as a polyline through its positions frame by frame "
+        f"(truestep.reference_impl.strands), {lengths.min():.1f} to {lengths.max():.1f} m long. "
+        f"Each strand is {1000 * root:.0f} mm thick at the root (twice the emitter's particle "
+        f"size), tapering linearly along the strand to {100 * (1 - STRAND_TAPER):.0f} %; colour "
+        "runs from birth to death as in the fountain."
+    )

@@ -46,15 +46,27 @@ def fig_springs(path: Path) -> str:
         exact = EXACT[case.exact](case, traj.t)
         x = traj.x[:, 0, 0]
         measured.append((traj.energy, decay_rate(traj.t, x), np.max(np.abs(traj.x - exact.x))))
-        axes[0, col].plot(traj.t, x, markevery=25, label=f"reference / {method}, dt = {dt:g} s",
-                          **reference_style(method, linewidth=1.6))
+        axes[0, col].plot(
+            traj.t,
+            x,
+            markevery=25,
+            label=f"reference / {method}, dt = {dt:g} s",
+            **reference_style(method, linewidth=1.6),
+        )
         axes[0, col].plot(traj.t, exact.x[:, 0, 0], label="exact", **exact_style())
-        axes[1, col].plot(traj.t, traj.energy, markevery=25, label=f"reference / {method}",
-                          **reference_style(method, linewidth=1.6))
+        axes[1, col].plot(
+            traj.t,
+            traj.energy,
+            markevery=25,
+            label=f"reference / {method}",
+            **reference_style(method, linewidth=1.6),
+        )
         axes[1, col].plot(traj.t, exact.energy, label="exact", **exact_style())
         a = case.model.anchors
-        axes[0, col].set_title(f"{case.title} (case {case.name})\nk_s = {a.stiffness[0]:g} N/m, "
-                               f"k_d = {a.damping[0]:g} N s/m", fontsize=10)
+        axes[0, col].set_title(
+            f"{case.title} (case {case.name})\nk_s = {a.stiffness[0]:g} N/m, k_d = {a.damping[0]:g} N s/m",
+            fontsize=10,
+        )
         axes[1, col].set_xlabel("time (s)")
     axes[0, 0].set_ylabel("position x (m)")
     axes[1, 0].set_ylabel("total energy (J)")
@@ -67,14 +79,16 @@ def fig_springs(path: Path) -> str:
     m = cases[0].model
     (e_free, _, err_free), (e_damped, rate, err_damped) = measured
     out = float(np.linalg.norm(m.x0[0] - m.anchors.point[0]) - m.anchors.rest[0])
-    return ('Reproduces the lecture slides "Damper" ("Un-damped spring" beside a damped one): '
-            f"the cases {' and '.join(c.name for c in cases)} ({m.mass[0]:g} kg on an anchored "
-            f"spring, released {out:g} m out), run by the reference {method.upper()} at dt = "
-            f"{1000 * dt:g} ms against their exact solutions (largest deviation {err_free:.0e} and "
-            f"{err_damped:.0e} m). Undamped, the energy stays at {e_free[0]:.3g} J (to "
-            f"{np.max(np.abs(e_free / e_free[0] - 1)):.0e} relative); the damper removes "
-            f"{100 * (1 - e_damped[-1] / e_damped[0]):.0f} % of it in {cases[1].duration:g} s and "
-            f"the amplitude decays as e^(−{rate:.2f} t).")
+    return (
+        'Reproduces the lecture slides "Damper" ("Un-damped spring" beside a damped one): '
+        f"the cases {' and '.join(c.name for c in cases)} ({m.mass[0]:g} kg on an anchored "
+        f"spring, released {out:g} m out), run by the reference {method.upper()} at dt = "
+        f"{1000 * dt:g} ms against their exact solutions (largest deviation {err_free:.0e} and "
+        f"{err_damped:.0e} m). Undamped, the energy stays at {e_free[0]:.3g} J (to "
+        f"{np.max(np.abs(e_free / e_free[0] - 1)):.0e} relative); the damper removes "
+        f"{100 * (1 - e_damped[-1] / e_damped[0]):.0f} % of it in {cases[1].duration:g} s and "
+        f"the amplitude decays as e^(−{rate:.2f} t)."
+    )
 
 
 # -- 6. spring-damper pair -----------------------------------------------------------------------
@@ -102,23 +116,33 @@ def fig_spring_damper_pair(path: Path) -> str:
         worst = np.max(np.abs(length - exact_length))
         late = traj.t >= traj.t[-1] - 1.0
         kept[k_d] = np.max(np.abs(length[late] - rest)) / stretch
-        axes[1].plot(traj.t, length, markevery=25, label=f"reference / {PAIR_METHOD}, k_d = {k_d:g} "
-                     f"N s/m (deviation from exact ≤ {worst:.0e} m)",
-                     **reference_style(PAIR_METHOD, k, 2, linewidth=1.6))
+        axes[1].plot(
+            traj.t,
+            length,
+            markevery=25,
+            label=f"reference / {PAIR_METHOD}, k_d = {k_d:g} N s/m (deviation from exact ≤ {worst:.0e} m)",
+            **reference_style(PAIR_METHOD, k, 2, linewidth=1.6),
+        )
         if k == 0:
             com = (m1 * x[:, 0, 0] + m2 * x[:, 1, 0]) / (m1 + m2)
-            com_moved = np.max(np.linalg.norm((m1 * x[:, 0] + m2 * x[:, 1]) / (m1 + m2)
-                                              - (m1 * x[0, 0] + m2 * x[0, 1]) / (m1 + m2), axis=1))
-            axes[1].plot(traj.t, exact_length, label="exact (reduced mass μ = m1 m2 / (m1 + m2))",
-                         **exact_style())
-            axes[0].plot(traj.t, x[:, 0, 0], color=SCENE_COLOURS[0], linewidth=1.5,
-                         label=f"p1, m1 = {m1:g} kg")
-            axes[0].plot(traj.t, x[:, 1, 0], color=SCENE_COLOURS[1], linewidth=1.5,
-                         label=f"p2, m2 = {m2:g} kg")
+            com_moved = np.max(
+                np.linalg.norm(
+                    (m1 * x[:, 0] + m2 * x[:, 1]) / (m1 + m2) - (m1 * x[0, 0] + m2 * x[0, 1]) / (m1 + m2),
+                    axis=1,
+                )
+            )
+            axes[1].plot(
+                traj.t, exact_length, label="exact (reduced mass μ = m1 m2 / (m1 + m2))", **exact_style()
+            )
+            axes[0].plot(
+                traj.t, x[:, 0, 0], color=SCENE_COLOURS[0], linewidth=1.5, label=f"p1, m1 = {m1:g} kg"
+            )
+            axes[0].plot(
+                traj.t, x[:, 1, 0], color=SCENE_COLOURS[1], linewidth=1.5, label=f"p2, m2 = {m2:g} kg"
+            )
             axes[0].plot(traj.t, com, color="black", linewidth=1.0, label="centre of mass")
             for i in range(2):
-                axes[0].plot(traj.t, exact[:, i, 0], label="exact" if i == 0 else None,
-                             **exact_style())
+                axes[0].plot(traj.t, exact[:, i, 0], label="exact" if i == 0 else None, **exact_style())
     axes[1].axhline(rest, color="0.5", linewidth=0.8, linestyle=":", label="rest length L_r")
     axes[0].set_title(f"Positions along x, k_s = {k_s:g} N/m, k_d = {s.damping[0]:g} N s/m")
     axes[0].set_ylabel("position x (m)")
@@ -132,13 +156,15 @@ def fig_spring_damper_pair(path: Path) -> str:
     fig.tight_layout()
     save_figure(fig, path)
     (k_d, damped_left), (_, free_left) = kept.items()
-    return ('Reproduces the lecture slide "Spring-Damper Pair": two free point masses '
-            f"({m1:g} kg and {m2:g} kg) joined by the lecture's spring-damper "
-            "f = (k_s (L_c − L_r) + k_d (ṗ2 − ṗ1)·u) u, u = (p2 − p1)/|p2 − p1| (the damper's sign "
-            "taken so that it resists the change of length, as the damped-spring slide writes it), "
-            f"released {stretch:g} m stretched. Reference {PAIR_METHOD.upper()} at dt = "
-            f"{1000 * damped.dts[0]:g} ms against the exact solution; the centre of mass moves by "
-            f"at most {com_moved:.0e} m. In the last second the stretch is at most "
-            f"{100 * damped_left:.1g} % of the initial one with the damper (k_d = {k_d:g} N s/m) and "
-            f"{100 * free_left:.0f} % without it (k_d = 0)"
-            + (": the undamped pair oscillates on at full amplitude." if free_left > 0.99 else "."))
+    return (
+        'Reproduces the lecture slide "Spring-Damper Pair": two free point masses '
+        f"({m1:g} kg and {m2:g} kg) joined by the lecture's spring-damper "
+        "f = (k_s (L_c − L_r) + k_d (ṗ2 − ṗ1)·u) u, u = (p2 − p1)/|p2 − p1| (the damper's sign "
+        "taken so that it resists the change of length, as the damped-spring slide writes it), "
+        f"released {stretch:g} m stretched. Reference {PAIR_METHOD.upper()} at dt = "
+        f"{1000 * damped.dts[0]:g} ms against the exact solution; the centre of mass moves by "
+        f"at most {com_moved:.0e} m. In the last second the stretch is at most "
+        f"{100 * damped_left:.1g} % of the initial one with the damper (k_d = {k_d:g} N s/m) and "
+        f"{100 * free_left:.0f} % without it (k_d = 0)"
+        + (": the undamped pair oscillates on at full amplitude." if free_left > 0.99 else ".")
+    )

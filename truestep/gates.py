@@ -27,8 +27,7 @@ DECLARED = "declared"
 """The ``where`` of the gates :mod:`truestep.declared` makes from the methods' facts. A
 sweep that gives no fittable order (unstable, or not yet converged, at every step) leaves
 such a gate not evaluated: the case's own gates and the baseline say what went wrong."""
-GATE_COLUMNS = ["case", "source", "gate", "kind", "engine", "method", "dt", "verdict",
-                "measured", "required"]
+GATE_COLUMNS = ["case", "source", "gate", "kind", "engine", "method", "dt", "verdict", "measured", "required"]
 """The columns of :func:`verdict_table` (and of ``truestep gate --json``'s gates)."""
 
 
@@ -105,9 +104,13 @@ def _broken(rows: pd.DataFrame) -> str | None:
     return f"row dt={r['dt']} {r['status']}" + (f" ({message[:120]})" if message else "")
 
 
-def check_gate(case: Case, g: Gate, results: pd.DataFrame,
-               stability: pd.DataFrame | None = None,
-               restitution: pd.DataFrame | None = None) -> GateResult:
+def check_gate(
+    case: Case,
+    g: Gate,
+    results: pd.DataFrame,
+    stability: pd.DataFrame | None = None,
+    restitution: pd.DataFrame | None = None,
+) -> GateResult:
     """Evaluate one gate for one engine and method (no ``*``); a gate with no row to read
     fails, saying so, and a gate whose case or engine the run left out altogether
     (``--cases``, ``--engines``) is not evaluated and says so."""
@@ -116,8 +119,7 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
     if g.kind == "restitution":
         return _restitution(case.name, g, restitution)
     if not len(ran):
-        return GateResult(case.name, g, True, "not run", "a run of this case and engine",
-                          evaluated=False)
+        return GateResult(case.name, g, True, "not run", "a run of this case and engine", evaluated=False)
     rows = ran[ran["method"] == g.method]
     if g.kind == "stability-limit":
         return _stability(case, g, stability)
@@ -128,15 +130,7 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
         why = r.get("missing") if r["status"] == "unsupported" else r.get("message")
         return GateResult(case.name, g, False, f"{r['status']} ({why})", "a run to read")
     if g.kind == "order":
-        broken = _broken(rows)
-        if broken:
-            return GateResult(case.name, g, False, broken, "every row of the sweep measured")
-        ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
-        order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale)
-        if g.where == DECLARED:
-            return _declared_order(case, g, ok, order)
-        return GateResult(case.name, g, _within(abs(order - p["expect"]), None, p["tol"]),
-                          f"order {order:.3f}", f"{p['expect']:g} +- {p['tol']:g}")
+        return _order(case, g, rows)
     if g.kind == "no-worse-than":
         return _no_worse(case, g, results, rows)
     rows = _at_dt(rows, g.dt)
@@ -146,46 +140,92 @@ def check_gate(case: Case, g: Gate, results: pd.DataFrame,
     if row["status"] in BROKEN:
         return GateResult(case.name, g, False, _broken(rows), "a measured row")
     if g.kind == "status":
-        return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]),
-                          str(p["expect"]))
+        return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]), str(p["expect"]))
     if row["status"] != "ok":
         return GateResult(case.name, g, False, _status(row), "status ok")
     if g.kind in ("error", "energy_drift"):
         value = float(_num(rows[g.kind])[0])
-        return GateResult(case.name, g, _within(value, None, p["max"]), f"{g.kind} {value:.3g}",
-                          f"<= {p['max']:g}")
+        return GateResult(
+            case.name, g, _within(value, None, p["max"]), f"{g.kind} {value:.3g}", f"<= {p['max']:g}"
+        )
     if g.kind == "property":
-        name = p["name"]
-        value = float(_num(rows[name])[0]) if name in rows else np.nan
-        lo, hi = p.get("min"), p.get("max")
-        bounds = " and ".join(s for s in (f">= {lo:g}" if lo is not None else "",
-                                          f"<= {hi:g}" if hi is not None else "") if s)
-        return GateResult(case.name, g, _within(value, lo, hi), f"{name} {value:.4g}", bounds)
+        return _property(case, g, rows)
     if g.kind == "speedup":
-        ratios, elsewhere = [], []
-        for other in p["over"]:
-            o = _at_dt(results[(results["case"] == case.name) & (results["engine"] == other)
-                               & (results["status"] == "ok")], g.dt)
-            if "host" in o and "host" in row.index:  # wall times compare within one machine
-                here = "" if pd.isna(row["host"]) else str(row["host"])
-                same = o["host"].fillna("").astype(str) == here
-                elsewhere += [other] if len(o) and not same.any() else []
-                o = o[same]
-            if len(o):
-                ratios.append(float(np.nanmin(_num(o["wall_s"]))) / float(row["wall_s"]))
-        value = min(ratios) if ratios and not elsewhere else np.nan
-        where = f" ({', '.join(elsewhere)} timed on another host: not compared)" if elsewhere else ""
-        return GateResult(case.name, g, _within(value, p["min"], None),
-                          f"speed-up {value:.3g}x over {', '.join(p['over'])}{where}",
-                          f">= {p['min']:g}x")
+        return _speedup(case, g, results, row)
     raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
+
+
+def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
+    """An ``order`` gate on one method's sweep: the order fitted to its measured rows."""
+    p = g.params
+    broken = _broken(rows)
+    if broken:
+        return GateResult(case.name, g, False, broken, "every row of the sweep measured")
+    ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
+    order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale)
+    if g.where == DECLARED:
+        return _declared_order(case, g, ok, order)
+    return GateResult(
+        case.name,
+        g,
+        _within(abs(order - p["expect"]), None, p["tol"]),
+        f"order {order:.3f}",
+        f"{p['expect']:g} +- {p['tol']:g}",
+    )
+
+
+def _property(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
+    """A ``property`` gate: the named property of the row at the gate's step, in bounds."""
+    p = g.params
+    name = p["name"]
+    value = float(_num(rows[name])[0]) if name in rows else np.nan
+    lo, hi = p.get("min"), p.get("max")
+    bounds = " and ".join(
+        s for s in (f">= {lo:g}" if lo is not None else "", f"<= {hi:g}" if hi is not None else "") if s
+    )
+    return GateResult(case.name, g, _within(value, lo, hi), f"{name} {value:.4g}", bounds)
+
+
+def _speedup(case: Case, g: Gate, results: pd.DataFrame, row: pd.Series) -> GateResult:
+    """A ``speedup`` gate: the row's speed-up over each engine of ``over``, at the same step,
+    timed on the same host (the smallest counts)."""
+    p = g.params
+    ratios, elsewhere = [], []
+    for other in p["over"]:
+        o = _at_dt(
+            results[
+                (results["case"] == case.name) & (results["engine"] == other) & (results["status"] == "ok")
+            ],
+            g.dt,
+        )
+        if "host" in o and "host" in row.index:  # wall times compare within one machine
+            here = "" if pd.isna(row["host"]) else str(row["host"])
+            same = o["host"].fillna("").astype(str) == here
+            elsewhere += [other] if len(o) and not same.any() else []
+            o = o[same]
+        if len(o):
+            ratios.append(float(np.nanmin(_num(o["wall_s"]))) / float(row["wall_s"]))
+    value = min(ratios) if ratios and not elsewhere else np.nan
+    where = f" ({', '.join(elsewhere)} timed on another host: not compared)" if elsewhere else ""
+    return GateResult(
+        case.name,
+        g,
+        _within(value, p["min"], None),
+        f"speed-up {value:.3g}x over {', '.join(p['over'])}{where}",
+        f">= {p['min']:g}x",
+    )
 
 
 def _stability(case: Case, g: Gate, stability: pd.DataFrame | None) -> GateResult:
     p = g.params
-    need = " and ".join(s for s in (
-        f"within {p['rel_tol']:.3%} of exact" if "rel_tol" in p else "",
-        f">= {p['min']:g} s" if "min" in p else "") if s)
+    need = " and ".join(
+        s
+        for s in (
+            f"within {p['rel_tol']:.3%} of exact" if "rel_tol" in p else "",
+            f">= {p['min']:g} s" if "min" in p else "",
+        )
+        if s
+    )
     s = pd.DataFrame() if stability is None else stability
     if len(s):
         s = s[(s["case"] == case.name) & (s["engine"] == g.engine) & (s["method"] == g.method)]
@@ -224,19 +264,31 @@ def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> Gate
     p = g.params
     need = f">= {p['expect']:g} - {p['tol']:g}"
     if not np.isfinite(order):
-        return GateResult(case.name, g, True, "no order: fewer than two errors in the "
-                          "asymptotic range", need, evaluated=False)
+        return GateResult(
+            case.name,
+            g,
+            True,
+            "no order: fewer than two errors in the asymptotic range",
+            need,
+            evaluated=False,
+        )
     from truestep.metrics import local_orders
 
     dts, errors = _num(ok["dt"]), _num(ok["error"])
     usable = np.isfinite(errors) & (errors > 0)
     local = local_orders(dts[usable], errors[usable])
     if len(local) and local[-1] < CONVERGING:
-        return GateResult(case.name, g, True, f"no order yet: the error falls as dt^"
-                          f"{local[-1]:.2f} at the finest steps (the sweep is not in the "
-                          "asymptotic range)", need, evaluated=False)
-    return GateResult(case.name, g, order >= p["expect"] - p["tol"], f"order {order:.3f}",
-                      need)
+        return GateResult(
+            case.name,
+            g,
+            True,
+            f"no order yet: the error falls as dt^"
+            f"{local[-1]:.2f} at the finest steps (the sweep is not in the "
+            "asymptotic range)",
+            need,
+            evaluated=False,
+        )
+    return GateResult(case.name, g, order >= p["expect"] - p["tol"], f"order {order:.3f}", need)
 
 
 def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
@@ -246,8 +298,9 @@ def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
     if len(t):
         t = t[(t["engine"] == g.engine) & (t["method"] == g.method)]
     if not len(t):
-        return GateResult(case, g, True, "no restitution rows for this engine",
-                          "a restitution sweep of it", evaluated=False)
+        return GateResult(
+            case, g, True, "no restitution rows for this engine", "a restitution sweep of it", evaluated=False
+        )
     t = _at_dt(t, g.dt)
     for key in ("e_set", "bounce"):
         if key in p:
@@ -263,10 +316,14 @@ def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
         return GateResult(case, g, False, "no bounce measured", need)
     worst = int(np.nanargmax(np.where(np.isfinite(dev), dev, -1)))
     r = t.iloc[worst]
-    return GateResult(case, g, bool(np.max(measured) <= p["tol"]),
-                      f"worst {p['quantity']} {values[worst]:.4g} at e={r['e_set']:g} "
-                      f"dt={float(r['dt']):.4g} bounce {int(r['bounce'])} ({len(measured)} bounces)",
-                      need)
+    return GateResult(
+        case,
+        g,
+        bool(np.max(measured) <= p["tol"]),
+        f"worst {p['quantity']} {values[worst]:.4g} at e={r['e_set']:g} "
+        f"dt={float(r['dt']):.4g} bounce {int(r['bounce'])} ({len(measured)} bounces)",
+        need,
+    )
 
 
 def _no_worse(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) -> GateResult:
@@ -274,37 +331,46 @@ def _no_worse(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) ->
     other_engine, other_method = p["than"]
     q, factor = p["quantity"], p["factor"]
     need = f"{q} <= {factor:g} x {other_engine}/{other_method}'s at every dt both ran"
-    other = results[(results["case"] == case.name) & (results["engine"] == other_engine)
-                    & (results["method"] == other_method)]
+    other = results[
+        (results["case"] == case.name)
+        & (results["engine"] == other_engine)
+        & (results["method"] == other_method)
+    ]
     rows, other = _at_dt(rows, g.dt), _at_dt(other, g.dt)
     if not len(other) or other["status"].isin(NOT_RUN).all():
-        return GateResult(case.name, g, True, f"{other_engine}/{other_method} not run",
-                          need, evaluated=False)
+        return GateResult(case.name, g, True, f"{other_engine}/{other_method} not run", need, evaluated=False)
     broken = _broken(rows)
     if broken:
         return GateResult(case.name, g, False, broken, need)
     pairs = 0
     for _, r in rows.iterrows():
-        o = other[(other["dt_kind"] == r["dt_kind"])
-                  & np.isclose(_num(other["dt"]), float(r["dt"]), rtol=1e-9, atol=0)]
+        o = other[
+            (other["dt_kind"] == r["dt_kind"])
+            & np.isclose(_num(other["dt"]), float(r["dt"]), rtol=1e-9, atol=0)
+        ]
         if not len(o) or o.iloc[0]["status"] != "ok":
             continue
         pairs += 1
         mine, theirs = float(pd.to_numeric(r[q], errors="coerce")), float(_num(o[q])[0])
         if r["status"] != "ok" or not mine <= factor * theirs:
             shown = _status(r) if r["status"] != "ok" else f"{q} {mine:.3g}"
-            return GateResult(case.name, g, False,
-                              f"dt={float(r['dt']):g}: {shown} against {theirs:.3g}", need)
+            return GateResult(
+                case.name, g, False, f"dt={float(r['dt']):g}: {shown} against {theirs:.3g}", need
+            )
     if not pairs:
-        return GateResult(case.name, g, False, f"no dt that both this run and "
-                          f"{other_engine}/{other_method} measured", need)
+        return GateResult(
+            case.name, g, False, f"no dt that both this run and {other_engine}/{other_method} measured", need
+        )
     return GateResult(case.name, g, True, f"no worse at {pairs} dt", need)
 
 
-def check_gates(cases: list[Case], results: pd.DataFrame,
-                stability: pd.DataFrame | None = None,
-                restitution: pd.DataFrame | None = None,
-                extra: list[tuple[list[str], Gate]] | None = None) -> list[GateResult]:
+def check_gates(
+    cases: list[Case],
+    results: pd.DataFrame,
+    stability: pd.DataFrame | None = None,
+    restitution: pd.DataFrame | None = None,
+    extra: list[tuple[list[str], Gate]] | None = None,
+) -> list[GateResult]:
     """Every gate of every case, in case order, then every gate of ``extra`` (the gates
     of a gates file, :func:`truestep.cases.loader.load_gates_file`) on every case whose
     name matches one of its patterns (a ``restitution`` gate of a gates file reads the
@@ -318,16 +384,26 @@ def check_gates(cases: list[Case], results: pd.DataFrame,
         else:
             pairs = _pairs(results, c.name, g)
         if not pairs:
-            out.append(GateResult(c.name, g, True, "nothing ran that it names",
-                                  "a run of a matching engine and method", evaluated=False))
+            out.append(
+                GateResult(
+                    c.name,
+                    g,
+                    True,
+                    "nothing ran that it names",
+                    "a run of a matching engine and method",
+                    evaluated=False,
+                )
+            )
         for e, m in pairs:
-            out.append(check_gate(c, dataclasses.replace(g, engine=e, method=m), results,
-                                  stability, restitution))
+            out.append(
+                check_gate(c, dataclasses.replace(g, engine=e, method=m), results, stability, restitution)
+            )
     return out
 
 
-def gates_to_check(cases: list[Case], extra: list[tuple[list[str], Gate]] | None = None
-                   ) -> list[tuple[Case, Gate]]:
+def gates_to_check(
+    cases: list[Case], extra: list[tuple[list[str], Gate]] | None = None
+) -> list[tuple[Case, Gate]]:
     """(case, gate) pairs: the cases' own gates, then each gates-file gate on every case
     its patterns match (a restitution gate once, as case :data:`SWEEP`)."""
     todo = [(c, g) for c in cases for g in c.gates]
@@ -365,8 +441,21 @@ def _table_pairs(case: Case, g: Gate, table: pd.DataFrame | None) -> list[tuple[
 
 def verdict_table(verdicts: list[GateResult]) -> pd.DataFrame:
     """The verdicts as a table (:data:`GATE_COLUMNS`)."""
-    return pd.DataFrame([{
-        "case": v.case, "source": v.gate.file, "gate": v.gate.where, "kind": v.gate.kind,
-        "engine": v.gate.engine, "method": v.gate.method, "dt": v.gate.dt,
-        "verdict": v.verdict, "measured": v.measured, "required": v.required,
-    } for v in verdicts], columns=GATE_COLUMNS)
+    return pd.DataFrame(
+        [
+            {
+                "case": v.case,
+                "source": v.gate.file,
+                "gate": v.gate.where,
+                "kind": v.gate.kind,
+                "engine": v.gate.engine,
+                "method": v.gate.method,
+                "dt": v.gate.dt,
+                "verdict": v.verdict,
+                "measured": v.measured,
+                "required": v.required,
+            }
+            for v in verdicts
+        ],
+        columns=GATE_COLUMNS,
+    )

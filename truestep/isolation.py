@@ -164,8 +164,9 @@ def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
     try:
         conn.send((*reply, output))
     except Exception as err:  # a value that cannot be pickled: the call's row says so
-        conn.send(("crashed", f"its result cannot be sent back: {type(err).__name__}: "
-                   f"{str(err)[:200]}", output))
+        conn.send(
+            ("crashed", f"its result cannot be sent back: {type(err).__name__}: {str(err)[:200]}", output)
+        )
     finally:
         conn.close()
 
@@ -206,23 +207,27 @@ def _start(index: int, call: Call) -> Running:
     faults.note_child(proc.pid)
     child.close()
     left = _budget_left()
-    return Running(index, proc, parent, time.monotonic() + min(timeout, left), timeout,
-                   by_budget=left < timeout)
+    return Running(
+        index, proc, parent, time.monotonic() + min(timeout, left), timeout, by_budget=left < timeout
+    )
 
 
 def _finish(run: Running, *, timed_out: bool) -> Outcome:
     try:
         if timed_out:
-            return Outcome("timeout", message=BUDGET_SPENT if run.by_budget
-                           else f"no result within {run.timeout:g} s")
+            return Outcome(
+                "timeout", message=BUDGET_SPENT if run.by_budget else f"no result within {run.timeout:g} s"
+            )
         try:
             status, value, output = run.conn.recv()
         except (EOFError, OSError, ValueError):
             _end(run.proc)
-            return Outcome("crashed",
-                           message=f"engine process died (exit code {run.proc.exitcode})")
-        return (Outcome("ok", value, output=output) if status == "ok"
-                else Outcome("crashed", message=value, output=output))
+            return Outcome("crashed", message=f"engine process died (exit code {run.proc.exitcode})")
+        return (
+            Outcome("ok", value, output=output)
+            if status == "ok"
+            else Outcome("crashed", message=value, output=output)
+        )
     finally:
         run.conn.close()
         if timed_out:
@@ -241,8 +246,9 @@ def kill_children() -> None:
         _LIVE.pop(pid, None)
 
 
-def run_isolated_all(calls: Sequence[Call], workers: int = 1,
-                     done: Callable[[int, Outcome], None] | None = None) -> list[Outcome]:
+def run_isolated_all(
+    calls: Sequence[Call], workers: int = 1, done: Callable[[int, Outcome], None] | None = None
+) -> list[Outcome]:
     """Run every ``fn(*args)`` in its own forked child, at most ``workers`` at a time.
 
     Returns the outcomes in the order of ``calls``; never raises for what happens inside a
@@ -264,8 +270,7 @@ def run_isolated_all(calls: Sequence[Call], workers: int = 1,
             if not running:
                 continue
             now = time.monotonic()
-            ready = wait([r.conn for r in running],
-                         timeout=max(0.0, min(r.deadline for r in running) - now))
+            ready = wait([r.conn for r in running], timeout=max(0.0, min(r.deadline for r in running) - now))
             for r in list(running):
                 timed_out = r.conn not in ready and time.monotonic() >= r.deadline
                 if r.conn in ready or timed_out:
@@ -292,8 +297,9 @@ def set_untimed_runner(cluster: Any) -> None:
     _UNTIMED[0] = cluster
 
 
-def run_untimed(calls: Sequence[Call], workers: int,
-                done: Callable[[int, Outcome], None] | None = None) -> list[Outcome]:
+def run_untimed(
+    calls: Sequence[Call], workers: int, done: Callable[[int, Outcome], None] | None = None
+) -> list[Outcome]:
     """Work whose wall time is not measured (stability searches, bounce drops): on every
     worker of the cluster set by :func:`set_untimed_runner`, else as
     :func:`run_isolated_all` with ``workers`` children at once."""

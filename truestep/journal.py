@@ -86,8 +86,12 @@ def _case_digest(case: Case) -> str:
 
 def fingerprint(cases: list[Case], engines: list[str], quick: bool) -> dict[str, Any]:
     """What a resumed run must share with the interrupted one."""
-    return {"truestep": __version__, "quick": bool(quick), "engines": list(engines),
-            "cases": [[c.name, _case_digest(c)] for c in cases]}
+    return {
+        "truestep": __version__,
+        "quick": bool(quick),
+        "engines": list(engines),
+        "cases": [[c.name, _case_digest(c)] for c in cases],
+    }
 
 
 def run_id(fp: dict[str, Any]) -> str:
@@ -98,8 +102,13 @@ def run_id(fp: dict[str, Any]) -> str:
 def _encode(kind: str, run: str, body: Any) -> bytes:
     """A checkpoint file: the header line, then the body."""
     data = dump_json(body).encode()
-    header = {"schema": SCHEMA, "kind": kind, "run": run,
-              "sha256": hashlib.sha256(data).hexdigest(), "size": len(data)}
+    header = {
+        "schema": SCHEMA,
+        "kind": kind,
+        "run": run,
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "size": len(data),
+    }
     return json.dumps(header, sort_keys=True).encode() + b"\n" + data
 
 
@@ -129,8 +138,7 @@ def _decode(raw: bytes, kind: str, run: str | None) -> Any:
 def _write_atomic(path: Path, data: bytes) -> None:
     tmp = path.parent / f"{TMP_PREFIX}{os.getpid()}-{path.name}"
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC,
-                     0o600)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)
@@ -152,8 +160,10 @@ class Survey:
             return ""
         shown = "; ".join(self.ignored[:3])
         more = f"; and {len(self.ignored) - 3} more" if len(self.ignored) > 3 else ""
-        return (f"{where}: ignored {len(self.ignored)} entries that are not this run's "
-                f"checkpoints, never loaded ({shown}{more})")[:400]
+        return (
+            f"{where}: ignored {len(self.ignored)} entries that are not this run's "
+            f"checkpoints, never loaded ({shown}{more})"
+        )[:400]
 
 
 class Journal:
@@ -183,31 +193,47 @@ class Journal:
         except OSError:
             raise JournalError(f"no interrupted run to resume: {self.dir} does not exist") from None
         if not stat.S_ISDIR(st.st_mode):
-            raise JournalError(f"{self.dir} is not a directory truestep wrote (a symbolic link "
-                               "or a file); run without --resume to start afresh")
+            raise JournalError(
+                f"{self.dir} is not a directory truestep wrote (a symbolic link "
+                "or a file); run without --resume to start afresh"
+            )
         if st.st_uid != os.geteuid():
-            raise JournalError(f"{self.dir} belongs to another user (uid {st.st_uid}); "
-                               "run without --resume to start afresh")
+            raise JournalError(
+                f"{self.dir} belongs to another user (uid {st.st_uid}); run without --resume to start afresh"
+            )
         try:
-            kept = _decode(read_regular(self.dir / JOURNAL_FILE, MAX_CHECKPOINT_BYTES,
-                                        follow_links=False), "journal", None)
+            kept = _decode(
+                read_regular(self.dir / JOURNAL_FILE, MAX_CHECKPOINT_BYTES, follow_links=False),
+                "journal",
+                None,
+            )
         except FileRefused as err:
             raise JournalError(f"no interrupted run to resume: {err}") from None
         except DataError as err:
-            raise JournalError(f"{self.dir / JOURNAL_FILE}: not a journal of truestep's: {err}; "
-                               "run without --resume to start afresh") from None
+            raise JournalError(
+                f"{self.dir / JOURNAL_FILE}: not a journal of truestep's: {err}; "
+                "run without --resume to start afresh"
+            ) from None
         if not isinstance(kept, dict):
-            raise JournalError(f"{self.dir / JOURNAL_FILE}: not a journal of truestep's; "
-                               "run without --resume to start afresh")
-        for key, what in (("truestep", "truestep version"), ("quick", "--quick"),
-                          ("engines", "engines"), ("cases", "cases")):
+            raise JournalError(
+                f"{self.dir / JOURNAL_FILE}: not a journal of truestep's; "
+                "run without --resume to start afresh"
+            )
+        for key, what in (
+            ("truestep", "truestep version"),
+            ("quick", "--quick"),
+            ("engines", "engines"),
+            ("cases", "cases"),
+        ):
             if kept.get(key) != fp[key]:
                 was, now = kept.get(key), fp[key]
                 if key == "cases":
                     was, now = _case_change(was, now)
-                raise JournalError(f"the interrupted run in {self.dir} had other {what} "
-                                   f"({_short(was)}, now {_short(now)}); "
-                                   "run without --resume to start afresh")
+                raise JournalError(
+                    f"the interrupted run in {self.dir} had other {what} "
+                    f"({_short(was)}, now {_short(now)}); "
+                    "run without --resume to start afresh"
+                )
         self.run = run_id(fp)
         self._survey = self._look()
         return len(self._survey.sweeps)
@@ -223,14 +249,12 @@ class Journal:
             if name.startswith(TMP_PREFIX) and entry.is_file(follow_symlinks=False):
                 Path(entry.path).unlink(missing_ok=True)  # a write a kill cut short
                 continue
-            kind = ("sweep" if SWEEP_FILE.fullmatch(name)
-                    else "analyses" if name == ANALYSES_FILE else None)
+            kind = "sweep" if SWEEP_FILE.fullmatch(name) else "analyses" if name == ANALYSES_FILE else None
             if kind is None:
                 survey.ignored.append(f"{_short(name)}: not a checkpoint's name")
                 continue
             try:
-                _decode(read_regular(entry.path, MAX_CHECKPOINT_BYTES, follow_links=False),
-                        kind, self.run)
+                _decode(read_regular(entry.path, MAX_CHECKPOINT_BYTES, follow_links=False), kind, self.run)
             except (FileRefused, DataError) as err:
                 survey.ignored.append(f"{name}: {getattr(err, 'reason', err)}")
                 continue
@@ -263,8 +287,7 @@ class Journal:
         if path is None or self.run is None:
             return None
         try:
-            return _decode(read_regular(path, MAX_CHECKPOINT_BYTES, follow_links=False),
-                           kind, self.run)
+            return _decode(read_regular(path, MAX_CHECKPOINT_BYTES, follow_links=False), kind, self.run)
         except (FileRefused, DataError):
             return None
 
@@ -289,8 +312,12 @@ class Journal:
         if self.run is None:
             return
         try:
-            body = {"key": list(key), "dts": [float(d) for d in dts], "rows": rows_to(rows),
-                    "traces": traces_to(traces)}
+            body = {
+                "key": list(key),
+                "dts": [float(d) for d in dts],
+                "rows": rows_to(rows),
+                "traces": traces_to(traces),
+            }
         except DataError:
             return
         path = self.dir / self._sweep_name(key)

@@ -43,8 +43,7 @@ def _matching(t: np.ndarray, t_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return k[ok], np.nonzero(ok)[0]
 
 
-def _parts(case: Case, traj: Trajectory, exact: Exact, part: str
-           ) -> tuple[np.ndarray, np.ndarray] | None:
+def _parts(case: Case, traj: Trajectory, exact: Exact, part: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The run's and the exact solution's positions (``part = "x"``) or velocities
     (``"v"``) at their shared times: particles (T, n, 3); an ODE's state (T, 1, dim), of
     which a second-order system's half (its positions or its velocities) is kept, a
@@ -66,8 +65,9 @@ def _parts(case: Case, traj: Trajectory, exact: Exact, part: str
     return traj.v[k], exact.v[j]
 
 
-def position_error(case: Case, traj: Trajectory, exact: Exact, *, norm: str | None = None,
-                   part: str = "x") -> float:
+def position_error(
+    case: Case, traj: Trajectory, exact: Exact, *, norm: str | None = None, part: str = "x"
+) -> float:
     """Distance between computed and exact positions, m (or state units for an ODE).
 
     ``norm`` (default the case's ``error_norm``): ``max``, the largest over every shared
@@ -88,8 +88,8 @@ def position_error(case: Case, traj: Trajectory, exact: Exact, *, norm: str | No
     if traj.alive is not None and case.kind != "ode":
         d = np.where(traj.alive[k][..., None], d, np.nan)
     d = np.where(np.isnan(theirs), 0.0, np.nan_to_num(d, nan=0.0)) if np.isnan(d).any() else d
-    per_record = np.max(np.abs(d), axis=(1, 2)) if case.kind == "ode" else np.max(
-        np.linalg.norm(d, axis=2), axis=1
+    per_record = (
+        np.max(np.abs(d), axis=(1, 2)) if case.kind == "ode" else np.max(np.linalg.norm(d, axis=2), axis=1)
     )
     if (norm or case.error_norm) == "final":
         if abs(traj.t[k[-1]] - case.duration) > 1e-9 * max(1.0, case.duration):
@@ -98,8 +98,9 @@ def position_error(case: Case, traj: Trajectory, exact: Exact, *, norm: str | No
     return float(np.max(per_record))
 
 
-def energy_drift(case: Case, traj: Trajectory, exact: Exact | None, *,
-                 scale: float | None = None) -> tuple[float, float]:
+def energy_drift(
+    case: Case, traj: Trajectory, exact: Exact | None, *, scale: float | None = None
+) -> tuple[float, float]:
     """Energy error over the case's energy scale: (largest over the run, at the end).
 
     ``S`` is the case's energy scale (:func:`truestep.energy_scale.energy_scale`: the
@@ -146,8 +147,12 @@ def energy_behaviour(case: Case) -> str:
     m = case.model
     if m is None:
         return "conservative"
-    damped = (m.drag > 0 or np.any(m.springs.damping > 0) or np.any(m.anchors.damping > 0)
-              or any(p.restitution < 1 or p.friction > 0 for p in m.planes))
+    damped = (
+        m.drag > 0
+        or np.any(m.springs.damping > 0)
+        or np.any(m.anchors.damping > 0)
+        or any(p.restitution < 1 or p.friction > 0 for p in m.planes)
+    )
     return "dissipative" if damped else "conservative"
 
 
@@ -181,8 +186,13 @@ def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0) -> flo
     against log(dt) over that range. NaN with fewer than two usable points.
     """
     dts, errors = np.asarray(dts, float), np.asarray(errors, float)
-    ok = (np.isfinite(errors) & np.isfinite(dts) & (dts > 0) & (errors > ROUND_OFF * scale)
-          & (errors < PRE_ASYMPTOTIC * scale))
+    ok = (
+        np.isfinite(errors)
+        & np.isfinite(dts)
+        & (dts > 0)
+        & (errors > ROUND_OFF * scale)
+        & (errors < PRE_ASYMPTOTIC * scale)
+    )
     dts, errors = dts[ok], errors[ok]
     if len(dts) < 2:
         return float("nan")

@@ -39,17 +39,41 @@ import platform
 import sys
 from importlib import metadata
 
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "BLIS_NUM_THREADS")
+THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "BLIS_NUM_THREADS",
+)
 """Thread counts of the BLAS and OpenMP runtimes a process may load: all set to 1."""
 OPENBLAS_CORE = "Haswell"
 """The OpenBLAS kernels asked for on x86-64 CPUs with AVX2 and FMA."""
-NUMPY_DISPATCH_OFF = ("X86_V4", "AVX512_ICL", "AVX512_SPR", "AVX512_SKX", "AVX512_CLX",
-                      "AVX512_CNL", "AVX512F", "AVX512CD")
+NUMPY_DISPATCH_OFF = (
+    "X86_V4",
+    "AVX512_ICL",
+    "AVX512_SPR",
+    "AVX512_SKX",
+    "AVX512_CLX",
+    "AVX512_CNL",
+    "AVX512F",
+    "AVX512CD",
+)
 """numpy dispatch targets above ``X86_V3`` (the names of numpy 2.x and of 1.x): switched
 off. numpy ignores names it does not know and targets the CPU does not have."""
-PACKAGES = ("truestep", "numpy", "scipy", "numba", "llvmlite", "pandas", "pymunk", "pybullet",
-            "mujoco", "distributed")
+PACKAGES = (
+    "truestep",
+    "numpy",
+    "scipy",
+    "numba",
+    "llvmlite",
+    "pandas",
+    "pymunk",
+    "pybullet",
+    "mujoco",
+    "distributed",
+)
 """Packages whose versions a run records: a run is reproducible bit for bit with the same
 revision and these versions."""
 OPT_OUT = "TRUESTEP_NUMERICS"
@@ -130,12 +154,19 @@ def fingerprint() -> dict[str, object]:
 
     try:
         from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
         simd = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
     except ImportError:  # numpy 1.x spells the module without the underscore
         from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
         simd = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
-    blas = sorted({f"{p.get('internal_api')} {p.get('version')} {p.get('architecture', '')} "
-                   f"threads={p.get('num_threads')}".strip() for p in threadpool_info()})
+    blas = sorted(
+        {
+            f"{p.get('internal_api')} {p.get('version')} {p.get('architecture', '')} "
+            f"threads={p.get('num_threads')}".strip()
+            for p in threadpool_info()
+        }
+    )
     return {
         "machine": platform.machine(),
         "python": platform.python_version(),
@@ -162,9 +193,11 @@ def differences(a: dict, b: dict) -> list[str]:
     for key in sorted(set(a) | set(b)):
         if key == "packages":
             pa, pb = a.get(key, {}), b.get(key, {})
-            out += [f"{name} {pa.get(name, '-')} -> {pb.get(name, '-')}"
-                    for name in sorted(set(pa) | set(pb))
-                    if name != "truestep" and pa.get(name) != pb.get(name)]
+            out += [
+                f"{name} {pa.get(name, '-')} -> {pb.get(name, '-')}"
+                for name in sorted(set(pa) | set(pb))
+                if name != "truestep" and pa.get(name) != pb.get(name)
+            ]
         elif a.get(key) != b.get(key):
             out.append(f"{key}: {a.get(key)} -> {b.get(key)}")
     return out

@@ -22,8 +22,21 @@ however stable it stayed (close-encounter at 1 ms: errors of 3 to 43 scales)."""
 SURVIVAL_ENERGY = 1.0
 """... and its relative energy error is at most this: a bound three-body system whose
 energy went from -2.4 J to +525 J has been blown apart, whatever its positions say."""
-PICK_COLUMNS = ["case", "target", "error_needed", "by", "engine", "method", "dt", "dt_kind",
-                "error", "wall_s", "nfev", "runs_reaching", "tied"]
+PICK_COLUMNS = [
+    "case",
+    "target",
+    "error_needed",
+    "by",
+    "engine",
+    "method",
+    "dt",
+    "dt_kind",
+    "error",
+    "wall_s",
+    "nfev",
+    "runs_reaching",
+    "tied",
+]
 TIE_NOISE = 0.15
 """The least relative noise of a wall time: two runs of the same revision on one machine
 moved single rows by up to 12% (a shared machine's load, caches, frequency), more than the
@@ -80,8 +93,9 @@ def _pick_by_wall(reach: pd.DataFrame) -> tuple[pd.Series, str]:
     return named, "; ".join(others)
 
 
-def cheapest(results: pd.DataFrame, cases: list[Case],
-             targets: tuple[float, ...] = ACCURACY_TARGETS) -> pd.DataFrame:
+def cheapest(
+    results: pd.DataFrame, cases: list[Case], targets: tuple[float, ...] = ACCURACY_TARGETS
+) -> pd.DataFrame:
     """For each case with measured errors and each target: the cheapest ``ok`` run whose
     error is at most ``target x scale``, by wall time (``by = wall_s``) and by derivative
     evaluations (``by = nfev``). A target no run reaches is a row with an empty engine
@@ -99,8 +113,14 @@ def cheapest(results: pd.DataFrame, cases: list[Case],
             needed = target * case.error_scale
             reach = d[error <= needed]
             for by in ("wall_s", "nfev"):
-                base = {"case": case.name, "target": target, "error_needed": needed, "by": by,
-                        "runs_reaching": len(reach), "tied": ""}
+                base = {
+                    "case": case.name,
+                    "target": target,
+                    "error_needed": needed,
+                    "by": by,
+                    "runs_reaching": len(reach),
+                    "tied": "",
+                }
                 cost = _num(reach, by)
                 if not np.isfinite(cost).any():
                     rows.append({**base, "engine": "", "method": ""})
@@ -109,8 +129,12 @@ def cheapest(results: pd.DataFrame, cases: list[Case],
                     r, base["tied"] = _pick_by_wall(reach)
                 else:
                     r = reach.iloc[int(np.nanargmin(cost))]
-                rows.append({**base, **{k: r[k] for k in ("engine", "method", "dt", "dt_kind",
-                                                          "error", "wall_s", "nfev")}})
+                rows.append(
+                    {
+                        **base,
+                        **{k: r[k] for k in ("engine", "method", "dt", "dt_kind", "error", "wall_s", "nfev")},
+                    }
+                )
     return pd.DataFrame(rows, columns=PICK_COLUMNS)
 
 
@@ -149,16 +173,29 @@ def survival(case: Case, results: pd.DataFrame) -> pd.DataFrame:
         outcomes = [outcome(case, r) for _, r in g.iterrows()]
         dts = _num(g, "dt")
         survived = [dt for dt, o in zip(dts, outcomes, strict=True) if not o]
-        out.append({"engine": engine, "method": method,
-                    "dt_survived": max(survived) if survived else np.nan,
-                    "failure": outcomes[int(np.argmax(dts))]})
+        out.append(
+            {
+                "engine": engine,
+                "method": method,
+                "dt_survived": max(survived) if survived else np.nan,
+                "failure": outcomes[int(np.argmax(dts))],
+            }
+        )
     return pd.DataFrame(out, columns=["engine", "method", "dt_survived", "failure"])
 
 
 SCORECARD_TARGET = 1e-4
 """The accuracy the scorecard's cost column asks for, as a fraction of each case's scale."""
-SCORECARD_COLUMNS = ["engine", "method", "family", "cases_run", "cases_reached", "cost_ratio",
-                     "stability_cases", "stability_ratio"]
+SCORECARD_COLUMNS = [
+    "engine",
+    "method",
+    "family",
+    "cases_run",
+    "cases_reached",
+    "cost_ratio",
+    "stability_cases",
+    "stability_ratio",
+]
 
 
 def _limit_reference(stability: pd.DataFrame) -> pd.Series:
@@ -170,8 +207,13 @@ def _limit_reference(stability: pd.DataFrame) -> pd.Series:
     return exact.where(np.isfinite(exact) & (exact > 0), best)
 
 
-def scorecard(results: pd.DataFrame, cases: list[Case], stability: pd.DataFrame | None = None,
-              *, target: float = SCORECARD_TARGET) -> pd.DataFrame:
+def scorecard(
+    results: pd.DataFrame,
+    cases: list[Case],
+    stability: pd.DataFrame | None = None,
+    *,
+    target: float = SCORECARD_TARGET,
+) -> pd.DataFrame:
     """One row per engine, method and family of scenes (:data:`SCORECARD_COLUMNS`).
 
     ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
@@ -184,14 +226,14 @@ def scorecard(results: pd.DataFrame, cases: list[Case], stability: pd.DataFrame 
     """
     family = {c.name: c.family for c in cases}
     scale = {c.name: c.error_scale for c in cases}
-    ran = results[~results["status"].isin(["unsupported", "skipped"])
-                  & results["case"].isin(list(family))]
+    ran = results[~results["status"].isin(["unsupported", "skipped"]) & results["case"].isin(list(family))]
     ok = ran[ran["status"] == "ok"].copy()
     ok["reaches"] = _num(ok, "error") <= target * ok["case"].map(scale).to_numpy(float)
     ok["band"] = _bands(ok) if len(ok) else np.zeros(0)
     reached = ok[ok["reaches"] & np.isfinite(_num(ok, "wall_s"))]
-    fastest = {case: g.iloc[int(np.argmin(_num(g, "wall_s")))]
-               for case, g in reached.groupby("case", sort=False)}
+    fastest = {
+        case: g.iloc[int(np.argmin(_num(g, "wall_s")))] for case, g in reached.groupby("case", sort=False)
+    }
     stab = None
     if stability is not None and len(stability):
         stab = stability[stability["status"] == "ok"].copy()
@@ -202,28 +244,41 @@ def scorecard(results: pd.DataFrame, cases: list[Case], stability: pd.DataFrame 
             names = [c for c in dict.fromkeys(mine["case"]) if family[c] == fam]
             ratios = []
             for case in names:
-                hit = reached[(reached["case"] == case) & (reached["engine"] == engine)
-                              & (reached["method"] == method)]
+                hit = reached[
+                    (reached["case"] == case) & (reached["engine"] == engine) & (reached["method"] == method)
+                ]
                 if len(hit):
                     mine_best = hit.iloc[int(np.argmin(_num(hit, "wall_s")))]
                     top = fastest[case]
                     tied = mine_best["wall_s"] - mine_best["band"] <= top["wall_s"] + top["band"]
                     ratios.append(1.0 if tied else float(mine_best["wall_s"] / top["wall_s"]))
-            s = stab[(stab["engine"] == engine) & (stab["method"] == method)
-                     & stab["case"].isin(names)] if stab is not None else pd.DataFrame()
+            s = (
+                stab[(stab["engine"] == engine) & (stab["method"] == method) & stab["case"].isin(names)]
+                if stab is not None
+                else pd.DataFrame()
+            )
             s_ratio = _num(s, "ratio") if len(s) else np.array([])
             s_ratio = s_ratio[np.isfinite(s_ratio)]
-            rows.append({"engine": engine, "method": method, "family": fam,
-                         "cases_run": len(names), "cases_reached": len(ratios),
-                         "cost_ratio": float(np.median(ratios)) if ratios else np.nan,
-                         "stability_cases": len(s_ratio),
-                         "stability_ratio": float(np.median(s_ratio)) if len(s_ratio) else np.nan})
-    order = {pair: k for k, pair in enumerate(dict.fromkeys(
-        zip(results["engine"], results["method"], strict=True)))}
+            rows.append(
+                {
+                    "engine": engine,
+                    "method": method,
+                    "family": fam,
+                    "cases_run": len(names),
+                    "cases_reached": len(ratios),
+                    "cost_ratio": float(np.median(ratios)) if ratios else np.nan,
+                    "stability_cases": len(s_ratio),
+                    "stability_ratio": float(np.median(s_ratio)) if len(s_ratio) else np.nan,
+                }
+            )
+    order = {
+        pair: k
+        for k, pair in enumerate(dict.fromkeys(zip(results["engine"], results["method"], strict=True)))
+    }
     card = pd.DataFrame(rows, columns=SCORECARD_COLUMNS)
-    return card.iloc[sorted(range(len(card)), key=lambda k: order[(card["engine"].iloc[k],
-                                                                     card["method"].iloc[k])])
-                     ].reset_index(drop=True)
+    return card.iloc[
+        sorted(range(len(card)), key=lambda k: order[(card["engine"].iloc[k], card["method"].iloc[k])])
+    ].reset_index(drop=True)
 
 
 def restitution_fidelity(restitution: pd.DataFrame | None) -> pd.DataFrame:
@@ -233,9 +288,18 @@ def restitution_fidelity(restitution: pd.DataFrame | None) -> pd.DataFrame:
     if restitution is None or not len(restitution):
         return pd.DataFrame(columns=cols)
     r = restitution[restitution["status"] == "ok"].copy()
-    r["gap"] = (pd.to_numeric(r["e_measured"], errors="coerce")
-                - pd.to_numeric(r["e_set"], errors="coerce")).abs()
+    r["gap"] = (
+        pd.to_numeric(r["e_measured"], errors="coerce") - pd.to_numeric(r["e_set"], errors="coerce")
+    ).abs()
     r = r.dropna(subset=["gap"])
-    out = [{"engine": e, "method": m, "bounces": len(g), "median": float(g["gap"].median()),
-            "worst": float(g["gap"].max())} for (e, m), g in r.groupby(["engine", "method"], sort=False)]
+    out = [
+        {
+            "engine": e,
+            "method": m,
+            "bounces": len(g),
+            "median": float(g["gap"].median()),
+            "worst": float(g["gap"].max()),
+        }
+        for (e, m), g in r.groupby(["engine", "method"], sort=False)
+    ]
     return pd.DataFrame(out, columns=cols)

@@ -21,12 +21,24 @@ ENGINE_COLOURS = {
     "mujoco": "#9467bd",
 }
 METHOD_STYLES = {
-    "euler": ("-", "o"), "midpoint": ("--", "s"), "heun": ("-.", "^"), "rk4": (":", "D"),
-    "dopri5": ("-", "*"), "symplectic-euler": ("--", "v"), "verlet": ("-.", "P"),
-    "implicit-euler": (":", "X"), "lecture": ("-", "h"),
-    "RK45": ("-", "*"), "DOP853": ("--", "p"), "Radau": (":", "X"),
-    "default": ("-", "o"), "clean": ("--", "s"),
-    "Euler": ("-", "o"), "implicit": ("--", "s"), "implicitfast": ("-.", "^"), "RK4": (":", "D"),
+    "euler": ("-", "o"),
+    "midpoint": ("--", "s"),
+    "heun": ("-.", "^"),
+    "rk4": (":", "D"),
+    "dopri5": ("-", "*"),
+    "symplectic-euler": ("--", "v"),
+    "verlet": ("-.", "P"),
+    "implicit-euler": (":", "X"),
+    "lecture": ("-", "h"),
+    "RK45": ("-", "*"),
+    "DOP853": ("--", "p"),
+    "Radau": (":", "X"),
+    "default": ("-", "o"),
+    "clean": ("--", "s"),
+    "Euler": ("-", "o"),
+    "implicit": ("--", "s"),
+    "implicitfast": ("-.", "^"),
+    "RK4": (":", "D"),
 }
 """Engines by colour, methods by line style and marker; within an engine the
 (line style, marker) pair tells its methods apart."""
@@ -68,8 +80,13 @@ def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
 
 def series_style(engine: str, method: str) -> dict:
     ls, marker = METHOD_STYLES.get(method, ("-", "o"))
-    return {"color": ENGINE_COLOURS.get(engine, "black"), "linestyle": ls, "marker": marker,
-            "markersize": 4, "linewidth": 1.3}
+    return {
+        "color": ENGINE_COLOURS.get(engine, "black"),
+        "linestyle": ls,
+        "marker": marker,
+        "markersize": 4,
+        "linewidth": 1.3,
+    }
 
 
 def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path | None:
@@ -98,14 +115,12 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path 
         ax.grid(True, which="major", alpha=0.3)
     fig.suptitle(f"{_plain(title)}: work against precision")
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.81, 0.5), fontsize=7,
-               frameon=False)
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.81, 0.5), fontsize=7, frameon=False)
     fig.tight_layout(rect=(0, 0, 0.81, 1))
     return save(fig, path)
 
 
-SEARCH_FAILED = {"solver-failed": "solver failed", "timeout": "search timed out",
-                 "crashed": "crashed"}
+SEARCH_FAILED = {"solver-failed": "solver failed", "timeout": "search timed out", "crashed": "crashed"}
 """Stability rows without a limit that the figure still shows, and how it labels them."""
 
 
@@ -138,14 +153,17 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
             ax.plot([ex, ex], [yi - 0.4, yi + 0.4], color="black", linewidth=2)
     for yi, status in zip(y, s["status"], strict=True):
         if status in SEARCH_FAILED:
-            ax.text(floor, yi, f" {SEARCH_FAILED[status]}: no limit", va="center",
-                    fontsize=8, color="#b2182b")
+            ax.text(
+                floor, yi, f" {SEARCH_FAILED[status]}: no limit", va="center", fontsize=8, color="#b2182b"
+            )
     ax.set_yticks(y, labels, fontsize=8)
     ax.set_xscale("log")
     ax.set_xlim(left=floor / 2)
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("largest stable step (s); black tick: exact limit; hatched: stable at every\n"
-                  "step tried (a lower bound); a stub at the left edge: unstable at every step tried")
+    ax.set_xlabel(
+        "largest stable step (s); black tick: exact limit; hatched: stable at every\n"
+        "step tried (a lower bound); a stub at the left edge: unstable at every step tried"
+    )
     ax.set_title(f"{case}: largest stable step")
     ax.invert_yaxis()
     fig.tight_layout()
@@ -163,8 +181,7 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
         d = r[np.isclose(r["dt"].astype(float), dt)]
         for (engine, method), g in d.groupby(["engine", "method"], sort=False):
             g = g.sort_values("e_set")
-            ax.plot(g["e_set"], g["e_measured"], label=_pair(engine, method),
-                    **series_style(engine, method))
+            ax.plot(g["e_set"], g["e_measured"], label=_pair(engine, method), **series_style(engine, method))
         ax.plot([0, 1], [0, 1], color="black", linewidth=0.8, label="requested = measured")
         ax.set_xlabel("requested restitution")
         ax.set_ylabel("measured (rebound / impact speed, bounce 1)")
@@ -175,17 +192,20 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
     return save(fig, path)
 
 
-def energy_over_time(traces: dict, case: str, title: str, dt_step: float | None,
-                     tol: float | None, path: Path) -> Path | None:
+def energy_over_time(
+    traces: dict, case: str, title: str, dt_step: float | None, tol: float | None, path: Path
+) -> Path | None:
     """Relative energy error ``|E(t) - E(0)| / |E(0)|`` over time (log scale), one line per
     engine/method: fixed-step methods at step ``dt_step``, adaptive ones at tolerance ``tol``.
 
     ``traces`` maps ``(case, engine, method, dt_kind, dt)`` to ``(t, energy)``.
     """
     wanted = {"step": dt_step, "tolerance": tol}
-    chosen = {k: v for k, v in traces.items()
-              if k[0] == case and wanted[k[3]] is not None
-              and np.isclose(k[4], wanted[k[3]], rtol=1e-9, atol=0.0)}
+    chosen = {
+        k: v
+        for k, v in traces.items()
+        if k[0] == case and wanted[k[3]] is not None and np.isclose(k[4], wanted[k[3]], rtol=1e-9, atol=0.0)
+    }
     if not chosen:
         return None
     fig, ax = plt.subplots(figsize=(9.5, 4.4))
@@ -208,8 +228,9 @@ SCORECARD_DPI = 96
 """The scorecard is read first and its cells carry numbers: drawn sharper than the rest."""
 
 
-def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], target: float,
-              path: Path) -> Path | None:
+def scorecard(
+    card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], target: float, path: Path
+) -> Path | None:
     """The report's overview: a row per engine/method, three panels.
 
     Left: the wall time to reach ``target`` of each case's scale, as a multiple of the
@@ -238,15 +259,40 @@ def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], t
     for r in fidelity.itertuples(index=False):
         if (r.engine, r.method) in index:
             rest[index[(r.engine, r.method)], 0] = r.median
-    fig, axes = plt.subplots(1, 3, figsize=(12.5, 0.3 * len(rows) + 2.2),
-                             gridspec_kw={"width_ratios": [len(families), len(families), 1.3]})
+    fig, axes = plt.subplots(
+        1,
+        3,
+        figsize=(12.5, 0.3 * len(rows) + 2.2),
+        gridspec_kw={"width_ratios": [len(families), len(families), 1.3]},
+    )
     panels = [
-        (axes[0], np.log10(np.maximum(cost, 1.0)), cost, "RdYlGn_r", (0, 3),
-         f"time to reach {target:g} of the scale,\n x the fastest run", lambda v: f"{v:.3g}x"),
-        (axes[1], np.clip(limit, 0, 1), limit, "RdYlGn", (0, 1),
-         "largest stable step,\n x the exact (or best) limit", lambda v: f"{v:.2f}"),
-        (axes[2], np.log10(np.maximum(rest, 1e-4)), rest, "RdYlGn_r", (-4, -0.5),
-         "restitution\nerror |de|", lambda v: f"{v:.3f}"),
+        (
+            axes[0],
+            np.log10(np.maximum(cost, 1.0)),
+            cost,
+            "RdYlGn_r",
+            (0, 3),
+            f"time to reach {target:g} of the scale,\n x the fastest run",
+            lambda v: f"{v:.3g}x",
+        ),
+        (
+            axes[1],
+            np.clip(limit, 0, 1),
+            limit,
+            "RdYlGn",
+            (0, 1),
+            "largest stable step,\n x the exact (or best) limit",
+            lambda v: f"{v:.2f}",
+        ),
+        (
+            axes[2],
+            np.log10(np.maximum(rest, 1e-4)),
+            rest,
+            "RdYlGn_r",
+            (-4, -0.5),
+            "restitution\nerror |de|",
+            lambda v: f"{v:.3f}",
+        ),
     ]
     for ax, shade, values, cmap, (lo, hi), title, text in panels:
         ax.imshow(np.ma.masked_invalid(shade), cmap=cmap, vmin=lo, vmax=hi, aspect="auto")
@@ -256,11 +302,14 @@ def scorecard(card: pd.DataFrame, fidelity: pd.DataFrame, families: list[str], t
             elif values is cost and ran[i, j]:
                 ax.text(j, i, "-", ha="center", va="center", fontsize=8, color="#777777")
         ax.set_title(title, fontsize=9)
-        ax.set_xticks(range(values.shape[1]),
-                      families if values.shape[1] == len(families) else ["sweep"], fontsize=8,
-                      rotation=30, ha="right")
-        ax.set_yticks(range(len(rows)), [_pair(e, m) for e, m in rows] if ax is axes[0] else [],
-                      fontsize=8)
+        ax.set_xticks(
+            range(values.shape[1]),
+            families if values.shape[1] == len(families) else ["sweep"],
+            fontsize=8,
+            rotation=30,
+            ha="right",
+        )
+        ax.set_yticks(range(len(rows)), [_pair(e, m) for e, m in rows] if ax is axes[0] else [], fontsize=8)
         ax.set_xticks(np.arange(values.shape[1] + 1) - 0.5, minor=True)
         ax.set_yticks(np.arange(len(rows) + 1) - 0.5, minor=True)
         ax.grid(which="minor", color="white", linewidth=1.5)

@@ -32,7 +32,7 @@ def _parents() -> dict[int, int]:
                 stat = fh.read()
         except OSError:
             continue
-        fields = stat[stat.rfind(b")") + 2:].split()
+        fields = stat[stat.rfind(b")") + 2 :].split()
         if len(fields) > 1:
             out[int(name)] = int(fields[1])
     return out

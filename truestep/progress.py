@@ -23,8 +23,14 @@ class Progress:
     the terminal or log (default standard error).
     """
 
-    def __init__(self, total: int, label: str, *, say: Callable[[str], None] | None = None,
-                 stream: TextIO | None = None) -> None:
+    def __init__(
+        self,
+        total: int,
+        label: str,
+        *,
+        say: Callable[[str], None] | None = None,
+        stream: TextIO | None = None,
+    ) -> None:
         self.total, self.label, self.say = max(int(total), 0), label, say
         self.stream = stream or sys.stderr
         self.count = 0
@@ -33,8 +39,9 @@ class Progress:
         if say is None and self.total and self.stream.isatty():
             from tqdm import tqdm
 
-            self.bar = tqdm(total=self.total, desc=label, unit="run", file=self.stream,
-                            dynamic_ncols=True, leave=False)
+            self.bar = tqdm(
+                total=self.total, desc=label, unit="run", file=self.stream, dynamic_ncols=True, leave=False
+            )
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.start
@@ -62,8 +69,12 @@ class Progress:
         left = self.remaining()
         width = len(str(self.total))
         eta = f"~{left:.0f} s left" if left == left else ""
-        print(f"[{self.count:{width}d}/{self.total}] {self.label} {self.elapsed():6.1f} s "
-              f"elapsed, {eta:>12s}  {line}".rstrip(), file=self.stream, flush=True)
+        print(
+            f"[{self.count:{width}d}/{self.total}] {self.label} {self.elapsed():6.1f} s "
+            f"elapsed, {eta:>12s}  {line}".rstrip(),
+            file=self.stream,
+            flush=True,
+        )
 
     def close(self) -> None:
         if self.bar is not None:

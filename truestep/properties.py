@@ -59,7 +59,7 @@ def momentum_drift(case: Case, traj: Trajectory) -> float:
     planes, fields, pinned particles, emitters).
     """
     m = case.model
-    if (m.drag or len(m.anchors) or m.planes or m.fields or m.emitters or np.any(m.fixed)):
+    if m.drag or len(m.anchors) or m.planes or m.fields or m.emitters or np.any(m.fixed):
         return float("nan")
     live = _alive(case, traj)
     p = np.einsum("tn,n,tni->ti", live, m.mass, traj.v)
@@ -70,9 +70,11 @@ def momentum_drift(case: Case, traj: Trajectory) -> float:
     delivered = sum((force * (t_off - t_on) for _, force, t_on, t_off in m.impulses), np.zeros(3))
     exact = (m.mass @ m.v0) + delivered + m.mass.sum() * m.gravity * traj.t[k0:, None]
     mass = np.where(live[k0], m.mass, 0.0)
-    scale = max(float(np.max(np.linalg.norm(exact, axis=1))),
-                float(mass @ np.linalg.norm(traj.v[k0], axis=1)),
-                float(mass.sum()) * float(case.exact_params.get("v_scale", 0.0)))
+    scale = max(
+        float(np.max(np.linalg.norm(exact, axis=1))),
+        float(mass @ np.linalg.norm(traj.v[k0], axis=1)),
+        float(mass.sum()) * float(case.exact_params.get("v_scale", 0.0)),
+    )
     return float(np.max(np.linalg.norm(p[k0:] - exact, axis=1)) / (scale or 1.0))
 
 
@@ -179,8 +181,7 @@ def apex_height_error(case: Case, traj: Trajectory) -> float:
     m = case.model
     plane = m.planes[0]
     u0 = float((m.x0[0] - plane.point) @ plane.normal - m.radius[0])
-    _, launches = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution,
-                                  float(traj.t[-1]))
+    _, launches = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution, float(traj.t[-1]))
     exact = launches[:k] ** 2 / (2 * g)
     return float(np.max(np.abs(apex[:k] / exact - 1.0)))
 
@@ -199,8 +200,7 @@ def bounce_time_error(case: Case, traj: Trajectory) -> float:
     m = case.model
     plane = m.planes[0]
     u0 = float((m.x0[0] - plane.point) @ plane.normal - m.radius[0])
-    times, _ = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution,
-                               float(traj.t[-1]))
+    times, _ = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution, float(traj.t[-1]))
     return float(np.max(np.abs(when[:k] - times[:k])))
 
 
@@ -213,8 +213,10 @@ def _emitter_pools(case: Case, traj: Trajectory):
     m = case.model
     if not m.emitters or traj.alive is None:
         return []
-    return [(spec, traj.alive[:, first : first + spec.capacity])
-            for spec, first in zip(m.emitters, pool_starts(m), strict=True)]
+    return [
+        (spec, traj.alive[:, first : first + spec.capacity])
+        for spec, first in zip(m.emitters, pool_starts(m), strict=True)
+    ]
 
 
 @register
@@ -262,8 +264,9 @@ def population_z(case: Case, traj: Trajectory) -> float:
         mu, var = spawn_count_moments(spawn_mean(spec), spec.rate_r)
         spawn_frames = np.arange(max(0, ks[0] - k0 + 1), ks[-1] + 1)
         end = spawn_frames[:, None] + lives[None, :] - 1
-        counts = (np.searchsorted(ks, end, side="right")
-                  - np.searchsorted(ks, spawn_frames, side="left")[:, None])
+        counts = (
+            np.searchsorted(ks, end, side="right") - np.searchsorted(ks, spawn_frames, side="left")[:, None]
+        )
         c_mean, c_var = counts.mean(axis=1), counts.var(axis=1)
         expect = mu * c_mean.sum()
         spread = np.sqrt(np.sum(mu * c_var + var * c_mean**2))

@@ -71,8 +71,8 @@ def _scratch_of(out: Path) -> list[tuple[str, int, Path]]:
     for name in names:
         for kind in KINDS:
             prefix = f".{out.name}.{kind}-"
-            if name.startswith(prefix) and name[len(prefix):].isdigit():
-                found.append((kind, int(name[len(prefix):]), out.parent / name))
+            if name.startswith(prefix) and name[len(prefix) :].isdigit():
+                found.append((kind, int(name[len(prefix) :]), out.parent / name))
     return found
 
 
@@ -82,10 +82,10 @@ def recover(out: Path) -> list[str]:
     processes. Returns a line per action."""
     out = target(out)
     done = []
-    stale = [(kind, pid, path) for kind, pid, path in _scratch_of(out)
-             if pid == os.getpid() or not _alive(pid)]
-    olds = sorted((p for kind, _, p in stale if kind == "old" and _ours(p)),
-                  key=lambda p: -p.stat().st_mtime)
+    stale = [
+        (kind, pid, path) for kind, pid, path in _scratch_of(out) if pid == os.getpid() or not _alive(pid)
+    ]
+    olds = sorted((p for kind, _, p in stale if kind == "old" and _ours(p)), key=lambda p: -p.stat().st_mtime)
     if not os.path.lexists(out) and olds:
         os.rename(olds[0], out)
         done.append(f"put the previous report back from {olds[0].name}")

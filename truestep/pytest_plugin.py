@@ -38,8 +38,10 @@ _RUNS: dict[tuple, Any] = {}
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
-        "markers", f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True): "
-        "run truestep cases on these engines; the test takes `truestep_gate`, once per gate")
+        "markers",
+        f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True): "
+        "run truestep cases on these engines; the test takes `truestep_gate`, once per gate",
+    )
 
 
 @dataclass(frozen=True)
@@ -58,8 +60,9 @@ def _paths(value: Any, base: Path) -> tuple[str, ...]:
     out = []
     for item in (str(i).strip() for i in items if str(i).strip()):
         near = base / item
-        out.append(str(near) if ("/" in item or item.endswith(".toml") or near.exists())
-                   and near.exists() else item)
+        out.append(
+            str(near) if ("/" in item or item.endswith(".toml") or near.exists()) and near.exists() else item
+        )
     return tuple(out)
 
 
@@ -72,8 +75,11 @@ def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
         raise pytest.UsageError(f"@pytest.mark.{MARKER} needs engines= and cases=")
     base = test_file.parent
     return Selection(
-        engines=tuple(e.strip() for e in (kw["engines"].split(",") if isinstance(kw["engines"], str)
-                                          else kw["engines"]) if e.strip()),
+        engines=tuple(
+            e.strip()
+            for e in (kw["engines"].split(",") if isinstance(kw["engines"], str) else kw["engines"])
+            if e.strip()
+        ),
         cases=_paths(kw["cases"], base),
         gates=_paths(kw.get("gates"), base),
         quick=bool(kw.get("quick", False)),
@@ -138,10 +144,12 @@ def _plan(sel: Selection) -> list[GateCheck]:
                 checks.append(GateCheck(sel, case, g))  # not run: the check says so (skip)
                 continue
             adapter = get_adapter(engine)
-            methods = [m for m in adapter.methods if not hasattr(case, "model")
-                       or not adapter.missing(case, m)] if g.method == "*" else [g.method]
-            checks += [GateCheck(sel, case, dataclasses.replace(g, engine=engine, method=m))
-                       for m in methods]
+            methods = (
+                [m for m in adapter.methods if not hasattr(case, "model") or not adapter.missing(case, m)]
+                if g.method == "*"
+                else [g.method]
+            )
+            checks += [GateCheck(sel, case, dataclasses.replace(g, engine=engine, method=m)) for m in methods]
     return checks
 
 
@@ -154,8 +162,9 @@ def _tables(sel: Selection):
     if key not in _RUNS:
         cases, todo = _gates(sel)
         analyses = any(g.kind in ("stability-limit", "restitution") for _, g in todo)
-        _RUNS[key] = run(cases, list(sel.engines), quick=sel.quick, analyses=analyses,
-                         progress=lambda _: None)
+        _RUNS[key] = run(
+            cases, list(sel.engines), quick=sel.quick, analyses=analyses, progress=lambda _: None
+        )
     return _RUNS[key]
 
 
@@ -164,8 +173,10 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         return
     mark = metafunc.definition.get_closest_marker(MARKER)
     if mark is None:
-        raise pytest.UsageError(f"{metafunc.definition.nodeid}: `truestep_gate` needs "
-                                f"@pytest.mark.{MARKER}(engines=..., cases=..., gates=...)")
+        raise pytest.UsageError(
+            f"{metafunc.definition.nodeid}: `truestep_gate` needs "
+            f"@pytest.mark.{MARKER}(engines=..., cases=..., gates=...)"
+        )
     from truestep.adapters import EngineNotInstalled, UnknownEngine
     from truestep.cases import CaseError, SelectionError
 
@@ -185,8 +196,11 @@ def truestep_gate(request: pytest.FixtureRequest) -> GateCheck:
     """One gate of the test's ``@pytest.mark.truestep`` selection (call ``.check()``)."""
     check = getattr(request, "param", None)
     if check is None:
-        pytest.fail("truestep: the marker's cases and gates name no gate to check: "
-                    "a gate that checked nothing has not passed", pytrace=False)
+        pytest.fail(
+            "truestep: the marker's cases and gates name no gate to check: "
+            "a gate that checked nothing has not passed",
+            pytrace=False,
+        )
     return check
 
 

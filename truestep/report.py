@@ -40,10 +40,8 @@ from truestep.report_sections import (
 )
 from truestep.visible import visible
 
-PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet",
-            "mujoco")
-__all__ = ["hard_case_line", "render_markdown", "speed_section", "speed_table", "survival",
-           "write_report"]
+PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet", "mujoco")
+__all__ = ["hard_case_line", "render_markdown", "speed_section", "speed_table", "survival", "write_report"]
 
 
 def footer(argv: list[str]) -> str:
@@ -72,8 +70,9 @@ def numerics_line() -> str:
 
     fp = fingerprint()
     simd = ", ".join(fp["numpy_simd"]) or "baseline only"
-    return (f"BLAS {'; '.join(fp['blas'])}; numpy SIMD dispatch {simd}"
-            + (" (TRUESTEP_NUMERICS=native)" if fp["native"] else ""))
+    return f"BLAS {'; '.join(fp['blas'])}; numpy SIMD dispatch {simd}" + (
+        " (TRUESTEP_NUMERICS=native)" if fp["native"] else ""
+    )
 
 
 def _command(argv: list[str]) -> str:
@@ -88,51 +87,73 @@ def middle(values: list[float]) -> float | None:
     return sorted(values)[len(values) // 2] if values else None
 
 
-def _case_figures(cases: list[Case], results: pd.DataFrame, traces: dict | None,
-                  fig_dir: Path) -> dict[str, tuple[Path | None, Path | None]]:
+def _case_figures(
+    cases: list[Case], results: pd.DataFrame, traces: dict | None, fig_dir: Path
+) -> dict[str, tuple[Path | None, Path | None]]:
     """Draw each case's work-precision figure and, for conservative cases with traces,
     its energy figure; return their paths (``None`` where there is nothing to draw)."""
     out = {}
     for case in cases:
         df = results[results["case"] == case.name]
-        fig = plots.work_precision(df, case.name, case.title,
-                                   fig_dir / f"{case.name}-work-precision.png")
+        fig = plots.work_precision(df, case.name, case.title, fig_dir / f"{case.name}-work-precision.png")
         energy_fig = None
         if traces and case.conservative:
             steps = df.loc[df["dt_kind"] == "step", "dt"].dropna().astype(float).unique().tolist()
             tols = df.loc[df["dt_kind"] == "tolerance", "dt"].dropna().astype(float).unique().tolist()
-            energy_fig = plots.energy_over_time(traces, case.name, case.title, middle(steps),
-                                                middle(tols), fig_dir / f"{case.name}-energy.png")
+            energy_fig = plots.energy_over_time(
+                traces,
+                case.name,
+                case.title,
+                middle(steps),
+                middle(tols),
+                fig_dir / f"{case.name}-energy.png",
+            )
         out[case.name] = (fig, energy_fig)
     return out
 
 
-def draw_case_figures(cases: list[Case], results: pd.DataFrame, traces: dict | None,
-                      fig_dir: Path) -> dict[str, tuple[Path | None, Path | None]]:
+def draw_case_figures(
+    cases: list[Case], results: pd.DataFrame, traces: dict | None, fig_dir: Path
+) -> dict[str, tuple[Path | None, Path | None]]:
     """:func:`_case_figures` for every case, the cases dealt out over one process per core
     (drawing is not timed). A share whose process fails is drawn again here."""
     workers = untimed_workers()
     shares = [cases[k::workers] for k in range(workers) if cases[k::workers]]
-    outs = run_isolated_all([(_case_figures, (share, results, traces, fig_dir), 600.0)
-                             for share in shares], workers)
+    outs = run_isolated_all(
+        [(_case_figures, (share, results, traces, fig_dir), 600.0) for share in shares], workers
+    )
     drawn: dict[str, tuple[Path | None, Path | None]] = {}
     for share, out in zip(shares, outs, strict=True):
-        drawn.update(out.value if out.status == "ok"
-                     else _case_figures(share, results, traces, fig_dir))
+        drawn.update(out.value if out.status == "ok" else _case_figures(share, results, traces, fig_dir))
     return drawn
 
 
-SECTIONS = ("Which engine, which method", "Summary", "Measured orders of convergence",
-            "Work against precision, per case", "Stability limits", "Restitution",
-            "How cost grows with work", "Pairs not run", "The lecture's figures, reproduced",
-            "How the numbers are made")
+SECTIONS = (
+    "Which engine, which method",
+    "Summary",
+    "Measured orders of convergence",
+    "Work against precision, per case",
+    "Stability limits",
+    "Restitution",
+    "How cost grows with work",
+    "Pairs not run",
+    "The lecture's figures, reproduced",
+    "How the numbers are made",
+)
 """The report's top-level sections, in order (its table of contents)."""
 
 
-def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
-                    tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
-                    traces: dict | None = None,
-                    lecture_figures: LectureFigures = None) -> str:
+def render_markdown(
+    out: Path,
+    cases: list[Case],
+    results: pd.DataFrame,
+    tables: dict[str, pd.DataFrame],
+    *,
+    quick: bool,
+    argv: list[str],
+    traces: dict | None = None,
+    lecture_figures: LectureFigures = None,
+) -> str:
     """The report as Markdown; figures are written under ``out/figures``.
 
     The question, a table of contents, the scorecard and its picks first; then the
@@ -151,29 +172,43 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
         f"{len(results)} runs over {results['case'].nunique()} cases and "
         f"{results['engine'].nunique()} engines: "
         + ", ".join(f"{v} {k}" for k, v in counts.items())
-        + (". This is a `--quick` run: short sweeps." if quick else ".") + "\n"
+        + (". This is a `--quick` run: short sweeps." if quick else ".")
+        + "\n"
     )
     speed = speed_section(cases, results)
-    titles = list(SECTIONS[:2]) + [line[3:].strip() for line in speed if line.startswith("## ")] \
+    titles = (
+        list(SECTIONS[:2])
+        + [line[3:].strip() for line in speed if line.startswith("## ")]
         + list(SECTIONS[2:])
+    )
     parts.append("Contents: " + " · ".join(link(t) for t in titles) + "\n")
     parts += scorecard_section(cases, results, tables, fig_dir)
     parts += summary(cases, results, tables)
     parts += speed
     orders = orders_table(results, cases)
     parts.append("## Measured orders of convergence\n")
-    parts.append("Least-squares slope of log(error) against log(dt) over the sweep, leaving "
-                 "out errors above a tenth of the case's scale (not yet converged) and below "
-                 "1e-11 of it (round-off).\n")
+    parts.append(
+        "Least-squares slope of log(error) against log(dt) over the sweep, leaving "
+        "out errors above a tenth of the case's scale (not yet converged) and below "
+        "1e-11 of it (round-off).\n"
+    )
     fitted = orders.dropna(subset=["order"])
     disagree = fitted[fitted["agrees"] == "no"]
-    parts.append(f"Against the orders the engines declare (on smooth cases with an exact "
-                 f"solution): {int((fitted['agrees'] == 'yes').sum())} fits agree, "
-                 f"{len(disagree)} do not"
-                 + (": " + "; ".join(f"{r.case} {text(r.engine)} / {text(r.method)} {r.order:.2f} "
-                                     f"(declared {r.declared:g})"
-                                     for r in disagree.itertuples(index=False)) if len(disagree)
-                    else "") + ".\n")
+    parts.append(
+        f"Against the orders the engines declare (on smooth cases with an exact "
+        f"solution): {int((fitted['agrees'] == 'yes').sum())} fits agree, "
+        f"{len(disagree)} do not"
+        + (
+            ": "
+            + "; ".join(
+                f"{r.case} {text(r.engine)} / {text(r.method)} {r.order:.2f} (declared {r.declared:g})"
+                for r in disagree.itertuples(index=False)
+            )
+            if len(disagree)
+            else ""
+        )
+        + ".\n"
+    )
     parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
     parts.append("## Work against precision, per case\n")
     drawn = draw_case_figures(cases, results, traces, fig_dir)
@@ -189,16 +224,29 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
         if energy_fig is not None:
             parts.append(f"![energy over time of {case.name}](figures/{energy_fig.name})\n")
         shown = df[~df["status"].isin(["unsupported", "skipped"])]
-        cols = ["engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev",
-                "wall_s", "t_fail", *case.properties]
+        cols = [
+            "engine",
+            "method",
+            "dt",
+            "dt_kind",
+            "status",
+            "error",
+            "energy_drift",
+            "nfev",
+            "wall_s",
+            "t_fail",
+            *case.properties,
+        ]
         parts.append(folded(f"{len(shown)} runs of {case.name}", md_table(with_units(shown[cols]))))
     stab = tables.get("stability")
     parts.append("## Stability limits\n")
     if stab is not None and len(stab):
-        parts.append("Largest stable step by bisection over each case's horizon (see "
-                     f"{link('How the numbers are made')}). `dt_limit_exact` is 0 where the "
-                     "method is unstable at every step and inf where it is stable at every "
-                     "step.\n")
+        parts.append(
+            "Largest stable step by bisection over each case's horizon (see "
+            f"{link('How the numbers are made')}). `dt_limit_exact` is 0 where the "
+            "method is unstable at every step and inf where it is stable at every "
+            "step.\n"
+        )
         for case_name in stab["case"].unique():
             fig = plots.stability_bars(stab, case_name, fig_dir / f"{case_name}-stability.png")
             if fig is not None:
@@ -209,9 +257,11 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
     rest = tables.get("restitution")
     parts.append("## Restitution\n")
     if rest is not None and len(rest):
-        parts.append("Restitution per bounce of a dropped ball (see "
-                     f"{link('How the numbers are made')}), from rebound speeds and from apex "
-                     "heights.\n")
+        parts.append(
+            "Restitution per bounce of a dropped ball (see "
+            f"{link('How the numbers are made')}), from rebound speeds and from apex "
+            "heights.\n"
+        )
         fig = plots.restitution_plot(rest, fig_dir / "restitution.png")
         if fig is not None:
             parts.append(f"![requested against measured restitution](figures/{fig.name})\n")
@@ -221,10 +271,16 @@ def render_markdown(out: Path, cases: list[Case], results: pd.DataFrame,
     parts += scaling_section(tables.get("scaling"), fig_dir)
     absent = results[results["status"].isin(["unsupported", "skipped"])]
     parts.append("## Pairs not run\n")
-    parts.append("Every case, engine and method that was not run, and why: `unsupported` "
-                 "names the features the engine cannot model.\n")
-    parts.append(folded(f"{len(absent)} pairs", md_table(
-        absent[["case", "engine", "method", "status", "missing", "message"]])))
+    parts.append(
+        "Every case, engine and method that was not run, and why: `unsupported` "
+        "names the features the engine cannot model.\n"
+    )
+    parts.append(
+        folded(
+            f"{len(absent)} pairs",
+            md_table(absent[["case", "engine", "method", "status", "missing", "message"]]),
+        )
+    )
     if callable(lecture_figures):
         lecture_figures = lecture_figures()
     parts.append("## The lecture's figures, reproduced\n")
@@ -251,8 +307,7 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
     from truestep.figures import FIGURES, lecture_figure_shares, write_lecture_figures
 
     shares = lecture_figure_shares(untimed_workers())
-    started = [(names, start_isolated(write_lecture_figures, (fig_dir, names), 600.0))
-               for names in shares]
+    started = [(names, start_isolated(write_lecture_figures, (fig_dir, names), 600.0)) for names in shares]
 
     def collect() -> list[tuple[Path, str]]:
         drawn = []
@@ -272,14 +327,18 @@ RUN_FILE = "run.json"
 def git_revision() -> str:
     """The short git revision of truestep's source, or ``""`` outside a checkout."""
     try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=False,
+            cwd=Path(__file__).parent,
+        ).stdout.strip()
     except OSError:
         return ""
 
 
-def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool,
-               argv: list[str]) -> dict:
+def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool, argv: list[str]) -> dict:
     """``run.json``: the truestep version and revision, the command, whether it was quick,
     the cases and engines the run was asked for (in order), and the floating-point
     environment (:func:`truestep.numerics.fingerprint`): with equal ``numerics`` and
@@ -287,11 +346,15 @@ def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool,
     from truestep import __version__
     from truestep.numerics import fingerprint
 
-    return {"truestep": __version__, "revision": git_revision(),
-            "command": "truestep " + " ".join(argv or ["run"]), "quick": bool(quick),
-            "cases": [c.name for c in cases],
-            "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
-            "numerics": fingerprint()}
+    return {
+        "truestep": __version__,
+        "revision": git_revision(),
+        "command": "truestep " + " ".join(argv or ["run"]),
+        "quick": bool(quick),
+        "cases": [c.name for c in cases],
+        "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
+        "numerics": fingerprint(),
+    }
 
 
 def read_run_record(directory: Path) -> dict | None:
@@ -307,9 +370,18 @@ def read_run_record(directory: Path) -> dict | None:
         return None
     return record if isinstance(record, dict) else None
 
-def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
-                 tables: dict[str, pd.DataFrame], *, quick: bool, argv: list[str],
-                 traces: dict | None = None, with_lecture_figures: bool = True) -> None:
+
+def write_report(
+    out: Path,
+    cases: list[Case],
+    results: pd.DataFrame,
+    tables: dict[str, pd.DataFrame],
+    *,
+    quick: bool,
+    argv: list[str],
+    traces: dict | None = None,
+    with_lecture_figures: bool = True,
+) -> None:
     """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
     the table), index.md, index.html, figures/.
 
@@ -342,12 +414,14 @@ def write_report(out: Path, cases: list[Case], results: pd.DataFrame,
             scaling.to_csv(stage / "scaling.csv", index=False, columns=SCALING_COLUMNS)
         import json
 
-        (stage / RUN_FILE).write_text(json.dumps(run_record(cases, results, quick=quick,
-                                                            argv=argv), indent=1) + "\n")
+        (stage / RUN_FILE).write_text(
+            json.dumps(run_record(cases, results, quick=quick, argv=argv), indent=1) + "\n"
+        )
         faults.point("report-csv")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
-        md = render_markdown(stage, cases, results, tables, quick=quick, argv=argv,
-                             traces=traces, lecture_figures=lecture)
+        md = render_markdown(
+            stage, cases, results, tables, quick=quick, argv=argv, traces=traces, lecture_figures=lecture
+        )
         faults.point("report-figures")
         (stage / "index.md").write_text(md)
         faults.point("report-index")

@@ -24,12 +24,21 @@ from truestep.visible import visible
 
 MARKER = ".truestep-report"
 """The marker file's name."""
-MARKER_TEXT = ('{"written_by": "truestep", "kind": "report", "schema": 1, "note": "truestep '
-               'replaces this folder as a whole when a run names it as --out"}\n')
+MARKER_TEXT = (
+    '{"written_by": "truestep", "kind": "report", "schema": 1, "note": "truestep '
+    'replaces this folder as a whole when a run names it as --out"}\n'
+)
 """What truestep writes into the marker (the same for every report)."""
 MAX_MARKER_BYTES = 4096
-REPORT_FILES = ("results.csv", "stability.csv", "restitution.csv", "scaling.csv", "index.md",
-                "index.html", "run.json")
+REPORT_FILES = (
+    "results.csv",
+    "stability.csv",
+    "restitution.csv",
+    "scaling.csv",
+    "index.md",
+    "index.html",
+    "run.json",
+)
 """Regular files truestep writes into a report folder."""
 REPORT_DIRS = ("figures",)
 """Directories truestep writes into a report folder (of ``*.png`` files only)."""
@@ -76,11 +85,15 @@ def check_out(out: Path, *, flag: str = "--out") -> Path:
     real = Path(os.path.realpath(out))
     if os.path.islink(out):
         if not real.is_dir():
-            raise OutRefused(f"{flag}: {shown} is a symbolic link to {visible(real)}, which is "
-                             "not a folder: nothing was touched")
+            raise OutRefused(
+                f"{flag}: {shown} is a symbolic link to {visible(real)}, which is "
+                "not a folder: nothing was touched"
+            )
         if not _marked(real):
-            raise OutRefused(f"{flag}: {shown} is a symbolic link to {visible(real)}, which is "
-                             "not a report truestep wrote: nothing was touched")
+            raise OutRefused(
+                f"{flag}: {shown} is a symbolic link to {visible(real)}, which is "
+                "not a report truestep wrote: nothing was touched"
+            )
     if not os.path.lexists(real):
         return real
     if not real.is_dir():
@@ -93,24 +106,27 @@ def check_out(out: Path, *, flag: str = "--out") -> Path:
         return real
     if not _marked(real):
         first = visible(sorted(entries)[0])[:60]
-        raise OutRefused(f"{flag}: {shown} holds {len(entries)} entries ({first!r} ...) and is "
-                         f"not a report truestep wrote (no {MARKER} in it): nothing was touched; "
-                         "name a new or empty folder")
+        raise OutRefused(
+            f"{flag}: {shown} holds {len(entries)} entries ({first!r} ...) and is "
+            f"not a report truestep wrote (no {MARKER} in it): nothing was touched; "
+            "name a new or empty folder"
+        )
     try:
         stranger = _stranger(real)
     except OSError as err:
         raise OutRefused(f"{flag}: cannot look into {shown}: {err.strerror or err}") from None
     if stranger is not None:
-        raise OutRefused(f"{flag}: {shown} is a truestep report, but {visible(stranger)[:80]!r} in "
-                         "it is not something truestep wrote, and a report is replaced as a "
-                         "whole: move it out, or name another folder; nothing was touched")
+        raise OutRefused(
+            f"{flag}: {shown} is a truestep report, but {visible(stranger)[:80]!r} in "
+            "it is not something truestep wrote, and a report is replaced as a "
+            "whole: move it out, or name another folder; nothing was touched"
+        )
     return real
 
 
 def write_marker(folder: Path) -> None:
     """Mark ``folder`` as a report truestep wrote."""
-    fd = os.open(folder / MARKER, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW
-                 | os.O_CLOEXEC, 0o644)
+    fd = os.open(folder / MARKER, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         fh.write(MARKER_TEXT)
 

@@ -66,8 +66,10 @@ def markdown_to_html(md: str, base: Path) -> str:
             figure = _own_figure(base, m.group(2)) if m else None
             if figure is not None:
                 data = base64.b64encode(figure.read_bytes()).decode()
-                out.append(f'<figure><img alt="{html.escape(m.group(1))}" '
-                           f'src="data:image/png;base64,{data}"></figure>')
+                out.append(
+                    f'<figure><img alt="{html.escape(m.group(1))}" '
+                    f'src="data:image/png;base64,{data}"></figure>'
+                )
             else:
                 out.append(f"<p>{inline(line)}</p>")  # text, as written: nothing is read
         elif line.startswith("|"):
@@ -76,8 +78,9 @@ def markdown_to_html(md: str, base: Path) -> str:
                 rows.append([c.strip() for c in _protect(lines[i]).strip("|").split("|")])
                 i += 1
             head, body = rows[0], rows[2:]
-            out.append("<table><thead><tr>" + "".join(f"<th>{inline(c)}</th>" for c in head)
-                       + "</tr></thead><tbody>")
+            out.append(
+                "<table><thead><tr>" + "".join(f"<th>{inline(c)}</th>" for c in head) + "</tr></thead><tbody>"
+            )
             out.extend("<tr>" + "".join(f"<td>{inline(c)}</td>" for c in r) + "</tr>" for r in body)
             out.append("</tbody></table>")
             continue
@@ -93,12 +96,16 @@ def markdown_to_html(md: str, base: Path) -> str:
         elif line.strip():
             out.append(f"<p>{inline(line)}</p>")
         i += 1
-    style = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;"
-             "padding:0 1em;color:#222}table{border-collapse:collapse;font-size:12px;"
-             "margin:1em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
-             "th{background:#f3f3f3}img{max-width:100%}code{background:#f3f3f3}"
-             "details{margin:.5em 0}summary{cursor:pointer;color:#1f5fa8}")
-    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<title>truestep report</title><style>{style}</style></head><body>\n"
-            + "\n".join(out) + "\n</body></html>\n")
-
+    style = (
+        "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;"
+        "padding:0 1em;color:#222}table{border-collapse:collapse;font-size:12px;"
+        "margin:1em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
+        "th{background:#f3f3f3}img{max-width:100%}code{background:#f3f3f3}"
+        "details{margin:.5em 0}summary{cursor:pointer;color:#1f5fa8}"
+    )
+    return (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f"<title>truestep report</title><style>{style}</style></head><body>\n"
+        + "\n".join(out)
+        + "\n</body></html>\n"
+    )

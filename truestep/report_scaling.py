@@ -58,7 +58,8 @@ def scaling_lines(table: pd.DataFrame) -> list[str]:
         f"{bandwidth / 1e9:.1f} GB/s, which at {per_step} B per particle-step (positions and "
         f"velocities, float64, read and written once) is "
         f"{bandwidth / per_step:.3g} particle-steps/s. `truestep bench` makes the same table "
-        f"with a larger budget.\n"]
+        f"with a larger budget.\n"
+    ]
     at = comparison_n(table)
     if at is None:
         lines.append("No run of the scaling table finished.\n")
@@ -66,17 +67,30 @@ def scaling_lines(table: pd.DataFrame) -> list[str]:
     n, shared = at
     best = best_at(table, n)
     top = best.iloc[0]
-    cells = [f"{text(r.engine)} / {text(r.method)} {r.particle_steps_per_s:.3g} "
-             f"({percent(r.bandwidth_fraction)} of the bandwidth"
-             + ("" if r.engine == top.engine
-                else f", {top.particle_steps_per_s / r.particle_steps_per_s:.1f}x slower") + ")"
-             for r in best.itertuples(index=False)]
-    lines.append(f"At n = {n:,}, the largest n "
-                 + ("that more than one engine reached" if shared else "any run reached")
-                 + ", the fastest method of each engine, in particle-steps per second: "
-                 + "; ".join(cells)
-                 + "." + (" A fraction above 100% means the state stayed in cache between "
-                          "steps." if (best["bandwidth_fraction"] > 1).any() else "") + "\n")
+    cells = [
+        f"{text(r.engine)} / {text(r.method)} {r.particle_steps_per_s:.3g} "
+        f"({percent(r.bandwidth_fraction)} of the bandwidth"
+        + (
+            ""
+            if r.engine == top.engine
+            else f", {top.particle_steps_per_s / r.particle_steps_per_s:.1f}x slower"
+        )
+        + ")"
+        for r in best.itertuples(index=False)
+    ]
+    lines.append(
+        f"At n = {n:,}, the largest n "
+        + ("that more than one engine reached" if shared else "any run reached")
+        + ", the fastest method of each engine, in particle-steps per second: "
+        + "; ".join(cells)
+        + "."
+        + (
+            " A fraction above 100% means the state stayed in cache between steps."
+            if (best["bandwidth_fraction"] > 1).any()
+            else ""
+        )
+        + "\n"
+    )
     return lines
 
 
@@ -86,13 +100,14 @@ def scaling_section(table: pd.DataFrame | None, fig_dir: Path) -> list[str]:
 
     parts = [f"## {TITLE}\n"]
     if table is None or not len(table):
-        parts.append("Not run: the scaling table is made by a full run that includes the "
-                     "`particle-rain` case, and by `truestep bench`.\n")
+        parts.append(
+            "Not run: the scaling table is made by a full run that includes the "
+            "`particle-rain` case, and by `truestep bench`.\n"
+        )
         return parts
     parts += scaling_lines(table)
     if (table["status"] == "ok").any():
-        fig = scaling_plot(table, float(table.attrs["bandwidth_bytes_per_s"]),
-                           fig_dir / "scaling.png")
+        fig = scaling_plot(table, float(table.attrs["bandwidth_bytes_per_s"]), fig_dir / "scaling.png")
         parts.append(f"![particle-steps per second against n](figures/{fig.name})\n")
     shown = table.assign(note=table["note"].str.slice(0, 160))
     parts.append(folded(f"{len(table)} rows of the scaling table", md_table(shown)))

@@ -31,24 +31,37 @@ def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
     from truestep.adapters import engine_status, registered
     from truestep.declared import DECLARED_ORDER_TOL, declared_order_pairs
 
-    ran = [e for e in dict.fromkeys(results["engine"].astype(str))
-           if e in registered() and engine_status(e) == "installed"]
-    declared = {(names[0], g.engine, g.method): g.params["expect"]
-                for names, g in declared_order_pairs(cases, ran)}
+    ran = [
+        e
+        for e in dict.fromkeys(results["engine"].astype(str))
+        if e in registered() and engine_status(e) == "installed"
+    ]
+    declared = {
+        (names[0], g.engine, g.method): g.params["expect"] for names, g in declared_order_pairs(cases, ran)
+    }
     rows = []
     scales = {c.name: c.error_scale for c in cases}
     steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
     for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
-        order = fit_order(g["dt"].astype(float), g["error"].astype(float),
-                          scale=scales.get(case, 1.0))
+        order = fit_order(g["dt"].astype(float), g["error"].astype(float), scale=scales.get(case, 1.0))
         expect = declared.get((case, engine, method), np.nan)
-        agrees = "" if not (np.isfinite(expect) and np.isfinite(order)) else (
-            "yes" if order >= expect - DECLARED_ORDER_TOL else "no")
-        rows.append({"case": case, "engine": engine, "method": method, "order": order,
-                     "declared": expect, "agrees": agrees,
-                     "points": int(g["error"].notna().sum())})
-    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "declared", "agrees",
-                                       "points"])
+        agrees = (
+            ""
+            if not (np.isfinite(expect) and np.isfinite(order))
+            else ("yes" if order >= expect - DECLARED_ORDER_TOL else "no")
+        )
+        rows.append(
+            {
+                "case": case,
+                "engine": engine,
+                "method": method,
+                "order": order,
+                "declared": expect,
+                "agrees": agrees,
+                "points": int(g["error"].notna().sum()),
+            }
+        )
+    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "declared", "agrees", "points"])
 
 
 def _run_label(r: pd.Series) -> str:
@@ -91,9 +104,11 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
     lines = ["## Summary\n"]
     table = cheapest_table(cases, results)
     if len(table):
-        lines.append("The cheapest run that reaches each accuracy (error at most 1e-2, 1e-4 "
-                     "and 1e-6 of the case's scale), by wall time; where another run needs "
-                     "fewer derivative evaluations it is named too:\n")
+        lines.append(
+            "The cheapest run that reaches each accuracy (error at most 1e-2, 1e-4 "
+            "and 1e-6 of the case's scale), by wall time; where another run needs "
+            "fewer derivative evaluations it is named too:\n"
+        )
         lines.append(md_table(table))
     rest = tables.get("restitution")
     if rest is not None and len(rest):
@@ -103,15 +118,19 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
             lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
             for w in worst.itertuples(index=False):
-                lines.append(f"- {text(w.engine)} / {text(w.method)}: requested {w.e_set:g}, measured "
-                             f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s.")
+                lines.append(
+                    f"- {text(w.engine)} / {text(w.method)}: requested {w.e_set:g}, measured "
+                    f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s."
+                )
             lines.append("")
     hard = [c for c in cases if c.hard]
     if hard:
-        lines.append(f"Hard cases: the largest step of the sweep at which each engine/method "
-                     f"survives: it finishes stable, does not fail what the scene tests (such "
-                     f"as tunnelling), its error is at most {SURVIVAL_ERROR:g} of the case's "
-                     f"scale and its energy error at most {SURVIVAL_ENERGY:g} of its energy:\n")
+        lines.append(
+            f"Hard cases: the largest step of the sweep at which each engine/method "
+            f"survives: it finishes stable, does not fail what the scene tests (such "
+            f"as tunnelling), its error is at most {SURVIVAL_ERROR:g} of the case's "
+            f"scale and its energy error at most {SURVIVAL_ENERGY:g} of its energy:\n"
+        )
         for c in hard:
             lines.append(hard_case_line(c, results))
         lines.append("")
@@ -124,16 +143,15 @@ def hard_case_line(case: Case, results: pd.DataFrame) -> str:
     if s.empty:
         return f"- **{case.name}**: no fixed-step runs."
     groups = []
-    for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"),
-                        key=lambda kv: -kv[0]):
-        names = ", ".join(f"{text(e)}/{text(m)}"
-                          for e, m in zip(g["engine"], g["method"], strict=True))
+    for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"), key=lambda kv: -kv[0]):
+        names = ", ".join(f"{text(e)}/{text(m)}" for e, m in zip(g["engine"], g["method"], strict=True))
         groups.append(f"{_fmt(float(dt))} s: {names}")
     never = s[s["dt_survived"].isna()]
     if len(never):
-        names = ", ".join(f"{text(e)}/{text(m)} ({text(f or 'failed')})"
-                          for e, m, f in zip(never["engine"], never["method"], never["failure"],
-                                             strict=True))
+        names = ", ".join(
+            f"{text(e)}/{text(m)} ({text(f or 'failed')})"
+            for e, m, f in zip(never["engine"], never["method"], never["failure"], strict=True)
+        )
         groups.append(f"at no step of the sweep: {names}")
     return f"- **{case.name}**: " + "; ".join(groups) + "."
 
@@ -146,18 +164,28 @@ def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> 
     ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
     """
     n = case.model.n if case.model is not None else 1
-    d = results[(results["case"] == case.name) & (results["dt_kind"] == "step")
-                & (results["status"] == "ok")].dropna(subset=["wall_s"])
+    d = results[
+        (results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")
+    ].dropna(subset=["wall_s"])
     rows = []
     for dt, g in d.groupby(d["dt"].astype(float)):
         base = g[(g["engine"] == engine) & (g["method"] == method)]
         base_wall = float(base["wall_s"].iloc[0]) if len(base) else np.nan
         for r in g.sort_values("wall_s").itertuples(index=False):
-            rows.append({"dt": dt, "engine": r.engine, "method": r.method, "wall_s": r.wall_s,
-                         "particle_steps_per_s": n * r.steps / r.wall_s, "error": r.error,
-                         "slower_by": r.wall_s / base_wall})
-    return pd.DataFrame(rows, columns=["dt", "engine", "method", "wall_s",
-                                       "particle_steps_per_s", "error", "slower_by"])
+            rows.append(
+                {
+                    "dt": dt,
+                    "engine": r.engine,
+                    "method": r.method,
+                    "wall_s": r.wall_s,
+                    "particle_steps_per_s": n * r.steps / r.wall_s,
+                    "error": r.error,
+                    "slower_by": r.wall_s / base_wall,
+                }
+            )
+    return pd.DataFrame(
+        rows, columns=["dt", "engine", "method", "wall_s", "particle_steps_per_s", "error", "slower_by"]
+    )
 
 
 def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
@@ -167,19 +195,23 @@ def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
     from truestep.picks import noise_band, tied_with_fastest
 
     tied = others[tied_with_fastest(others)].sort_values(["engine", "method"])
-    names = " and ".join(f"{text(r.engine)} / {text(r.method)}"
-                         for r in tied.itertuples(index=False))
+    names = " and ".join(f"{text(r.engine)} / {text(r.method)}" for r in tied.itertuples(index=False))
     fastest = tied.loc[tied["wall_s"].astype(float).idxmin()]
     w_e, w_r = float(fastest["wall_s"]), float(mine["wall_s"])
     b_e = float(noise_band(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))[0])
     b_r = float(noise_band(np.array([w_r]), np.array([mine.get("wall_s_spread", np.nan)]))[0])
     low, high = (w_e - b_e) / (w_r + b_r), (w_e + b_e) / max(w_r - b_r, 1e-300)
-    who = (f"the fastest engine, {names}," if len(tied) == 1
-           else f"the fastest engines, {names} (tied within timing noise),")
-    return (f"At dt {_fmt(gate.dt)} s {who} take{'s' if len(tied) == 1 else ''} "
-            f"{low:.0f} to {high:.0f} times as long as {text(gate.engine)} / {text(gate.method)} "
-            f"({w_e / w_r:.0f} times by the median wall times; the interval is each time's "
-            f"noise band; gate: at least {gate.params['min']:g} times).\n")
+    who = (
+        f"the fastest engine, {names},"
+        if len(tied) == 1
+        else f"the fastest engines, {names} (tied within timing noise),"
+    )
+    return (
+        f"At dt {_fmt(gate.dt)} s {who} take{'s' if len(tied) == 1 else ''} "
+        f"{low:.0f} to {high:.0f} times as long as {text(gate.engine)} / {text(gate.method)} "
+        f"({w_e / w_r:.0f} times by the median wall times; the interval is each time's "
+        f"noise band; gate: at least {gate.params['min']:g} times).\n"
+    )
 
 
 def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
@@ -202,14 +234,13 @@ def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
                 "solver, one body per particle). Each row: "
                 "particle-steps per second at the same step and the error against the exact "
                 "bounce solution; `slower_by` is its wall time over "
-                f"{text(g.engine)} / {text(g.method)}'s.\n")
+                f"{text(g.engine)} / {text(g.method)}'s.\n"
+            )
             mine = at[(at["engine"] == g.engine) & (at["method"] == g.method)]
             if len(others) and len(mine):
                 parts.append(speedup_sentence(g, others, mine.iloc[0]))
             parts.append(md_table(with_units(table)))
     return parts
-
-
 
 
 def _pair(r) -> str:
@@ -226,12 +257,14 @@ def _tied_group(ranked: pd.DataFrame) -> pd.DataFrame:
     top = ranked.iloc[0]
     ratio = ranked["cost_ratio"].to_numpy(float)
     same = (ranked["cases_reached"].to_numpy() == top.cases_reached) & (
-        ratio * (1 - TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE))
+        ratio * (1 - TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE)
+    )
     return ranked[same]
 
 
-def family_sentence(family: str, names: list[str], card: pd.DataFrame,
-                    fidelity: pd.DataFrame, picks: pd.DataFrame) -> str:
+def family_sentence(
+    family: str, names: list[str], card: pd.DataFrame, fidelity: pd.DataFrame, picks: pd.DataFrame
+) -> str:
     """One bullet for a family of scenes: the pick for accuracy per second, the pick for
     large steps and, where the scenes bounce, the truest restitution, with the numbers.
     ``picks``: :func:`truestep.picks.cheapest` at the loosest target, named when no run
@@ -242,30 +275,35 @@ def family_sentence(family: str, names: list[str], card: pd.DataFrame,
     mine = card[card["family"] == family]
     parts = []
     fast = mine[np.isfinite(mine["cost_ratio"].to_numpy(float))].sort_values(
-        ["cases_reached", "cost_ratio", "engine", "method"], ascending=[False, True, True, True])
+        ["cases_reached", "cost_ratio", "engine", "method"], ascending=[False, True, True, True]
+    )
     if len(fast):
         top = fast.iloc[0]
         group = _tied_group(fast)
         picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
         tie = " (tied within timing noise)" if len(group) > 1 else ""
-        line = (f"for accuracy per second, {picked}{tie}: "
-                f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
-                f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
-                f"{float(top.cost_ratio):.2g}x the fastest run's time (median)")
-        rest = fast.iloc[len(group):]
+        line = (
+            f"for accuracy per second, {picked}{tie}: "
+            f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
+            f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
+            f"{float(top.cost_ratio):.2g}x the fastest run's time (median)"
+        )
+        rest = fast.iloc[len(group) :]
         if len(rest):
             nxt = rest.iloc[0]
-            line += (f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), "
-                     f"{float(nxt.cost_ratio):.2g}x)")
+            line += f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), {float(nxt.cost_ratio):.2g}x)"
         parts.append(line)
     else:
-        loose = picks[(picks["case"].isin(names)) & (picks["by"] == "wall_s")
-                      & (picks["engine"] != "")].sort_values("wall_s")
+        loose = picks[
+            (picks["case"].isin(names)) & (picks["by"] == "wall_s") & (picks["engine"] != "")
+        ].sort_values("wall_s")
         line = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
         if len(loose):
             r = loose.iloc[0]
-            line += (f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
-                     f"({fmt(float(r.wall_s))} s)")
+            line += (
+                f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
+                f"({fmt(float(r.wall_s))} s)"
+            )
         parts.append(line)
     steady = mine[np.isfinite(mine["stability_ratio"].to_numpy(float))]
     if len(steady):
@@ -273,17 +311,17 @@ def family_sentence(family: str, names: list[str], card: pd.DataFrame,
         tops = steady[np.isclose(steady["stability_ratio"], best, rtol=5e-3)]
         named = ", ".join(_pair(r) for r in tops.head(3).itertuples(index=False))
         more = f" and {len(tops) - 3} more" if len(tops) > 3 else ""
-        parts.append(f"for the largest stable step, {named}{more} "
-                     f"({best:.2f} of the exact or best limit)")
+        parts.append(f"for the largest stable step, {named}{more} ({best:.2f} of the exact or best limit)")
     if family in ("contact", "particles") and len(fidelity):
         true = fidelity.sort_values("median").iloc[0]
-        parts.append(f"the truest restitution, {_pair(true)} (median |e_measured - e_set| "
-                     f"{fmt(float(true['median']))} over {int(true.bounces)} bounces)")
+        parts.append(
+            f"the truest restitution, {_pair(true)} (median |e_measured - e_set| "
+            f"{fmt(float(true['median']))} over {int(true.bounces)} bounces)"
+        )
     return f"- **{FAMILIES.get(family, family)}** ({', '.join(names)}): " + "; ".join(parts) + "."
 
 
-def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict,
-                      fig_dir) -> list[str]:
+def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict, fig_dir) -> list[str]:
     """The overview at the top of the report: the scorecard figure and a sentence per
     family of scenes naming the picks."""
     from truestep import plots
@@ -293,18 +331,21 @@ def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict,
     card = scorecard(results, cases, tables.get("stability"))
     fidelity = restitution_fidelity(tables.get("restitution"))
     families = [f for f in FAMILIES if any(c.family == f for c in cases)]
-    lines = ["## Which engine, which method\n",
-             f"Each row is an engine and method; each column of the left panel a family of "
-             f"scenes. Left: the wall time it takes to reach an error of {SCORECARD_TARGET:g} "
-             f"of each case's scale, as a multiple of the fastest run that does (median over "
-             f"the family's cases it reaches; `-`: it ran but never got there). Middle: its "
-             f"largest stable step over the exact limit, or over the best any method reached "
-             f"where none is known. Right: how far the restitution it gives is from the one "
-             f"asked (median over the bounces of the restitution sweep).\n"]
+    lines = [
+        "## Which engine, which method\n",
+        f"Each row is an engine and method; each column of the left panel a family of "
+        f"scenes. Left: the wall time it takes to reach an error of {SCORECARD_TARGET:g} "
+        f"of each case's scale, as a multiple of the fastest run that does (median over "
+        f"the family's cases it reaches; `-`: it ran but never got there). Middle: its "
+        f"largest stable step over the exact limit, or over the best any method reached "
+        f"where none is known. Right: how far the restitution it gives is from the one "
+        f"asked (median over the bounces of the restitution sweep).\n",
+    ]
     fig = plots.scorecard(card, fidelity, families, SCORECARD_TARGET, fig_dir / "scorecard.png")
     if fig is not None:
-        lines.append(f"![scorecard: cost to reach the accuracy, stability, restitution]"
-                     f"(figures/{fig.name})\n")
+        lines.append(
+            f"![scorecard: cost to reach the accuracy, stability, restitution](figures/{fig.name})\n"
+        )
     loose = cheapest(results, cases, targets=(ACCURACY_TARGETS[0],))
     for family in families:
         names = [c.name for c in cases if c.family == family]
@@ -322,54 +363,56 @@ def methods_section(cases: list[Case]) -> list[str]:
 
     timing = Timing()
     steps = sorted({c.stability.min_steps for c in cases if c.stability})
-    lines = ["## How the numbers are made\n",
-             f"- **Timing**: scenes are built outside the timed region; each case, engine and "
-             f"method runs in a process of its own, one at a time, on one thread; each row is "
-             f"first run untimed and watched at every step (its numbers come from that run, "
-             f"which also warms the process up), then timed, each timed run checked to end "
-             f"where it did; runs shorter than "
-             f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
-             f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
-             f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
-             f"longer ones once; the wall time is the median and `wall_s_spread` half the "
-             f"interquartile range. Runs whose times lie within each other's noise "
-             f"(their spread, and at least {100 * TIE_NOISE:.0f}% of the time) are "
-             f"**tied**: a pick names them together.",
-             "- **One answer on every machine**: every column but the timings and the host "
-             "is the same, bit for bit, for the same revision and package versions "
-             "(`run.json` records them, and the floating-point environment).",
-             "- **Engines as configured**: engine defaults that would distort a comparison "
-             "are switched off (pybullet's linear and angular damping; pymunk's pixel-scale "
-             "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "
-             "or clamp is added anywhere.",
-             f"- **Errors** are distances from the exact solution (or, where none exists, "
-             f"from a fine run of the reference that the case names, known along the whole "
-             f"run) in the case's units, the worst over the run (`error`; `error_final` at "
-             f"the end, `error_v` the velocities'); the targets "
-             f"{', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of each case's "
-             f"scale. **Energy drift** is the energy error over the case's energy scale (the "
-             f"largest kinetic energy, or swing of potential energy, along the exact motion: "
-             f"the same wherever the potential's zero lies), over every step.",
-             f"- **Unstable**: the state goes non-finite; or the motion does what the scene "
-             f"cannot: a bound orbit reaches its escape energy and keeps it, a damped scene "
-             f"stays more than {RISE_TOL:g} of its energy scale above its start through the "
-             f"late half (median), a conservative scene more than {LEAVE_TOL:g} of it through "
-             f"the whole late half, or the energy keeps growing through every quarter of the "
-             f"run, read at every step. A "
-             f"solver that cannot solve a step is `solver-failed`, never unstable. Searches "
-             f"bisect the step over each case's horizon, with at least "
-             f"{', '.join(str(s) for s in steps)} steps per run; there the late half's peak "
-             f"may also not rise above the early half's band by more than {GROWTH_TOL:g} of "
-             f"its width; the limit found is checked below itself for a boundary that is not "
-             f"monotone.",
-             f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
-             f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
-             f"{SURVIVAL_ENERGY:g} of the energy.",
-             f"- **Restitution**: a ball of radius {BALL_RADIUS:g} m dropped from "
-             f"{DROP_HEIGHT:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
-             f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s, every step "
-             f"recorded; per bounce from the rebound and impact speeds (the samples either "
-             f"side of the contact) and from apex heights (the highest height each flight "
-             f"reached at a step).",
-             ""]
+    lines = [
+        "## How the numbers are made\n",
+        f"- **Timing**: scenes are built outside the timed region; each case, engine and "
+        f"method runs in a process of its own, one at a time, on one thread; each row is "
+        f"first run untimed and watched at every step (its numbers come from that run, "
+        f"which also warms the process up), then timed, each timed run checked to end "
+        f"where it did; runs shorter than "
+        f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
+        f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
+        f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
+        f"longer ones once; the wall time is the median and `wall_s_spread` half the "
+        f"interquartile range. Runs whose times lie within each other's noise "
+        f"(their spread, and at least {100 * TIE_NOISE:.0f}% of the time) are "
+        f"**tied**: a pick names them together.",
+        "- **One answer on every machine**: every column but the timings and the host "
+        "is the same, bit for bit, for the same revision and package versions "
+        "(`run.json` records them, and the floating-point environment).",
+        "- **Engines as configured**: engine defaults that would distort a comparison "
+        "are switched off (pybullet's linear and angular damping; pymunk's pixel-scale "
+        "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "
+        "or clamp is added anywhere.",
+        f"- **Errors** are distances from the exact solution (or, where none exists, "
+        f"from a fine run of the reference that the case names, known along the whole "
+        f"run) in the case's units, the worst over the run (`error`; `error_final` at "
+        f"the end, `error_v` the velocities'); the targets "
+        f"{', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of each case's "
+        f"scale. **Energy drift** is the energy error over the case's energy scale (the "
+        f"largest kinetic energy, or swing of potential energy, along the exact motion: "
+        f"the same wherever the potential's zero lies), over every step.",
+        f"- **Unstable**: the state goes non-finite; or the motion does what the scene "
+        f"cannot: a bound orbit reaches its escape energy and keeps it, a damped scene "
+        f"stays more than {RISE_TOL:g} of its energy scale above its start through the "
+        f"late half (median), a conservative scene more than {LEAVE_TOL:g} of it through "
+        f"the whole late half, or the energy keeps growing through every quarter of the "
+        f"run, read at every step. A "
+        f"solver that cannot solve a step is `solver-failed`, never unstable. Searches "
+        f"bisect the step over each case's horizon, with at least "
+        f"{', '.join(str(s) for s in steps)} steps per run; there the late half's peak "
+        f"may also not rise above the early half's band by more than {GROWTH_TOL:g} of "
+        f"its width; the limit found is checked below itself for a boundary that is not "
+        f"monotone.",
+        f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
+        f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
+        f"{SURVIVAL_ENERGY:g} of the energy.",
+        f"- **Restitution**: a ball of radius {BALL_RADIUS:g} m dropped from "
+        f"{DROP_HEIGHT:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
+        f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s, every step "
+        f"recorded; per bounce from the rebound and impact speeds (the samples either "
+        f"side of the contact) and from apex heights (the highest height each flight "
+        f"reached at a step).",
+        "",
+    ]
     return lines

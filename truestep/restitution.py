@@ -116,19 +116,28 @@ def bounces(
             apex = np.nan if cut else max(float(h[top]), 0.0)
         else:  # a wall along gravity: straight flight off it, no apex
             apex = np.nan
-        out.append(Bounce(
-            len(out) + 1, float(t[a]), v_in, v_out, v_out / v_in if v_in > 0 else np.nan,
-            apex, float(np.sqrt(apex / apex_prev)) if apex_prev > 0 else np.nan, penetration,
-            float(t[low]),
-        ))
+        out.append(
+            Bounce(
+                len(out) + 1,
+                float(t[a]),
+                v_in,
+                v_out,
+                v_out / v_in if v_in > 0 else np.nan,
+                apex,
+                float(np.sqrt(apex / apex_prev)) if apex_prev > 0 else np.nan,
+                penetration,
+                float(t[low]),
+            )
+        )
         if resting:
             break
         apex_prev = apex
     return out
 
 
-def heights(x: np.ndarray, v: np.ndarray, point: np.ndarray, normal: np.ndarray,
-            radius: float) -> tuple[np.ndarray, np.ndarray]:
+def heights(
+    x: np.ndarray, v: np.ndarray, point: np.ndarray, normal: np.ndarray, radius: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Height of a ball's surface above a plane and its normal velocity.
 
     x, v : shape (T, 3), m and m/s;  point, normal : shape (3,);  radius : m.

@@ -65,15 +65,17 @@ class RunLock:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
             except OSError as err:
                 if err.errno == errno.ELOOP:
-                    raise LockBusy(f"{self.path} is a symbolic link, not truestep's lock file; "
-                                   "remove it") from None
+                    raise LockBusy(
+                        f"{self.path} is a symbolic link, not truestep's lock file; remove it"
+                    ) from None
                 raise
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 os.close(fd)
-                raise LockBusy(f"{self.out} is in use by "
-                               f"{_holder(self.path)}: one run per --out at a time") from None
+                raise LockBusy(
+                    f"{self.out} is in use by {_holder(self.path)}: one run per --out at a time"
+                ) from None
             except OSError:
                 os.close(fd)
                 raise
@@ -85,8 +87,9 @@ class RunLock:
                 break
             os.close(fd)
         self.took_over = self._previous(fd)
-        record = json.dumps({"pid": os.getpid(), "started": time.time(),
-                             "argv": [a[:200] for a in sys.argv[:20]]}).encode()
+        record = json.dumps(
+            {"pid": os.getpid(), "started": time.time(), "argv": [a[:200] for a in sys.argv[:20]]}
+        ).encode()
         os.ftruncate(fd, 0)
         os.pwrite(fd, record, 0)
         self.fd = fd

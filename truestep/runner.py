@@ -30,9 +30,28 @@ if TYPE_CHECKING:
     from truestep.journal import Journal
 
 RESULT_COLUMNS = [
-    "case", "engine", "method", "dt", "dt_kind", "status", "error", "error_final", "error_v",
-    "energy_drift", "energy_drift_final", "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail",
-    "missing", "message", "case_source", "path", "host",
+    "case",
+    "engine",
+    "method",
+    "dt",
+    "dt_kind",
+    "status",
+    "error",
+    "error_final",
+    "error_v",
+    "energy_drift",
+    "energy_drift_final",
+    "nfev",
+    "steps",
+    "wall_s",
+    "wall_s_spread",
+    "repeats",
+    "t_fail",
+    "missing",
+    "message",
+    "case_source",
+    "path",
+    "host",
 ]
 """The columns of ``results.csv`` (property columns follow, one per named property).
 ``error`` is the case's error measure, the worst over the run unless the case says
@@ -132,8 +151,9 @@ def watches_every_step(adapter) -> bool:
         return False
 
 
-def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timing, *,
-                   warm_up: bool = True) -> Trajectory:
+def simulate_timed(
+    engine: str, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool = True
+) -> Trajectory:
     """Make the run the row is measured from, then time; runs inside the child process.
 
     The measured run is watched at every step where the adapter can
@@ -149,8 +169,9 @@ def simulate_timed(engine: str, case: Case, method: str, dt: float, timing: Timi
     adapter = get_adapter(engine)
     monitor = watches_every_step(adapter)
     if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
-        short = dataclasses.replace(case, duration=max(case.duration * timing.warmup_fraction,
-                                                       min(dt, case.duration)))
+        short = dataclasses.replace(
+            case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
+        )
         adapter.simulate(short, method, dt)
     traj = adapter.simulate(case, method, dt, monitor=True) if monitor else None
     timed = adapter.simulate(case, method, dt)
@@ -203,8 +224,9 @@ def energy_trace(traj: Trajectory) -> tuple[np.ndarray, np.ndarray] | None:
     return traj.t[keep], traj.energy[keep]
 
 
-def simulate_sweep(engine: str, case: Case, method: str, dts: list[float],
-                   timing: Timing) -> list[Trajectory | Outcome | str]:
+def simulate_sweep(
+    engine: str, case: Case, method: str, dts: list[float], timing: Timing
+) -> list[Trajectory | Outcome | str]:
     """:func:`simulate_timed` at every step of a sweep, in one child process.
 
     Each entry is the step's Trajectory, the error message of an exception it raised, or
@@ -230,8 +252,16 @@ def simulate_sweep(engine: str, case: Case, method: str, dts: list[float],
     return out
 
 
-def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
-             outcome: Trajectory | Outcome | str, traces: dict | None = None) -> dict:
+def row_from(
+    case: Case,
+    engine: str,
+    method: str,
+    dt: float,
+    *,
+    adaptive: bool,
+    outcome: Trajectory | Outcome | str,
+    traces: dict | None = None,
+) -> dict:
     """One row of ``results.csv`` from what a run gave: a Trajectory, an exception's
     message (``crashed``) or an isolation outcome that is not ``ok``.
 
@@ -239,7 +269,10 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
     ``(case, engine, method, dt_kind, dt)``.
     """
     row = {
-        "case": case.name, "engine": engine, "method": method, "dt": dt,
+        "case": case.name,
+        "engine": engine,
+        "method": method,
+        "dt": dt,
         "dt_kind": "tolerance" if adaptive else "step",
     }
     if isinstance(outcome, str):
@@ -248,14 +281,18 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
     if isinstance(outcome, Outcome):
         row.update(status=outcome.status, message=with_output(outcome.message, outcome.output))
         return row
-    traj = checked(outcome, case.model.n if case.model is not None else None,
-                   duration=case.duration)
+    traj = checked(outcome, case.model.n if case.model is not None else None, duration=case.duration)
     if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
         row.update(status="crashed", message=traj)
         return row
-    row.update(nfev=traj.nfev, steps=traj.steps, wall_s=traj.wall_s,
-               wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
-               repeats=int(traj.extra.get("repeats", 0)), path=str(traj.path)[:MESSAGE_CHARS])
+    row.update(
+        nfev=traj.nfev,
+        steps=traj.steps,
+        wall_s=traj.wall_s,
+        wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
+        repeats=int(traj.extra.get("repeats", 0)),
+        path=str(traj.path)[:MESSAGE_CHARS],
+    )
     timed_out = _MEASURE_TIMED_OUT.get(case.file)
     try:
         if timed_out:
@@ -264,15 +301,15 @@ def row_from(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
             if traj.status == "ok" and (failed := _motion_failure(case, traj)) is not None:
                 traj.status, traj.t_fail = "unstable", failed.t
                 traj.message = "; ".join(m for m in (traj.message, failed.reason) if m)
-            row.update(status=traj.status, t_fail=traj.t_fail,
-                       message=str(traj.message)[:MESSAGE_CHARS])
+            row.update(status=traj.status, t_fail=traj.t_fail, message=str(traj.message)[:MESSAGE_CHARS])
             row.update(measure(case, traj))
     except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
         _MEASURE_TIMED_OUT[case.file] = str(err)
         row.update(status="timeout", message=str(err))
     except Exception as err:  # measuring this run failed: this row says so, the run goes on
-        row.update(status="crashed", message=f"measuring the run failed: {type(err).__name__}: "
-                   f"{str(err)[:120]}")
+        row.update(
+            status="crashed", message=f"measuring the run failed: {type(err).__name__}: {str(err)[:120]}"
+        )
     if traces is not None:
         trace = energy_trace(traj)
         if trace is not None:
@@ -313,19 +350,42 @@ _MEASURE_TIMED_OUT: dict[str, str] = {}
 later rows say so at once instead of waiting out the limit again."""
 
 
-def run_one(case: Case, engine: str, method: str, dt: float, *, adaptive: bool,
-            timing: Timing, traces: dict | None = None) -> dict:
+def run_one(
+    case: Case,
+    engine: str,
+    method: str,
+    dt: float,
+    *,
+    adaptive: bool,
+    timing: Timing,
+    traces: dict | None = None,
+) -> dict:
     """One row of ``results.csv``: run one step in its own process, then measure."""
     outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
-    row = row_from(case, engine, method, dt, adaptive=adaptive, traces=traces,
-                   outcome=outcome.value if outcome.status == "ok" else outcome)
+    row = row_from(
+        case,
+        engine,
+        method,
+        dt,
+        adaptive=adaptive,
+        traces=traces,
+        outcome=outcome.value if outcome.status == "ok" else outcome,
+    )
     if outcome.status == "ok" and row["status"] in ("crashed", "timeout"):
         row["message"] = with_output(row.get("message", ""), outcome.output)
     return row
 
 
-def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptive: bool,
-              timing: Timing, traces: dict | None = None) -> list[dict]:
+def run_sweep(
+    case: Case,
+    engine: str,
+    method: str,
+    dts: list[float],
+    *,
+    adaptive: bool,
+    timing: Timing,
+    traces: dict | None = None,
+) -> list[dict]:
     """The rows of one case, engine and method over its sweep.
 
     The sweep runs in one child process (see :func:`simulate_sweep`); if that process
@@ -339,13 +399,17 @@ def run_sweep(case: Case, engine: str, method: str, dts: list[float], *, adaptiv
             prepare(case, method)
         except Exception:  # the sweep's own process fails alike, and its rows say why
             pass
-    outcome = run_isolated(simulate_sweep, (engine, case, method, dts, timing),
-                           SWEEP_SLACK * case.timeout_s * len(dts) + 10.0)
+    outcome = run_isolated(
+        simulate_sweep, (engine, case, method, dts, timing), SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
+    )
     if outcome.status != "ok":
-        return [run_one(case, engine, method, dt, adaptive=adaptive, timing=timing,
-                        traces=traces) for dt in dts]
-    rows = [row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
-            for dt, o in zip(dts, outcome.value, strict=True)]
+        return [
+            run_one(case, engine, method, dt, adaptive=adaptive, timing=timing, traces=traces) for dt in dts
+        ]
+    rows = [
+        row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
+        for dt, o in zip(dts, outcome.value, strict=True)
+    ]
     for row in rows:
         if row["status"] in ("crashed", "timeout"):
             row["message"] = with_output(row.get("message", ""), outcome.output)
@@ -431,9 +495,12 @@ def run_matrix(
     """
     timing = timing or (QUICK_TIMING if quick else Timing())
     preload()
-    planned = [(case, engine, method, list(entries)) for case in cases for engine in engines
-               for method, entries in itertools.groupby(plan(case, engine, quick=quick),
-                                                        key=lambda e: e[0])]
+    planned = [
+        (case, engine, method, list(entries))
+        for case in cases
+        for engine in engines
+        for method, entries in itertools.groupby(plan(case, engine, quick=quick), key=lambda e: e[0])
+    ]
     total = sum(len(entries) for *_, entries in planned if not entries[0][3])
     if cluster is None:
         compile_ahead(planned)
@@ -446,26 +513,33 @@ def run_matrix(
             case, engine, method, entries = planned[k]
             parts[k] = done
             for row in done:
-                bar.done(f"{case.name:24s} {engine:9s} {method:17s} {row['dt']:<9.3g} "
-                         f"{row['status']:9s} err={row.get('error', np.nan):.3g} "
-                         f"wall={row.get('wall_s', np.nan):.3g}s")
+                bar.done(
+                    f"{case.name:24s} {engine:9s} {method:17s} {row['dt']:<9.3g} "
+                    f"{row['status']:9s} err={row.get('error', np.nan):.3g} "
+                    f"wall={row.get('wall_s', np.nan):.3g}s"
+                )
                 faults.point("sweep")
             if traces is not None:
                 traces.update(swept)
             if journal is not None:
-                journal.put_sweep((case.name, engine, method), [dt for _, dt, _, _ in entries],
-                                  done, swept)
+                journal.put_sweep((case.name, engine, method), [dt for _, dt, _, _ in entries], done, swept)
 
         for k, (case, engine, method, entries) in enumerate(planned):
             adaptive, why_not = entries[0][2], entries[0][3]
             if why_not:
                 status, _, detail = why_not.partition(":")
-                parts[k] = [{
-                    "case": case.name, "engine": engine, "method": method,
-                    "dt_kind": "tolerance" if adaptive else "step", "status": status,
-                    "missing": detail if status == "unsupported" else "",
-                    "message": detail if status == "skipped" else "", "host": "",
-                }]
+                parts[k] = [
+                    {
+                        "case": case.name,
+                        "engine": engine,
+                        "method": method,
+                        "dt_kind": "tolerance" if adaptive else "step",
+                        "status": status,
+                        "missing": detail if status == "unsupported" else "",
+                        "message": detail if status == "skipped" else "",
+                        "host": "",
+                    }
+                ]
                 continue
             dts = [dt for _, dt, _, _ in entries]
             kept = journal.sweep((case.name, engine, method), dts) if journal is not None else None
@@ -473,16 +547,24 @@ def run_matrix(
                 parts[k] = kept[0]
                 if traces is not None:
                     traces.update(kept[1])
-                bar.done(f"{case.name:24s} {engine:9s} {method:17s} {len(kept[0])} rows from "
-                         "the interrupted run", n=len(kept[0]))
+                bar.done(
+                    f"{case.name:24s} {engine:9s} {method:17s} {len(kept[0])} rows from the interrupted run",
+                    n=len(kept[0]),
+                )
                 continue
             if cluster is not None:
-                jobs.append(SweepJob(k, case, engine, method, dts, adaptive, timing,
-                                     traces is not None))
+                jobs.append(SweepJob(k, case, engine, method, dts, adaptive, timing, traces is not None))
                 continue
             swept: dict = {}
-            done = run_sweep(case, engine, method, dts, adaptive=adaptive, timing=timing,
-                             traces=swept if traces is not None else None)
+            done = run_sweep(
+                case,
+                engine,
+                method,
+                dts,
+                adaptive=adaptive,
+                timing=timing,
+                traces=swept if traces is not None else None,
+            )
             for row in done:
                 row["host"] = here
             finished(k, done, swept)

@@ -70,8 +70,9 @@ def _floor(scale: float | None, energy: np.ndarray) -> float:
     return ROUNDOFF * scale
 
 
-def energy_grows(t: np.ndarray, energy: np.ndarray, *, tol: float | None = None,
-                 scale: float | None = None) -> bool:
+def energy_grows(
+    t: np.ndarray, energy: np.ndarray, *, tol: float | None = None, scale: float | None = None
+) -> bool:
     """Whether ``energy`` (J, shape (T,), at times ``t``) grows without bound: the late
     half's peak above the early half's band (the search's test, see the module docstring).
 
@@ -91,8 +92,9 @@ def energy_grows(t: np.ndarray, energy: np.ndarray, *, tol: float | None = None,
     return float(np.max(late)) > hi + tol * (hi - lo) + _floor(scale, energy)
 
 
-def energy_keeps_growing(t: np.ndarray, energy: np.ndarray, *, tol: float | None = None,
-                         scale: float | None = None) -> bool:
+def energy_keeps_growing(
+    t: np.ndarray, energy: np.ndarray, *, tol: float | None = None, scale: float | None = None
+) -> bool:
     """Whether ``energy`` grows in every quarter of the run: each quarter's peak rises above
     the band of the quarter before it (the test of :func:`energy_grows`, quarter by
     quarter). Exponential or steady growth does; a single jump (a close encounter taken
@@ -111,8 +113,11 @@ def energy_keeps_growing(t: np.ndarray, energy: np.ndarray, *, tol: float | None
         hi, lo = max(float(np.max(before)), 0.0), min(float(np.min(before)), 0.0)
         # Without a scale, round-off is judged against the energy so far, not the run's
         # largest: a run that explodes would hide its early quarters' growth under its end.
-        floor = (ROUNDOFF * scale if scale is not None and np.isfinite(scale)
-                 else ROUNDOFF * max(start, float(np.max(np.abs(before + energy[0]))), 1e-300))
+        floor = (
+            ROUNDOFF * scale
+            if scale is not None and np.isfinite(scale)
+            else ROUNDOFF * max(start, float(np.max(np.abs(before + energy[0]))), 1e-300)
+        )
         if not float(np.max(now)) > hi + tol * (hi - lo) + floor:
             return False
     return True
@@ -159,8 +164,11 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
     if escape is not None and e[-1] >= escape:
         below = np.nonzero(e < escape)[0]
         first = int(below[-1]) + 1 if len(below) else 0  # above it from here to the end
-        return Failure(float(t[first]), f"escaped: its energy rose to {e[first]:.4g} J, at or "
-                       f"above the case's escape energy {escape:g} J, and stayed there")
+        return Failure(
+            float(t[first]),
+            f"escaped: its energy rose to {e[first]:.4g} J, at or "
+            f"above the case's escape energy {escape:g} J, and stayed there",
+        )
     behaviour = energy_behaviour(case)
     if behaviour == "source":
         return None
@@ -168,23 +176,31 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
     far = np.abs(rise) > scale
     if far.any() and energy_keeps_growing(t, e, scale=scale):
         first = int(np.argmax(far))
-        return Failure(float(t[first]), f"finite, but its energy grew from {e0:.4g} J to "
-                       f"{e[-1]:.4g} J and was still rising")
+        return Failure(
+            float(t[first]),
+            f"finite, but its energy grew from {e0:.4g} J to {e[-1]:.4g} J and was still rising",
+        )
     half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
     late = rise[half:]
     if behaviour == "dissipative":
         if len(late) and float(np.median(late)) > RISE_TOL * scale:
             first = int(np.argmax(rise > RISE_TOL * scale))
-            return Failure(float(t[first]), f"a dissipative scene gained energy and kept it: "
-                           f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above its "
-                           f"start from here, {float(np.median(late)) / scale:.3g} through the "
-                           "late half (median)")
+            return Failure(
+                float(t[first]),
+                f"a dissipative scene gained energy and kept it: "
+                f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above its "
+                f"start from here, {float(np.median(late)) / scale:.3g} through the "
+                "late half (median)",
+            )
     else:
         if len(late) and float(np.min(late)) > LEAVE_TOL * scale:
             first = int(np.argmax(rise > LEAVE_TOL * scale))
-            return Failure(float(t[first]), f"its energy left its start for good: "
-                           f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above it "
-                           "and never back in the late half")
+            return Failure(
+                float(t[first]),
+                f"its energy left its start for good: "
+                f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above it "
+                "and never back in the late half",
+            )
     return None
 
 
@@ -243,8 +259,10 @@ def bisect_limit(
 
     def stable(dt: float) -> bool:
         if time.perf_counter() - start > budget_s:
-            raise SearchTimeout(f"still searching after its {budget_s:g} s safety limit "
-                                f"([stability] budget_s), at {runs} runs: no limit reported")
+            raise SearchTimeout(
+                f"still searching after its {budget_s:g} s safety limit "
+                f"([stability] budget_s), at {runs} runs: no limit reported"
+            )
         return stable_at(dt)
 
     runs = 1
@@ -277,8 +295,9 @@ class _SolverFailedAt(Exception):
         self.dt = dt
 
 
-def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
-                quick: bool = False) -> SearchResult:
+def search_case(
+    case: Case, simulate: Callable[[Case, float], Trajectory], *, quick: bool = False
+) -> SearchResult:
     """Bisect ``case.stability``'s bracket; ``simulate(case, dt)`` runs one engine and method.
 
     Each run covers the horizon, and at least :data:`MIN_STEPS` steps, recording every
@@ -313,8 +332,9 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
 
     def search(lo: float, hi: float, runs_before: int) -> SearchResult:
         left = spec.budget_s - (time.perf_counter() - start)
-        r = bisect_limit(stable_at, lo, hi, rel_tol=rel_tol,
-                         max_runs=max(spec.max_runs - runs_before, 2), budget_s=left)
+        r = bisect_limit(
+            stable_at, lo, hi, rel_tol=rel_tol, max_runs=max(spec.max_runs - runs_before, 2), budget_s=left
+        )
         return dataclasses.replace(r, runs=r.runs + runs_before)
 
     try:
@@ -327,13 +347,27 @@ def search_case(case: Case, simulate: Callable[[Case, float], Trajectory], *,
             result = dataclasses.replace(result, runs=result.runs + 1)
             if not stable_at(probe):
                 again = search(spec.dt_lo, probe, result.runs - 1)  # the probe's run counts
-                result = dataclasses.replace(again, note="; ".join(n for n in (
-                    again.note, f"not monotone: unstable at {probe:.4g} s, below the first "
-                    f"boundary found ({first:.4g} s); the limit is the largest step below "
-                    "which every step tried was stable") if n))
+                result = dataclasses.replace(
+                    again,
+                    note="; ".join(
+                        n
+                        for n in (
+                            again.note,
+                            f"not monotone: unstable at {probe:.4g} s, below the first "
+                            f"boundary found ({first:.4g} s); the limit is the largest step below "
+                            "which every step tried was stable",
+                        )
+                        if n
+                    ),
+                )
                 break
     except _SolverFailedAt as err:
-        return SearchResult(float("nan"), float("nan"), made[0],
-                            f"the solver failed at dt {err.dt:.4g} s ({str(err)[:160]}): a "
-                            "solver failure is not a stability limit", status="solver-failed")
+        return SearchResult(
+            float("nan"),
+            float("nan"),
+            made[0],
+            f"the solver failed at dt {err.dt:.4g} s ({str(err)[:160]}): a "
+            "solver failure is not a stability limit",
+            status="solver-failed",
+        )
     return result

@@ -12,16 +12,26 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-STATUSES = frozenset({"ok", "unstable", "solver-failed", "crashed", "timeout", "unsupported",
-                      "skipped"})
+STATUSES = frozenset({"ok", "unstable", "solver-failed", "crashed", "timeout", "unsupported", "skipped"})
 """Values of a ``status`` column."""
 
 NUMERIC = {
-    "results": ("dt", "error", "error_final", "error_v", "energy_drift", "energy_drift_final",
-                "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail"),
+    "results": (
+        "dt",
+        "error",
+        "error_final",
+        "error_v",
+        "energy_drift",
+        "energy_drift_final",
+        "nfev",
+        "steps",
+        "wall_s",
+        "wall_s_spread",
+        "repeats",
+        "t_fail",
+    ),
     "stability": ("dt_limit", "dt_limit_exact", "dt_unstable", "runs"),
-    "restitution": ("dt", "e_set", "bounce", "e_measured", "e_apex", "v_in", "v_out", "apex",
-                    "penetration"),
+    "restitution": ("dt", "e_set", "bounce", "e_measured", "e_apex", "v_in", "v_out", "apex", "penetration"),
 }
 """Columns that must hold numbers (or be empty), per table."""
 
@@ -52,8 +62,27 @@ KEYS = {
     "restitution": ("case", "engine", "method", "dt", "e_set", "bounce"),
 }
 """What identifies a row, per table (the parts a table has): no two rows may share it."""
-NA_VALUES = ["", "#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND",
-             "1.#QNAN", "<NA>", "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null"]
+NA_VALUES = [
+    "",
+    "#N/A",
+    "#N/A N/A",
+    "#NA",
+    "-1.#IND",
+    "-1.#QNAN",
+    "-NaN",
+    "-nan",
+    "1.#IND",
+    "1.#QNAN",
+    "<NA>",
+    "N/A",
+    "NA",
+    "NULL",
+    "NaN",
+    "None",
+    "n/a",
+    "nan",
+    "null",
+]
 """What reads as a missing value, in every column but the names of :data:`TEXT` (where
 ``nan`` is a method's name like any other)."""
 RAN = ("ok", "unstable", "crashed", "timeout")
@@ -120,8 +149,9 @@ def _lines(path: Path, text: str, *, rows: bool) -> list[list[str]]:
             raise TableError(f"{path}: line {k} has {len(line)} fields, the header {width}")
         longest = max(len(field) for field in line)
         if longest > MAX_FIELD_CHARS:
-            raise TableError(f"{path}: line {k} has a field of {longest} characters (at most "
-                             f"{MAX_FIELD_CHARS})")
+            raise TableError(
+                f"{path}: line {k} has a field of {longest} characters (at most {MAX_FIELD_CHARS})"
+            )
     if len(lines) == 1 and rows:
         raise TableError(f"{path}: a header and no rows: nothing to check")
     return lines
@@ -141,10 +171,13 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
     header = [c.strip() for c in _lines(path, text, rows=rows)[0]]
     names = [c for c in header if c in TEXT]
     try:
-        table = pd.read_csv(io.StringIO(text), dtype={c: str for c in names},
-                            keep_default_na=False,
-                            na_values={c: NA_VALUES for c in header if c not in TEXT},
-                            skipinitialspace=False)
+        table = pd.read_csv(
+            io.StringIO(text),
+            dtype={c: str for c in names},
+            keep_default_na=False,
+            na_values={c: NA_VALUES for c in header if c not in TEXT},
+            skipinitialspace=False,
+        )
     except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError, OverflowError) as err:
         raise TableError(f"{path}: cannot read as CSV: {str(err).splitlines()[0][:120]}") from None
     table.columns = [str(c).strip() for c in table.columns]
@@ -156,8 +189,9 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
             values = pd.to_numeric(table[col], errors="coerce")
             bad = table[col][values.isna() & table[col].notna()]
             if len(bad):
-                raise TableError(f"{path}: column {col}: not a number: {_short(bad.iloc[0])} "
-                                 f"(row {int(bad.index[0]) + 2})")
+                raise TableError(
+                    f"{path}: column {col}: not a number: {_short(bad.iloc[0])} (row {int(bad.index[0]) + 2})"
+                )
             table[col] = values
     for col in names:
         values = table[col].astype(str)
@@ -165,18 +199,20 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
             continue
         empty = values.str.strip() == ""
         if col in ("case", "engine", "method", "status") and empty.any():
-            raise TableError(f"{path}: column {col}: empty (row {_row(table, empty)}): every "
-                             "row names what it is")
+            raise TableError(
+                f"{path}: column {col}: empty (row {_row(table, empty)}): every row names what it is"
+            )
         as_numbers = pd.to_numeric(values, errors="coerce").to_numpy(float)
         if np.isfinite(as_numbers).all():
-            raise TableError(f"{path}: column {col}: numbers where names belong "
-                             f"({_short(values.iloc[0])})")
+            raise TableError(f"{path}: column {col}: numbers where names belong ({_short(values.iloc[0])})")
         table[col] = values
     if "status" in table:
         unknown = set(table["status"]) - STATUSES
         if unknown:
-            raise TableError(f"{path}: column status: unknown value {_short(sorted(unknown)[0])} "
-                             f"(known: {', '.join(sorted(STATUSES))})")
+            raise TableError(
+                f"{path}: column status: unknown value {_short(sorted(unknown)[0])} "
+                f"(known: {', '.join(sorted(STATUSES))})"
+            )
     check_rows(path, kind, table)
     return table
 
@@ -195,17 +231,39 @@ def check_rows(path: Path, kind: str, table: pd.DataFrame) -> None:
         twice = table.duplicated(subset=keys, keep=False).to_numpy()
         if twice.any():
             first = np.flatnonzero(twice)[:2] + 2
-            raise TableError(f"{path}: rows {first[0]} and {first[1]} have the same "
-                             f"{', '.join(keys)}: a table holds each run once")
+            raise TableError(
+                f"{path}: rows {first[0]} and {first[1]} have the same "
+                f"{', '.join(keys)}: a table holds each run once"
+            )
     ran = table["status"].isin(RAN).to_numpy() if "status" in table else np.ones(len(table), bool)
     if "dt" in table:
         dt = _numbers(table, "dt")
         bad = ran & ~(np.isfinite(dt) & (dt > 0))
         if bad.any():
-            raise TableError(f"{path}: column dt: {_value(table, 'dt', bad)} (row {_row(table, bad)}): "
-                             "a run's step must be positive and finite")
-    for col in ("error", "energy_drift", "energy_drift_final", "nfev", "steps", "repeats",
-                "e_set", "bounce", "runs", "dt_limit"):
+            raise TableError(
+                f"{path}: column dt: {_value(table, 'dt', bad)} (row {_row(table, bad)}): "
+                "a run's step must be positive and finite"
+            )
+    _check_counts(path, table)
+    if kind == "results" and "status" in table:
+        _check_ok_rows(path, table)
+
+
+def _check_counts(path: Path, table: pd.DataFrame) -> None:
+    """Counts, errors and drifts are neither negative nor infinite; ``e_set`` is at most 1 and
+    ``bounce`` a whole number from 1."""
+    for col in (
+        "error",
+        "energy_drift",
+        "energy_drift_final",
+        "nfev",
+        "steps",
+        "repeats",
+        "e_set",
+        "bounce",
+        "runs",
+        "dt_limit",
+    ):
         if col not in table:
             continue
         values = _numbers(table, col)
@@ -215,27 +273,37 @@ def check_rows(path: Path, kind: str, table: pd.DataFrame) -> None:
         if col == "bounce":
             bad |= np.isfinite(values) & ((values < 1) | (values != np.round(values)))
         if bad.any():
-            raise TableError(f"{path}: column {col}: {_value(table, col, bad)} (row "
-                             f"{_row(table, bad)}) is not a value a run writes")
-    if kind != "results" or "status" not in table:
-        return
+            raise TableError(
+                f"{path}: column {col}: {_value(table, col, bad)} (row "
+                f"{_row(table, bad)}) is not a value a run writes"
+            )
+
+
+def _check_ok_rows(path: Path, table: pd.DataFrame) -> None:
+    """A results table's ``ok`` rows: each counts its evaluations and has a positive, finite
+    wall time, and at least one of them holds a measurement."""
     ok = (table["status"] == "ok").to_numpy()
     if "nfev" in table:
         bad = ok & ~np.isfinite(_numbers(table, "nfev"))
         if bad.any():
-            raise TableError(f"{path}: column nfev: empty in an ok row (row {_row(table, bad)}): "
-                             "every run counts its evaluations")
+            raise TableError(
+                f"{path}: column nfev: empty in an ok row (row {_row(table, bad)}): "
+                "every run counts its evaluations"
+            )
     if "wall_s" in table:
         wall = _numbers(table, "wall_s")
         bad = ok & ~(np.isfinite(wall) & (wall > 0))
         if bad.any():
-            raise TableError(f"{path}: column wall_s: {_value(table, 'wall_s', bad)} (row "
-                             f"{_row(table, bad)}): a run's wall time is positive and finite")
-    measured = [c for c in table.columns if c not in NOT_MEASURED
-                and pd.api.types.is_numeric_dtype(table[c])]
+            raise TableError(
+                f"{path}: column wall_s: {_value(table, 'wall_s', bad)} (row "
+                f"{_row(table, bad)}): a run's wall time is positive and finite"
+            )
+    measured = [c for c in table.columns if c not in NOT_MEASURED and pd.api.types.is_numeric_dtype(table[c])]
     if ok.any() and not any(np.isfinite(_numbers(table[ok], c)).any() for c in measured):
-        raise TableError(f"{path}: no ok row holds a measurement (error, energy drift or a "
-                         "property): nothing to check or compare")
+        raise TableError(
+            f"{path}: no ok row holds a measurement (error, energy drift or a "
+            "property): nothing to check or compare"
+        )
 
 
 NOT_MEASURED = frozenset({"dt", "nfev", "steps", "wall_s", "wall_s_spread", "repeats", "t_fail"})
@@ -254,9 +322,9 @@ def read_run_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
     if not os.path.lexists(results):
         raise TableError(f"{results}: no such file (run `truestep run` first)")
     out: dict[str, pd.DataFrame | None] = {
-        "results": read_table(results, "results", set(REQUIRED["results"]))}
+        "results": read_table(results, "results", set(REQUIRED["results"]))
+    }
     for name in ("stability", "restitution"):
         path = directory / f"{name}.csv"
-        out[name] = (read_table(path, name, set(REQUIRED[name]), rows=False)
-                     if os.path.lexists(path) else None)
+        out[name] = read_table(path, name, set(REQUIRED[name]), rows=False) if os.path.lexists(path) else None
     return out

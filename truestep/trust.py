@@ -27,8 +27,7 @@ END_SLACK = 0.01
 engine's last step may overshoot by part of a step; never by a whole run)."""
 
 
-def contract_breach(traj: object, n: int | None = None, *,
-                    duration: float | None = None) -> str | None:
+def contract_breach(traj: object, n: int | None = None, *, duration: float | None = None) -> str | None:
     """Why ``traj`` breaks the adapter contract, in one short line, or ``None``.
 
     ``t`` (T,) finite and strictly increasing, from the case's start (t = 0) and, with
@@ -47,21 +46,9 @@ def contract_breach(traj: object, n: int | None = None, *,
         x = np.asarray(traj.x, dtype=float)
     except (TypeError, ValueError) as err:
         return f"adapter returned non-numeric t or x ({str(err)[:60]})"
-    if t.ndim != 1 or len(t) == 0:
-        return f"adapter returned t of shape {_shape(t)}, expected (T,) with T >= 1"
-    if not np.all(np.isfinite(t)):
-        return "adapter returned record times that are not finite"
-    scale = max(abs(duration), 1.0) if duration is not None else 1.0
-    if abs(t[0]) > START_TOLERANCE * scale:
-        return (f"adapter returned records from t = {t[0]:.6g} s, not from the case's "
-                "start (t = 0)")
-    if np.any(np.diff(t) <= 0):
-        k = int(np.argmax(np.diff(t) <= 0))
-        return (f"adapter returned record times that do not increase (t = {t[k]:.6g} s, "
-                f"then {t[k + 1]:.6g} s)")
-    if duration is not None and t[-1] > duration * (1 + END_SLACK) + 1e-12:
-        return (f"adapter returned records to t = {t[-1]:.6g} s, past the case's "
-                f"{duration:g} s")
+    breach = _times_breach(t, duration)
+    if breach is not None:
+        return breach
     wall = _number(traj.wall_s)
     if not (np.isfinite(wall) and wall > 0):
         return f"adapter returned a wall time of {wall:.6g} s (it must be positive and finite)"
@@ -81,6 +68,23 @@ def contract_breach(traj: object, n: int | None = None, *,
     return None
 
 
+def _times_breach(t: np.ndarray, duration: float | None) -> str | None:
+    """Why record times ``t`` (s) break the contract (see :func:`contract_breach`), or ``None``."""
+    if t.ndim != 1 or len(t) == 0:
+        return f"adapter returned t of shape {_shape(t)}, expected (T,) with T >= 1"
+    if not np.all(np.isfinite(t)):
+        return "adapter returned record times that are not finite"
+    scale = max(abs(duration), 1.0) if duration is not None else 1.0
+    if abs(t[0]) > START_TOLERANCE * scale:
+        return f"adapter returned records from t = {t[0]:.6g} s, not from the case's start (t = 0)"
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0))
+        return f"adapter returned record times that do not increase (t = {t[k]:.6g} s, then {t[k + 1]:.6g} s)"
+    if duration is not None and t[-1] > duration * (1 + END_SLACK) + 1e-12:
+        return f"adapter returned records to t = {t[-1]:.6g} s, past the case's {duration:g} s"
+    return None
+
+
 def _number(value: object) -> float:
     try:
         return float(value)  # type: ignore[arg-type]
@@ -88,8 +92,7 @@ def _number(value: object) -> float:
         return float("nan")
 
 
-def checked(traj: object, n: int | None = None, *,
-            duration: float | None = None) -> Trajectory | str:
+def checked(traj: object, n: int | None = None, *, duration: float | None = None) -> Trajectory | str:
     """``traj`` as the harness trusts it, or the ``crashed`` message of its breach.
 
     A state (``x`` or ``v``) that is non-finite at some record of an ``ok`` run makes it
@@ -106,6 +109,12 @@ def checked(traj: object, n: int | None = None, *,
         if bad.any():
             first = int(np.argmax(bad))
             traj.status, traj.t_fail = "unstable", float(traj.t[first])
-            traj.message = "; ".join(m for m in (traj.message, "the state went non-finite "
-                                     "(found by the harness; the adapter said ok)") if m)
+            traj.message = "; ".join(
+                m
+                for m in (
+                    traj.message,
+                    "the state went non-finite (found by the harness; the adapter said ok)",
+                )
+                if m
+            )
     return traj

@@ -14,7 +14,14 @@ from hostile_attacks import (
     tables,
 )
 
-BY_GROUP = {1: checkpoints.ATTACKS, 2: out_folders.ATTACKS, 3: special_files.ATTACKS,
-            4: ceilings.ATTACKS, 5: adapters.ATTACKS, 6: one_run.ATTACKS, 7: names.ATTACKS,
-            8: tables.ATTACKS}
+BY_GROUP = {
+    1: checkpoints.ATTACKS,
+    2: out_folders.ATTACKS,
+    3: special_files.ATTACKS,
+    4: ceilings.ATTACKS,
+    5: adapters.ATTACKS,
+    6: one_run.ATTACKS,
+    7: names.ATTACKS,
+    8: tables.ATTACKS,
+}
 """Every attack, by the number of the finding it attacks (:data:`common.GROUPS`)."""

@@ -34,8 +34,9 @@ def _limit_attack(key: str, value: str) -> Callable[[Campaign, Path], tuple[bool
 def attack_emitter_frame_dt_1e_300(c: Campaign, where: Path) -> tuple[bool, str]:
     """An emitter with ``frame_dt = 1e-300``."""
     body = CASE.format(duration="1.0", dt="[0.01]", extra="") + (
-        "[[scene.emitters]]\nshape = \"cube\"\ncenter = [0.0, 0.0, 0.0]\nsize = 0.1\nrate_n = 1.0\n"
-        "speed = 1.0\nlifetime = 2\ncapacity = 4\nframe_dt = 1e-300\n")
+        '[[scene.emitters]]\nshape = "cube"\ncenter = [0.0, 0.0, 0.0]\nsize = 0.1\nrate_n = 1.0\n'
+        "speed = 1.0\nlifetime = 2\ncapacity = 4\nframe_dt = 1e-300\n"
+    )
     return listed(c, where, case_file(where, body=body))
 
 
@@ -88,22 +89,24 @@ def scene_api(c: Campaign, where: Path, scene: str) -> tuple[bool, str]:
     Python: held when refused with a CaseError and the memory grew by under 256 MiB
     beyond the lists themselves (no array was built)."""
     result = c.python(SCENE_API.format(scene=scene), where, timeout=180, memory_gb=6)
-    grew = next((float(x.split()[1]) for x in result.out.splitlines() if x.startswith("GREW")),
-                float("inf"))
+    grew = next((float(x.split()[1]) for x in result.out.splitlines() if x.startswith("GREW")), float("inf"))
     return "CLEAN" in result.out and grew < 256, f"grew {grew:.0f} MiB; {result.why()}"
 
 
 def attack_explicit_list_of_1e8_particles_api(c: Campaign, where: Path) -> tuple[bool, str]:
     """An explicit list of 1e8 positions through the scene reader."""
-    return scene_api(c, where, "{'particles': [{'position': [[0.0, 0.0, 0.0]] * 10**8, "
-                               "'mass': 1.0}]}")
+    return scene_api(c, where, "{'particles': [{'position': [[0.0, 0.0, 0.0]] * 10**8, 'mass': 1.0}]}")
 
 
 def attack_explicit_list_of_1e8_springs_api(c: Campaign, where: Path) -> tuple[bool, str]:
     """An explicit list of 1e8 spring pairs through the scene reader."""
-    return scene_api(c, where, "{'particles': [{'position': [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], "
-                               "'mass': 1.0}], 'springs': [{'pairs': [[0, 1]] * 10**8, "
-                               "'stiffness': 1.0}]}")
+    return scene_api(
+        c,
+        where,
+        "{'particles': [{'position': [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], "
+        "'mass': 1.0}], 'springs': [{'pairs': [[0, 1]] * 10**8, "
+        "'stiffness': 1.0}]}",
+    )
 
 
 def attack_command_line_limit_without_trust(c: Campaign, where: Path) -> tuple[bool, str]:
@@ -111,11 +114,24 @@ def attack_command_line_limit_without_trust(c: Campaign, where: Path) -> tuple[b
     return refused(c.quick_run(where, "rep", "--limit", "steps=1e12", cases="free-fall"))
 
 
-ATTACKS = [*(_limit_attack(k, v) for k, v in (
-                ("particles", "1000000000000"), ("springs", "1000000000000"),
-                ("steps", "1000000000000"), ("records", "1000000000000"), ("work", "1e300"),
-                ("memory_mb", "1e300"), ("timeout_s", "1e300"))),
-            attack_emitter_frame_dt_1e_300, attack_time_step_1e_300,
-            attack_stability_bracket_1e_300, attack_linear_exact_of_20000_particles,
-            attack_explicit_list_of_1e8_particles_api, attack_explicit_list_of_1e8_springs_api,
-            attack_command_line_limit_without_trust]
+ATTACKS = [
+    *(
+        _limit_attack(k, v)
+        for k, v in (
+            ("particles", "1000000000000"),
+            ("springs", "1000000000000"),
+            ("steps", "1000000000000"),
+            ("records", "1000000000000"),
+            ("work", "1e300"),
+            ("memory_mb", "1e300"),
+            ("timeout_s", "1e300"),
+        )
+    ),
+    attack_emitter_frame_dt_1e_300,
+    attack_time_step_1e_300,
+    attack_stability_bracket_1e_300,
+    attack_linear_exact_of_20000_particles,
+    attack_explicit_list_of_1e8_particles_api,
+    attack_explicit_list_of_1e8_springs_api,
+    attack_command_line_limit_without_trust,
+]

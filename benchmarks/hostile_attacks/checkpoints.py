@@ -44,7 +44,8 @@ def resumed(c: Campaign, where: Path, mark: Path) -> tuple[bool, str]:
     same = tables_without_timing(where / "rep") == tables_without_timing(c.base_report())
     said = [x for x in result.err.splitlines() if "ignored" in x or "not a checkpoint" in x]
     return same, ("tables as uninterrupted" if same else "tables differ from an uninterrupted run") + (
-        f"; said: {said[0][:160]}" if said else "")
+        f"; said: {said[0][:160]}" if said else ""
+    )
 
 
 def attack_sweep_checkpoints_replaced_by_a_payload(c: Campaign, where: Path) -> tuple[bool, str]:
@@ -71,8 +72,14 @@ def attack_whole_journal_planted(c: Campaign, where: Path) -> tuple[bool, str]:
     for p in list(journal.iterdir()):
         if p.name not in ("fingerprint.json", "journal.json"):
             p.unlink()
-    for name in ("sweep-0123456789abcdef.pkl", "sweep-" + "0" * 32 + ".json", "analyses.pkl",
-                 "journal.pkl", "evil.pkl", "checkpoint.npy"):
+    for name in (
+        "sweep-0123456789abcdef.pkl",
+        "sweep-" + "0" * 32 + ".json",
+        "analyses.pkl",
+        "journal.pkl",
+        "evil.pkl",
+        "checkpoint.npy",
+    ):
         (journal / name).write_bytes(payload(mark))
     import numpy as np
 
@@ -143,7 +150,12 @@ def attack_forged_checkpoint_out_of_schema(c: Campaign, where: Path) -> tuple[bo
     return resumed(c, where, mark)
 
 
-ATTACKS = [attack_sweep_checkpoints_replaced_by_a_payload, attack_analyses_checkpoint_planted,
-            attack_whole_journal_planted, attack_a_checkpoint_damaged_by_one_byte,
-            attack_special_files_named_as_checkpoints, attack_journal_folder_is_a_link_elsewhere,
-            attack_forged_checkpoint_out_of_schema]
+ATTACKS = [
+    attack_sweep_checkpoints_replaced_by_a_payload,
+    attack_analyses_checkpoint_planted,
+    attack_whole_journal_planted,
+    attack_a_checkpoint_damaged_by_one_byte,
+    attack_special_files_named_as_checkpoints,
+    attack_journal_folder_is_a_link_elsewhere,
+    attack_forged_checkpoint_out_of_schema,
+]

@@ -26,10 +26,12 @@ sys.path.insert(0, str(HERE))
 
 from fuzz_campaign import Target  # noqa: E402
 
-PEAK = ("import resource, subprocess, sys\n"
-        "code = subprocess.call(sys.argv[2:])\n"
-        "open(sys.argv[1], 'w').write(str(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss))\n"
-        "sys.exit(code if code >= 0 else 128 - code)\n")
+PEAK = (
+    "import resource, subprocess, sys\n"
+    "code = subprocess.call(sys.argv[2:])\n"
+    "open(sys.argv[1], 'w').write(str(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss))\n"
+    "sys.exit(code if code >= 0 else 128 - code)\n"
+)
 """A wrapper that runs a command and writes its peak resident memory (KiB) to a file."""
 PEAK_LIMIT_MIB = 1024
 """The most memory refusing an input may take (loading truestep takes about 200 MiB): a
@@ -83,16 +85,22 @@ class Result:
     def clean_refusal(self) -> bool:
         """Exit 2 with one short line on standard error and no traceback."""
         lines = [x for x in self.err.strip().splitlines() if x.strip()]
-        return (self.code == 2 and len(lines) == 1 and len(lines[0]) <= MAX_LINE
-                and "Traceback" not in self.err)
+        return (
+            self.code == 2 and len(lines) == 1 and len(lines[0]) <= MAX_LINE and "Traceback" not in self.err
+        )
 
     @property
     def run_refusal(self) -> bool:
         """Exit 2 after a run's progress lines: one error line, last, no traceback."""
         lines = [x for x in self.err.strip().splitlines() if x.strip()]
         errors = [x for x in lines if x.startswith("truestep: error:")]
-        return (self.code == 2 and len(errors) == 1 and lines[-1] == errors[0]
-                and len(errors[0]) <= MAX_LINE and "Traceback" not in self.err)
+        return (
+            self.code == 2
+            and len(errors) == 1
+            and lines[-1] == errors[0]
+            and len(errors[0]) <= MAX_LINE
+            and "Traceback" not in self.err
+        )
 
     def why(self) -> str:
         tail = " | ".join(self.err.strip().splitlines()[-2:])[-240:]
@@ -120,9 +128,16 @@ class Campaign:
         env.update(extra)
         return env
 
-    def start(self, args: list[str], cwd: Path, *, env: dict[str, str] | None = None,
-              memory_gb: float = 8.0, fsize: int | None = None,
-              peak_file: Path | None = None) -> subprocess.Popen:
+    def start(
+        self,
+        args: list[str],
+        cwd: Path,
+        *,
+        env: dict[str, str] | None = None,
+        memory_gb: float = 8.0,
+        fsize: int | None = None,
+        peak_file: Path | None = None,
+    ) -> subprocess.Popen:
         """Start ``truestep ARGS`` (the target's), niced, in a session of its own; with
         ``peak_file``, through a wrapper that writes its peak memory (KiB) there."""
 
@@ -135,16 +150,18 @@ class Campaign:
                 resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
 
         wrap = [] if peak_file is None else [sys.executable, "-c", PEAK, str(peak_file)]
-        return self._popen(["nice", "-n", "5", *wrap, *self.target.cli, *args], cwd,
-                           env or self.env(), limits)
+        return self._popen(
+            ["nice", "-n", "5", *wrap, *self.target.cli, *args], cwd, env or self.env(), limits
+        )
 
     @staticmethod
     def _popen(cmd: list[str], cwd: Path, env: dict[str, str], limits) -> subprocess.Popen:
         """Start ``cmd`` with its output in files (a process it leaves behind holding a
         pipe cannot make the campaign wait), in a session of its own."""
         out, err = tempfile.TemporaryFile(), tempfile.TemporaryFile()
-        proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=err,
-                                start_new_session=True, preexec_fn=limits)
+        proc = subprocess.Popen(
+            cmd, cwd=cwd, env=env, stdout=out, stderr=err, start_new_session=True, preexec_fn=limits
+        )
         proc.outputs = (out, err)  # type: ignore[attr-defined]
         return proc
 
@@ -166,21 +183,29 @@ class Campaign:
             fh.close()
         return Result(code, texts[0], texts[1], time.perf_counter() - started)
 
-    def truestep(self, args: list[str], cwd: Path, *, timeout: float = CALL_TIMEOUT,
-                 env: dict[str, str] | None = None, memory_gb: float = 8.0,
-                 fsize: int | None = None, peak: bool = False) -> Result:
+    def truestep(
+        self,
+        args: list[str],
+        cwd: Path,
+        *,
+        timeout: float = CALL_TIMEOUT,
+        env: dict[str, str] | None = None,
+        memory_gb: float = 8.0,
+        fsize: int | None = None,
+        peak: bool = False,
+    ) -> Result:
         started = time.perf_counter()
         peak_file = cwd / ".peak" if peak else None
-        proc = self.start(args, cwd, env=env, memory_gb=memory_gb, fsize=fsize,
-                          peak_file=peak_file)
+        proc = self.start(args, cwd, env=env, memory_gb=memory_gb, fsize=fsize, peak_file=peak_file)
         result = self.finish(proc, timeout, started)
         if peak_file is not None and peak_file.exists():
             result.peak_mib = int(peak_file.read_text()) / 1024
             peak_file.unlink()
         return result
 
-    def python(self, code: str, cwd: Path, *, timeout: float = CALL_TIMEOUT,
-               memory_gb: float = 4.0) -> Result:
+    def python(
+        self, code: str, cwd: Path, *, timeout: float = CALL_TIMEOUT, memory_gb: float = 4.0
+    ) -> Result:
         """Run ``code`` in the target's interpreter (for the Python API)."""
 
         def limits() -> None:
@@ -190,8 +215,7 @@ class Campaign:
             resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 
         started = time.perf_counter()
-        proc = self._popen(["nice", "-n", "5", str(self.target.python), "-c", code], cwd,
-                           self.env(), limits)
+        proc = self._popen(["nice", "-n", "5", str(self.target.python), "-c", code], cwd, self.env(), limits)
         return self.finish(proc, timeout, started)
 
     def folder(self, name: str) -> Path:
@@ -200,11 +224,24 @@ class Campaign:
         where.mkdir(parents=True)
         return where
 
-    def quick_run(self, cwd: Path, out: str, *extra: str, cases: str = BASE_CASES,
-                  engines: str = "reference", env: dict[str, str] | None = None,
-                  timeout: float = RUN_TIMEOUT, fsize: int | None = None) -> Result:
-        return self.truestep(["run", "--quick", "--engines", engines, "--cases", cases,
-                              "--out", out, *extra], cwd, timeout=timeout, env=env, fsize=fsize)
+    def quick_run(
+        self,
+        cwd: Path,
+        out: str,
+        *extra: str,
+        cases: str = BASE_CASES,
+        engines: str = "reference",
+        env: dict[str, str] | None = None,
+        timeout: float = RUN_TIMEOUT,
+        fsize: int | None = None,
+    ) -> Result:
+        return self.truestep(
+            ["run", "--quick", "--engines", engines, "--cases", cases, "--out", out, *extra],
+            cwd,
+            timeout=timeout,
+            env=env,
+            fsize=fsize,
+        )
 
     def base_report(self) -> Path:
         """An uninterrupted quick run of :data:`BASE_CASES` (made once)."""
@@ -226,8 +263,9 @@ class Campaign:
             held, note = False, f"attack failed: {type(err).__name__}: {err}"
         v = Verdict(group, name, held, note[:400], round(time.perf_counter() - started, 1))
         self.verdicts.append(v)
-        print(f"  [{group}] {'held ' if held else 'BROKE'} {name}: {v.note[:160]}",
-              file=sys.stderr, flush=True)
+        print(
+            f"  [{group}] {'held ' if held else 'BROKE'} {name}: {v.note[:160]}", file=sys.stderr, flush=True
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -315,8 +353,15 @@ dt = {dt}
 """
 
 
-def case_file(where: Path, name: str = "campaign-case", *, duration: str = "1.0",
-              dt: str = "[0.01]", extra: str = "", body: str | None = None) -> Path:
+def case_file(
+    where: Path,
+    name: str = "campaign-case",
+    *,
+    duration: str = "1.0",
+    dt: str = "[0.01]",
+    extra: str = "",
+    body: str | None = None,
+) -> Path:
     path = where / f"{name}.toml"
     path.write_text(body if body is not None else CASE.format(duration=duration, dt=dt, extra=extra))
     return path
@@ -330,10 +375,16 @@ def shipped_tables(where: Path) -> Path:
     return where
 
 
-def gate(c: Campaign, cwd: Path, results: Path, *extra: str, timeout: float = CALL_TIMEOUT,
-         memory_gb: float = 6.0) -> Result:
-    return c.truestep(["gate", "--results", str(results), "-q", *extra], cwd, timeout=timeout,
-                      memory_gb=memory_gb, peak=True)
+def gate(
+    c: Campaign, cwd: Path, results: Path, *extra: str, timeout: float = CALL_TIMEOUT, memory_gb: float = 6.0
+) -> Result:
+    return c.truestep(
+        ["gate", "--results", str(results), "-q", *extra],
+        cwd,
+        timeout=timeout,
+        memory_gb=memory_gb,
+        peak=True,
+    )
 
 
 def refused(result: Result) -> tuple[bool, str]:

@@ -26,13 +26,21 @@ def hostile_run(c: Campaign) -> tuple[Path, Result]:
         where = c.folder("hostile-run")
         cases = where / "cases"
         cases.mkdir()
-        case_file(cases, "hostile-text", extra="", body=CASE.format(
-            duration="1.0", dt="[0.01, 0.005]",
-            extra='[reference]\nexact = "uniform-gravity"\n'
-                  '[stability]\nhorizon = 0.5\ndt_lo = 1e-3\ndt_hi = 0.2\nquick = true\n').replace(
-            'title = "a case of the campaign"',
-            'title = "T<script>alert(1)</script>\\u202eeltit"\n'
-            'description = "D<img src=x onerror=alert(1)> \\u200b\\u001b[31m"'))
+        case_file(
+            cases,
+            "hostile-text",
+            extra="",
+            body=CASE.format(
+                duration="1.0",
+                dt="[0.01, 0.005]",
+                extra='[reference]\nexact = "uniform-gravity"\n'
+                "[stability]\nhorizon = 0.5\ndt_lo = 1e-3\ndt_hi = 0.2\nquick = true\n",
+            ).replace(
+                'title = "a case of the campaign"',
+                'title = "T<script>alert(1)</script>\\u202eeltit"\n'
+                'description = "D<img src=x onerror=alert(1)> \\u200b\\u001b[31m"',
+            ),
+        )
         result = adapter_run(c, where, "Hostile", cases=str(cases / "hostile-text.toml"))
         c._hostile = (where, result)  # type: ignore[attr-defined]
     return c._hostile  # type: ignore[attr-defined]
@@ -43,7 +51,7 @@ def raw_in(text: str, *, markdown: bool) -> list[str]:
     behind a backslash)."""
     found = [repr(s) for s in HIDDEN if s in text]
     for s in INJECTED:
-        if (re.search(r"(?<!\\)" + re.escape(s), text) if markdown else s in text):
+        if re.search(r"(?<!\\)" + re.escape(s), text) if markdown else s in text:
             found.append(repr(s))
     return found
 
@@ -80,11 +88,28 @@ def hostile_gate(c: Campaign) -> tuple[Path, Result]:
     if not hasattr(c, "_hostile_gate"):
         run, _ = hostile_run(c)
         gates = run / "gates.toml"
-        gates.write_text('[[gates]]\ncases = "*"\nkind = "error"\nengine = "*"\nmethod = "*"\n'
-                         'dt = 0.01\nmax = 0.0\n')
-        result = c.truestep(["gate", "--results", str(run / "rep" / "results.csv"), "--cases",
-                             str(run / "cases"), "--gates", str(gates), "-v",
-                             "--junit", "j.xml", "--markdown", "m.md", "--json", "j.json"], run)
+        gates.write_text(
+            '[[gates]]\ncases = "*"\nkind = "error"\nengine = "*"\nmethod = "*"\ndt = 0.01\nmax = 0.0\n'
+        )
+        result = c.truestep(
+            [
+                "gate",
+                "--results",
+                str(run / "rep" / "results.csv"),
+                "--cases",
+                str(run / "cases"),
+                "--gates",
+                str(gates),
+                "-v",
+                "--junit",
+                "j.xml",
+                "--markdown",
+                "m.md",
+                "--json",
+                "j.json",
+            ],
+            run,
+        )
         c._hostile_gate = (run, result)  # type: ignore[attr-defined]
     return c._hostile_gate  # type: ignore[attr-defined]
 
@@ -147,7 +172,13 @@ def attack_mathtext_method_name(c: Campaign, where: Path) -> tuple[bool, str]:
     return result.code == 0 and bool(figures), result.why()
 
 
-ATTACKS = [attack_names_in_index_md, attack_names_in_index_html,
-            attack_names_on_the_console_of_run, attack_names_in_junit,
-            attack_names_in_the_markdown_summary, attack_names_in_the_json,
-            attack_names_on_the_console_of_gate, attack_mathtext_method_name]
+ATTACKS = [
+    attack_names_in_index_md,
+    attack_names_in_index_html,
+    attack_names_on_the_console_of_run,
+    attack_names_in_junit,
+    attack_names_in_the_markdown_summary,
+    attack_names_in_the_json,
+    attack_names_on_the_console_of_gate,
+    attack_mathtext_method_name,
+]

@@ -13,13 +13,16 @@ from hostile_attacks.common import (
 )
 
 
-def two_runs(c: Campaign, where: Path, second: list[str], out_second: str = "rep",
-             cwd_second: Path | None = None) -> tuple[bool, str]:
+def two_runs(
+    c: Campaign, where: Path, second: list[str], out_second: str = "rep", cwd_second: Path | None = None
+) -> tuple[bool, str]:
     """A slow run on ``rep``, then a second command while it runs: the second is refused
     at once naming the first, and the first finishes its report."""
     started = time.perf_counter()
-    first = c.start(["run", "--quick", "--engines", "hostile_adapters:Sleeper", "--cases",
-                     "free-fall", "--out", "rep"], where)
+    first = c.start(
+        ["run", "--quick", "--engines", "hostile_adapters:Sleeper", "--cases", "free-fall", "--out", "rep"],
+        where,
+    )
     deadline = time.monotonic() + RUN_TIMEOUT
     while not (where / ".rep.partial").exists() and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -34,21 +37,35 @@ def two_runs(c: Campaign, where: Path, second: list[str], out_second: str = "rep
 
 def attack_second_run_on_the_same_out(c: Campaign, where: Path) -> tuple[bool, str]:
     """Two ``truestep run`` on one ``--out`` at once."""
-    return two_runs(c, where, ["run", "--quick", "--engines", "reference", "--cases",
-                               "free-fall", "--out", "rep"])
+    return two_runs(
+        c, where, ["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", "rep"]
+    )
 
 
 def attack_resume_while_the_run_is_alive(c: Campaign, where: Path) -> tuple[bool, str]:
     """``--resume`` of a run that is still running."""
-    return two_runs(c, where, ["run", "--quick", "--engines", "hostile_adapters:Sleeper",
-                               "--cases", "free-fall", "--resume", "rep"])
+    return two_runs(
+        c,
+        where,
+        [
+            "run",
+            "--quick",
+            "--engines",
+            "hostile_adapters:Sleeper",
+            "--cases",
+            "free-fall",
+            "--resume",
+            "rep",
+        ],
+    )
 
 
 def attack_second_run_through_a_link(c: Campaign, where: Path) -> tuple[bool, str]:
     """A second run on the same folder, named through a symbolic link to its parent."""
     (where / "alias").symlink_to(where)
-    return two_runs(c, where, ["run", "--quick", "--engines", "reference", "--cases",
-                               "free-fall", "--out", "alias/rep/"])
+    return two_runs(
+        c, where, ["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", "alias/rep/"]
+    )
 
 
 def attack_resume_after_a_kill(c: Campaign, where: Path) -> tuple[bool, str]:
@@ -71,6 +88,10 @@ def attack_new_run_after_a_kill(c: Campaign, where: Path) -> tuple[bool, str]:
     return again.code == 0, again.why()
 
 
-ATTACKS = [attack_second_run_on_the_same_out, attack_resume_while_the_run_is_alive,
-            attack_second_run_through_a_link, attack_resume_after_a_kill,
-            attack_new_run_after_a_kill]
+ATTACKS = [
+    attack_second_run_on_the_same_out,
+    attack_resume_while_the_run_is_alive,
+    attack_second_run_through_a_link,
+    attack_resume_after_a_kill,
+    attack_new_run_after_a_kill,
+]

@@ -19,8 +19,15 @@ from hostile_attacks.common import (
 )
 
 
-def untouched_refusal(c: Campaign, where: Path, out: str, folder: Path, *,
-                      cwd: Path | None = None, env: dict[str, str] | None = None) -> tuple[bool, str]:
+def untouched_refusal(
+    c: Campaign,
+    where: Path,
+    out: str,
+    folder: Path,
+    *,
+    cwd: Path | None = None,
+    env: dict[str, str] | None = None,
+) -> tuple[bool, str]:
     before = snapshot(folder)
     result = c.quick_run(cwd or where, out, cases="free-fall", env=env)
     after = snapshot(folder)
@@ -115,12 +122,21 @@ def attack_a_process_writing_into_out(c: Campaign, where: Path) -> tuple[bool, s
     """Another process writes files into the folder while truestep runs on it."""
     folder = where / "busy"
     folder.mkdir()
-    writer = subprocess.Popen([sys.executable, "-c", (
-        "import sys, time, pathlib\n"
-        "d = pathlib.Path(sys.argv[1])\n"
-        "for i in range(100000):\n"
-        "    (d / f'part-{i:05d}.dat').write_text(str(i))\n"
-        "    time.sleep(0.005)\n"), str(folder)], start_new_session=True)
+    writer = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            (
+                "import sys, time, pathlib\n"
+                "d = pathlib.Path(sys.argv[1])\n"
+                "for i in range(100000):\n"
+                "    (d / f'part-{i:05d}.dat').write_text(str(i))\n"
+                "    time.sleep(0.005)\n"
+            ),
+            str(folder),
+        ],
+        start_new_session=True,
+    )
     try:
         time.sleep(0.5)
         result = c.quick_run(where, "busy", cases="free-fall")
@@ -149,17 +165,26 @@ def attack_bench_command_into_a_folder_of_other_files(c: Campaign, where: Path) 
     """``truestep bench --out`` on a folder of someone's files (a tiny bench)."""
     folder = user_folder(where / "mine")
     before = snapshot(folder)
-    result = c.truestep(["bench", "--engines", "reference", "--sizes", "100", "--budget", "1",
-                         "--out", "mine"], where, timeout=RUN_TIMEOUT)
+    result = c.truestep(
+        ["bench", "--engines", "reference", "--sizes", "100", "--budget", "1", "--out", "mine"],
+        where,
+        timeout=RUN_TIMEOUT,
+    )
     if snapshot(folder) != before:
         return False, f"the folder changed: {result.why()}"
     return refused(result)
 
 
-ATTACKS = [attack_out_is_a_folder_of_other_files, attack_out_is_the_current_directory,
-            attack_out_is_the_home_directory, attack_out_is_a_link_to_other_files,
-            attack_out_is_a_file, attack_report_holding_a_link_elsewhere,
-            attack_planted_scratch_folder_beside_out,
-            attack_modes_and_owners_come_from_the_old_report, attack_a_process_writing_into_out,
-            attack_figures_command_into_a_folder_of_other_files,
-            attack_bench_command_into_a_folder_of_other_files]
+ATTACKS = [
+    attack_out_is_a_folder_of_other_files,
+    attack_out_is_the_current_directory,
+    attack_out_is_the_home_directory,
+    attack_out_is_a_link_to_other_files,
+    attack_out_is_a_file,
+    attack_report_holding_a_link_elsewhere,
+    attack_planted_scratch_folder_beside_out,
+    attack_modes_and_owners_come_from_the_old_report,
+    attack_a_process_writing_into_out,
+    attack_figures_command_into_a_folder_of_other_files,
+    attack_bench_command_into_a_folder_of_other_files,
+]

@@ -32,8 +32,14 @@ def attack_fifo_toml_in_a_cases_directory(c: Campaign, where: Path) -> tuple[boo
 def attack_dev_zero_toml_in_a_cases_directory(c: Campaign, where: Path) -> tuple[bool, str]:
     """A link to /dev/zero named ``*.toml`` in a ``--cases`` directory (``truestep run``)."""
     d = cases_dir_with(where, lambda p: p.symlink_to("/dev/zero"))
-    return refused(c.truestep(["run", "--quick", "--engines", "reference", "--cases", str(d),
-                               "--out", "rep"], where, memory_gb=6, peak=True))
+    return refused(
+        c.truestep(
+            ["run", "--quick", "--engines", "reference", "--cases", str(d), "--out", "rep"],
+            where,
+            memory_gb=6,
+            peak=True,
+        )
+    )
 
 
 def attack_dev_urandom_as_a_case_file(c: Campaign, where: Path) -> tuple[bool, str]:
@@ -120,8 +126,11 @@ def attack_baseline_results_is_dev_urandom(c: Campaign, where: Path) -> tuple[bo
 def attack_load_case_on_a_fifo(c: Campaign, where: Path) -> tuple[bool, str]:
     """``truestep.load_case`` (the Python API) on a FIFO: a clean CaseError, no hang."""
     mkfifo(where / "fifo.toml")
-    result = c.python("import truestep\ntry:\n    truestep.load_case('fifo.toml')\n"
-                      "except truestep.cases.CaseError as e:\n    print('CLEAN', e)\n", where)
+    result = c.python(
+        "import truestep\ntry:\n    truestep.load_case('fifo.toml')\n"
+        "except truestep.cases.CaseError as e:\n    print('CLEAN', e)\n",
+        where,
+    )
     return result.code == 0 and "CLEAN" in result.out, result.why()
 
 
@@ -131,16 +140,29 @@ def attack_compare_on_a_fifo(c: Campaign, where: Path) -> tuple[bool, str]:
     bad = where / "bad"
     bad.mkdir()
     mkfifo(bad / "results.csv")
-    result = c.python("import truestep\nfrom truestep.tables_io import TableError\ntry:\n"
-                      f"    truestep.compare({str(bad)!r}, {str(tables)!r})\n"
-                      "except TableError as e:\n    print('CLEAN', e)\n", where)
+    result = c.python(
+        "import truestep\nfrom truestep.tables_io import TableError\ntry:\n"
+        f"    truestep.compare({str(bad)!r}, {str(tables)!r})\n"
+        "except TableError as e:\n    print('CLEAN', e)\n",
+        where,
+    )
     return result.code == 0 and "CLEAN" in result.out, result.why()
 
 
-ATTACKS = [attack_fifo_toml_in_a_cases_directory, attack_dev_zero_toml_in_a_cases_directory,
-            attack_dev_urandom_as_a_case_file, attack_sparse_20_gib_case_file,
-            attack_fifo_gates_file, attack_dev_zero_gates_file, attack_fifo_results_table,
-            attack_dev_zero_results_table, attack_dev_urandom_results_table,
-            attack_fifo_beside_the_results_table, attack_dev_zero_beside_the_results_table,
-            attack_sparse_20_gib_results_table, attack_baseline_results_is_dev_urandom,
-            attack_load_case_on_a_fifo, attack_compare_on_a_fifo]
+ATTACKS = [
+    attack_fifo_toml_in_a_cases_directory,
+    attack_dev_zero_toml_in_a_cases_directory,
+    attack_dev_urandom_as_a_case_file,
+    attack_sparse_20_gib_case_file,
+    attack_fifo_gates_file,
+    attack_dev_zero_gates_file,
+    attack_fifo_results_table,
+    attack_dev_zero_results_table,
+    attack_dev_urandom_results_table,
+    attack_fifo_beside_the_results_table,
+    attack_dev_zero_beside_the_results_table,
+    attack_sparse_20_gib_results_table,
+    attack_baseline_results_is_dev_urandom,
+    attack_load_case_on_a_fifo,
+    attack_compare_on_a_fifo,
+]

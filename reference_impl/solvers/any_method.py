@@ -101,7 +101,7 @@ _NO_KICK_DRIFT_KICK = KickDriftKick(0.0, 0.0, 0.0)
 def pattern(kind: Tableau) -> tuple:
     """A tableau's pattern of non-zero entries below the diagonal, row by row: what its
     unrolled step of one particle is made from."""
-    return tuple(tuple(int(c) for c in kind.cols[s, :kind.terms[s]]) for s in range(len(kind.b)))
+    return tuple(tuple(int(c) for c in kind.cols[s, : kind.terms[s]]) for s in range(len(kind.b)))
 
 
 class AnyMethod(NamedTuple):

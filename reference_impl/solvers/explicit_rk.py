@@ -139,8 +139,9 @@ def polynomial_step_matrix(gamma: np.ndarray) -> StepMatrix:
 
 def _first_crossing(f: Polynomial, candidates: np.ndarray) -> float:
     """The smallest positive real candidate root past which ``f`` is positive, or inf."""
-    real = np.sort(candidates.real[(np.abs(candidates.imag) <= 1e-9 * np.abs(candidates))
-                                   & (candidates.real > 0)])
+    real = np.sort(
+        candidates.real[(np.abs(candidates.imag) <= 1e-9 * np.abs(candidates)) & (candidates.real > 0)]
+    )
     for r in real:
         if f(r * (1 + 1e-7)) > 0:
             return float(r)
@@ -209,8 +210,9 @@ class Euler(ExplicitRungeKutta):
     name = "euler"
     A = np.array([[0.0]])
     B = np.array([1.0])
-    facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=False,
-                        stability=tableau_stability(A, B, order=1))
+    facts = MethodFacts(
+        order=1, evaluations_per_step=1, symplectic=False, stability=tableau_stability(A, B, order=1)
+    )
 
 
 class Midpoint(ExplicitRungeKutta):
@@ -219,8 +221,9 @@ class Midpoint(ExplicitRungeKutta):
     name = "midpoint"
     A = np.array([[0.0, 0.0], [0.5, 0.0]])
     B = np.array([0.0, 1.0])
-    facts = MethodFacts(order=2, evaluations_per_step=2, symplectic=False,
-                        stability=tableau_stability(A, B, order=2))
+    facts = MethodFacts(
+        order=2, evaluations_per_step=2, symplectic=False, stability=tableau_stability(A, B, order=2)
+    )
 
 
 class Heun(ExplicitRungeKutta):
@@ -229,8 +232,9 @@ class Heun(ExplicitRungeKutta):
     name = "heun"
     A = np.array([[0.0, 0.0], [1.0, 0.0]])
     B = np.array([0.5, 0.5])
-    facts = MethodFacts(order=2, evaluations_per_step=2, symplectic=False,
-                        stability=tableau_stability(A, B, order=2))
+    facts = MethodFacts(
+        order=2, evaluations_per_step=2, symplectic=False, stability=tableau_stability(A, B, order=2)
+    )
 
 
 class RK4(ExplicitRungeKutta):
@@ -246,8 +250,9 @@ class RK4(ExplicitRungeKutta):
         ]
     )
     B = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
-    facts = MethodFacts(order=4, evaluations_per_step=4, symplectic=False,
-                        stability=tableau_stability(A, B, order=4))
+    facts = MethodFacts(
+        order=4, evaluations_per_step=4, symplectic=False, stability=tableau_stability(A, B, order=4)
+    )
 
 
 class DormandPrince54(Solver):
@@ -283,16 +288,26 @@ class DormandPrince54(Solver):
     )
     B = np.array([35 / 384, 0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0])
     # B minus the embedded fourth-order weights: the local error estimate per unit h.
-    E = np.array(
-        [71 / 57600, 0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40]
+    E = np.array([71 / 57600, 0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40])
+    facts = MethodFacts(
+        order=5,
+        evaluations_per_step=6,
+        symplectic=False,
+        stability=tableau_stability(A[:6, :6], B[:6], order=5),
     )
-    facts = MethodFacts(order=5, evaluations_per_step=6, symplectic=False,
-                        stability=tableau_stability(A[:6, :6], B[:6], order=5))
     # The continuous extension of order 4 (Hairer, Norsett & Wanner, II.6, "dense output
     # of DOPRI5"): the last term's weights on the seven stages.
-    D = np.array([-12715105075 / 11282082432, 0, 87487479700 / 32700410799,
-                  -10690763975 / 1880347072, 701980252875 / 199316789632,
-                  -1453857185 / 822651844, 69997945 / 29380423])
+    D = np.array(
+        [
+            -12715105075 / 11282082432,
+            0,
+            87487479700 / 32700410799,
+            -10690763975 / 1880347072,
+            701980252875 / 199316789632,
+            -1453857185 / 822651844,
+            69997945 / 29380423,
+        ]
+    )
 
     def dense(self) -> DenseStep:
         """The last accepted step's continuous extension: the state at any time within it
@@ -360,7 +375,7 @@ class DormandPrince54(Solver):
             scale = self.atol + np.maximum(abs_x, np.abs(x_new)) * self.rtol
             err = _rms(h * (self.E @ k) / scale)
             if err <= 1.0:
-                factor = self.max_factor if err == 0 else self.safety * err ** -0.2
+                factor = self.max_factor if err == 0 else self.safety * err**-0.2
                 factor = min(self.max_factor, factor)
                 if rejected:
                     factor = min(1.0, factor)
@@ -369,16 +384,17 @@ class DormandPrince54(Solver):
             if not np.isfinite(err):
                 factor = self.min_factor
             else:
-                factor = max(self.min_factor, self.safety * err ** -0.2)
+                factor = max(self.min_factor, self.safety * err**-0.2)
             h *= factor
             rejected = True
             self.n_rejected += 1
             if h < 1e-14 * max(1.0, abs(t)):
                 if not np.isfinite(err):
-                    raise FloatingPointError(f"dopri5: non-finite state or derivative at "
-                                             f"t={t:.6g}")
-                raise SolverFailed(f"dopri5: step size underflow at t={t:.6g}: the error "
-                                   "estimate stays above the tolerance at every step size")
+                    raise FloatingPointError(f"dopri5: non-finite state or derivative at t={t:.6g}")
+                raise SolverFailed(
+                    f"dopri5: step size underflow at t={t:.6g}: the error "
+                    "estimate stays above the tolerance at every step size"
+                )
         self._f0 = f_new  # a new array (System.derivative's contract): kept, not copied
         self._x_end = x_new
         self._step = (t, h, x, x_new, k.copy())
@@ -412,8 +428,7 @@ class DenseStep:
         if index is None:
             x0, x1, hk1, hk7, hdk = self.x0, self.x1, self.hk1, self.hk7, self.hdk
         else:
-            x0, x1, hk1, hk7, hdk = (a[index] for a in (self.x0, self.x1, self.hk1, self.hk7,
-                                                        self.hdk))
+            x0, x1, hk1, hk7, hdk = (a[index] for a in (self.x0, self.x1, self.hk1, self.hk7, self.hdk))
         r2 = x1 - x0
         r3 = hk1 - r2
         r4 = r2 - hk7 - r3

@@ -100,12 +100,13 @@ def point_step_lines(terms: list[list[int]], stages: int) -> list[str]:
     for s in range(stages):
         lines += [f"x{s}, v{s} = x, v"]
         for q, r in enumerate(terms[s]):
-            lines += [f"w = h * method.weights[{s}, {q}]",
-                      f"x{s}, v{s} = axpy(x{s}, w, v{r}), axpy(v{s}, w, a{r})"]
+            lines += [
+                f"w = h * method.weights[{s}, {q}]",
+                f"x{s}, v{s} = axpy(x{s}, w, v{r}), axpy(v{s}, w, a{r})",
+            ]
         lines += [f"a{s} = point_accel(scene, tile, x{s}, v{s}, t + method.c[{s}] * h, p)"]
     lines += ["dx, dv = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)"]
-    lines += [f"dx, dv = axpy(dx, method.b[{s}], v{s}), axpy(dv, method.b[{s}], a{s})"
-              for s in range(stages)]
+    lines += [f"dx, dv = axpy(dx, method.b[{s}], v{s}), axpy(dv, method.b[{s}], a{s})" for s in range(stages)]
     return [*lines, "return axpy(x, h, dx), axpy(v, h, dv)"]
 
 
@@ -129,9 +130,12 @@ class Tableau(NamedTuple):
         unrolled for this tableau's pattern of non-zero entries, which the code is made
         from (its weights are read from the tableau, so Heun and the midpoint method
         share it)."""
-        terms = [list(self.cols[s, :self.terms[s]]) for s in range(len(self.b))]
-        return glue(tiles.point_step, point_step_lines(terms, len(self.b)),
-                    {"axpy": axpy, "point_accel": tiles.point_accel})
+        terms = [list(self.cols[s, : self.terms[s]]) for s in range(len(self.b))]
+        return glue(
+            tiles.point_step,
+            point_step_lines(terms, len(self.b)),
+            {"axpy": axpy, "point_accel": tiles.point_accel},
+        )
 
     def special_step(self):
         """The step of one special particle (a filling of :func:`tiles.special_step`)."""
@@ -146,10 +150,9 @@ class Tableau(NamedTuple):
         for i in range(s):
             nonzero = np.flatnonzero(a[i, :i])
             terms[i] = len(nonzero)
-            cols[i, :len(nonzero)] = nonzero
-            weights[i, :len(nonzero)] = a[i, nonzero]
-        return cls(np.array(b, dtype=float), np.array(c, dtype=float), terms, cols, weights,
-                   len(b))
+            cols[i, : len(nonzero)] = nonzero
+            weights[i, : len(nonzero)] = a[i, nonzero]
+        return cls(np.array(b, dtype=float), np.array(c, dtype=float), terms, cols, weights, len(b))
 
     @property
     def stages(self) -> int:

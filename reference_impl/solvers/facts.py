@@ -52,8 +52,7 @@ def spectral_radius(m: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(np.asarray(m, float)))))
 
 
-def first_growth(radius: Callable[[float], float], *, lo: float = SCAN_MIN,
-                 hi: float = SCAN_MAX) -> float:
+def first_growth(radius: Callable[[float], float], *, lo: float = SCAN_MIN, hi: float = SCAN_MAX) -> float:
     """The smallest ``x`` in ``[lo, hi]`` where ``radius(x)`` exceeds ``1 + RADIUS_TOL``.
 
     Scans a geometric grid (:data:`SCAN_PER_DECADE`) and refines the first bracket by
@@ -101,8 +100,10 @@ class Stability:
 
     def __post_init__(self) -> None:
         if not (self.imaginary >= 0 and self.real >= 0):
-            raise ValueError(f"Stability: imaginary={self.imaginary} and real={self.real} "
-                             "must be non-negative (inf for every step)")
+            raise ValueError(
+                f"Stability: imaginary={self.imaginary} and real={self.real} "
+                "must be non-negative (inf for every step)"
+            )
         if self.a_stable and not (np.isinf(self.imaginary) and np.isinf(self.real)):
             raise ValueError("Stability: an A-stable method has imaginary = real = inf")
 
@@ -169,8 +170,7 @@ class MethodFacts:
     def __post_init__(self) -> None:
         for name in ("order", "velocity_order"):
             value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int)
-                                      or value < 1):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
                 raise ValueError(f"MethodFacts.{name}: a positive integer, got {value!r}")
         e = self.evaluations_per_step
         if e is not None and (isinstance(e, bool) or not isinstance(e, int) or e < 1):

@@ -48,12 +48,18 @@ class ImplicitEuler(Solver):
     """
 
     name = "implicit-euler"
-    facts = MethodFacts(order=1, evaluations_per_step=None, symplectic=False,
-                        stability=Stability(imaginary=float("inf"), real=float("inf"),
-                                            a_stable=True, step_matrix=implicit_euler_step))
+    facts = MethodFacts(
+        order=1,
+        evaluations_per_step=None,
+        symplectic=False,
+        stability=Stability(
+            imaginary=float("inf"), real=float("inf"), a_stable=True, step_matrix=implicit_euler_step
+        ),
+    )
 
-    def __init__(self, system: System, *, tol: float = 1e-10, max_iter: int = 20,
-                 max_damped_iter: int = 200) -> None:
+    def __init__(
+        self, system: System, *, tol: float = 1e-10, max_iter: int = 20, max_damped_iter: int = 200
+    ) -> None:
         super().__init__(system)
         self.tol, self.max_iter, self.max_damped_iter = tol, max_iter, max_damped_iter
         self.n_jac = 0
@@ -87,8 +93,7 @@ class ImplicitEuler(Solver):
     def _size(self, delta: np.ndarray, y: np.ndarray) -> float:
         return float(np.sqrt(np.mean((delta / (1.0 + np.abs(y))) ** 2)))
 
-    def _fast_newton(self, x: np.ndarray, fx: np.ndarray, t: float, dt: float
-                     ) -> np.ndarray | None:
+    def _fast_newton(self, x: np.ndarray, fx: np.ndarray, t: float, dt: float) -> np.ndarray | None:
         """Newton from the explicit predictor ``x + h f(x)`` with the kept matrix (rebuilt
         once at an iterate when it converges slowly); ``None`` when it does not converge."""
         t1 = t + dt
@@ -155,9 +160,11 @@ class ImplicitEuler(Solver):
                 self._solve_dt = None  # the matrix of this iterate is not the fast path's
                 return y
         self._solve_dt = None
-        raise SolverFailed(f"implicit-euler: Newton found no solution of the step's equation "
-                           f"at t = {t:.6g} s with h = {dt:.4g} s (residual {norm:.3g}, damped "
-                           "and with a fresh Jacobian at every iterate)")
+        raise SolverFailed(
+            f"implicit-euler: Newton found no solution of the step's equation "
+            f"at t = {t:.6g} s with h = {dt:.4g} s (residual {norm:.3g}, damped "
+            "and with a fresh Jacobian at every iterate)"
+        )
 
     def step(self, dt: float) -> float:
         x, t = self.system.get_state(), self.system.get_time()

@@ -78,9 +78,12 @@ class SymplecticEuler(_SplitSolver):
     """
 
     name = "symplectic-euler"
-    facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=True,
-                        stability=Stability(imaginary=2.0, real=2.0,
-                                            step_matrix=symplectic_euler_step))
+    facts = MethodFacts(
+        order=1,
+        evaluations_per_step=1,
+        symplectic=True,
+        stability=Stability(imaginary=2.0, real=2.0, step_matrix=symplectic_euler_step),
+    )
     splitting = Splitting(kick=1.0, old=0.0, new=1.0)
 
     def step(self, dt: float) -> float:
@@ -102,8 +105,13 @@ class VelocityVerlet(_SplitSolver):
     """
 
     name = "verlet"
-    facts = MethodFacts(order=2, evaluations_per_step=1, symplectic=True, velocity_order=1,
-                        stability=Stability(imaginary=2.0, real=2.0, step_matrix=verlet_step))
+    facts = MethodFacts(
+        order=2,
+        evaluations_per_step=1,
+        symplectic=True,
+        velocity_order=1,
+        stability=Stability(imaginary=2.0, real=2.0, step_matrix=verlet_step),
+    )
     splitting = Splitting(kick=0.5, old=0.0, new=1.0)
 
     def __init__(self, system) -> None:
@@ -146,9 +154,13 @@ class LectureUpdate(_SplitSolver):
     """
 
     name = "lecture"
-    facts = MethodFacts(order=1, evaluations_per_step=1, symplectic=False,
-                        exact_constant_acceleration=True,
-                        stability=Stability(imaginary=0.0, real=2.0, step_matrix=lecture_step))
+    facts = MethodFacts(
+        order=1,
+        evaluations_per_step=1,
+        symplectic=False,
+        exact_constant_acceleration=True,
+        stability=Stability(imaginary=0.0, real=2.0, step_matrix=lecture_step),
+    )
     splitting = Splitting(kick=1.0, old=0.5, new=0.5)
 
     def step(self, dt: float) -> float:

@@ -28,8 +28,11 @@ def drift(method, x, v, u, h):
 def kick_drift_point(method, x, v, a, h):
     """A particle's kick ``v' = v + h a`` and drift, on 3-tuples: ``(x', v')``."""
     u = (v[0] + h * a[0], v[1] + h * a[1], v[2] + h * a[2])
-    return (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
-            drift(method, x[2], v[2], u[2], h)), u
+    return (
+        drift(method, x[0], v[0], u[0], h),
+        drift(method, x[1], v[1], u[1], h),
+        drift(method, x[2], v[2], u[2], h),
+    ), u
 
 
 @njit(**KERNEL)
@@ -84,8 +87,15 @@ def kick_drift_kick_input(method, e, tile, t, h):
         x, v = load(X, j), load(V, j)
         u = axpy(v, kick, load(A, j))
         store(VS, j, u)
-        store(X, j, (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
-                     drift(method, x[2], v[2], u[2], h)))
+        store(
+            X,
+            j,
+            (
+                drift(method, x[0], v[0], u[0], h),
+                drift(method, x[1], v[1], u[1], h),
+                drift(method, x[2], v[2], u[2], h),
+            ),
+        )
     return A, X, VS, t + h
 
 
@@ -105,8 +115,11 @@ def kick_drift_kick_point(method, scene, tile, x, v, t, h, p, a):
     (kept in column ``p`` of ``A`` for the next step) and the closing half kick."""
     kick = method.kick * h
     u = axpy(v, kick, a)
-    y = (drift(method, x[0], v[0], u[0], h), drift(method, x[1], v[1], u[1], h),
-         drift(method, x[2], v[2], u[2], h))
+    y = (
+        drift(method, x[0], v[0], u[0], h),
+        drift(method, x[1], v[1], u[1], h),
+        drift(method, x[2], v[2], u[2], h),
+    )
     closing = point_accel(scene, tile, y, u, t + h, p)
     store(tile.A, p, closing)
     return y, axpy(u, kick, closing)
@@ -118,8 +131,7 @@ def kick_drift_kick_point_step(method, scene, tile, x, v, t, h, p):
     :func:`tiles.point_step`): the acceleration at the start evaluated afresh when the
     step is (:data:`tiles.FRESH`), else the one kept in ``A``."""
     if tile.count[FRESH]:
-        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p,
-                                     point_accel(scene, tile, x, v, t, p))
+        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, point_accel(scene, tile, x, v, t, p))
     return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.A, p))
 
 
@@ -128,8 +140,7 @@ def kick_drift_kick_special_step(method, scene, tile, x, v, t, h, p):
     """:func:`kick_drift_kick_point_step` of a special particle, stepped again from the
     step's start: its kept acceleration is where the fused step saved it (``F``)."""
     if tile.count[FRESH]:
-        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p,
-                                     point_accel(scene, tile, x, v, t, p))
+        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, point_accel(scene, tile, x, v, t, p))
     return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.F, p))
 
 

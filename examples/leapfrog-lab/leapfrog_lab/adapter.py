@@ -9,18 +9,37 @@ from leapfrog_lab.world import World
 class LeapfrogAdapter(truestep.FixedStepAdapter):
     name = "leapfrog"
     methods = ("leapfrog",)
-    capabilities = frozenset({"point-masses", "2d", "3d", "uniform-gravity", "drag", "springs",
-                              "spring-damping", "anchored-springs", "planes", "pinned-particles"})
+    capabilities = frozenset(
+        {
+            "point-masses",
+            "2d",
+            "3d",
+            "uniform-gravity",
+            "drag",
+            "springs",
+            "spring-damping",
+            "anchored-springs",
+            "planes",
+            "pinned-particles",
+        }
+    )
     schemes: ClassVar = {"leapfrog": "verlet"}  # stability interval omega h < 2, as Verlet's
 
     def build(self, case, method, h):
         m = case.model
         s, a = m.springs, m.anchors
         return World(
-            m.x0.copy(), m.v0.copy(), m.mass, m.fixed, m.radius, m.gravity, m.drag,
+            m.x0.copy(),
+            m.v0.copy(),
+            m.mass,
+            m.fixed,
+            m.radius,
+            m.gravity,
+            m.drag,
             springs=(s.i, s.j, s.stiffness, s.damping, s.rest) if len(s) else (),
             anchors=(a.i, a.point, a.stiffness, a.damping, a.rest) if len(a) else (),
-            planes=tuple((p.point, p.normal, p.restitution) for p in m.planes))
+            planes=tuple((p.point, p.normal, p.restitution) for p in m.planes),
+        )
 
     def advance(self, world, k, steps, h):
         for _ in range(steps):
@@ -28,4 +47,3 @@ class LeapfrogAdapter(truestep.FixedStepAdapter):
 
     def read(self, world):
         return world.x, world.v
-

@@ -63,8 +63,7 @@ class World:
             collide(self.x, self.v, self.radius, point, normal, e)
 
 
-def spring_force(d: np.ndarray, dv: np.ndarray, k: np.ndarray, c: np.ndarray,
-                 rest: np.ndarray) -> np.ndarray:
+def spring_force(d: np.ndarray, dv: np.ndarray, k: np.ndarray, c: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """Force on the first end of springs with ends ``d`` apart (s, 3), relative
     velocity ``dv``: ``-(k (|d| - rest) + c (dv . u)) u``, ``u = d / |d|``."""
     length = np.linalg.norm(d, axis=1)
@@ -73,8 +72,9 @@ def spring_force(d: np.ndarray, dv: np.ndarray, k: np.ndarray, c: np.ndarray,
     return -(k * (length - rest) + c * along)[:, None] * u
 
 
-def collide(x: np.ndarray, v: np.ndarray, radius: np.ndarray, point: np.ndarray,
-            normal: np.ndarray, e: float) -> None:
+def collide(
+    x: np.ndarray, v: np.ndarray, radius: np.ndarray, point: np.ndarray, normal: np.ndarray, e: float
+) -> None:
     """Push particles inside the plane back onto it and reflect their normal velocity
     (``v_N -> -e v_N``) when they move into it; ``x``, ``v`` changed in place."""
     depth = (x - point) @ normal - radius

@@ -8,8 +8,12 @@ import pytest
 LECTURE_CASES = "free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball"
 
 
-@pytest.mark.truestep(engines="leapfrog_lab.adapter:LeapfrogAdapter,reference",
-                      cases=f"{LECTURE_CASES},../leapfrog_lab/cases",
-                      gates="../truestep-gates.toml", quick=True, case_gates=False)
+@pytest.mark.truestep(
+    engines="leapfrog_lab.adapter:LeapfrogAdapter,reference",
+    cases=f"{LECTURE_CASES},../leapfrog_lab/cases",
+    gates="../truestep-gates.toml",
+    quick=True,
+    case_gates=False,
+)
 def test_physics(truestep_gate):
     truestep_gate.check()
