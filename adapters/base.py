@@ -416,9 +416,9 @@ class FixedStepAdapter(abc.ABC):
         :data:`MONITOR_BYTES` is watched at its records only."""
         self.require(case, method)
         n_steps, h = case.steps_for(dt)
-        every = monitor and n_steps > case.max_records and (n_steps * case.model.n * 48 <= MONITOR_BYTES)
+        every = monitor and n_steps > case.max_records and (n_steps * case.particles.n * 48 <= MONITOR_BYTES)
         if monitor and n_steps > case.max_records and not every:
-            notes_first = [unwatched_note(n_steps * case.model.n * 48)]
+            notes_first = [unwatched_note(n_steps * case.particles.n * 48)]
         else:
             notes_first = []
         run_case = replace(case, max_records=n_steps) if every else case
@@ -443,7 +443,7 @@ class FixedStepAdapter(abc.ABC):
         if status != "ok" and rec.stopped:
             notes = [rec.stopped, *notes]
         with np.errstate(all="ignore"):
-            energy = total_energy(case.model, rec.x, rec.v)
+            energy = total_energy(case.particles, rec.x, rec.v)
         return Trajectory(
             t=rec.t,
             x=rec.x,

@@ -511,7 +511,7 @@ class Scene:
 
 def build(case: Case, method: str, dt: float, *, contact_steps: float = CONTACT_STEPS) -> Scene:
     """Compile ``case`` for ``method`` at nominal step ``dt`` and set the initial state."""
-    model = case.model
+    model = case.particles
     h = case.steps_for(dt)[1]
     xml, layout = mjcf(model, method, h, contact_steps=contact_steps)
     m = mujoco.MjModel.from_xml_string(xml)
@@ -702,7 +702,7 @@ def _step(
     wall = time.perf_counter() - start
 
     states = states[: i + 1]
-    n, dim = case.model.n, lay.dim
+    n, dim = case.particles.n, lay.dim
     x, v = np.zeros((len(states), n, 3)), np.zeros((len(states), n, 3))
     x[:, lay.free, :dim] = states[:, 1 : 1 + m.nq].reshape(len(states), -1, dim)
     x[:, lay.pinned] = scene.pinned_x

@@ -453,7 +453,7 @@ class PybulletAdapter(FixedStepAdapter):
         """``clean`` changes only contact handling (and uses maximal coordinates, which
         step a free body the same way): without planes its trajectory is ``default``'s,
         bit for bit (tested)."""
-        if method == "clean" and not case.model.planes:
+        if method == "clean" and not case.particles.planes:
             return (
                 "no contacts: the same trajectory as pybullet/default bit for bit "
                 "(clean changes only contact handling)"
@@ -461,7 +461,7 @@ class PybulletAdapter(FixedStepAdapter):
         return None
 
     def build(self, case: Case, method: str, h: float) -> _Run:
-        return _Run(case.model, build_scene(case.model, h, clean=method == "clean"))
+        return _Run(case.particles, build_scene(case.particles, h, clean=method == "clean"))
 
     def close(self, run: _Run) -> None:
         p.disconnect(run.scene.client)

@@ -292,7 +292,7 @@ class PymunkAdapter(FixedStepAdapter):
         return missing
 
     def build(self, case: Case, method: str, h: float) -> _Stepper:
-        return _Stepper(case.model, build_scene(case.model, collision_slop=self.collision_slop), h)
+        return _Stepper(case.particles, build_scene(case.particles, collision_slop=self.collision_slop), h)
 
     def advance(self, scene: _Stepper, k: int, steps: int, h: float) -> None:
         """``steps`` calls of ``space.step(h)``, each after the numpy forces of its start."""

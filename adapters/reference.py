@@ -29,15 +29,15 @@ def build_system(case: Case) -> System:
     """The reference system for a case: its ODE system (the lecture's or an installed
     one, :func:`truestep.cases.plugins.ode_system`) or its particles."""
     if case.kind == "ode":
-        return ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
-    return ParticleSystem(case.model, passes_for(case.model))
+        return ode_system(case.ode_spec.system)(case.ode_spec.y0, **case.ode_spec.params)
+    return ParticleSystem(case.particles, passes_for(case.particles))
 
 
 def trajectory_from_states(case: Case, t: np.ndarray, states: np.ndarray) -> tuple:
     """Split flat states (T, dim) into positions, velocities and energy as a Trajectory has them."""
     if case.kind == "ode":
         return states[:, None, :], None
-    n = case.model.n
+    n = case.particles.n
     return states[:, : 3 * n].reshape(-1, n, 3), states[:, 3 * n :].reshape(-1, n, 3)
 
 
@@ -87,7 +87,7 @@ class ReferenceAdapter:
         shown on standard error when slow), where the compiled path applies: called in
         the parent before it forks a sweep's runs, so that they find it ready."""
         if self.compiled and compiled_reason(case.model, method) is None:
-            prepared(case.model, method)
+            prepared(case.particles, method)
 
     def prepare_all(self, pairs: list[tuple[Case, str]], *, workers: int = 1) -> None:
         """:meth:`prepare` every (case, method) of ``pairs``, the loops they need compiled
@@ -146,7 +146,7 @@ class ReferenceAdapter:
             energy = np.array([system.energy(s, t) for s, t in zip(run.x, run.t, strict=True)])
             energy = None if energy.dtype == object else energy
         else:
-            energy = total_energy(case.model, x, v, alive)
+            energy = total_energy(case.particles, x, v, alive)
         return Trajectory(
             t=run.t,
             x=x,
@@ -164,10 +164,10 @@ class ReferenceAdapter:
 
     def _simulate_compiled(self, case: Case, method: str, dt: float) -> Trajectory:
         run, wall = run_compiled(
-            case.model, method, case.duration, case.steps_for(dt)[1], max_records=case.max_records
+            case.particles, method, case.duration, case.steps_for(dt)[1], max_records=case.max_records
         )
         with np.errstate(all="ignore"):
-            energy = total_energy(case.model, run.x, run.v)
+            energy = total_energy(case.particles, run.x, run.v)
         message = "non-finite or runaway state (beyond 1e12)" if run.status == "unstable" else ""
         return Trajectory(
             t=run.t,

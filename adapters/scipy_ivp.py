@@ -120,7 +120,7 @@ class ScipyAdapter:
             e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
             energy = None if e[0] is None else np.array(e)
         else:
-            energy = total_energy(case.model, x, v)
+            energy = total_energy(case.particles, x, v)
         status, t_fail = finite_until(states, t)
         message = ""
         if not sol.success and status == "ok":  # finite, but scipy could not go on
@@ -261,7 +261,7 @@ def _step_energies(
         e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
         return (None, None) if e[0] is None else (t, np.array(e, dtype=float))
     with np.errstate(all="ignore"):
-        return t, np.asarray(total_energy(case.model, x, v), float)
+        return t, np.asarray(total_energy(case.particles, x, v), float)
 
 
 class _NonFinite(Exception):
@@ -279,7 +279,7 @@ def _unstable_at(case: Case, system, x0: np.ndarray, bad: _NonFinite, nfev: int,
     x, v = trajectory_from_states(case, t, states)
     energy = None
     if case.kind != "ode":
-        energy = total_energy(case.model, x, v)
+        energy = total_energy(case.particles, x, v)
     return Trajectory(
         t=t,
         x=x,

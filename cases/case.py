@@ -144,6 +144,22 @@ class Case:
     escape_energy: float | None = None
 
     @property
+    def particles(self) -> ParticleModel:
+        """The particle scene of a ``particles`` case (a ``TypeError`` for an ODE case): the
+        typed view of :attr:`model` for code that runs only on particle scenes."""
+        if self.model is None:
+            raise TypeError(f"{self.name}: an ODE case has no particle scene")
+        return self.model
+
+    @property
+    def ode_spec(self) -> OdeSpec:
+        """The ODE of an ``ode`` case (a ``TypeError`` for a particle case): the typed view
+        of :attr:`ode`."""
+        if self.ode is None:
+            raise TypeError(f"{self.name}: a particle case has no ODE")
+        return self.ode
+
+    @property
     def features(self) -> set[str]:
         """Modelling features the scene needs (an ODE needs ``ode``)."""
         if self.model is not None:

@@ -36,7 +36,7 @@ __all__ = [
 @exact_solution("circle", params={}, kind="ode")
 def circle(case: Case, t: np.ndarray) -> Exact:
     """``x' = (-y, x)``: the start rotated by angle ``t``; half the squared radius is kept."""
-    y0 = case.ode.y0
+    y0 = case.ode_spec.y0
     c, s = np.cos(t), np.sin(t)
     x = np.stack([c * y0[0] - s * y0[1], s * y0[0] + c * y0[1]], axis=1)
     return Exact(t, x[:, None, :], None, np.full(t.shape, 0.5 * float(y0 @ y0)))
@@ -50,7 +50,7 @@ def anchored_oscillator(case: Case, t: np.ndarray) -> Exact:
     that line: ``u`` (extension beyond rest) obeys ``m u'' + k_d u' + k_s u = 0``.
     Energy: ``m v^2 / 2 + k_s u^2 / 2`` (gravity must be zero).
     """
-    m = case.model
+    m = case.particles
     a = m.anchors
     d0 = m.x0[0] - a.point[0]
     axis = d0 / np.linalg.norm(d0)
@@ -66,8 +66,8 @@ def anchored_oscillator(case: Case, t: np.ndarray) -> Exact:
 @exact_solution("kepler", params={}, kind="ode")
 def kepler(case: Case, t: np.ndarray) -> Exact:
     """The Kepler orbit from pericentre ``(a (1 - e), 0)``; energy ``-mu / (2 a)``."""
-    mu = case.ode.params.get("mu", 1.0)
-    q0, v0 = case.ode.y0[:2], case.ode.y0[2:]
+    mu = case.ode_spec.params.get("mu", 1.0)
+    q0, v0 = case.ode_spec.y0[:2], case.ode_spec.y0[2:]
     r0 = float(np.linalg.norm(q0))
     energy = 0.5 * float(v0 @ v0) - mu / r0
     a = -mu / (2 * energy)
@@ -90,7 +90,7 @@ def periodic(case: Case, t: np.ndarray) -> Exact:
     period = float(case.exact_params["period"])
     k = np.round(t / period)
     keep = np.abs(t - k * period) <= 1e-9 * max(1.0, period)
-    y0 = case.ode.y0
+    y0 = case.ode_spec.y0
     return Exact(t[keep], np.tile(y0, (int(keep.sum()), 1))[:, None, :])
 
 
@@ -216,7 +216,7 @@ def linear(case: Case, t: np.ndarray) -> Exact:
     from scipy.linalg import expm
 
     _check_linear(case)
-    m = case.model
+    m = case.particles
     n = m.n
     free = ~m.fixed
     K = np.zeros((n, n))
@@ -394,11 +394,11 @@ class ReferencePath:
 
         cls_ = get_solver(case.exact_params.get("method", "dopri5"))
         if case.kind == "ode":
-            system = ode_system(case.ode.system)(case.ode.y0, **case.ode.params)
+            system = ode_system(case.ode_spec.system)(case.ode_spec.y0, **case.ode_spec.params)
             n = None
         else:
-            system = ParticleSystem(case.model, passes_for(case.model))
-            n = case.model.n
+            system = ParticleSystem(case.particles, passes_for(case.particles))
+            n = case.particles.n
         if cls_.adaptive:
             tol = float(case.exact_params.get("rtol", 1e-12))
             solver = cls_(system, rtol=tol, atol=tol)

@@ -29,7 +29,7 @@ def _require(ok: bool, case: Case, what: str) -> None:
 
 
 def _free_forces(case: Case, *, drag: bool) -> ParticleModel:
-    m = case.model
+    m = case.particles
     _require(
         not len(m.springs)
         and not len(m.anchors)
@@ -87,7 +87,7 @@ def two_body(case: Case, t: np.ndarray) -> Exact:
     circular included), solved by :func:`truestep.cases.exact.kepler_state` in the orbit's own
     frame. Energy ``m_0 v_0^2 / 2 + m_1 v_1^2 / 2 - G m_0 m_1 / r`` is conserved.
     """
-    m = case.model
+    m = case.particles
     g = m.gravitation
     _require(
         m.n == 2
@@ -140,7 +140,7 @@ def spring_pair(case: Case, t: np.ndarray) -> Exact:
     Needs the relative velocity along the spring. Energy: kinetic plus gravity plus
     ``k_s u^2 / 2``.
     """
-    m = case.model
+    m = case.particles
     s = m.springs
     _require(
         m.n == 2
@@ -199,7 +199,7 @@ def bounce_schedule(u0: float, w0: float, g: float, e: float, t_max: float) -> t
 
 def _plane_motion(case: Case) -> tuple[ParticleModel, np.ndarray, float, float, float]:
     """Particle 0 above plane 0 with gravity along ``-N``: model, N, g, height, normal speed."""
-    m = case.model
+    m = case.particles
     _require(
         m.n == 1
         and len(m.planes) == 1
@@ -294,7 +294,7 @@ def bouncing_rain(case: Case, t: np.ndarray) -> Exact:
     Every particle starts above plane 0 with gravity along the plane's inward normal and no
     other force; each follows its own chain of parabolas (:func:`bounce_schedule`).
     """
-    m = case.model
+    m = case.particles
     _require(
         len(m.planes) == 1
         and m.drag == 0

@@ -563,9 +563,9 @@ def _check_exact(case: Case) -> None:
     except (Exception, TimeLimitExceeded) as err:  # it says why it does not fit by raising
         raise CaseError(case.file, where, f"{case.exact!r} does not fit this case: {err}") from None
     if case.kind == "ode":
-        x0, shape = case.ode.y0[None, None, :], (1, 1, len(case.ode.y0))
+        x0, shape = case.ode_spec.y0[None, None, :], (1, 1, len(case.ode_spec.y0))
     else:
-        x0, shape = case.model.x0[None], (1, case.model.n, 3)
+        x0, shape = case.particles.x0[None], (1, case.particles.n, 3)
     x = np.asarray(getattr(start, "x", None))
     if len(getattr(start, "t", [])) == 0:
         return  # known at some times only, not at the start

@@ -25,20 +25,21 @@ import hashlib
 import inspect
 from pathlib import Path
 from types import FunctionType
+from typing import Any
 
 from numba import njit
 from numba.core.dispatcher import Dispatcher
 
-INLINE = {"error_model": "numpy", "inline": "always"}
+INLINE: dict[str, Any] = {"error_model": "numpy", "inline": "always"}
 """How composed functions are compiled: into the loop that calls them."""
-COLD = {"cache": True, "error_model": "numpy", "_nrt": False}
+COLD: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
 """How the rarely called parts of a loop are compiled (a tile's start, a collision pass, a
 particle stepped again alone, the stop after a blow-up): on their own, called, so that
 numba does not copy them into the loop (it copies a function it inlines once for every
 place that calls it, a cost that grows with the square of the loop's size)."""
-COPY_COLD = {"error_model": "numpy", "_nrt": False}
+COPY_COLD: dict[str, Any] = {"error_model": "numpy", "_nrt": False}
 """How a copy of a rarely called part is compiled (:func:`instantiate`)."""
-LOOP = {"cache": True, "error_model": "numpy", "_nrt": False}
+LOOP: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
 """How a composed loop is compiled: cached on disk, and without numba's reference counting
 (its arrays all come from Python, which holds them while it runs; it allocates none), so
 that passing arrays between the functions it is made of costs nothing."""

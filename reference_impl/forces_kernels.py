@@ -31,21 +31,23 @@ transposed.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
+
+from truestep.reference_impl.class_kernels import carries
 
 TIME_ROUNDOFF = 1e-9
 """Relative margin on the ends of an impulse's window: a step time made by repeated
 addition (``4 x 0.0025 = 0.009999999999999998``) counts as the time it stands for."""
 
-KERNEL = {"cache": True, "error_model": "numpy", "inline": "always"}
+KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy", "inline": "always"}
 """How a kernel that names a slot of a composed step is compiled (:mod:`compose`): into
 the step that calls it (numba inlines it before it types the step: a call costs
 nothing), or on its own and cached when Python calls it; division by zero gives ``inf``
 or ``nan`` as numpy does, never an exception."""
-LEAF = {"cache": True, "error_model": "numpy", "_nrt": False}
+LEAF: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
 """How a kernel off the hot path of a step is compiled (a collision response, an
 energy): once, on its own, cached, and called, so that composing a step does not
 compile it again; without reference counting (a composed step has none,
@@ -91,15 +93,11 @@ def gravity_add(kind, F, X, V, t, particles):
         F[0, p], F[1, p], F[2, p] = gravity_at(kind, (F[0, p], F[1, p], F[2, p]), None, None, t, particles, p)
 
 
+@carries(pointwise=True, at=gravity_at, add=gravity_add, energy=gravity_energy, cut=uncut)
 class Gravity(NamedTuple):
     """Uniform gravity; ``g`` (3-tuple, m/s^2) not zero. Twin: :func:`forces.add_gravity`."""
 
     g: tuple[float, float, float]
-    pointwise = True
-    at = gravity_at
-    add = gravity_add
-    energy = gravity_energy
-    cut = uncut
 
 
 @njit(**LEAF)
@@ -118,15 +116,11 @@ def drag_add(kind, F, X, V, t, particles):
         )
 
 
+@carries(pointwise=True, at=drag_at, add=drag_add, energy=no_energy, cut=uncut)
 class Drag(NamedTuple):
     """Viscous drag; ``k`` (N s/m) not zero. Twin: :func:`forces.add_drag`."""
 
     k: float
-    pointwise = True
-    at = drag_at
-    add = drag_add
-    energy = no_energy
-    cut = uncut
 
 
 @njit(**LEAF)
@@ -203,6 +197,7 @@ def springs_energy(kind, X, particles):
     return e
 
 
+@carries(pointwise=False, add=springs_add, energy=springs_energy)
 class Springs(NamedTuple):
     """Damped springs between particle pairs (int64 ``i``, ``j``; float64 ``stiffness``
     N/m, ``damping`` N s/m, ``rest`` m; all (m,)). Twin: :func:`forces.add_springs`."""
@@ -212,9 +207,6 @@ class Springs(NamedTuple):
     stiffness: np.ndarray
     damping: np.ndarray
     rest: np.ndarray
-    pointwise = False
-    add = springs_add
-    energy = springs_energy
 
 
 @njit(**KERNEL)
@@ -266,6 +258,7 @@ def anchors_cut(kind, lo, hi):
     )
 
 
+@carries(pointwise=True, at=anchors_at, add=anchors_add, energy=anchors_energy, cut=anchors_cut)
 class Anchors(NamedTuple):
     """Damped springs from particles ``i`` (int64, (m,)) to fixed points ``point`` (m,
     (3, m)); ``stiffness``, ``damping``, ``rest`` as :class:`Springs`. An anchor acts on
@@ -281,11 +274,6 @@ class Anchors(NamedTuple):
     rest: np.ndarray
     start: np.ndarray
     order: np.ndarray
-    pointwise = True
-    at = anchors_at
-    add = anchors_add
-    energy = anchors_energy
-    cut = anchors_cut
 
 
 @njit(**KERNEL)
@@ -331,15 +319,13 @@ def gravitation_energy(kind, X, particles):
     return e
 
 
+@carries(pointwise=False, add=gravitation_add, energy=gravitation_energy)
 class Gravitation(NamedTuple):
     """Universal gravitation: ``G`` (m^3 kg^-1 s^-2), Plummer ``softening`` (m). Twin:
     :func:`forces.add_gravitation`."""
 
     G: float
     softening: float
-    pointwise = False
-    add = gravitation_add
-    energy = gravitation_energy
 
 
 @njit(**KERNEL)
@@ -372,6 +358,7 @@ def impulses_cut(kind, lo, hi):
     return Impulses(kind.start[lo : hi + 1], kind.force, kind.on, kind.off, k[a:b], lo)
 
 
+@carries(pointwise=True, at=impulse_at, add=impulses_add, energy=no_energy, cut=impulses_cut)
 class Impulses(NamedTuple):
     """Forces on single particles over time windows, grouped by particle (each particle's
     in the case's order): particle ``p``'s are entries ``start[p]`` to ``start[p + 1]``
@@ -386,8 +373,3 @@ class Impulses(NamedTuple):
     off: np.ndarray
     kicked: np.ndarray
     first: int
-    pointwise = True
-    at = impulse_at
-    add = impulses_add
-    energy = no_energy
-    cut = impulses_cut

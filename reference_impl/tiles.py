@@ -30,6 +30,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.collisions import EPS_DISTANCE
 from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
 from truestep.reference_impl.compose import COLD, slot
@@ -247,14 +248,12 @@ def passes_start(scene, tile, t):
     tile.count[FRESH] = 1
 
 
+@carries(name="passes", start=passes_start, collide=passes_collisions)
 class Passes(NamedTuple):
     """The layout that runs the derivative in passes over a tile (any scene), in tiles of
     ``size`` particles; ``collide`` is its collision pass."""
 
     size: int
-    name = "passes"
-    start = passes_start
-    collide = passes_collisions
 
 
 @njit(**COLD)
@@ -360,14 +359,12 @@ def fused_start(scene, tile, t):
     tile.count[FRESH] = 1
 
 
+@carries(name="fused", start=fused_start, collide=fused_collisions)
 class Fused(NamedTuple):
     """The layout that steps each particle of a tile in one loop, for scenes whose forces
     are all pointwise, in tiles of ``size`` particles; ``collide`` is its collision pass."""
 
     size: int
-    name = "fused"
-    start = fused_start
-    collide = fused_collisions
 
 
 @njit(**KERNEL)

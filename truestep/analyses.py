@@ -152,6 +152,8 @@ def _search_cost(engine: str, case: Case, method: str) -> float:
     from truestep.adapters.base import facts_of
 
     spec = case.stability
+    if spec is None:
+        raise ValueError(f"{case.name}: the case declares no stability search")
     steps = max(spec.min_steps, spec.horizon / spec.dt_lo)
     facts = facts_of(get_adapter(engine), method)
     per_step = 1.0 if facts is None else float(facts.evaluations_per_step or IMPLICIT_COST)
@@ -196,7 +198,7 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
     base = {"engine": engine, "method": method, "dt": dt, "e_set": e}
     if traj.status != "ok":
         return [{**base, "bounce": 1, "status": traj.status, "note": traj.message}]
-    plane = case.model.planes[0]
+    plane = case.particles.planes[0]
     h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, BALL_RADIUS)
     found = bounces(traj.t, h, vn, GRAVITY)
     rows = []

@@ -309,10 +309,10 @@ def _prepare_and_warm_up(
     pair.spent = time.perf_counter() - began
     note = ""
     if warm_up.status == "ok" and not pair.stop:
-        pair.per_step[warm.model.n] = warm_up.value
+        pair.per_step[warm.particles.n] = warm_up.value
         if pair.spent > 1.0:
             note = (
-                f"compiling and the warm-up (n={_fmt_n(warm.model.n)}, untimed) took "
+                f"compiling and the warm-up (n={_fmt_n(warm.particles.n)}, untimed) took "
                 f"{pair.spent:.2g} s of the pair's share"
             )
     return warm_up, note

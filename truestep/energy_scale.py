@@ -54,13 +54,13 @@ def _scale(case: Case) -> float:
 def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None) -> float:
     from truestep.reference_impl.particles import total_energy
 
-    m = np.where(case.model.fixed, 0.0, case.model.mass)
+    m = np.where(case.particles.fixed, 0.0, case.particles.mass)
     mass = m if alive is None else np.where(alive, m, 0.0)
     with np.errstate(invalid="ignore"):
         x0 = np.nan_to_num(x)
         v0 = np.nan_to_num(v)
         kinetic = 0.5 * np.sum(mass * np.sum(v0 * v0, axis=-1), axis=-1)
-        potential = total_energy(case.model, x0, v0, alive) - kinetic
+        potential = total_energy(case.particles, x0, v0, alive) - kinetic
     return _combine(kinetic, potential)
 
 

@@ -40,7 +40,7 @@ def floor_bounces(case: Case, traj: Trajectory) -> list[PlaneBounce]:
     """Bounces of particle 0 off every plane that gravity pulls it toward or along (the
     floor and the side walls), in time order, by :func:`truestep.restitution.bounces`;
     a ceiling (gravity away from it) is not measured."""
-    m = case.model
+    m = case.particles
     out = []
     for k, plane in enumerate(m.planes):
         g_n = float(-(m.gravity @ plane.normal))
@@ -55,14 +55,14 @@ def floor_bounces(case: Case, traj: Trajectory) -> list[PlaneBounce]:
 
 def with_restitution(case: Case, e: float) -> Case:
     """The case with every plane's coefficient of restitution set to ``e``."""
-    planes = [replace(p, restitution=e) for p in case.model.planes]
+    planes = [replace(p, restitution=e) for p in case.particles.planes]
     return replace(case, model=replace(case.model, planes=planes))
 
 
 def _box_outline(case: Case) -> tuple[np.ndarray, np.ndarray]:
     """Corners (2,) x and (2,) y of the box the case's planes bound in the x-y plane, m."""
     lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
-    for p in case.model.planes:
+    for p in case.particles.planes:
         axis = int(np.argmax(np.abs(p.normal)))
         if p.normal[axis] > 0:
             lo[axis] = p.point[axis]
@@ -113,7 +113,7 @@ def fig_bounce(path: Path) -> str:
     """A particle bouncing in a box for three restitutions; one collision taken apart."""
     base = figure_case("particle-in-a-box")
     dt = base.dts[0]
-    x0 = base.model.x0[0]
+    x0 = base.particles.x0[0]
     fig, axes = plt.subplots(1, 3, figsize=(15, 5.6), gridspec_kw={"width_ratios": [1, 1.1, 1]})
     measured, diagram = [], None
     for k, e in enumerate(BOX_RESTITUTIONS):
@@ -124,10 +124,12 @@ def fig_bounce(path: Path) -> str:
         )
         found = floor_bounces(case, traj)
         measured += [(k, pb.bounce) for pb in found if pb.bounce.v_out > 0]
-        floors = [pb for pb in found if -(case.model.gravity @ case.model.planes[pb.plane].normal) > 0]
+        floors = [
+            pb for pb in found if -(case.particles.gravity @ case.particles.planes[pb.plane].normal) > 0
+        ]
         if diagram is None and e < 1 and floors:
             pb = floors[0]
-            diagram = (pb.v_before, pb.bounce.v_out, case.model.planes[pb.plane].normal, e)
+            diagram = (pb.v_before, pb.bounce.v_out, case.particles.planes[pb.plane].normal, e)
     if diagram is None:
         raise RuntimeError(f"{base.name}: no floor bounce to draw")
     ax = axes[0]
@@ -178,8 +180,8 @@ def fig_bounce(path: Path) -> str:
     ax.legend(loc="upper left", fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     save_figure(fig, path)
-    planes = len(base.model.planes)
-    g = float(np.linalg.norm(base.model.gravity))
+    planes = len(base.particles.planes)
+    g = float(np.linalg.norm(base.particles.gravity))
     restitutions = ", ".join(f"{e:g}" for e in BOX_RESTITUTIONS[:-1]) + f" and {BOX_RESTITUTIONS[-1]:g}"
     return (
         'Reproduces the lecture slides "Bouncing off the Walls", "Normal and Tangential '
@@ -213,7 +215,7 @@ def contact_start(d: np.ndarray, vn: np.ndarray) -> int | None:
 def fig_contact(path: Path) -> str:
     """A particle dropped onto an inclined wall: bounces, then contact and sliding."""
     case = figure_case("inclined-wall-drop")
-    m = case.model
+    m = case.particles
     (plane,) = m.planes
     normal = plane.normal
     gravity = m.gravity

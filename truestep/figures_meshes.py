@@ -30,7 +30,7 @@ CUBE_CASES = {"edges": "pushed-cube-edges", "volume": "pushed-cube-braced"}
 def fig_triangle(path: Path) -> str:
     """The triangle of springs, a force on V2 for one step, then step by step."""
     case = figure_case("triangle-push")
-    model, springs = case.model, case.model.springs
+    model, springs = case.particles, case.particles.springs
     dt = case.dts[0]
     traj = run_reference(case, "lecture")
     x, v = traj.x, traj.v
@@ -154,13 +154,13 @@ def simulate_cube(bracing: str) -> CubeRun:
     reference adapter with velocity Verlet at its case's step (:data:`CUBE_CASES`)."""
     case = figure_case(CUBE_CASES[bracing])
     traj = run_reference(case, "verlet")
-    return CubeRun(case, traj.t, traj.x, signed_volume(traj.x, case.model.surfaces[0]))
+    return CubeRun(case, traj.t, traj.x, signed_volume(traj.x, case.particles.surfaces[0]))
 
 
 def _spring_kinds(case: Case) -> np.ndarray:
     """0 for an edge, 1 for a face diagonal, 2 for a body diagonal of a cube, shape (m,):
     from the rest lengths, in the ratios 1, sqrt(2), sqrt(3)."""
-    rest = case.model.springs.rest
+    rest = case.particles.springs.rest
     return np.rint((rest / rest.min()) ** 2).astype(int) - 1
 
 
@@ -172,7 +172,7 @@ def _up(x: np.ndarray) -> np.ndarray:
 def _draw_cube(ax: plt.Axes, case: Case, x: np.ndarray, colour: str) -> None:
     """The cube of ``case`` at positions ``x`` (8, 3): faces, springs by kind, pinned
     vertices as squares, the push as arrows."""
-    m, p = case.model, _up(x)
+    m, p = case.particles, _up(x)
     ax.add_collection3d(Poly3DCollection(p[m.surfaces[0]], facecolor=colour, alpha=0.2, edgecolor="none"))
     pairs, kinds = np.stack([m.springs.i, m.springs.j], axis=1), _spring_kinds(case)
     styles = {0: ("black", 2.0), 1: ("0.4", 0.8), 2: ("0.55", 0.8)}
@@ -204,7 +204,7 @@ def fig_cube(path: Path) -> str:
     """Edge-sprung against fully braced cube under the same push: snapshots and volume."""
     runs = {key: simulate_cube(key) for key in CUBE_CASES}
     labels = {
-        key: f"{label} ({len(r.case.model.springs)})"
+        key: f"{label} ({len(r.case.particles.springs)})"
         for (key, r), label in zip(
             runs.items(), ("edge springs only", "edge, face and volume springs"), strict=True
         )
@@ -258,7 +258,7 @@ def fig_cube(path: Path) -> str:
     ax.set_title("Signed volume of the cube's surface")
     ax.grid(True, alpha=0.3)
     case = runs["edges"].case
-    m = case.model
+    m = case.particles
     push = float(np.linalg.norm(m.impulses[0][1]))
     handles = [
         *ax.get_legend_handles_labels()[0],

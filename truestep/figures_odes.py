@@ -73,13 +73,13 @@ def _exact_circle(case, points: int = 400) -> np.ndarray:
 def fig_vector_field(path: Path) -> str:
     """The circle field as arrows, and integral curves followed by the adaptive solver."""
     case = figure_case("integral-curves")
-    field = ode_system(case.ode.system)(case.ode.y0)
+    field = ode_system(case.ode_spec.system)(case.ode_spec.y0)
     g = np.linspace(-2.0, 2.0, 15)
     gx, gy = np.meshgrid(g, g)
     pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
     f = np.array([field.derivative(p, 0.0) for p in pts])
     tol = case.tolerances[0]
-    starts = [case.ode.y0, *(np.array(s) for s in MORE_STARTS)]
+    starts = [case.ode_spec.y0, *(np.array(s) for s in MORE_STARTS)]
     runs = [run_reference(replace(case, ode=replace(case.ode, y0=s)), "dopri5", tol) for s in starts]
     closure = max(float(np.linalg.norm(ode_states(r)[-1] - s)) for r, s in zip(runs, starts, strict=True))
     drift = max(float(np.max(np.abs(_radius(r) / _radius(r)[0] - 1))) for r in runs)
@@ -212,7 +212,7 @@ def _decay_verdict(factor: float) -> str:
 def fig_euler_instability(path: Path) -> str:
     """Explicit Euler on ``v' = -k v`` below, near and beyond ``k h = 2``."""
     case = figure_case("viscous-decay")
-    m = case.model
+    m = case.particles
     k_rate = float(m.drag / m.mass[0])
     v0 = float(m.v0[0, 0])
     steps = sorted(case.dts)
@@ -271,8 +271,8 @@ def fig_euler_instability(path: Path) -> str:
 def _midpoint_diagram(ax: plt.Axes, case) -> None:
     """One midpoint step of :data:`DIAGRAM_STEP` from the case's start, taken apart."""
     hs = DIAGRAM_STEP
-    x0 = case.ode.y0
-    field = ode_system(case.ode.system)(x0)
+    x0 = case.ode_spec.y0
+    field = ode_system(case.ode_spec.system)(x0)
     dx = hs * field.derivative(x0, 0.0)
     xm = x0 + dx / 2
     f_mid = field.derivative(xm, hs / 2)

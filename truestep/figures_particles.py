@@ -113,7 +113,7 @@ def simulate_fountain(case: Case | None = None, *, target: int = FOUNTAIN_TARGET
     born in the first :data:`STRAND_FRAMES` frames outlives the run (its life would not be
     whole)."""
     case = figure_case("cube-emitter-5000") if case is None else case
-    (spec,) = case.model.emitters
+    (spec,) = case.particles.emitters
     traj = run_reference(case, "lecture", spec.frame_dt)
     alive = traj.alive
     born, lifespan = _lives(case, alive)
@@ -129,7 +129,7 @@ def simulate_fountain(case: Case | None = None, *, target: int = FOUNTAIN_TARGET
         raise RuntimeError(f"{case.name}: particles the figures draw outlive the run; lengthen it")
     spawned = np.bincount(born[born >= 0], minlength=len(traj.t))
     colors, shapes = _render_attributes(
-        spec, case.model.gravity, s - born, lifespan, traj.x[s], traj.v[s], alive[s]
+        spec, case.particles.gravity, s - born, lifespan, traj.x[s], traj.v[s], alive[s]
     )
     return Fountain(
         case,
@@ -266,7 +266,7 @@ def fig_fountain(path: Path, fountain: Fountain) -> str:
     ax.grid(True, alpha=0.3)
     ax.legend(loc="lower right", fontsize=8, frameon=False)
     save_figure(fig, path)
-    g = float(np.linalg.norm(f.case.model.gravity))
+    g = float(np.linalg.norm(f.case.particles.gravity))
     return (
         'Reproduces the lecture slide "A cube emitting 5000 animated particles, obeying a '
         "'gravitational' force in -Y direction\" (Snowflakes vs Hair): the reference emitter "

@@ -62,7 +62,7 @@ def fig_springs(path: Path) -> str:
             **reference_style(method, linewidth=1.6),
         )
         axes[1, col].plot(traj.t, exact.energy, label="exact", **exact_style())
-        a = case.model.anchors
+        a = case.particles.anchors
         axes[0, col].set_title(
             f"{case.title} (case {case.name})\nk_s = {a.stiffness[0]:g} N/m, k_d = {a.damping[0]:g} N s/m",
             fontsize=10,
@@ -76,7 +76,7 @@ def fig_springs(path: Path) -> str:
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     save_figure(fig, path)
-    m = cases[0].model
+    m = cases[0].particles
     (e_free, _, err_free), (e_damped, rate, err_damped) = measured
     out = float(np.linalg.norm(m.x0[0] - m.anchors.point[0]) - m.anchors.rest[0])
     return (
@@ -94,20 +94,20 @@ def fig_springs(path: Path) -> str:
 # -- 6. spring-damper pair -----------------------------------------------------------------------
 def _undamped(case):
     """The case with every spring's damper removed."""
-    springs = replace(case.model.springs, damping=np.zeros_like(case.model.springs.damping))
+    springs = replace(case.particles.springs, damping=np.zeros_like(case.particles.springs.damping))
     return replace(case, model=replace(case.model, springs=springs))
 
 
 def fig_spring_damper_pair(path: Path) -> str:
     """Two free masses on one spring-damper, with and without the damper."""
     damped = figure_case("stretched-spring-pair")
-    m, s = damped.model, damped.model.springs
+    m, s = damped.particles, damped.particles.springs
     m1, m2, k_s, rest = m.mass[0], m.mass[1], s.stiffness[0], s.rest[0]
     stretch = float(np.linalg.norm(m.x0[1] - m.x0[0]) - rest)
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.0))
     kept = {}
     for k, case in enumerate((damped, _undamped(damped))):
-        k_d = case.model.springs.damping[0]
+        k_d = case.particles.springs.damping[0]
         traj = run_reference(case, PAIR_METHOD)
         x = traj.x
         exact = EXACT[case.exact](case, traj.t).x

@@ -38,7 +38,7 @@ def register(fn: Property) -> Property:
 
 def _alive(case: Case, traj: Trajectory) -> np.ndarray:
     """Particles that exist and move, (T, n) bool."""
-    moving = ~case.model.fixed[None, :]
+    moving = ~case.particles.fixed[None, :]
     if traj.alive is None:
         return np.broadcast_to(moving, traj.x.shape[:2])
     return traj.alive & moving
@@ -58,7 +58,7 @@ def momentum_drift(case: Case, traj: Trajectory) -> float:
     NaN for scenes with external forces besides gravity and impulses (drag, anchors,
     planes, fields, pinned particles, emitters).
     """
-    m = case.model
+    m = case.particles
     if m.drag or len(m.anchors) or m.planes or m.fields or m.emitters or np.any(m.fixed):
         return float("nan")
     live = _alive(case, traj)
@@ -82,7 +82,7 @@ def momentum_drift(case: Case, traj: Trajectory) -> float:
 def min_signed_volume(case: Case, traj: Trajectory) -> float:
     """Smallest signed volume of any closed mesh of the scene over the run, relative to its
     start (1: unchanged, 0: collapsed flat, negative: turned inside out)."""
-    surfaces = case.model.surfaces
+    surfaces = case.particles.surfaces
     if not surfaces:
         return float("nan")
     worst = np.inf
@@ -98,7 +98,7 @@ def max_penetration(case: Case, traj: Trajectory) -> float:
 
     0 when nothing ever went below a plane.
     """
-    m = case.model
+    m = case.particles
     live = _alive(case, traj)
     deepest = 0.0
     for plane in m.planes:
@@ -118,7 +118,7 @@ def final_speed(case: Case, traj: Trajectory) -> float:
 @register
 def max_strain(case: Case, traj: Trajectory) -> float:
     """Largest relative length change ``| |x_i - x_j| / r - 1 |`` of any spring over the run."""
-    s = case.model.springs
+    s = case.particles.springs
     if not len(s):
         return float("nan")
     length = np.linalg.norm(traj.x[:, s.i] - traj.x[:, s.j], axis=2)
@@ -129,7 +129,7 @@ def max_strain(case: Case, traj: Trajectory) -> float:
 def stopping_distance_error(case: Case, traj: Trajectory) -> float:
     """``|s - v0^2 / (2 mu g)|``, m: distance slid by particle 0 on plane 0 (to the last
     record) against the exact stopping distance under Coulomb friction ``mu``."""
-    m = case.model
+    m = case.particles
     plane = m.planes[0]
     g = float(-(m.gravity @ plane.normal))
     v0 = m.v0[0] - (m.v0[0] @ plane.normal) * plane.normal
@@ -150,7 +150,7 @@ def _arcs(case: Case, traj: Trajectory) -> tuple[np.ndarray, np.ndarray, float]:
     contact's lowest sample. Both need every step recorded (the case's ``max_records`` at
     least its steps): a run recorded more sparsely gives NaN, not a guess.
     """
-    m = case.model
+    m = case.particles
     plane = m.planes[0]
     g = float(-(m.gravity @ plane.normal))
     if traj.steps and len(traj.t) < traj.steps + 1:
@@ -178,7 +178,7 @@ def apex_height_error(case: Case, traj: Trajectory) -> float:
     k = _bounces(case)
     if len(apex) < k:
         return float("inf")
-    m = case.model
+    m = case.particles
     plane = m.planes[0]
     u0 = float((m.x0[0] - plane.point) @ plane.normal - m.radius[0])
     _, launches = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution, float(traj.t[-1]))
@@ -197,7 +197,7 @@ def bounce_time_error(case: Case, traj: Trajectory) -> float:
     k = _bounces(case)
     if len(when) < k:
         return float("inf")
-    m = case.model
+    m = case.particles
     plane = m.planes[0]
     u0 = float((m.x0[0] - plane.point) @ plane.normal - m.radius[0])
     times, _ = bounce_schedule(u0, float(m.v0[0] @ plane.normal), g, plane.restitution, float(traj.t[-1]))
@@ -210,7 +210,7 @@ def _frames(spec, t: np.ndarray) -> np.ndarray:
 
 
 def _emitter_pools(case: Case, traj: Trajectory):
-    m = case.model
+    m = case.particles
     if not m.emitters or traj.alive is None:
         return []
     return [
@@ -284,7 +284,7 @@ def strand_error(case: Case, traj: Trajectory) -> float:
     uniform gravity and drag alone each lies on the curve fixed by its first point and
     velocity (:func:`~truestep.reference_impl.strands.ballistic_deviation`).
     """
-    m = case.model
+    m = case.particles
     if traj.alive is None or not m.emitters:
         return float("nan")
     strands = collect_strands(traj.t, traj.x, traj.v, traj.alive)
@@ -309,7 +309,7 @@ def tunnelled(case: Case, traj: Trajectory) -> float:
     A particle is behind a wall when its centre lies beyond the wall's back face,
     ``(X - P) . N < -thickness``; only planes with a thickness count.
     """
-    m = case.model
+    m = case.particles
     count = 0
     for plane in m.planes:
         if plane.thickness <= 0:

@@ -313,6 +313,8 @@ def search_case(
     from truestep.energy_scale import energy_scale
 
     spec = case.stability
+    if spec is None:
+        raise ValueError(f"{case.name}: the case declares no stability search")
     min_steps = min(QUICK_MIN_STEPS, spec.min_steps) if quick else spec.min_steps
     rel_tol = max(spec.rel_tol, 1e-2) if quick else spec.rel_tol
     scale = energy_scale(case)

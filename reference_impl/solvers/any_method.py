@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.particles_kernels import accelerations
 from truestep.reference_impl.solvers.explicit_rk_kernels import (
@@ -104,6 +105,7 @@ def pattern(kind: Tableau) -> tuple:
     return tuple(tuple(int(c) for c in kind.cols[s, : kind.terms[s]]) for s in range(len(kind.b)))
 
 
+@carries(passes=any_passes)
 class AnyMethod(NamedTuple):
     """A method of any ``shape`` (:data:`TABLEAU`, ...): its own step in the field of that
     shape, placeholders of the right types in the others; ``pattern``, fused, the index of
@@ -114,7 +116,6 @@ class AnyMethod(NamedTuple):
     tableau: Tableau
     kick_drift: KickDrift
     kick_drift_kick: KickDriftKick
-    passes = any_passes
 
     @classmethod
     def of(cls, kind, patterns: tuple = ()) -> AnyMethod:

@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from truestep.reference_impl import tiles
+from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.compose import glue
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.tiles import axpy, load, point_accel, store
@@ -110,6 +111,7 @@ def point_step_lines(terms: list[list[int]], stages: int) -> list[str]:
     return [*lines, "return axpy(x, h, dx), axpy(v, h, dv)"]
 
 
+@carries(carries_state=False)
 class Tableau(NamedTuple):
     """An explicit tableau as a compiled step reads it: ``b`` and ``c`` ((s,) float64, the
     method's ``B`` and row sums of ``A``); for each row ``s`` of ``A``, its ``terms[s]``
@@ -123,7 +125,6 @@ class Tableau(NamedTuple):
     cols: np.ndarray
     weights: np.ndarray
     evaluations: int
-    carries_state = False
 
     def point_step(self):
         """The step of one particle (a filling of :func:`tiles.point_step`): the stages

@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 from numba import njit
 
+from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.forces_kernels import KERNEL, LEAF
 from truestep.reference_impl.tiles import FRESH, axpy, load, point_accel, store
 
@@ -53,6 +54,7 @@ def kick_drift_point_step(method, scene, tile, x, v, t, h, p):
     return kick_drift_point(method, x, v, point_accel(scene, tile, x, v, t, p), h)
 
 
+@carries(carries_state=False)
 class KickDrift(NamedTuple):
     """A whole kick, then the drift with weights ``old`` and ``new``: symplectic Euler
     (0, 1) and the lecture's update (1/2, 1/2); one ``evaluations`` a step. Twins:
@@ -61,7 +63,6 @@ class KickDrift(NamedTuple):
     old: float
     new: float
     evaluations: int
-    carries_state = False
 
     def point_step(self):
         """The step of one particle (a filling of :func:`tiles.point_step`)."""
@@ -144,6 +145,7 @@ def kick_drift_kick_special_step(method, scene, tile, x, v, t, h, p):
     return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.F, p))
 
 
+@carries(carries_state=True)
 class KickDriftKick(NamedTuple):
     """Half kicks of ``kick`` h around the drift with weights ``old`` and ``new``, the
     closing acceleration reused: velocity Verlet. Twin: :meth:`VelocityVerlet.step`. It
@@ -153,7 +155,6 @@ class KickDriftKick(NamedTuple):
     kick: float
     old: float
     new: float
-    carries_state = True
 
     def point_step(self):
         """The step of one particle (a filling of :func:`tiles.point_step`)."""
