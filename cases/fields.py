@@ -98,7 +98,7 @@ class Fields:
         ``at_most``, ``below``, ``at_least``: bounds."""
         value = self.raw(name, default)
         if value is None:
-            return value
+            return None  # type: ignore[return-value]  # only when the default is None
         value = self._float(name, value)
         if positive and value <= 0:
             raise self.error(name, f"must be positive, got {value:g}")
@@ -137,7 +137,7 @@ class Fields:
         """A string of at most ``max_length`` characters, one of ``choices`` if given."""
         value = self.raw(name, default)
         if value is None:
-            return value
+            return None  # type: ignore[return-value]  # only when the default is None
         if not isinstance(value, str):
             raise self.error(name, f"expected a string, got {short(value)}")
         if choices is not None and value not in choices:

@@ -184,7 +184,7 @@ class ParticleSystem(SecondOrderSystem):
         return {"alive": self.alive.copy()} if self.model.emitters else {}
 
     # -- observables -------------------------------------------------------------------
-    def energy(self, x: np.ndarray, t: float) -> float | None:
+    def energy(self, x: np.ndarray, t: float) -> float | np.ndarray | None:
         """Kinetic plus potential energy (gravity, springs, gravitation), J.
 
         Force fields and impulses have no potential; scenes with them report the

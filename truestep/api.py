@@ -156,7 +156,7 @@ def gate_results(
     gate naming an engine that is neither registered nor in the results is refused
     (:class:`~truestep.cases.CaseError`), as ``truestep gate`` refuses it.
     """
-    extra = []
+    extra: list = []
     for g in [] if gates is None else [gates] if isinstance(gates, str | Path | dict) else gates:
         if isinstance(g, dict):
             from truestep.cases.fields import Fields

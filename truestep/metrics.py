@@ -25,7 +25,10 @@ def exact_for(case: Case, t: np.ndarray) -> Exact | None:
     hit = _EXACT_CACHE.get(key)
     if hit is not None and hit[0] is case:
         return hit[1]
-    exact = exact_named(case.exact)(case, t)
+    solution = exact_named(case.exact) if case.exact is not None else None
+    if solution is None:
+        raise ValueError(f"{case.name}: no exact solution named {case.exact!r}")
+    exact = solution(case, t)
     if len(_EXACT_CACHE) >= _EXACT_CACHE_SIZE:
         _EXACT_CACHE.pop(next(iter(_EXACT_CACHE)))
     _EXACT_CACHE[key] = (case, exact)

@@ -19,7 +19,7 @@ ROUNDS = 20
 
 def _parents() -> dict[int, int]:
     """Every visible process's parent, by pid (``/proc/PID/stat``)."""
-    out = {}
+    out: dict[int, int] = {}
     try:
         names = os.listdir("/proc")
     except OSError:

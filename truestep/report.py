@@ -310,7 +310,7 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
     started = [(names, start_isolated(write_lecture_figures, (fig_dir, names), 600.0)) for names in shares]
 
     def collect() -> list[tuple[Path, str]]:
-        drawn = []
+        drawn: list[tuple[Path, str]] = []
         for names, run in started:
             out = finish_isolated(run)
             drawn += out.value if out.status == "ok" else write_lecture_figures(fig_dir, names)

@@ -64,7 +64,7 @@ def markdown_to_html(md: str, base: Path) -> str:
         elif line.startswith("!["):
             m = re.match(r"!\[(.*?)\]\((.*?)\)", line)
             figure = _own_figure(base, m.group(2)) if m else None
-            if figure is not None:
+            if m is not None and figure is not None:
                 data = base64.b64encode(figure.read_bytes()).decode()
                 out.append(
                     f'<figure><img alt="{html.escape(m.group(1))}" '

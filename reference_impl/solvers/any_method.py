@@ -141,7 +141,9 @@ def fused_kinds(kinds) -> tuple[tuple, tuple]:
     one tableau for each pattern, in order of first appearance, then the kick and drift
     and velocity Verlet's step if any method has them. Returns (the tableaux' patterns,
     the steps: (field of :class:`AnyMethod`, a step of that shape) each)."""
-    patterns, tableaux, splittings = [], [], {}
+    patterns: list = []
+    tableaux: list = []
+    splittings: dict = {}
     for kind in kinds:
         if isinstance(kind, Tableau) and pattern(kind) not in patterns:
             patterns.append(pattern(kind))
