@@ -167,21 +167,7 @@ def as_json(
         "passed": passed,
         "counts": _counts(verdicts),
         "reasons": reasons,
-        "gates": [
-            {
-                "case": v.case,
-                "source": v.gate.file,
-                "gate": v.gate.where,
-                "kind": v.gate.kind,
-                "engine": v.gate.engine,
-                "method": v.gate.method,
-                "dt": v.gate.dt,
-                "verdict": v.verdict,
-                "measured": v.measured,
-                "required": v.required,
-            }
-            for v in verdicts
-        ],
+        "gates": [v.row() for v in verdicts],
     }
     if comparison is not None:
         doc["baseline"] = {

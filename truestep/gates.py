@@ -55,6 +55,21 @@ class GateResult:
         dt = f" dt={g.dt:g}" if g.dt is not None else ""
         return f"{self.case} {g.where} {g.kind} {g.engine}/{g.method}{dt}"
 
+    def row(self) -> dict:
+        """This verdict as a row of the verdict table (:data:`GATE_COLUMNS`, in order)."""
+        return {
+            "case": self.case,
+            "source": self.gate.file,
+            "gate": self.gate.where,
+            "kind": self.gate.kind,
+            "engine": self.gate.engine,
+            "method": self.gate.method,
+            "dt": self.gate.dt,
+            "verdict": self.verdict,
+            "measured": self.measured,
+            "required": self.required,
+        }
+
     def line(self) -> str:
         verdict = {"skip": "SKIP", "pass": "ok  ", "fail": "FAIL"}[self.verdict]
         return f"{verdict} {self.label}: measured {self.measured}, required {self.required}"
@@ -441,21 +456,4 @@ def _table_pairs(case: Case, g: Gate, table: pd.DataFrame | None) -> list[tuple[
 
 def verdict_table(verdicts: list[GateResult]) -> pd.DataFrame:
     """The verdicts as a table (:data:`GATE_COLUMNS`)."""
-    return pd.DataFrame(
-        [
-            {
-                "case": v.case,
-                "source": v.gate.file,
-                "gate": v.gate.where,
-                "kind": v.gate.kind,
-                "engine": v.gate.engine,
-                "method": v.gate.method,
-                "dt": v.gate.dt,
-                "verdict": v.verdict,
-                "measured": v.measured,
-                "required": v.required,
-            }
-            for v in verdicts
-        ],
-        columns=GATE_COLUMNS,
-    )
+    return pd.DataFrame([v.row() for v in verdicts], columns=GATE_COLUMNS)
