@@ -33,6 +33,7 @@ from truestep.cases.limits import (
 )
 from truestep.cases.scene import read_scene
 from truestep.reference_impl.system import SecondOrderSystem
+from truestep.table_spec import RESULTS
 from truestep.time_limit import TimeLimitExceeded, time_limit
 
 CASE_DIR = plugins.CASE_DIR
@@ -587,7 +588,8 @@ def _read_gates(f: Fields) -> list[Gate]:
 
 
 STATUS_VALUES = {"ok", "unstable"}
-QUANTITIES = {"error", "energy_drift", "energy_drift_final", "nfev"}
+QUANTITIES = set(RESULTS.where(gate=True))
+"""The results columns a ``no-worse-than`` gate may compare (:mod:`truestep.table_spec`)."""
 RESTITUTION_QUANTITIES = {"e_measured", "e_apex"}
 
 

@@ -18,33 +18,12 @@ from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
 from truestep.stability import SearchTimeout, search_case
+from truestep.table_spec import RESTITUTION, SCALING, STABILITY
 
-STABILITY_COLUMNS = [
-    "case",
-    "engine",
-    "method",
-    "dt_limit",
-    "dt_limit_exact",
-    "dt_unstable",
-    "runs",
-    "status",
-    "note",
-]
-RESTITUTION_COLUMNS = [
-    "engine",
-    "method",
-    "dt",
-    "e_set",
-    "bounce",
-    "e_measured",
-    "e_apex",
-    "v_in",
-    "v_out",
-    "apex",
-    "penetration",
-    "status",
-    "note",
-]
+STABILITY_COLUMNS = STABILITY.names
+"""The columns of ``stability.csv`` (:data:`truestep.table_spec.STABILITY`)."""
+RESTITUTION_COLUMNS = RESTITUTION.names
+"""The columns of ``restitution.csv`` (:data:`truestep.table_spec.RESTITUTION`)."""
 
 RESTITUTION_SET = (0.0, 0.5, 0.8, 0.9, 1.0)
 RESTITUTION_DTS = (1 / 240, 1 / 1000)
@@ -137,7 +116,7 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool, worke
         range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
     )
     run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
-    return pd.DataFrame(rows, columns=STABILITY_COLUMNS)
+    return STABILITY.frame(rows)
 
 
 IMPLICIT_COST = 8.0
@@ -270,7 +249,7 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
             )
 
     run_untimed(calls, workers, done)
-    return pd.DataFrame([r for g in groups for r in g], columns=RESTITUTION_COLUMNS)
+    return RESTITUTION.frame([r for g in groups for r in g])
 
 
 def run_analyses(
@@ -286,7 +265,6 @@ def run_analyses(
     (:func:`untimed_workers`). The scaling table is timed, so it runs after them, one run
     at a time.
     """
-    from truestep.bench import COLUMNS as SCALING_COLUMNS
     from truestep.bench import RAIN_CASE, scaling_table
 
     preload()
@@ -296,12 +274,12 @@ def run_analyses(
         "stability": stability_table(cases, engines, quick=quick, workers=workers),
         "restitution": restitution_table(engines, quick=quick, workers=workers)
         if bouncing
-        else pd.DataFrame(columns=RESTITUTION_COLUMNS),
+        else RESTITUTION.frame([]),
     }
     rain = next((c for c in cases if c.name == RAIN_CASE), None)
     tables["scaling"] = (
         scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain)
         if rain is not None and not quick
-        else pd.DataFrame(columns=SCALING_COLUMNS)
+        else SCALING.frame([])
     )
     return tables

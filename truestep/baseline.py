@@ -23,40 +23,19 @@ import numpy as np
 import pandas as pd
 
 from truestep.metrics import fit_order
+from truestep.table_spec import DERIVED, RESTITUTION, RESULTS, STABILITY, Compared, Table, compared
 
-TOLERANCES: dict[str, float] = {
-    "error": 1e-3,
-    "energy_drift": 1e-3,
-    "nfev": 0.02,
-    "order": 0.05,
-    "dt_limit": 0.01,
-    "e_error": 0.005,
-    "wall_ratio": 1.0,
-}
-"""Default tolerances, with why:
-
-- ``error``, ``energy_drift``: relative, 1e-3 (plus an absolute floor of 1e-12 of the
-  quantity's scale, :data:`FLOORS`). Identical on any machine with the same versions;
-  round-off from other library versions moves them by parts in 1e9 on smooth scenes
-  (adaptive runs more, where an accept/reject flips); a wrong term in a method changes
-  them by factors.
-- ``nfev``: relative, 0.02. A fixed-step method's count is exact; an adaptive method's
-  accept/reject decisions can flip on round-off near a tolerance boundary, by a step or
-  two in a hundred.
-- ``order``: absolute, 0.05. Fitted from errors that each hold to 1e-3, so the fit
-  holds to about 1e-3 / log(dt ratio); a lost order moves it by 1.
-- ``dt_limit``: relative, 0.01: the bisection stops at 0.1% (1% where the case says so);
-  searches are bounded by their runs, never by time, so a machine's speed never moves it.
-- ``e_error``: absolute, 0.005 in ``|e_measured - e_set|``, the restitution measured from
-  velocities against the one set.
-- ``wall_ratio``: relative, 1.0 (a run may take up to twice its former share of the
-  named engine's time): a shared machine moves single timings by tens of percent.
-"""
-FLOORS: dict[str, float] = {"error": 1e-12, "energy_drift": 1e-12}
+TOLERANCES: dict[str, float] = {name: c.tolerance for name, c in compared().items()}
+"""Default tolerances, each with its reason beside it in :mod:`truestep.table_spec` (the
+tables' compared columns, then :data:`~truestep.table_spec.DERIVED`): ``error``,
+``energy_drift`` relative 1e-3 (above :data:`FLOORS`), ``nfev`` relative 0.02, ``dt_limit``
+relative 0.01, ``order`` absolute 0.05, ``e_error`` absolute 0.005, ``wall_ratio`` relative
+1.0."""
+FLOORS: dict[str, float] = {name: c.floor for name, c in compared().items() if c.floor}
 """Absolute floors under the relative tolerances: differences below these are round-off."""
-RESULT_KEYS = ["case", "engine", "method", "dt_kind", "dt"]
-STABILITY_KEYS = ["case", "engine", "method"]
-RESTITUTION_KEYS = ["engine", "method", "dt", "e_set", "bounce"]
+RESULT_KEYS = list(RESULTS.keys)
+STABILITY_KEYS = list(STABILITY.keys)
+RESTITUTION_KEYS = list(RESTITUTION.keys)
 ORDER_KEYS = ["case", "engine", "method"]
 STATUS_RANK = {"ok": 0, "unstable": 1, "solver-failed": 1, "timeout": 2, "crashed": 2}
 """Higher is worse: ok -> unstable is a regression, as is anything -> crashed."""
@@ -262,7 +241,7 @@ def compare(
         old_r,
         new_r,
         RESULT_KEYS,
-        [("error", True, True), ("energy_drift", True, True), ("nfev", True, True)],
+        _quantities(RESULTS),
         tol,
         findings,
     )
@@ -272,7 +251,7 @@ def compare(
             orders(old_r, scales),
             orders(new_r, scales),
             ORDER_KEYS,
-            [("order", False, False)],
+            [_quantity("order", DERIVED["order"])],
             tol,
             findings,
         )
@@ -283,7 +262,7 @@ def compare(
                 _wall_ratios(old_r, (e, m)),
                 _wall_ratios(new_r, (e, m)),
                 RESULT_KEYS,
-                [("wall_ratio", True, True)],
+                [_quantity("wall_ratio", DERIVED["wall_ratio"])],
                 tol,
                 findings,
             )
@@ -292,7 +271,7 @@ def compare(
         baseline.get("stability"),
         current.get("stability"),
         STABILITY_KEYS,
-        [("dt_limit", False, True)],
+        _quantities(STABILITY),
         tol,
         findings,
     )
@@ -301,9 +280,25 @@ def compare(
         _restitution_error(current.get("restitution")),
     )
     compared += _compare_rows(
-        "restitution", old_e, new_e, RESTITUTION_KEYS, [("e_error", True, False)], tol, findings
+        "restitution",
+        old_e,
+        new_e,
+        RESTITUTION_KEYS,
+        [_quantity("e_error", DERIVED["e_error"])],
+        tol,
+        findings,
     )
     return Comparison(findings, compared, tol, time_against)
+
+
+def _quantity(name: str, c: Compared) -> tuple[str, bool, bool]:
+    return name, c.higher_is_worse, c.relative
+
+
+def _quantities(table: Table) -> list[tuple[str, bool, bool]]:
+    """The (quantity, higher_is_worse, relative) of each column of ``table`` a baseline
+    compares."""
+    return [_quantity(c.name, c.compared) for c in table.columns if c.compared is not None]
 
 
 TABLE_KEYS = {"results": RESULT_KEYS, "stability": STABILITY_KEYS, "restitution": RESTITUTION_KEYS}

@@ -71,6 +71,7 @@ from truestep.adapters import get_adapter
 from truestep.cases.case import Case
 from truestep.isolation import Outcome, run_isolated
 from truestep.progress import Progress
+from truestep.table_spec import SCALING
 
 RAIN_CASE = "particle-rain"
 """The case whose scene is scaled: independent balls over a floor."""
@@ -122,20 +123,8 @@ BYTES_PER_PARTICLE_STEP = 2 * 2 * 3 * 8
 """Bytes one particle-step moves at least: positions and velocities (3 float64 each),
 each read and written once."""
 
-COLUMNS = [
-    "engine",
-    "method",
-    "n",
-    "steps",
-    "repeats",
-    "wall_s",
-    "particle_steps_per_s",
-    "bandwidth_fraction",
-    "untimed_s",
-    "status",
-    "note",
-]
-"""The columns of ``scaling.csv``."""
+COLUMNS = SCALING.names
+"""The columns of ``scaling.csv`` (:data:`truestep.table_spec.SCALING`)."""
 
 
 def copy_bandwidth(nbytes: int = 2**28, repeats: int = 5) -> float:

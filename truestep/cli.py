@@ -34,6 +34,7 @@ from truestep.cases.limits import CEILING
 from truestep.cases.limits import KEYS as LIMIT_KEYS
 from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
 from truestep.cases.plugins import PluginError
+from truestep.table_spec import compared
 from truestep.visible import visible
 
 REPORT_SPACE_MB = 64
@@ -829,8 +830,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="QUANTITY=X",
-        help="override a baseline tolerance (error, energy_drift, nfev, order, "
-        "dt_limit, e_error, wall_ratio); repeatable",
+        help=f"override a baseline tolerance ({', '.join(compared())}); repeatable",
     )
     gate.add_argument(
         "--time-against",

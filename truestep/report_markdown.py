@@ -12,6 +12,7 @@ import re
 import numpy as np
 import pandas as pd
 
+from truestep.table_spec import labels
 from truestep.visible import visible
 
 
@@ -72,24 +73,8 @@ def folded(summary: str, body: str) -> str:
 
 
 UNITS: dict[str, str] = {
-    "dt": "dt (s; tol if adaptive)",
-    "error": "error (m; ODE: state units)",
-    "energy_drift": "energy drift (relative)",
-    "energy_drift_final": "final energy drift (relative)",
-    "wall_s": "wall (s)",
-    "t_fail": "t_fail (s)",
-    "nfev": "nfev (evaluations)",
-    "dt_limit": "dt_limit (s)",
-    "dt_limit_exact": "dt_limit_exact (s)",
-    "dt_unstable": "dt_unstable (s)",
+    **labels(),
     "dt_survived": "dt_survived (s)",
-    "e_measured": "e_measured (from speeds)",
-    "e_apex": "e_apex (from apexes)",
-    "v_in": "v_in (m/s)",
-    "v_out": "v_out (m/s)",
-    "apex": "apex (m)",
-    "penetration": "penetration (m)",
-    "particle_steps_per_s": "particle-steps per s",
     "slower_by": "slower by (x)",
     "apex_height_error": "apex height error (relative)",
     "bounce_time_error": "bounce time error (s)",
@@ -106,7 +91,8 @@ UNITS: dict[str, str] = {
     "tunnelled": "tunnelled (particles)",
 }
 """Column headers with their units, for the tables the report shows (the CSV files keep
-the bare names other tools read)."""
+the bare names other tools read): the tables' columns' (:func:`truestep.table_spec.labels`),
+then those of the report's own columns and of the properties."""
 
 
 def with_units(df: pd.DataFrame) -> pd.DataFrame:

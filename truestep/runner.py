@@ -22,6 +22,7 @@ from truestep.cases.case import Case
 from truestep.isolation import Outcome, run_isolated
 from truestep.progress import Progress
 from truestep.sweep_job import SweepJob, host_name
+from truestep.table_spec import RESULTS
 from truestep.time_limit import TimeLimitExceeded, time_limit
 from truestep.trust import checked
 
@@ -29,41 +30,10 @@ if TYPE_CHECKING:
     from truestep.cluster import Cluster
     from truestep.journal import Journal
 
-RESULT_COLUMNS = [
-    "case",
-    "engine",
-    "method",
-    "dt",
-    "dt_kind",
-    "status",
-    "error",
-    "error_final",
-    "error_v",
-    "energy_drift",
-    "energy_drift_final",
-    "nfev",
-    "steps",
-    "wall_s",
-    "wall_s_spread",
-    "repeats",
-    "t_fail",
-    "missing",
-    "message",
-    "case_source",
-    "path",
-    "host",
-]
-"""The columns of ``results.csv`` (property columns follow, one per named property).
-``error`` is the case's error measure, the worst over the run unless the case says
-``[reference] error = "final"``; ``error_final`` the position error at the end;
-``error_v`` the velocity error, the worst over the run (m/s; for a second-order ODE the
-velocity half of its state);
-``case_source`` is the case's name when the case library holds it, else its file, so
-that ``truestep gate`` finds the case again; ``path`` is the engine's code path (the
-reference: ``compiled`` or ``numpy``); ``host`` the machine the row was timed on (empty
-for rows that did not run); ``wall_s_spread`` half the interquartile range of the timed
-runs (:func:`spread`)."""
-MACHINE_COLUMNS = ("wall_s", "wall_s_spread", "repeats", "host", "case_source")
+RESULT_COLUMNS = RESULTS.names
+"""The columns of ``results.csv`` (:data:`truestep.table_spec.RESULTS`); one column per named
+property follows them."""
+MACHINE_COLUMNS = RESULTS.where(machine=True)
 """The columns of ``results.csv`` that depend on the machine and its load (timings, the
 host) or on where the case file lies (``case_source`` of a file outside the library).
 Every other column is the same, bit for bit, for the same revision and package versions on any

@@ -12,37 +12,21 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from truestep.table_spec import TABLES
+
 STATUSES = frozenset({"ok", "unstable", "solver-failed", "crashed", "timeout", "unsupported", "skipped"})
 """Values of a ``status`` column."""
 
-NUMERIC = {
-    "results": (
-        "dt",
-        "error",
-        "error_final",
-        "error_v",
-        "energy_drift",
-        "energy_drift_final",
-        "nfev",
-        "steps",
-        "wall_s",
-        "wall_s_spread",
-        "repeats",
-        "t_fail",
-    ),
-    "stability": ("dt_limit", "dt_limit_exact", "dt_unstable", "runs"),
-    "restitution": ("dt", "e_set", "bounce", "e_measured", "e_apex", "v_in", "v_out", "apex", "penetration"),
-}
+READ = ("results", "stability", "restitution")
+"""The tables a run writes and ``truestep gate`` reads (:data:`truestep.table_spec.TABLES`)."""
+
+NUMERIC = {name: TABLES[name].numeric for name in READ}
 """Columns that must hold numbers (or be empty), per table."""
 
-REQUIRED = {
-    "results": frozenset({"case", "engine", "method", "dt", "dt_kind", "status", "error"}),
-    "stability": frozenset({"case", "engine", "method", "dt_limit", "dt_limit_exact", "status"}),
-    "restitution": frozenset({"engine", "method", "dt", "e_set", "bounce", "e_measured", "status"}),
-}
+REQUIRED = {name: frozenset(TABLES[name].where(required=True)) for name in READ}
 """Columns every reader of a table needs, per table."""
 
-TEXT = ("case", "engine", "method", "dt_kind", "status")
+TEXT = tuple(dict.fromkeys(c for name in READ for c in TABLES[name].where(kind="name")))
 """Columns that must hold names, not numbers, where a table has them."""
 
 
@@ -56,12 +40,8 @@ MAX_FIELD_CHARS = 20_000
 """The longest field of a table (messages are cut far shorter when a run writes them)."""
 MAX_COLUMNS = 1000
 """The most columns a table may have (a results table has about 30)."""
-KEYS = {
-    "results": ("case", "engine", "method", "dt_kind", "dt"),
-    "stability": ("case", "engine", "method"),
-    "restitution": ("case", "engine", "method", "dt", "e_set", "bounce"),
-}
-"""What identifies a row, per table (the parts a table has): no two rows may share it."""
+KEYS = {name: TABLES[name].keys for name in READ}
+"""What identifies a row, per table: no two rows may share it."""
 NA_VALUES = [
     "",
     "#N/A",
@@ -244,37 +224,27 @@ def check_rows(path: Path, kind: str, table: pd.DataFrame) -> None:
                 f"{path}: column dt: {_value(table, 'dt', bad)} (row {_row(table, bad)}): "
                 "a run's step must be positive and finite"
             )
-    _check_counts(path, table)
+    _check_counts(path, kind, table)
     if kind == "results" and "status" in table:
         _check_ok_rows(path, table)
 
 
-def _check_counts(path: Path, table: pd.DataFrame) -> None:
-    """Counts, errors and drifts are neither negative nor infinite; ``e_set`` is at most 1 and
-    ``bounce`` a whole number from 1."""
-    for col in (
-        "error",
-        "energy_drift",
-        "energy_drift_final",
-        "nfev",
-        "steps",
-        "repeats",
-        "e_set",
-        "bounce",
-        "runs",
-        "dt_limit",
-    ):
-        if col not in table:
+def _check_counts(path: Path, kind: str, table: pd.DataFrame) -> None:
+    """Values no run writes, as the table's spec bounds them (:class:`~truestep.table_spec.Column`
+    ``least``, ``most``, ``whole``): counts, errors and drifts are neither negative nor
+    infinite, ``e_set`` is at most 1, ``bounce`` a whole number from 1."""
+    for c in TABLES[kind].columns if kind in TABLES else ():
+        if c.least is None or c.name not in table:
             continue
-        values = _numbers(table, col)
-        bad = np.isinf(values) | (values < 0)
-        if col == "e_set":
-            bad |= values > 1
-        if col == "bounce":
-            bad |= np.isfinite(values) & ((values < 1) | (values != np.round(values)))
+        values = _numbers(table, c.name)
+        bad = np.isinf(values) | (values < c.least)
+        if c.most is not None:
+            bad |= values > c.most
+        if c.whole:
+            bad |= np.isfinite(values) & (values != np.round(values))
         if bad.any():
             raise TableError(
-                f"{path}: column {col}: {_value(table, col, bad)} (row "
+                f"{path}: column {c.name}: {_value(table, c.name, bad)} (row "
                 f"{_row(table, bad)}) is not a value a run writes"
             )
 
