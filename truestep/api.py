@@ -13,9 +13,9 @@ Everything here takes and returns plain values and pandas tables::
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
@@ -24,25 +24,9 @@ from truestep.adapters import adapter_class, engine_status, registered, resolve_
 from truestep.cases import Case, CaseError, load_cases
 from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
+from truestep.experiment import Tables
 from truestep.gates import GateResult, check_gates, verdict_table
-
-
-@dataclass
-class Tables:
-    """The tables of one run (as ``truestep run`` writes them) and the cases they cover.
-
-    results : one row per (case, engine, method, dt) (``results.csv``)
-    stability : largest stable steps (``stability.csv``), empty if not searched
-    restitution : bounces per engine, method, step and set restitution (``restitution.csv``)
-    scaling : particle-steps per second against n on the rain scene (``scaling.csv``),
-        empty in a ``quick`` run or without the rain case
-    """
-
-    results: pd.DataFrame
-    stability: pd.DataFrame = field(default_factory=pd.DataFrame)
-    restitution: pd.DataFrame = field(default_factory=pd.DataFrame)
-    cases: list[Case] = field(default_factory=list)
-    scaling: pd.DataFrame = field(default_factory=pd.DataFrame)
+from truestep.visible import visible
 
 
 def select_engines(
@@ -90,60 +74,67 @@ def run(
     analyses: bool = True,
     out: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
+    resume: str | Path | None = None,
+    scheduler: str | None = None,
+    budget: float | None = None,
+    lecture_figures: bool = False,
+    argv: list[str] | None = None,
 ) -> Tables:
-    """Run the matrix (and, with ``analyses``, the stability searches and the restitution
-    sweep) and return the tables; with ``out``, also write the report there as
+    """Run the matrix (and, with ``analyses``, the stability searches, the restitution
+    sweep and scaling) and return the tables; with ``out``, also write the report there, as
     ``truestep run --out`` does (a folder truestep may replace, locked for the run, else
-    :class:`~truestep.report_folder.OutRefused` or :class:`~truestep.run_lock.LockBusy`).
+    :class:`~truestep.report_folder.OutRefused` or :class:`~truestep.run_lock.LockBusy`),
+    checkpointing each finished sweep in a journal beside it until the report is in place.
+    ``truestep run`` is this function (:mod:`truestep.experiment`).
 
     ``cases``: a selection as ``--cases`` takes it (names, globs, files, directories) or
-    loaded :class:`Case` objects; ``engines``: as :func:`select_engines`.
+    loaded :class:`Case` objects; ``engines``: as :func:`select_engines`; ``progress``:
+    each result row's line and what the run says (default: a progress bar and the lines on
+    standard error); ``resume``: a folder whose journal the run continues from (``out``
+    defaults to it); ``scheduler``: a Dask scheduler or ``local:N``; ``budget``: the run's
+    time budget, s; ``lecture_figures``: also draw the lecture's figures; ``argv``: the
+    command line the report says reproduces the run.
     """
-    say = progress or (lambda msg: print(msg, file=sys.stderr))
+    from truestep.experiment import Experiment, run_experiment
+
+    say = progress or (lambda msg: print(visible(msg), file=sys.stderr))
     chosen = _cases(cases)
     names = select_engines(engines, say=say)
-    if out is None:
-        return _run(chosen, names, quick=quick, analyses=analyses, out=None, say=say)
+    if out is None and resume is not None:
+        out = resume
+    exp = Experiment(
+        chosen,
+        names,
+        quick=quick,
+        analyses=analyses,
+        out=None if out is None else Path(out),
+        resume=None if resume is None else Path(resume),
+        scheduler=scheduler,
+        budget=budget,
+        argv=argv or ["run"],
+        lecture_figures=lecture_figures,
+        rows=progress,
+        say=say,
+    )
+    if exp.out is None:
+        return run_experiment(exp)
     from truestep.report_folder import check_out
     from truestep.run_lock import RunLock
 
-    check_out(Path(out))
-    with RunLock(Path(out)):
-        return _run(chosen, names, quick=quick, analyses=analyses, out=Path(out), say=say)
-
-
-def _run(
-    chosen: list[Case],
-    names: list[str],
-    *,
-    quick: bool,
-    analyses: bool,
-    out: Path | None,
-    say: Callable[[str], None],
-) -> Tables:
-    """:func:`run` once its cases and engines are chosen (and ``out``, if any, locked)."""
-    from truestep.analyses import run_analyses
-    from truestep.runner import run_matrix
-
-    traces: dict = {}
-    results = run_matrix(chosen, names, quick=quick, progress=say, traces=traces)
-    tables = {"stability": pd.DataFrame(), "restitution": pd.DataFrame(), "scaling": pd.DataFrame()}
-    if analyses:
-        tables = run_analyses(chosen, names, results, quick=quick)
-    if out is not None:
-        from truestep.report import write_report
-
-        write_report(
-            out,
-            chosen,
-            results,
-            tables,
-            quick=quick,
-            argv=["run"],
-            traces=None if quick else traces,
-            with_lecture_figures=False,
-        )
-    return Tables(results, tables["stability"], tables["restitution"], chosen, tables["scaling"])
+    check_out(exp.out)
+    locks = [
+        RunLock(Path(p)) for p in dict.fromkeys(os.path.realpath(p) for p in (exp.out, exp.resume or exp.out))
+    ]
+    try:
+        for lock in locks:
+            lock.acquire()
+        for lock in locks:
+            if lock.took_over is not None:
+                say(f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which is gone")
+        return run_experiment(exp)
+    finally:
+        for lock in locks:
+            lock.release()
 
 
 def gate_results(

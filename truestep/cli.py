@@ -8,14 +8,12 @@ no traceback; nothing already written is touched).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import shutil
 import signal
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -126,10 +124,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from truestep.api import select_engines
-    from truestep.run_lock import LockBusy, RunLock
+    """``truestep run`` once its arguments are checked: :func:`truestep.run` (the one
+    experiment driver, :mod:`truestep.experiment`) with the report in ``--out``."""
+    from truestep.api import run, select_engines
+    from truestep.cluster import ClusterError
+    from truestep.journal import JournalError
+    from truestep.report_folder import OutRefused
+    from truestep.run_lock import LockBusy
 
-    resuming = args.resume is not None
     args.out = args.out or args.resume or "reports"
     if not 0 < args.budget < float("inf"):
         raise UsageError(f"--budget: must be a positive number of seconds, got {args.budget:g}")
@@ -141,119 +143,29 @@ def _run(args: argparse.Namespace) -> int:
         cases = [c for c in cases if c.in_quick] or cases
     out = Path(args.out)
     _check_out(out)
-    folders = dict.fromkeys(os.path.realpath(p) for p in (out, args.resume or out))
-    locks = [RunLock(Path(p)) for p in folders]
     try:
-        for lock in locks:
-            lock.acquire()
-        stale = [
-            f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which is gone"
-            for lock in locks
-            if lock.took_over is not None
-        ]
-        return _run_locked(args, cases, engines, out, resuming, said=stale)
-    except LockBusy as err:
-        raise UsageError(str(err)) from None
-    finally:
-        for lock in locks:
-            lock.release()
-
-
-def _run_locked(
-    args: argparse.Namespace,
-    cases: list[Case],
-    engines: list[str],
-    out: Path,
-    resuming: bool,
-    *,
-    said: list[str],
-) -> int:
-    """The run itself, once it holds the lock of ``out`` (:mod:`truestep.run_lock`);
-    ``said``: lines to print once the run is sure to go ahead."""
-    from truestep import faults, publish
-    from truestep.analyses import run_analyses
-    from truestep.isolation import set_run_budget
-    from truestep.journal import Journal, JournalError, fingerprint
-    from truestep.report import write_report
-    from truestep.runner import run_matrix
-
-    for line in publish.recover(out):
-        _say(f"{out}: {line} (left by a killed run)")
-    journal = Journal(Path(args.resume) if args.resume else out)
-    fp = fingerprint(cases, engines, args.quick)
-    if resuming:
-        try:
-            kept = journal.resume(fp)
-        except JournalError as err:
-            raise UsageError(f"--resume: {err}") from None
-        _say(f"resuming: {kept} finished sweeps in {journal.dir}")
-        if journal.ignored_line():
-            _say(journal.ignored_line())
-    else:
-        journal.start(fp)
-    for line in said:
-        _say(line)
-    set_run_budget(args.budget)
-    clock = [time.perf_counter()]
-
-    def lap() -> float:
-        clock.append(time.perf_counter())
-        return clock[-1] - clock[-2]
-
-    traces: dict = {}
-    with _cluster(args.scheduler, journal) as cluster:
-        results = run_matrix(
-            cases, engines, quick=args.quick, traces=traces, journal=journal, cluster=cluster
+        tables = run(
+            cases,
+            engines,
+            quick=args.quick,
+            out=out,
+            progress=None,
+            resume=None if args.resume is None else (args.resume or args.out),
+            scheduler=args.scheduler,
+            budget=args.budget,
+            lecture_figures=not args.quick,
+            argv=_reproduce(args),
         )
-        t_sweep = lap()
-        tables = journal.analyses() if resuming else None
-        if tables is None:
-            with faults.phase("analyses"):
-                tables = run_analyses(cases, engines, results, quick=args.quick)
-            journal.put_analyses(tables)
-        t_analyses = lap()
-    write_report(
-        out,
-        cases,
-        results,
-        tables,
-        quick=args.quick,
-        argv=_reproduce(args),
-        traces=None if args.quick else traces,
-        with_lecture_figures=not args.quick,
-    )
-    journal.remove()
-    t_report = lap()
+    except JournalError as err:
+        raise UsageError(f"--resume: {err}") from None
+    except (LockBusy, OutRefused, ClusterError) as err:
+        raise UsageError(str(err)) from None
+    laps = tables.seconds
     print(
-        f"wrote {visible(out)}/ ({len(results)} result rows) in {clock[-1] - clock[0]:.1f} s: "
-        f"sweep {t_sweep:.1f} s, analyses {t_analyses:.1f} s, report {t_report:.1f} s"
+        f"wrote {visible(out)}/ ({len(tables.results)} result rows) in {sum(laps.values()):.1f} s: "
+        f"sweep {laps['sweep']:.1f} s, analyses {laps['analyses']:.1f} s, report {laps['report']:.1f} s"
     )
     return 0
-
-
-@contextlib.contextmanager
-def _cluster(address: str | None, journal) -> Iterator[object]:
-    """The Dask cluster of ``--scheduler`` for the sweep and the untimed analyses (``None``
-    without one); a cluster that cannot be reached, or goes away, is one line (exit 2)
-    saying that the finished sweeps are kept for ``--resume``."""
-    if address is None:
-        yield None
-        return
-    from truestep.cluster import Cluster, ClusterError
-    from truestep.isolation import set_untimed_runner
-
-    try:
-        with Cluster(address) as cluster:
-            set_untimed_runner(cluster)
-            try:
-                yield cluster
-            finally:
-                set_untimed_runner(None)
-    except ClusterError as err:
-        raise UsageError(
-            f"{err}; {journal.finished()} finished sweeps are kept in {journal.dir} "
-            "(the same command with --resume continues from them)"
-        ) from None
 
 
 def _check_out(out: Path) -> None:

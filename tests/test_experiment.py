@@ -1,0 +1,53 @@
+"""One experiment driver: ``truestep run`` is :func:`truestep.run`, and both go through
+:func:`truestep.experiment.run_experiment` (journal, budget, cluster, report)."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+import truestep
+from truestep import api, experiment
+from truestep.cli import main
+
+ARGS = ["--quick", "--engines", "reference", "--cases", "free-fall"]
+
+
+def test_the_cli_run_is_the_public_run(tmp_path, monkeypatch, capsys):
+    calls = []
+    real = api.run
+
+    def recorded(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(api, "run", recorded)
+    out = tmp_path / "rep"
+    assert main(["run", *ARGS, "--out", str(out)]) == 0
+    (kw,) = calls
+    assert kw["out"] == out and kw["quick"] and not kw["lecture_figures"]
+    assert kw["argv"][:2] == ["run", "--quick"]
+    said = capsys.readouterr().out
+    assert f"wrote {out}/ (" in said and "sweep" in said and "report" in said
+    written = pd.read_csv(out / "results.csv")
+    assert set(written["case"]) == {"free-fall"} and (written["engine"] == "reference").all()
+
+
+def test_the_public_run_writes_the_same_tables_and_leaves_no_journal(tmp_path):
+    """With ``out``, :func:`truestep.run` checkpoints in a journal beside it (gone once the
+    report is in place) and returns the tables it wrote, with each phase's time."""
+    out = tmp_path / "rep"
+    seen = []
+    tables = truestep.run("free-fall", ["reference"], quick=True, out=out, progress=seen.append)
+    assert set(tables.seconds) == {"sweep", "analyses", "report"}
+    assert all(s >= 0 for s in tables.seconds.values())
+    assert not (tmp_path / ".rep.partial").exists()
+    written = pd.read_csv(out / "results.csv")
+    assert len(written) == len(tables.results) and seen  # each row's line went to progress
+    assert written["error"].equals(tables.results["error"].astype(float))
+
+
+def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    tables = truestep.run("free-fall", ["reference"], quick=True, analyses=False, progress=lambda _: None)
+    assert set(tables.seconds) == {"sweep", "analyses"} and list(tmp_path.iterdir()) == []
+    assert isinstance(tables, experiment.Tables) and tables.stability.empty
