@@ -3,6 +3,8 @@ cost grows with the number of particles."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import sys
 import time
 
@@ -13,8 +15,8 @@ from truestep.adapters import get_adapter
 from truestep.adapters.base import facts_of
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
+from truestep.cases.loader import CASE_DIR, load_case
 from truestep.isolation import run_untimed, untimed_workers
-from truestep.reference_impl.model import ParticleModel, Plane
 from truestep.restitution import bounces, heights
 from truestep.runner import duplicate_of, preload
 from truestep.stability import SearchTimeout, search_case
@@ -33,9 +35,6 @@ REFERENCE_BOUNCE_METHODS = ("lecture", "symplectic-euler", "rk4")
 """Reference methods in the bounce test: the collision pass is the same for all, so a
 first-order, a symplectic and a fourth-order integrator show whether the integrator
 matters at all."""
-BALL_RADIUS = 0.05
-DROP_HEIGHT = 1.0
-GRAVITY = 9.81
 BOUNCES = 3
 SCALING_BUDGET_S = 12.0
 """Seconds of timed runs for the scaling table of a full run (``truestep bench`` takes
@@ -139,35 +138,42 @@ def _search_cost(engine: str, case: Case, method: str) -> float:
     return steps * (case.model.n if case.model is not None else 1) * per_step
 
 
+DROP_CASE = CASE_DIR / "analyses" / "restitution-drop.toml"
+"""The restitution sweep's scene: a ball of radius 0.05 m dropped from 1 m onto y = 0."""
+
+
+@functools.cache
+def _drop() -> Case:
+    return load_case(DROP_CASE)
+
+
+def drop_geometry() -> tuple[float, float, float]:
+    """The drop's ball radius (m), the height of its lowest point above the plane (m) and
+    gravity along the plane's normal (m/s^2), as :data:`DROP_CASE` sets them."""
+    model = _drop().particles
+    plane = model.planes[0]
+    radius = float(model.radius[0])
+    height = float((model.x0[0] - plane.point) @ plane.normal) - radius
+    return radius, height, float(-model.gravity @ plane.normal)
+
+
 def bounce_case(e: float, dt: float) -> Case:
-    """A ball of radius 0.05 m dropped from 1 m (surface above the floor) onto y = 0."""
-    model = ParticleModel(
-        mass=np.array([1.0]),
-        x0=np.array([[0.0, DROP_HEIGHT + BALL_RADIUS, 0.0]]),
-        v0=np.zeros((1, 3)),
-        radius=np.array([BALL_RADIUS]),
-        fixed=np.zeros(1, bool),
-        gravity=np.array([0.0, -GRAVITY, 0.0]),
-        planes=[Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), restitution=e)],
-        dimension=2,
-    )
-    t_first = np.sqrt(2 * DROP_HEIGHT / GRAVITY)
+    """The drop of :data:`DROP_CASE` with restitution ``e`` at step ``dt`` (s), run in whole
+    steps past the third bounce."""
+    drop = _drop()
+    model = drop.particles
+    _, height, g = drop_geometry()
+    t_first = np.sqrt(2 * height / g)
     steps = int(np.ceil((t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25) / dt))
     duration = steps * dt  # whole steps: the run steps exactly the dt its rows are labelled with
-    return Case(
+    return dataclasses.replace(
+        drop,
         name=f"bounce-e{e:g}",
-        file="<restitution sweep>",
-        title="restitution sweep",
-        description="",
-        kind="particles",
+        model=dataclasses.replace(model, planes=[dataclasses.replace(model.planes[0], restitution=e)]),
         duration=duration,
         dts=[dt],
         quick_dts=[dt],
-        tolerances=[],
-        quick_tolerances=[],
-        model=model,
         max_records=int(np.ceil(duration / dt)) + 1,
-        timeout_s=60.0,
     )
 
 
@@ -178,8 +184,9 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
     if traj.status != "ok":
         return [{**base, "bounce": 1, "status": traj.status, "note": traj.message}]
     plane = case.particles.planes[0]
-    h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, BALL_RADIUS)
-    found = bounces(traj.t, h, vn, GRAVITY)
+    radius, _, g = drop_geometry()
+    h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, radius)
+    found = bounces(traj.t, h, vn, g)
     rows = []
     for k in range(1, BOUNCES + 1):
         if k <= len(found):

@@ -356,10 +356,12 @@ def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict, fi
 
 def methods_section(cases: list[Case]) -> list[str]:
     """How the numbers are made, with every number read from the constant that sets it."""
-    from truestep.analyses import BALL_RADIUS, DROP_HEIGHT, RESTITUTION_DTS, RESTITUTION_SET
+    from truestep.analyses import RESTITUTION_DTS, RESTITUTION_SET, drop_geometry
     from truestep.picks import TIE_NOISE
     from truestep.runner import Timing
     from truestep.stability import GROWTH_TOL, LEAVE_TOL, RISE_TOL
+
+    radius, height, _ = drop_geometry()
 
     timing = Timing()
     steps = sorted({c.stability.min_steps for c in cases if c.stability})
@@ -407,8 +409,8 @@ def methods_section(cases: list[Case]) -> list[str]:
         f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
         f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
         f"{SURVIVAL_ENERGY:g} of the energy.",
-        f"- **Restitution**: a ball of radius {BALL_RADIUS:g} m dropped from "
-        f"{DROP_HEIGHT:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
+        f"- **Restitution**: a ball of radius {radius:g} m dropped from "
+        f"{height:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
         f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s, every step "
         f"recorded; per bounce from the rebound and impact speeds (the samples either "
         f"side of the contact) and from apex heights (the highest height each flight "
