@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pandas as pd
 
 import truestep
@@ -51,3 +53,34 @@ def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypat
     tables = truestep.run("free-fall", ["reference"], quick=True, analyses=False, progress=lambda _: None)
     assert set(tables.seconds) == {"sweep", "analyses"} and list(tmp_path.iterdir()) == []
     assert isinstance(tables, experiment.Tables) and tables.stability.empty
+
+
+def test_the_report_renders_the_findings_and_computes_none(tmp_path, monkeypatch):
+    """Given a run's findings, rendering the report fits no order and picks nothing again."""
+    from truestep import findings, picks, report_sections
+    from truestep.report import render_markdown
+
+    cases = truestep.load_cases("free-fall,bouncing-ball")
+    reports = Path(__file__).resolve().parents[1] / "reports"
+    results = pd.read_csv(reports / "results.csv")
+    results = results[results["case"].isin([c.name for c in cases])]
+    tables = {n: pd.read_csv(reports / f"{n}.csv") for n in ("stability", "restitution")}
+    found = findings.find(cases, results, tables)
+    assert len(found.orders) and len(found.cheapest) and set(found.survival) <= {"bouncing-ball"}
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("recomputed while rendering")
+
+    for module, name in [
+        (findings, "orders_table"),
+        (findings, "find"),
+        (findings, "speed_table"),
+        (picks, "cheapest"),
+        (picks, "scorecard"),
+        (picks, "survival"),
+        (picks, "restitution_fidelity"),
+        (report_sections, "fit_order"),
+    ]:
+        monkeypatch.setattr(module, name, refuse, raising=False)
+    md = render_markdown(tmp_path, cases, results, tables, quick=True, argv=["run"], findings=found)
+    assert "## Which engine, which method" in md and "## Measured orders of convergence" in md

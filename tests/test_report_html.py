@@ -222,13 +222,13 @@ def test_hard_case_summary_counts_tunnelling_as_failure():
     assert s.loc["reference", "dt_survived"] == 5e-5 and s.loc["reference", "failure"] == "tunnelled"
     assert np.isnan(s.loc["mujoco", "dt_survived"]) and s.loc["mujoco", "failure"] == "unstable"
     assert s.loc["pymunk", "dt_survived"] == 1e-3 and s.loc["pymunk", "failure"] == ""
-    line = hard_case_line(case, results)
+    line = hard_case_line(case, survival(case, results))
     assert line.index("pymunk/default") < line.index("reference/lecture")
     assert "at no step of the sweep: mujoco/Euler (unstable)" in line
 
 
 def test_speed_table_gives_particle_steps_per_second_and_ratios():
-    from truestep.report import speed_section, speed_table
+    from truestep.report import speed_section, speed_table, speed_tables
 
     case = load_cases("particle-rain")[0]
     n = case.model.n
@@ -244,12 +244,12 @@ def test_speed_table_gives_particle_steps_per_second_and_ratios():
     assert t.loc["reference", "particle_steps_per_s"] == pytest.approx(n * 1500 / 0.004)
     assert t.loc["pymunk", "slower_by"] == pytest.approx(100.0)
     assert t.loc["mujoco", "slower_by"] == pytest.approx(150.0)
-    text = "\n".join(speed_section([case], results))
+    text = "\n".join(speed_section([case], speed_tables([case], results)))
     # 0.4 s and 0.004 s, each known to 15% (TIE_NOISE): 0.34 / 0.0046 to 0.46 / 0.0034
     assert "the fastest engine, pymunk / default, takes 74 to 135 times as long" in text
     assert "(100 times by the median wall times" in text
     tied = results.assign(wall_s=results["wall_s"].where(results["engine"] != "mujoco", 0.45))
-    text = "\n".join(speed_section([case], tied))
+    text = "\n".join(speed_section([case], speed_tables([case], tied)))
     assert "the fastest engines, mujoco / Euler and pymunk / default (tied within timing noise)" in text
 
 

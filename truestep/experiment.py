@@ -24,6 +24,7 @@ from truestep.cases.case import Case
 
 if TYPE_CHECKING:
     from truestep.cluster import Cluster
+    from truestep.findings import Findings
 
 
 @dataclass
@@ -37,6 +38,8 @@ class Tables:
         empty in a ``quick`` run or without the rain case
     seconds : wall time of each phase of the run that made them (``sweep``, ``analyses``,
         ``report``), s
+    findings : what the run found (:class:`truestep.findings.Findings`: picks, orders,
+        scorecard), computed once beside the analyses; ``None`` without them
     """
 
     results: pd.DataFrame
@@ -45,6 +48,7 @@ class Tables:
     cases: list[Case] = field(default_factory=list)
     scaling: pd.DataFrame = field(default_factory=pd.DataFrame)
     seconds: dict[str, float] = field(default_factory=dict)
+    findings: Findings | None = None
 
 
 @dataclass
@@ -84,6 +88,7 @@ def run_experiment(exp: Experiment) -> Tables:
     holds no run of these cases and engines, and :class:`~truestep.cluster.ClusterError`
     (saying what the journal keeps) when the cluster cannot be reached or goes away."""
     from truestep import publish
+    from truestep.findings import find
     from truestep.isolation import set_run_budget
     from truestep.runner import run_matrix
 
@@ -108,6 +113,7 @@ def run_experiment(exp: Experiment) -> Tables:
             )
             laps.lap("sweep")
             tables = _analyses(exp, results, journal)
+            found = find(exp.cases, results, tables) if exp.analyses else None
             laps.lap("analyses")
         if exp.out is not None:
             from truestep.report import write_report
@@ -121,6 +127,7 @@ def run_experiment(exp: Experiment) -> Tables:
                 argv=exp.argv,
                 traces=None if exp.quick else traces,
                 with_lecture_figures=exp.lecture_figures,
+                findings=found,
             )
             laps.lap("report")
     finally:
@@ -134,6 +141,7 @@ def run_experiment(exp: Experiment) -> Tables:
         exp.cases,
         tables["scaling"],
         seconds=laps.seconds,
+        findings=found,
     )
 
 

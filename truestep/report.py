@@ -19,6 +19,7 @@ import pandas as pd
 
 from truestep import plots
 from truestep.cases.case import Case
+from truestep.findings import Findings, find, speed_table, speed_tables
 from truestep.isolation import (
     finish_isolated,
     run_isolated_all,
@@ -32,16 +33,22 @@ from truestep.report_scaling import scaling_section
 from truestep.report_sections import (
     hard_case_line,
     methods_section,
-    orders_table,
     scorecard_section,
     speed_section,
-    speed_table,
     summary,
 )
 from truestep.visible import visible
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet", "mujoco")
-__all__ = ["hard_case_line", "render_markdown", "speed_section", "speed_table", "survival", "write_report"]
+__all__ = [
+    "hard_case_line",
+    "render_markdown",
+    "speed_section",
+    "speed_table",
+    "speed_tables",
+    "survival",
+    "write_report",
+]
 
 
 def footer(argv: list[str]) -> str:
@@ -153,8 +160,11 @@ def render_markdown(
     argv: list[str],
     traces: dict | None = None,
     lecture_figures: LectureFigures = None,
+    findings: Findings | None = None,
 ) -> str:
-    """The report as Markdown; figures are written under ``out/figures``.
+    """The report as Markdown; figures are written under ``out/figures``. It renders
+    ``findings`` (default: :func:`truestep.findings.find` of these tables) and computes
+    nothing else.
 
     The question, a table of contents, the scorecard and its picks first; then the
     summary, and the detail behind it with every long table folded away.
@@ -163,6 +173,7 @@ def render_markdown(
     (a ``--quick`` run: not drawn).
     """
     fig_dir = out / "figures"
+    found = findings if findings is not None else find(cases, results, tables)
     parts = ["# truestep report\n"]
     counts = results["status"].value_counts().to_dict()
     parts.append(
@@ -175,17 +186,17 @@ def render_markdown(
         + (". This is a `--quick` run: short sweeps." if quick else ".")
         + "\n"
     )
-    speed = speed_section(cases, results)
+    speed = speed_section(cases, found.speed)
     titles = (
         list(SECTIONS[:2])
         + [line[3:].strip() for line in speed if line.startswith("## ")]
         + list(SECTIONS[2:])
     )
     parts.append("Contents: " + " · ".join(link(t) for t in titles) + "\n")
-    parts += scorecard_section(cases, results, tables, fig_dir)
-    parts += summary(cases, results, tables)
+    parts += scorecard_section(cases, found, fig_dir)
+    parts += summary(cases, found, tables)
     parts += speed
-    orders = orders_table(results, cases)
+    orders = found.orders
     parts.append("## Measured orders of convergence\n")
     parts.append(
         "Least-squares slope of log(error) against log(dt) over the sweep, leaving "
@@ -381,6 +392,7 @@ def write_report(
     argv: list[str],
     traces: dict | None = None,
     with_lecture_figures: bool = True,
+    findings: Findings | None = None,
 ) -> None:
     """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
     the table), index.md, index.html, figures/.
@@ -420,7 +432,15 @@ def write_report(
         faults.point("report-csv")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(
-            stage, cases, results, tables, quick=quick, argv=argv, traces=traces, lecture_figures=lecture
+            stage,
+            cases,
+            results,
+            tables,
+            quick=quick,
+            argv=argv,
+            traces=traces,
+            lecture_figures=lecture,
+            findings=findings,
         )
         faults.point("report-figures")
         (stage / "index.md").write_text(md)

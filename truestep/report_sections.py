@@ -10,58 +10,15 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case
-from truestep.metrics import fit_order
+from truestep.findings import Findings
 from truestep.picks import (
     ACCURACY_TARGETS,
     SURVIVAL_ENERGY,
     SURVIVAL_ERROR,
-    cheapest,
-    survival,
 )
 from truestep.report_markdown import fmt, md_table, text, with_units
 
 _fmt = fmt
-
-
-def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
-    """Fitted order of convergence per case, engine and fixed-step method, beside the
-    order its engine declares there (:mod:`truestep.declared`; empty where none is
-    declared: non-smooth scenes, no exact solution, a method exact on the case) and
-    whether the fit is within the declared-order gates' tolerance of it."""
-    from truestep.adapters import engine_status, registered
-    from truestep.declared import DECLARED_ORDER_TOL, declared_order_pairs
-
-    ran = [
-        e
-        for e in dict.fromkeys(results["engine"].astype(str))
-        if e in registered() and engine_status(e) == "installed"
-    ]
-    declared = {
-        (names[0], g.engine, g.method): g.params["expect"] for names, g in declared_order_pairs(cases, ran)
-    }
-    rows = []
-    scales = {c.name: c.error_scale for c in cases}
-    steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
-    for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
-        order = fit_order(g["dt"].astype(float), g["error"].astype(float), scale=scales.get(case, 1.0))
-        expect = declared.get((case, engine, method), np.nan)
-        agrees = (
-            ""
-            if not (np.isfinite(expect) and np.isfinite(order))
-            else ("yes" if order >= expect - DECLARED_ORDER_TOL else "no")
-        )
-        rows.append(
-            {
-                "case": case,
-                "engine": engine,
-                "method": method,
-                "order": order,
-                "declared": expect,
-                "agrees": agrees,
-                "points": int(g["error"].notna().sum()),
-            }
-        )
-    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "declared", "agrees", "points"])
 
 
 def _run_label(r: pd.Series) -> str:
@@ -70,10 +27,10 @@ def _run_label(r: pd.Series) -> str:
     return f"{r['engine']} / {r['method']} ({kind} {_fmt(float(r['dt']))})"
 
 
-def cheapest_table(cases: list[Case], results: pd.DataFrame) -> pd.DataFrame:
+def cheapest_table(cases: list[Case], picks: pd.DataFrame) -> pd.DataFrame:
     """Per case, the cheapest run by wall time that reaches each accuracy target, with
-    its time, and the cheapest by evaluations where it is another run."""
-    picks = cheapest(results, cases)
+    its time, and the cheapest by evaluations where it is another run (``picks``:
+    :attr:`Findings.cheapest <truestep.findings.Findings>`)."""
     rows = []
     for case in cases:
         mine = picks[picks["case"] == case.name]
@@ -99,10 +56,10 @@ def cheapest_table(cases: list[Case], results: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> list[str]:
-    """The summary, every sentence generated from the tables."""
+def summary(cases: list[Case], found: Findings, tables: dict[str, pd.DataFrame]) -> list[str]:
+    """The summary, every sentence generated from the findings and the tables."""
     lines = ["## Summary\n"]
-    table = cheapest_table(cases, results)
+    table = cheapest_table(cases, found.cheapest)
     if len(table):
         lines.append(
             "The cheapest run that reaches each accuracy (error at most 1e-2, 1e-4 "
@@ -132,14 +89,14 @@ def summary(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataF
             f"scale and its energy error at most {SURVIVAL_ENERGY:g} of its energy:\n"
         )
         for c in hard:
-            lines.append(hard_case_line(c, results))
+            lines.append(hard_case_line(c, found.survival[c.name]))
         lines.append("")
     return lines
 
 
-def hard_case_line(case: Case, results: pd.DataFrame) -> str:
-    """One summary bullet: engine/methods grouped by the largest step they survive."""
-    s = survival(case, results)
+def hard_case_line(case: Case, s: pd.DataFrame) -> str:
+    """One summary bullet: engine/methods grouped by the largest step they survive
+    (``s``: :func:`truestep.picks.survival` of the case)."""
     if s.empty:
         return f"- **{case.name}**: no fixed-step runs."
     groups = []
@@ -154,38 +111,6 @@ def hard_case_line(case: Case, results: pd.DataFrame) -> str:
         )
         groups.append(f"at no step of the sweep: {names}")
     return f"- **{case.name}**: " + "; ".join(groups) + "."
-
-
-def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> pd.DataFrame:
-    """Particle-steps per second of every engine/method beside ``engine/method``'s, per step.
-
-    Columns: ``dt`` (s), ``engine``, ``method``, ``wall_s`` (s), ``particle_steps_per_s``
-    (particles x steps / wall time), ``error`` and ``slower_by`` (that row's wall time over
-    ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
-    """
-    n = case.model.n if case.model is not None else 1
-    d = results[
-        (results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")
-    ].dropna(subset=["wall_s"])
-    rows = []
-    for dt, g in d.groupby(d["dt"].astype(float)):
-        base = g[(g["engine"] == engine) & (g["method"] == method)]
-        base_wall = float(base["wall_s"].iloc[0]) if len(base) else np.nan
-        for r in g.sort_values("wall_s").itertuples(index=False):
-            rows.append(
-                {
-                    "dt": dt,
-                    "engine": r.engine,
-                    "method": r.method,
-                    "wall_s": r.wall_s,
-                    "particle_steps_per_s": n * r.steps / r.wall_s,
-                    "error": r.error,
-                    "slower_by": r.wall_s / base_wall,
-                }
-            )
-    return pd.DataFrame(
-        rows, columns=["dt", "engine", "method", "wall_s", "particle_steps_per_s", "error", "slower_by"]
-    )
 
 
 def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
@@ -214,13 +139,13 @@ def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
     )
 
 
-def speed_section(cases: list[Case], results: pd.DataFrame) -> list[str]:
+def speed_section(cases: list[Case], speed: dict[tuple[str, str], pd.DataFrame]) -> list[str]:
     """For each case with a ``speedup`` gate: what modelling only what the scene needs is
     worth, the gated method against every engine at the same steps."""
     parts: list[str] = []
     for case in cases:
         for g in (g for g in case.gates if g.kind == "speedup"):
-            table = speed_table(case, results, g.engine, g.method)
+            table = speed[(case.name, g.where)]
             if table.empty:
                 continue
             at = table[np.isclose(table["dt"], g.dt)]
@@ -321,15 +246,14 @@ def family_sentence(
     return f"- **{FAMILIES.get(family, family)}** ({', '.join(names)}): " + "; ".join(parts) + "."
 
 
-def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict, fig_dir) -> list[str]:
+def scorecard_section(cases: list[Case], found: Findings, fig_dir) -> list[str]:
     """The overview at the top of the report: the scorecard figure and a sentence per
     family of scenes naming the picks."""
     from truestep import plots
     from truestep.cases.case import FAMILIES
-    from truestep.picks import SCORECARD_TARGET, restitution_fidelity, scorecard
+    from truestep.picks import SCORECARD_TARGET
 
-    card = scorecard(results, cases, tables.get("stability"))
-    fidelity = restitution_fidelity(tables.get("restitution"))
+    card, fidelity = found.scorecard, found.fidelity
     families = [f for f in FAMILIES if any(c.family == f for c in cases)]
     lines = [
         "## Which engine, which method\n",
@@ -346,7 +270,7 @@ def scorecard_section(cases: list[Case], results: pd.DataFrame, tables: dict, fi
         lines.append(
             f"![scorecard: cost to reach the accuracy, stability, restitution](figures/{fig.name})\n"
         )
-    loose = cheapest(results, cases, targets=(ACCURACY_TARGETS[0],))
+    loose = found.cheapest[found.cheapest["target"] == ACCURACY_TARGETS[0]]
     for family in families:
         names = [c.name for c in cases if c.family == family]
         lines.append(family_sentence(family, names, card, fidelity, loose))
