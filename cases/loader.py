@@ -277,7 +277,7 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
         max_records=max_records,
         gates=_read_gates(f),
         stability=stability,
-        properties=f.strings("properties", [], choices=_property_names()),
+        properties=_read_properties(f, kind),
         skip=skip,
         hard=f.text("hard", None, max_length=2000),
         tags=f.strings("tags", []),
@@ -313,10 +313,18 @@ def check_case_gates(case: Case, engines: set[str]) -> None:
             raise CaseError(case.file, f"{g.where}.engine", f"unknown engine {short(g.engine)}")
 
 
-def _property_names() -> set[str]:
-    from truestep.properties import PROPERTIES
+def _read_properties(f: Fields, kind: str) -> list[str]:
+    """``properties``: names of registered properties that read this kind of case."""
+    from truestep.properties import PROPERTIES, SCENE_KINDS
 
-    return set(PROPERTIES)
+    names = f.strings("properties", [], choices=set(PROPERTIES))
+    for name in names:
+        if SCENE_KINDS.get(name, kind) != kind:
+            raise f.error(
+                "properties",
+                f"{short(name)} is a property of {SCENE_KINDS[name]} cases; this case is kind = {kind!r}",
+            )
+    return names
 
 
 def _check_emitters(f: Fields, limits: Limits, duration: float, model) -> None:

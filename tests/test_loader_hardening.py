@@ -307,3 +307,13 @@ def test_measuring_that_hangs_is_that_case_s_timeout_rows(monkeypatch) -> None:
     assert first["status"] == second["status"] == "timeout"
     assert "longer than 0.5 s" in first["message"]
     assert time.perf_counter() - started < 3.0
+
+
+def test_a_property_of_another_scene_kind_is_refused_when_the_case_loads(tmp_path: Path) -> None:
+    """Properties declare the kind of case they read (every one: particles): an ODE case
+    naming one is refused at load, naming the field, not a crashed row at run time."""
+    text = (CASE_DIR / "circle-field.toml").read_text()
+    path = tmp_path / "circle-with-strain.toml"
+    path.write_text(text.replace('kind = "ode"', 'kind = "ode"\nproperties = ["max_strain"]', 1))
+    with pytest.raises(CaseError, match=r"properties: 'max_strain' is a property of particles cases"):
+        load_case(path)

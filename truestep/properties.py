@@ -30,9 +30,16 @@ FAILURES = {"tunnelled": "tunnelled"}
 though it finished: property name -> the word a report uses for that failure."""
 
 
+SCENE_KINDS: dict[str, str] = {}
+"""The kind of case (``particles`` or ``ode``) each property reads: a case of another kind
+that names it is refused when it loads."""
+
+
 def register(fn: Property) -> Property:
-    """Add ``fn`` to :data:`PROPERTIES` under its own name."""
+    """Add ``fn`` to :data:`PROPERTIES` under its own name, as a property of particle scenes
+    (every property of truestep reads particles)."""
     PROPERTIES[fn.__name__] = fn
+    SCENE_KINDS[fn.__name__] = "particles"
     return fn
 
 
