@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 from truestep.cases.fields import Fields
 
@@ -72,7 +73,7 @@ def read_limits(f: Fields, base: Limits) -> Limits:
     if not f.has("limits"):
         return base
     t = f.sub("limits")
-    values = {}
+    values: dict[str, Any] = {}
     for key in KEYS:
         if t.has(key):
             ceiling = getattr(CEILING, key)
@@ -124,9 +125,8 @@ def parse_override(items: list[str], *, trusted: bool = False) -> dict[str, floa
 
 def override(limits: Limits, values: dict[str, float]) -> Limits:
     """``limits`` with ``values`` (from :func:`parse_override`) put over it."""
-    return dataclasses.replace(
-        limits, **{k: (float(v) if k in _FLOATS else int(v)) for k, v in values.items()}
-    )
+    typed: dict[str, Any] = {k: (float(v) if k in _FLOATS else int(v)) for k, v in values.items()}
+    return dataclasses.replace(limits, **typed)
 
 
 class Budget:

@@ -553,8 +553,10 @@ def _read_ode(o: Fields, limits: Limits) -> OdeSpec:
 def _check_exact(case: Case) -> None:
     """The named exact solution must fit the scene: its own check if it has one, else it
     is evaluated at ``t = 0`` and must return the scene's start in the trajectory layout."""
-    fn = exact_named(case.exact)
     where = "reference.exact"
+    fn = exact_named(case.exact) if case.exact is not None else None
+    if fn is None:
+        raise CaseError(case.file, where, f"no exact solution named {case.exact!r}")
     kind = getattr(fn, "kind", None)
     if kind is not None and kind != case.kind:
         raise CaseError(

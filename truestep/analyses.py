@@ -74,7 +74,7 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool, worke
         for engine in engines:
             adapter = get_adapter(engine)
             for method in adapter.methods:
-                row = {"case": case.name, "engine": engine, "method": method}
+                row: dict[str, object] = {"case": case.name, "engine": engine, "method": method}
                 missing = adapter.missing(case, method)
                 adaptive = method in adapter.adaptive_methods
                 exact = None if adaptive else stability_limit(case, facts_of(adapter, method))

@@ -61,8 +61,9 @@ def select_engines(
 
 def _cases(cases: str | Iterable[str] | Iterable[Case]) -> list[Case]:
     items = [cases] if isinstance(cases, str) else list(cases)
-    if items and all(isinstance(c, Case) for c in items):
-        return items
+    loaded = [c for c in items if isinstance(c, Case)]
+    if items and len(loaded) == len(items):
+        return loaded
     return load_cases([str(c) for c in items])
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -121,7 +122,7 @@ def _index(df: pd.DataFrame, keys: list[str]) -> dict[tuple, dict]:
     return {tuple(_key_value(c, row[c]) for c in keys): row for row in df.to_dict("records")}
 
 
-def _as_float(x: object) -> float:
+def _as_float(x: Any) -> float:
     try:
         return float(x)
     except (TypeError, ValueError):

@@ -67,7 +67,8 @@ def _allow_children() -> None:
     """
     process = mp.current_process()
     if process.daemon:
-        process._config["daemon"] = False  # the refusal, lifted (see above)
+        # the refusal, lifted (see above); _config is multiprocessing's own, untyped
+        process._config["daemon"] = False  # type: ignore[attr-defined]
 
 
 def sweep_task(job: SweepJob) -> tuple[int, list[dict], dict, str]:
@@ -290,13 +291,14 @@ class Cluster:
             for future in as_completed(futures):
                 k = futures[future]
                 try:
-                    outcomes[k] = future.result()
+                    outcome = future.result()
                 except Exception as err:  # the task failed, not the run
                     if _scheduler_gone(err):
                         raise
-                    outcomes[k] = Outcome("crashed", message=_killed(err))
+                    outcome = Outcome("crashed", message=_killed(err))
+                outcomes[k] = outcome
                 if done is not None:
-                    done(k, outcomes[k])
+                    done(k, outcome)
         except Exception as err:  # the scheduler went away mid-run
             raise ClusterError(
                 f"--scheduler {self.address}: lost the scheduler: {type(err).__name__}: {str(err)[:120]}"

@@ -122,7 +122,10 @@ def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | Non
     if case.exact == "reference-run":
         ex, alive = run_path(case)
     else:
-        ex = exact_named(case.exact)(case, np.linspace(0.0, case.duration, GRID))
+        solution = exact_named(case.exact) if case.exact is not None else None
+        if solution is None:
+            raise ValueError(f"{case.name}: no exact solution named {case.exact!r}")
+        ex = solution(case, np.linspace(0.0, case.duration, GRID))
         alive = None
     if case.kind == "ode":
         return ex.t, ex.x[:, 0, :], None, None

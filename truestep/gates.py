@@ -153,7 +153,7 @@ def check_gate(
         return GateResult(case.name, g, False, "no result row at this dt", "a row to read")
     row = rows.iloc[0]
     if row["status"] in BROKEN:
-        return GateResult(case.name, g, False, _broken(rows), "a measured row")
+        return GateResult(case.name, g, False, _broken(rows) or str(row["status"]), "a measured row")
     if g.kind == "status":
         return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]), str(p["expect"]))
     if row["status"] != "ok":

@@ -38,6 +38,7 @@ import os
 import platform
 import sys
 from importlib import metadata
+from typing import Any
 
 THREAD_VARIABLES = (
     "OMP_NUM_THREADS",
@@ -142,7 +143,7 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def fingerprint() -> dict[str, object]:
+def fingerprint() -> dict[str, Any]:
     """What decides the numbers besides the code: the packages' versions, the machine's
     architecture, the BLAS libraries loaded (their kernels and threads), numpy's SIMD
     dispatch. Two runs whose fingerprints are equal give the same non-timing numbers.

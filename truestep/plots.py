@@ -154,7 +154,12 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     for yi, status in zip(y, s["status"], strict=True):
         if status in SEARCH_FAILED:
             ax.text(
-                floor, yi, f" {SEARCH_FAILED[status]}: no limit", va="center", fontsize=8, color="#b2182b"
+                floor,
+                float(yi),
+                f" {SEARCH_FAILED[status]}: no limit",
+                va="center",
+                fontsize=8,
+                color="#b2182b",
             )
     ax.set_yticks(y, labels, fontsize=8)
     ax.set_xscale("log")
@@ -201,11 +206,12 @@ def energy_over_time(
     ``traces`` maps ``(case, engine, method, dt_kind, dt)`` to ``(t, energy)``.
     """
     wanted = {"step": dt_step, "tolerance": tol}
-    chosen = {
-        k: v
-        for k, v in traces.items()
-        if k[0] == case and wanted[k[3]] is not None and np.isclose(k[4], wanted[k[3]], rtol=1e-9, atol=0.0)
-    }
+
+    def shown(key: tuple) -> bool:
+        at = wanted[key[3]]
+        return key[0] == case and at is not None and bool(np.isclose(key[4], at, rtol=1e-9, atol=0.0))
+
+    chosen = {k: v for k, v in traces.items() if shown(k)}
     if not chosen:
         return None
     fig, ax = plt.subplots(figsize=(9.5, 4.4))

@@ -146,7 +146,7 @@ def speed_section(cases: list[Case], speed: dict[tuple[str, str], pd.DataFrame])
     for case in cases:
         for g in (g for g in case.gates if g.kind == "speedup"):
             table = speed[(case.name, g.where)]
-            if table.empty:
+            if table.empty or g.dt is None:
                 continue
             at = table[np.isclose(table["dt"], g.dt)]
             others = at[at["engine"] != g.engine]
