@@ -22,7 +22,7 @@ import time
 def measure(workers: int) -> None:
     began = time.perf_counter()
     from truestep.cases import load_case, load_cases
-    from truestep.figure_scenes import FIGURE_CASE_DIR
+    from truestep.figures.scenes import FIGURE_CASE_DIR
     from truestep.reference_impl.precompile import compile_all, loops_needed
     from truestep.reference_impl.solvers import METHODS
 

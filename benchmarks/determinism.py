@@ -31,7 +31,7 @@ from pathlib import Path
 import pandas as pd
 
 MACHINE = {"wall_s", "wall_s_spread", "repeats", "host", "case_source"}
-"""Columns that depend on the machine (truestep.runner.MACHINE_COLUMNS, restated so that
+"""Columns that depend on the machine (truestep.execution.runner.MACHINE_COLUMNS, restated so that
 this script reads the tables of any version)."""
 KEYS = {
     "results": ["case", "engine", "method", "dt_kind", "dt"],

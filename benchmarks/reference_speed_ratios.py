@@ -21,7 +21,7 @@ import test_reference_speed as speed
 
 from truestep.adapters import get_adapter
 from truestep.cases.loader import CASE_DIR, load_case
-from truestep.runner import measure
+from truestep.execution.runner import measure
 
 
 def per_step() -> None:

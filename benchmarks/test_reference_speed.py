@@ -35,8 +35,8 @@ from truestep.adapters import get_adapter
 from truestep.cases import load_cases
 from truestep.cases.case import Case
 from truestep.cases.loader import CASE_DIR, load_case
+from truestep.execution.runner import measure, plan
 from truestep.reference_impl.compiled import compiled_reason
-from truestep.runner import measure, plan
 
 FIXED = ["euler", "midpoint", "heun", "rk4", "symplectic-euler", "verlet", "lecture"]
 ENGINES = ["pymunk", "pybullet", "mujoco"]

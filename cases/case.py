@@ -79,7 +79,7 @@ class StabilitySpec:
 
     horizon : s;  dt_lo, dt_hi : bracket, s;  max_runs : simulations per search;
     rel_tol : relative width at which bisection stops;
-    quick : whether ``--quick`` runs search this case too (coarser, see truestep.analyses);
+    quick : whether ``--quick`` runs search this case too (coarser, see truestep.execution.analyses);
     min_steps : every run of the search takes at least this many steps;
     budget_s : a safety valve, s: a search still running after this long is a ``timeout``
     row with no limit (searches are bounded by ``max_runs`` and ``rel_tol``, never by time,
@@ -92,7 +92,7 @@ class StabilitySpec:
     max_runs: int = 30
     rel_tol: float = 1e-3
     quick: bool = False
-    min_steps: int = 5000  # truestep.stability.MIN_STEPS
+    min_steps: int = 5000  # truestep.measures.stability.MIN_STEPS
     budget_s: float = 300.0
 
 
@@ -106,7 +106,7 @@ class Case:
     tolerances, quick_tolerances : rtol = atol sweep for adaptive methods
     exact : name of the exact solution in :mod:`truestep.cases.exact` (``None``: property checks only)
     error_norm : ``final`` (positions at the end) or ``max`` (worst over the run)
-    properties : names of extra metrics (:mod:`truestep.properties`) to compute per run
+    properties : names of extra metrics (:mod:`truestep.measures.properties`) to compute per run
     skip : ``(engine, method, reason)`` pairs that are not run (rows say why)
     in_quick : whether ``--quick`` runs this case at all (long cases say no)
     escape_energy : J, an energy the motion the case describes never reaches (a bound

@@ -32,9 +32,9 @@ from truestep.cases.limits import (
     read_limits,
 )
 from truestep.cases.scene import read_scene
+from truestep.execution.time_limit import TimeLimitExceeded, time_limit
 from truestep.reference_impl.system import SecondOrderSystem
-from truestep.table_spec import RESULTS
-from truestep.time_limit import TimeLimitExceeded, time_limit
+from truestep.tables.spec import RESULTS
 
 CASE_DIR = plugins.CASE_DIR
 """truestep's own case library (this folder)."""
@@ -65,7 +65,7 @@ EXACT_CHECK_S = 30.0
 """How long checking that an exact solution fits its case may take, s."""
 REFERENCE_KEYS = {"exact", "error", "scale", "conservative", "escape_energy"}
 PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
-"""``[reference]`` parameters that properties read (:mod:`truestep.properties`)."""
+"""``[reference]`` parameters that properties read (:mod:`truestep.measures.properties`)."""
 
 
 def library() -> dict[str, Path]:
@@ -315,7 +315,7 @@ def check_case_gates(case: Case, engines: set[str]) -> None:
 
 def _read_properties(f: Fields, kind: str) -> list[str]:
     """``properties``: names of registered properties that read this kind of case."""
-    from truestep.properties import PROPERTIES, SCENE_KINDS
+    from truestep.measures.properties import PROPERTIES, SCENE_KINDS
 
     names = f.strings("properties", [], choices=set(PROPERTIES))
     for name in names:
@@ -599,7 +599,7 @@ def _read_gates(f: Fields) -> list[Gate]:
 
 STATUS_VALUES = {"ok", "unstable"}
 QUANTITIES = set(RESULTS.where(gate=True))
-"""The results columns a ``no-worse-than`` gate may compare (:mod:`truestep.table_spec`)."""
+"""The results columns a ``no-worse-than`` gate may compare (:mod:`truestep.tables.spec`)."""
 RESTITUTION_QUANTITIES = {"e_measured", "e_apex"}
 
 
@@ -701,7 +701,7 @@ def load_gates_file(path: str | Path) -> list[tuple[list[str], Gate]]:
 
 def load_baseline_tolerances(path: str | Path) -> dict[str, float]:
     """The ``[baseline]`` table of a gates file: quantity -> tolerance (see
-    :mod:`truestep.baseline`); empty when the file has none."""
+    :mod:`truestep.ci.baseline`); empty when the file has none."""
     f = _read_toml(Path(path))
     if not f.has("baseline"):
         return {}

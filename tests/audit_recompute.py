@@ -1,8 +1,8 @@
 """Independent routes to truestep's published numbers, for tests/test_property_audit.py.
 
 Everything here is written from the physics and from the documented definitions of the
-quantities, not from the code that computes them: nothing of ``truestep.metrics``,
-``truestep.properties``, ``truestep.restitution``, ``truestep.stability``,
+quantities, not from the code that computes them: nothing of ``truestep.measures.metrics``,
+``truestep.measures.properties``, ``truestep.measures.restitution``, ``truestep.measures.stability``,
 ``truestep.cases.exact*`` or ``truestep.reference_impl`` is imported. The inputs are a
 case's scene parameters (masses, springs, planes ...) and a run's raw arrays
 (``t`` (T,), ``x`` and ``v`` (T, n, 3), ``alive`` (T, n)), in SI units.

@@ -36,7 +36,7 @@ def reference_loops_compiled(tmp_path_factory):
 
     index = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])
     count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
-    from truestep.figure_scenes import FIGURE_CASE_DIR
+    from truestep.figures.scenes import FIGURE_CASE_DIR
 
     cases = [*load_cases("*"), *(load_case(path) for path in sorted(FIGURE_CASE_DIR.glob("*.toml")))]
     models = [c.model for c in cases if c.model is not None]

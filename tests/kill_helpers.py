@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from truestep.runner import MACHINE_COLUMNS as TIMING_COLUMNS
+from truestep.execution.runner import MACHINE_COLUMNS as TIMING_COLUMNS
 
 
 def snapshot(root: Path) -> dict[str, bytes]:

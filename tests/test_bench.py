@@ -12,9 +12,10 @@ import pytest
 from PIL import Image
 
 import truestep.adapters
-from truestep import bench, report_scaling
 from truestep.adapters import get_adapter, resolve_engine
 from truestep.cli import main
+from truestep.execution import bench
+from truestep.reporting import scaling as report_scaling
 
 SIZES = (10, 100)
 TARGET_S = 0.02

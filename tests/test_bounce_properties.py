@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from truestep.adapters.base import Trajectory
-from truestep.properties import PROPERTIES
-from truestep.restitution import bounces
+from truestep.measures.properties import PROPERTIES
+from truestep.measures.restitution import bounces
 
 H0, E, G, R = 1.0, 0.8, 9.81, 0.05  # the bouncing-ball case: drop height, restitution, g, radius
 

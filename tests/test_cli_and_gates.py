@@ -8,10 +8,10 @@ import pytest
 
 from truestep.cases import load_case
 from truestep.cases.loader import CASE_DIR
+from truestep.ci.gates import check_gates
 from truestep.cli import main
-from truestep.gates import check_gates
+from truestep.execution.runner import run_matrix
 from truestep.reference_impl.solvers import RK4
-from truestep.runner import run_matrix
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +104,7 @@ def test_a_finite_run_whose_energy_explodes_is_an_unstable_row():
     1e12 blow-up bound over 0.05 s but multiplies its energy by (1 + 1)^50: the row must
     say unstable, with the time. Symplectic Euler at the same step (omega dt = 1) is
     inaccurate, its energy swinging by as much as its start, but bounded: an ok row."""
-    from truestep.runner import Timing, run_one
+    from truestep.execution.runner import Timing, run_one
 
     case = load_case(CASE_DIR / "stiff-spring.toml")
     timing = Timing(long_run_s=0.0)

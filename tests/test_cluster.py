@@ -21,9 +21,9 @@ import pandas as pd
 import pytest
 
 from truestep.cli import main
-from truestep.cluster import KILL_WORKER
-from truestep.report_folder import MARKER, MARKER_TEXT
-from truestep.runner import MACHINE_COLUMNS
+from truestep.execution.cluster import KILL_WORKER
+from truestep.execution.runner import MACHINE_COLUMNS
+from truestep.reporting.folder import MARKER, MARKER_TEXT
 
 CASES = "free-fall,harmonic-oscillator"
 TIMING = set(MACHINE_COLUMNS)
@@ -121,7 +121,7 @@ def test_a_sweep_that_kills_every_worker_is_crashed_rows(tmp_path: Path, monkeyp
 
 
 def test_an_unreachable_scheduler_is_one_line(tmp_path: Path, capsys, monkeypatch) -> None:
-    from truestep import cluster
+    from truestep.execution import cluster
 
     monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 2.0)
     with socket.socket() as s:

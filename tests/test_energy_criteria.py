@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from truestep.adapters import get_adapter
-from truestep.energy_scale import energy_scale
-from truestep.metrics import energy_behaviour
-from truestep.runner import Timing, run_one
-from truestep.stability import energy_grows, energy_keeps_growing, is_stable
+from truestep.execution.runner import Timing, run_one
+from truestep.measures.energy_scale import energy_scale
+from truestep.measures.metrics import energy_behaviour
+from truestep.measures.stability import energy_grows, energy_keeps_growing, is_stable
 
 T = np.linspace(0.0, 10.0, 4001)
 

@@ -1,5 +1,5 @@
 """One experiment driver: ``truestep run`` is :func:`truestep.run`, and both go through
-:func:`truestep.experiment.run_experiment` (journal, budget, cluster, report)."""
+:func:`truestep.execution.experiment.run_experiment` (journal, budget, cluster, report)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ from pathlib import Path
 import pandas as pd
 
 import truestep
-from truestep import api, experiment
+from truestep import api
 from truestep.cli import main
+from truestep.execution import experiment
 
 ARGS = ["--quick", "--engines", "reference", "--cases", "free-fall"]
 
@@ -57,8 +58,9 @@ def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypat
 
 def test_the_report_renders_the_findings_and_computes_none(tmp_path, monkeypatch):
     """Given a run's findings, rendering the report fits no order and picks nothing again."""
-    from truestep import findings, picks, report_sections
-    from truestep.report import render_markdown
+    from truestep.measures import findings, picks
+    from truestep.reporting import sections as report_sections
+    from truestep.reporting.report import render_markdown
 
     cases = truestep.load_cases("free-fall,bouncing-ball")
     reports = Path(__file__).resolve().parents[1] / "reports"

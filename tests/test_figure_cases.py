@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from truestep.cases.loader import library
-from truestep.figure_scenes import FIGURE_CASE_DIR, figure_case, run_reference
-from truestep.figures import LinearDecay, simulate_fountain
-from truestep.figures_contact import contact_start, floor_bounces, with_restitution
+from truestep.figures.contact import contact_start, floor_bounces, with_restitution
+from truestep.figures.lecture import LinearDecay, simulate_fountain
+from truestep.figures.scenes import FIGURE_CASE_DIR, figure_case, run_reference
 from truestep.reference_impl import meshes
 from truestep.reference_impl.collisions import box_planes
 from truestep.reference_impl.emitters import Emitter
@@ -293,7 +293,7 @@ def test_a_variant_changes_only_what_it_replaces():
 def test_a_caption_states_what_its_runs_did(tmp_path, monkeypatch):
     # The instability figure's caption is read off its runs: with half the drag (k = 0.5/s)
     # every step of the sweep is stable, and the caption must say so with the new factors.
-    import truestep.figures_odes as odes
+    import truestep.figures.odes as odes
 
     case = figure_case("viscous-decay")
     weaker = replace(case, model=replace(case.model, drag=0.5))

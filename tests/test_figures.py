@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from truestep.figures import (
+from truestep.figures.lecture import (
     FIGURES,
     LinearDecay,
     simulate_cube,

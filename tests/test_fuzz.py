@@ -1,5 +1,5 @@
 """Fuzzing in the normal suite: generated case files through the loader, damaged tables
-through :func:`truestep.tables_io.read_table`.
+through :func:`truestep.tables.io.read_table`.
 
 The bounded tests run with every ``pytest`` (a few hundred examples, well under 30 s, the
 same ones every run).
@@ -33,7 +33,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from truestep.tables_io import TableError, read_table
+from truestep.tables.io import TableError, read_table
 
 ROOT = Path(__file__).resolve().parent.parent
 LOAD_TIMEOUT_S = 3.0

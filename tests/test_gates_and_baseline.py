@@ -165,10 +165,10 @@ def test_junit_markdown_and_json_outputs(run_dir, tmp_path, monkeypatch, capsys)
     root = ET.parse(junit).getroot()
     assert root.tag == "testsuites"
     suites = {s.get("name"): s for s in root.iter("testsuite")}
-    cases = suites["truestep.gates"].findall("testcase")
-    assert len(cases) == int(suites["truestep.gates"].get("tests")) == len(doc["gates"])
+    cases = suites["truestep.ci.gates"].findall("testcase")
+    assert len(cases) == int(suites["truestep.ci.gates"].get("tests")) == len(doc["gates"])
     assert {c.get("classname") for c in cases} >= {"harmonic-oscillator", "restitution-sweep"}
-    assert suites["truestep.baseline"].get("failures") == "0"
+    assert suites["truestep.ci.baseline"].get("failures") == "0"
     assert doc["passed"] is True and doc["counts"]["fail"] == 0
     assert doc["baseline"]["compared"] > 0 and doc["baseline"]["findings"] == []
     assert md.read_text().startswith("### truestep gate: passed")

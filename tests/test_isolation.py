@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import time
 
-from truestep.isolation import run_isolated, run_isolated_all
+from truestep.execution.isolation import run_isolated, run_isolated_all
 
 
 def _square(x: int) -> int:
@@ -49,8 +49,8 @@ def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
     """One step of a sweep kills its process: the sweep is run again a step per process,
     and only that step's row says crashed; a step that raises is a crashed row without
     losing the others."""
-    from truestep import runner
     from truestep.cases import load_cases
+    from truestep.execution import runner
 
     case = load_cases("harmonic-oscillator")[0]
     real = runner.simulate_timed
@@ -80,8 +80,8 @@ def test_a_sweep_that_loses_its_process_is_rerun_step_by_step(monkeypatch):
 def test_compiled_loops_loaded_before_forking_still_run_in_the_children():
     """preload() compiles the reference's stepping loop in the parent; a forked run of the
     compiled path (bouncing-ball, lecture) must then still run, not be killed."""
-    from truestep import runner
     from truestep.cases import load_cases
+    from truestep.execution import runner
 
     runner.preload()
     case = load_cases("bouncing-ball")[0]

@@ -13,10 +13,10 @@ import pandas as pd
 import pytest
 
 from truestep.cases import load_cases
-from truestep.checkpoint_data import DataError, load_json, tables_from, tables_to
 from truestep.cli import main
-from truestep.journal import Journal, JournalError, fingerprint
-from truestep.runner import MACHINE_COLUMNS, run_matrix
+from truestep.execution.checkpoint_data import DataError, load_json, tables_from, tables_to
+from truestep.execution.journal import Journal, JournalError, fingerprint
+from truestep.execution.runner import MACHINE_COLUMNS, run_matrix
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 

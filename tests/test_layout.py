@@ -23,7 +23,7 @@ LAYERS = {"harness": 0, "adapters": 1, "cases": 2, "reference_impl": 3}
 folder below it (harness -> adapters -> cases -> reference_impl)."""
 LAYER_EXCEPTIONS = {
     ("truestep.cases.loader", "truestep.adapters"),
-    ("truestep.cases.loader", "truestep.properties"),
+    ("truestep.cases.loader", "truestep.measures.properties"),
 }
 """Known arrows against the layers, each a lazy import inside a function (the loader checks
 that a gate names a registered engine and a known property)."""
@@ -139,7 +139,7 @@ def test_dependencies_point_one_way(graph):
     truestep's other folders, and no folder imports the harness (but for the known arrows,
     and leaves: modules that import nothing of truestep, such as the tables' column spec)."""
     leaves = {m for m in graph.modules if not graph.find_modules_directly_imported_by(m)}
-    assert {"truestep.numerics", "truestep.table_spec", "truestep.time_limit"} <= leaves
+    assert {"truestep.numerics", "truestep.tables.spec", "truestep.execution.time_limit"} <= leaves
     against = [
         (m, w)
         for m in sorted(graph.modules)

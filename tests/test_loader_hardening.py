@@ -289,8 +289,8 @@ def test_measuring_that_hangs_is_that_case_s_timeout_rows(monkeypatch) -> None:
     once; the run goes on."""
     import dataclasses
 
-    from truestep import runner
     from truestep.adapters import get_adapter
+    from truestep.execution import runner
 
     case = dataclasses.replace(load_case(CASE_DIR / "free-fall.toml"), timeout_s=0.5)
     traj = get_adapter("reference").simulate(case, "euler", 0.1)

@@ -19,7 +19,9 @@ from truestep.adapters.base import FixedStepAdapter, facts_of
 from truestep.cases import load_cases
 from truestep.cases.case import Case
 from truestep.cases.exact import linear_modes, stability_limit
-from truestep.declared import (
+from truestep.ci.gates import check_gates
+from truestep.execution.runner import run_matrix
+from truestep.measures.declared import (
     DECLARED_FILE,
     DECLARED_ORDER_TOL,
     constant_acceleration,
@@ -28,7 +30,6 @@ from truestep.declared import (
     smooth_with_exact,
     velocity_dependent,
 )
-from truestep.gates import check_gates
 from truestep.reference_impl.model import Anchors, ParticleModel
 from truestep.reference_impl.solvers import (
     METHODS,
@@ -40,7 +41,6 @@ from truestep.reference_impl.solvers import (
 )
 from truestep.reference_impl.solvers.facts import RADIUS_TOL, spectral_radius
 from truestep.reference_impl.system import SecondOrderSystem
-from truestep.runner import run_matrix
 
 ENGINES = available_engines()
 INF = float("inf")

@@ -7,7 +7,7 @@ import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases.exact import EXACT
-from truestep.properties import PROPERTIES
+from truestep.measures.properties import PROPERTIES
 
 PARTICLE_CASES = [
     "free-fall",

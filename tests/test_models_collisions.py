@@ -7,7 +7,7 @@ import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases.exact_particles import bounce_schedule
-from truestep.properties import PROPERTIES
+from truestep.measures.properties import PROPERTIES
 from truestep.reference_impl.collisions import box_planes
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel, Plane

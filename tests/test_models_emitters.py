@@ -9,7 +9,7 @@ import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import CaseError, load_case
-from truestep.properties import PROPERTIES
+from truestep.measures.properties import PROPERTIES
 from truestep.reference_impl.emitters import Emitter, emitter_area, spawn_count_moments
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import EmitterSpec, ParticleModel

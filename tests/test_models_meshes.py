@@ -7,7 +7,7 @@ import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import CaseError, load_case
-from truestep.properties import PROPERTIES
+from truestep.measures.properties import PROPERTIES
 from truestep.reference_impl import meshes
 
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from truestep import metrics
 from truestep.adapters.base import EnergyExtremes, Trajectory
 from truestep.cases.case import Case
 from truestep.cases.exact import Exact
+from truestep.measures import metrics
 from truestep.reference_impl.model import Anchors, ParticleModel, Plane, Springs
 
 
@@ -161,7 +161,7 @@ def test_motion_failures_read_the_energy_against_its_scale():
     """Scale 1 J. Growth through every quarter, once 1 J from the start; a dissipative
     scene above its start by more than 0.1; a conservative one that jumps by more than 0.5
     and stays; an escape energy reached; none of it for a scene with energy sources."""
-    from truestep.stability import motion_failure
+    from truestep.measures.stability import motion_failure
 
     t = np.linspace(0.0, 4.0, 81)
     x = np.zeros((81, 2, 3))

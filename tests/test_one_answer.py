@@ -17,8 +17,8 @@ import pytest
 
 from truestep import numerics
 from truestep.cli import main
-from truestep.picks import TIE_NOISE, cheapest, tied_with_fastest
-from truestep.runner import MACHINE_COLUMNS, NOT_REPEATABLE, Timing, simulate_timed, spread
+from truestep.execution.runner import MACHINE_COLUMNS, NOT_REPEATABLE, Timing, simulate_timed, spread
+from truestep.measures.picks import TIE_NOISE, cheapest, tied_with_fastest
 
 
 def _python(code: str, **env: str) -> str:
@@ -68,7 +68,7 @@ def test_threads_are_pinned_even_when_numpy_came_first():
         import numpy
         from threadpoolctl import threadpool_info
         before = max(p["num_threads"] for p in threadpool_info())
-        from truestep.runner import preload
+        from truestep.execution.runner import preload
         preload()
         print(before, max(p["num_threads"] for p in threadpool_info()))
     """,
@@ -135,7 +135,7 @@ class Jittery:
 
 
 def test_an_engine_that_is_not_repeatable_says_so(monkeypatch, case_named):
-    import truestep.runner as runner
+    import truestep.execution.runner as runner
 
     monkeypatch.setattr(runner, "get_adapter", lambda name: Jittery())
     traj = simulate_timed("jittery", case_named("free-fall"), "euler", 0.01, Timing())
@@ -239,7 +239,7 @@ def test_identical_does_not_apply_across_package_versions(tmp_path, capsys):
 
 
 def test_machine_columns_are_the_only_ones_left_out():
-    from truestep.runner import RESULT_COLUMNS
+    from truestep.execution.runner import RESULT_COLUMNS
 
     assert set(MACHINE_COLUMNS) <= set(RESULT_COLUMNS)
     assert {"error", "energy_drift", "nfev", "status", "steps", "t_fail"}.isdisjoint(MACHINE_COLUMNS)

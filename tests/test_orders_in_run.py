@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 
-from truestep.metrics import exact_for, fit_order, position_error
-from truestep.runner import run_matrix
+from truestep.execution.runner import run_matrix
+from truestep.measures.metrics import exact_for, fit_order, position_error
 
 
 def test_a_first_order_method_on_an_orbit_reads_first_order(case_named):

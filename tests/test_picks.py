@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from truestep.picks import cheapest, survival
+from truestep.measures.picks import cheapest, survival
 
 COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev", "wall_s"]
 
@@ -56,7 +56,7 @@ def test_scorecard_cost_and_stability_ratios(case_named):
     on both), B only on earth-orbit, in 3 s: A's cost ratio is 1 on 2 cases, B's 3 on 1.
     Stability: A's limit 0.19 s against an exact 0.2 s reads 0.95; C, no exact limit,
     0.1 s against the best 0.4 s reads 0.25."""
-    from truestep.picks import restitution_fidelity, scorecard
+    from truestep.measures.picks import restitution_fidelity, scorecard
 
     kepler, earth = case_named("kepler-orbit"), case_named("earth-orbit")
     rows = [

@@ -7,7 +7,7 @@ import math
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from truestep import plots
+from truestep.reporting import plots
 
 
 def _stability_rows() -> pd.DataFrame:

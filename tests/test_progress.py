@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 import re
 
-from truestep.progress import Progress
+from truestep.execution.progress import Progress
 
 
 class Terminal(io.StringIO):

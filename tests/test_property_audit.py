@@ -76,7 +76,7 @@ ROUNDOFF_REL, for numbers that are round-off themselves (the lecture's free-flig
 a conserved momentum): double precision at metre scale is 1e-16 per operation."""
 SCALE_GRID = 2001
 """The energy scale is read along the exact (or reference) motion at this many evenly
-spread times of the run (README, "Energy drift"; ``truestep/energy_scale.py``)."""
+spread times of the run (README, "Energy drift"; ``truestep/measures/energy_scale.py``)."""
 
 
 def _close(published: float, mine: float, rel: float = ROUNDOFF_REL, floor: float = ROUNDOFF_ABS) -> bool:
@@ -250,7 +250,7 @@ ONE_TIMED_RUN = None
 def run(case, engine: str, method: str, dt: float) -> Run:
     """The row a full run publishes for one step: ``simulate_timed`` (the measured run
     watched at every step, then one timed run, checked to end alike) and ``row_from``."""
-    from truestep import runner
+    from truestep.execution import runner
 
     global ONE_TIMED_RUN
     if ONE_TIMED_RUN is None:
@@ -1616,7 +1616,7 @@ def my_limit(case, engine: str, method: str) -> float | None:
 
 
 def _in_process(calls, workers, done):
-    from truestep.isolation import Outcome
+    from truestep.execution.isolation import Outcome
 
     for k, (fn, args, _timeout) in enumerate(calls):
         done(k, Outcome("ok", fn(*args)))
@@ -1626,7 +1626,7 @@ def _in_process(calls, workers, done):
 def stability_rows():
     """``analyses.stability_table`` with ``quick`` searches (a 1% bracket, 2000 steps a
     run) of the two oscillators, run in this process rather than in child processes."""
-    from truestep import analyses
+    from truestep.execution import analyses
 
     cases = []
     for name in ("harmonic-oscillator", "damped-oscillator"):
@@ -1755,7 +1755,7 @@ def test_dt_limit(stability_rows, name, engine, method):
         pytest.skip(row.note)
     assert row.status == "ok", row.note
     case = cases[name]
-    from truestep.stability import QUICK_MIN_STEPS  # the quick search's documented run length
+    from truestep.measures.stability import QUICK_MIN_STEPS  # the quick search's documented run length
 
     _check_search(
         row,
@@ -1798,8 +1798,8 @@ EXACT_LIMIT_PARAMS = [
 def exact_limit_rows():
     """``analyses.stability_table`` (full, not quick) with its searches replaced by a stub:
     only ``dt_limit_exact`` is read from it, as the table fills that column."""
-    from truestep import analyses
-    from truestep.stability import SearchResult
+    from truestep.execution import analyses
+    from truestep.measures.stability import SearchResult
 
     cases = [case_of(name) for name in EXACT_LIMIT_CASES]
     engines = [e for e in ("reference", "pymunk", "pybullet", "mujoco") if _installed(e)]
@@ -1831,7 +1831,7 @@ def kepler_implicit_search():
     """``analyses.stability_table`` (full, not quick) of kepler-orbit for the reference's
     implicit Euler alone (the adapter's other methods hidden), in this process, every
     simulation of the search counted and kept."""
-    from truestep import analyses
+    from truestep.execution import analyses
 
     case = case_of("kepler-orbit")
     real = analyses.get_adapter
@@ -2036,7 +2036,7 @@ def test_fit_order(engine, method):
     (closed form, worst over the run) fitted over the range where local orders agree; and
     the physics: on the oscillator at these steps every method converges at the order of
     its documented step."""
-    from truestep.metrics import fit_order
+    from truestep.measures.metrics import fit_order
 
     case = case_of("harmonic-oscillator", 0.5)
     runs = [run(case, engine, method, dt) for dt in ORDER_DTS]
@@ -2063,7 +2063,7 @@ RESTITUTION_RUNS = [(0.5, 1 / 240), (0.8, 1 / 240), (0.0, 1 / 240), (0.8, 1 / 10
 
 
 def _restitution_params():
-    from truestep.analyses import REFERENCE_BOUNCE_METHODS, bounce_case
+    from truestep.execution.analyses import REFERENCE_BOUNCE_METHODS, bounce_case
 
     out = []
     probe = bounce_case(0.5, 1 / 240)
@@ -2087,7 +2087,7 @@ _DROPS: dict[tuple, tuple] = {}
 def _drop(engine, method, e, dt):
     """The restitution table's rows for one drop, and the trajectory they were read from
     (``analyses.get_adapter`` is wrapped to keep it: the engine runs once, unmocked)."""
-    from truestep import analyses
+    from truestep.execution import analyses
 
     key = (engine, method, e, dt)
     if key not in _DROPS:

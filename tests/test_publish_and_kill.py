@@ -23,12 +23,12 @@ from pathlib import Path
 import pytest
 from kill_helpers import _running, pids_in, scratch_left, snapshot, still_running
 
-from truestep import publish
 from truestep.cli import main
-from truestep.faults import CHILD_PIDS, KILL_AT, parse
-from truestep.oscalls import exchange
-from truestep.report_folder import MARKER, MARKER_TEXT
-from truestep.runner import preload
+from truestep.execution.faults import CHILD_PIDS, KILL_AT, parse
+from truestep.execution.oscalls import exchange
+from truestep.execution.runner import preload
+from truestep.reporting import publish
+from truestep.reporting.folder import MARKER, MARKER_TEXT
 
 RUN = ["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", "rep"]
 POINTS = ("report-csv", "report-figures", "report-index", "report-swap", "report-swapped")
@@ -112,7 +112,12 @@ def journal(tmp_path_factory) -> dict:
     report an uninterrupted resume from that journal writes."""
     base = tmp_path_factory.mktemp("kills")
     preload()
-    for name in ("truestep.analyses", "truestep.api", "truestep.report", "truestep.figures"):
+    for name in (
+        "truestep.execution.analyses",
+        "truestep.api",
+        "truestep.reporting.report",
+        "truestep.figures.lecture",
+    ):
         importlib.import_module(name)  # here, so that every forked run runs the same code
     first = base / "first"
     first.mkdir()
@@ -197,8 +202,8 @@ def test_directories_are_exchanged_here(tmp_path):
 
 CHILD_SCRIPT = """
 import sys, time
-from truestep.interrupts import Interrupted, handled
-from truestep.isolation import start_isolated
+from truestep.execution.interrupts import Interrupted, handled
+from truestep.execution.isolation import start_isolated
 with handled():
     try:
         run = start_isolated(time.sleep, (60,), 120.0)

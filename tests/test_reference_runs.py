@@ -10,7 +10,7 @@ import pytest
 
 from truestep.adapters import get_adapter
 from truestep.cases.exact import reference_run
-from truestep.metrics import exact_for, fit_order, position_error
+from truestep.measures.metrics import exact_for, fit_order, position_error
 
 
 def test_the_fine_rk4_run_of_the_cloth_agrees_with_dormand_prince(case_named):

@@ -15,12 +15,12 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from truestep.analyses import run_analyses
 from truestep.cases import load_cases
 from truestep.cli import main
-from truestep.figures import FIGURES
-from truestep.report import write_report
-from truestep.runner import run_matrix
+from truestep.execution.analyses import run_analyses
+from truestep.execution.runner import run_matrix
+from truestep.figures.lecture import FIGURES
+from truestep.reporting.report import write_report
 
 CHROMIUM = Path("/usr/bin/chromium")
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
@@ -204,7 +204,7 @@ def test_the_page_renders_in_headless_chromium(report, tmp_path):
 
 def test_hard_case_summary_counts_tunnelling_as_failure():
     """A run that finishes but tunnels through the wall has not survived that step."""
-    from truestep.report import hard_case_line, survival
+    from truestep.reporting.report import hard_case_line, survival
 
     case = load_cases("high-speed-impact")[0]
     rows = [
@@ -228,7 +228,7 @@ def test_hard_case_summary_counts_tunnelling_as_failure():
 
 
 def test_speed_table_gives_particle_steps_per_second_and_ratios():
-    from truestep.report import speed_section, speed_table, speed_tables
+    from truestep.reporting.report import speed_section, speed_table, speed_tables
 
     case = load_cases("particle-rain")[0]
     n = case.model.n
@@ -254,7 +254,7 @@ def test_speed_table_gives_particle_steps_per_second_and_ratios():
 
 
 def test_an_image_line_from_case_text_reads_nothing(tmp_path):
-    from truestep.report_html import markdown_to_html
+    from truestep.reporting.html import markdown_to_html
 
     secret = tmp_path / "secret.png"
     secret.write_bytes(b"not for the report")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 
 from truestep.cli import main
-from truestep.isolation import BUDGET_SPENT
+from truestep.execution.isolation import BUDGET_SPENT
 
 
 def test_a_spent_budget_makes_timeout_rows_and_the_report_is_still_written(tmp_path, capsys):
@@ -93,7 +93,7 @@ def test_a_step_that_runs_past_its_timeout_is_its_own_row_and_the_sweep_goes_on(
     import time
 
     from truestep.cases.loader import CASE_DIR, load_case
-    from truestep.runner import Timing, run_sweep
+    from truestep.execution.runner import Timing, run_sweep
 
     text = (CASE_DIR / "harmonic-oscillator.toml").read_text()
     text = re.sub(r"^stiffness = .*$", "stiffness = 1e14", text, count=1, flags=re.M)

@@ -7,13 +7,13 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from truestep.adapters.reference import build_system
+from truestep.measures.stability import energy_grows
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.odes import Arenstorf, KeplerProblem
 from truestep.reference_impl.particles import ParticleSystem
 from truestep.reference_impl.solvers import METHODS, get_solver
 from truestep.reference_impl.system import SecondOrderSystem, System
-from truestep.stability import energy_grows
 
 
 class Oscillator(SecondOrderSystem):

@@ -11,8 +11,8 @@ import pytest
 from truestep.adapters import get_adapter
 from truestep.cases import load_cases
 from truestep.cases.exact import stability_limit
-from truestep.restitution import bounces
-from truestep.stability import MIN_STEPS, SearchTimeout, bisect_limit, energy_grows, is_stable
+from truestep.measures.restitution import bounces
+from truestep.measures.stability import MIN_STEPS, SearchTimeout, bisect_limit, energy_grows, is_stable
 
 T = np.linspace(0.0, 100.0, 20001)
 

@@ -1,4 +1,4 @@
-"""The tables' column spec (:mod:`truestep.table_spec`) is what the tables, their readers,
+"""The tables' column spec (:mod:`truestep.tables.spec`) is what the tables, their readers,
 the baseline, the gates' schema, the report and the docs use: checked against the
 published tables and each consumer."""
 
@@ -11,11 +11,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from truestep import baseline, tables_io
 from truestep.cases import loader
-from truestep.report_markdown import UNITS
-from truestep.runner import MACHINE_COLUMNS, RESULT_COLUMNS
-from truestep.table_spec import DERIVED, RESULTS, TABLES, compared, labels, markdown
+from truestep.ci import baseline
+from truestep.execution.runner import MACHINE_COLUMNS, RESULT_COLUMNS
+from truestep.reporting.markdown import UNITS
+from truestep.tables import io as tables_io
+from truestep.tables.spec import DERIVED, RESULTS, TABLES, compared, labels, markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORTS = ROOT / "reports"
@@ -96,7 +97,7 @@ def test_the_report_labels_and_the_help_come_from_the_spec():
 
 def test_the_readme_documents_every_column_as_the_spec_does():
     """The README's column tables are :func:`markdown`'s output, word for word (regenerate
-    with ``python -c "from truestep.table_spec import markdown; print(markdown())"``)."""
+    with ``python -c "from truestep.tables.spec import markdown; print(markdown())"``)."""
     readme = (ROOT / "README.md").read_text()
     assert markdown() in readme
     for table in TABLES.values():

@@ -74,7 +74,7 @@ def test_a_malformed_baseline_is_exit_2_and_one_line_and_an_api_error(run_dir, t
     """The baseline directory is read as strictly as the results: by ``truestep gate
     --baseline`` (exit 2) and by ``truestep.compare`` (:class:`TableError`)."""
     import truestep
-    from truestep.tables_io import TableError
+    from truestep.tables.io import TableError
 
     base = tmp_path / "baseline"
     base.mkdir()
@@ -143,7 +143,7 @@ DAMAGED = {
 @pytest.mark.parametrize("label", list(DAMAGED))
 def test_tables_no_run_writes_are_refused_in_one_line(run_dir, tmp_path, capsys, label):
     import truestep
-    from truestep.tables_io import TableError
+    from truestep.tables.io import TableError
 
     table, change, reason = DAMAGED[label]
     _edit(run_dir / table, change)
@@ -163,7 +163,7 @@ def test_an_all_nan_baseline_is_refused(run_dir, tmp_path, capsys):
 
 
 def test_a_method_named_nan_is_a_name(run_dir, tmp_path, capsys):
-    from truestep.tables_io import REQUIRED, read_table
+    from truestep.tables.io import REQUIRED, read_table
 
     def rename(rows):
         e, m, c = (rows[0].index(k) for k in ("engine", "method", "case"))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from truestep.adapters import get_adapter
-from truestep.runner import row_from
+from truestep.execution.runner import row_from
 
 
 @pytest.fixture(scope="module")

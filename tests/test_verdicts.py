@@ -12,9 +12,9 @@ import pytest
 
 from truestep.adapters import get_adapter
 from truestep.adapters.base import Trajectory
-from truestep.energy_scale import energy_scale
-from truestep.runner import Timing, run_one
-from truestep.stability import is_stable, search_case
+from truestep.execution.runner import Timing, run_one
+from truestep.measures.energy_scale import energy_scale
+from truestep.measures.stability import is_stable, search_case
 
 ONE_RUN = Timing(long_run_s=0.0)
 
@@ -86,8 +86,8 @@ def test_moving_the_scene_changes_no_energy_number_and_no_status(case_named, nam
     15-20 m (|E(0)| tens of times larger), give the same drift and verdict as the case.
     (heun and midpoint at 4 ms gain energy on the damped cloth wherever it hangs: their
     blow-ups part after the instability sets in, their verdicts do not.)"""
-    from truestep.metrics import energy_drift
-    from truestep.runner import _motion_failure
+    from truestep.execution.runner import _motion_failure
+    from truestep.measures.metrics import energy_drift
 
     case = case_named(name)
     moved = _translated(case, np.array(shift))

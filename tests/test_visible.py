@@ -10,12 +10,12 @@ import xml.etree.ElementTree as ET
 import pandas as pd
 import pytest
 
-from truestep import ci_outputs
-from truestep.baseline import compare
 from truestep.cases.case import Gate
-from truestep.gates import GateResult
-from truestep.report_html import markdown_to_html
-from truestep.report_markdown import md_table, text
+from truestep.ci import outputs as ci_outputs
+from truestep.ci.baseline import compare
+from truestep.ci.gates import GateResult
+from truestep.reporting.html import markdown_to_html
+from truestep.reporting.markdown import md_table, text
 from truestep.visible import visible
 
 HIDDEN = [

@@ -52,7 +52,7 @@ _EXPORTS: dict[str, str] = {
     "check": "truestep.api",
     "compare": "truestep.api",
     "select_engines": "truestep.api",
-    "run_matrix": "truestep.runner",
+    "run_matrix": "truestep.execution.runner",
 }
 
 __all__ = [
@@ -104,7 +104,7 @@ if TYPE_CHECKING:
     from truestep.cases.errors import CaseError, SelectionError
     from truestep.cases.exact import Exact, exact_solution
     from truestep.cases.loader import load_case, load_cases
+    from truestep.execution.runner import run_matrix
     from truestep.reference_impl.model import ParticleModel
     from truestep.reference_impl.solvers.facts import MethodFacts, Stability
     from truestep.reference_impl.system import SecondOrderSystem, System
-    from truestep.runner import run_matrix

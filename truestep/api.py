@@ -24,8 +24,8 @@ from truestep.adapters import adapter_class, engine_status, registered, resolve_
 from truestep.cases import Case, CaseError, load_cases
 from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
-from truestep.experiment import Tables
-from truestep.gates import GateResult, check_gates, verdict_table
+from truestep.ci.gates import GateResult, check_gates, verdict_table
+from truestep.execution.experiment import Tables
 from truestep.visible import visible
 
 
@@ -84,9 +84,9 @@ def run(
     """Run the matrix (and, with ``analyses``, the stability searches, the restitution
     sweep and scaling) and return the tables; with ``out``, also write the report there, as
     ``truestep run --out`` does (a folder truestep may replace, locked for the run, else
-    :class:`~truestep.report_folder.OutRefused` or :class:`~truestep.run_lock.LockBusy`),
+    :class:`~truestep.reporting.folder.OutRefused` or :class:`~truestep.execution.run_lock.LockBusy`),
     checkpointing each finished sweep in a journal beside it until the report is in place.
-    ``truestep run`` is this function (:mod:`truestep.experiment`).
+    ``truestep run`` is this function (:mod:`truestep.execution.experiment`).
 
     ``cases``: a selection as ``--cases`` takes it (names, globs, files, directories) or
     loaded :class:`Case` objects; ``engines``: as :func:`select_engines`; ``progress``:
@@ -96,7 +96,7 @@ def run(
     time budget, s; ``lecture_figures``: also draw the lecture's figures; ``argv``: the
     command line the report says reproduces the run.
     """
-    from truestep.experiment import Experiment, run_experiment
+    from truestep.execution.experiment import Experiment, run_experiment
 
     say = progress or (lambda msg: print(visible(msg), file=sys.stderr))
     chosen = _cases(cases)
@@ -119,8 +119,8 @@ def run(
     )
     if exp.out is None:
         return run_experiment(exp)
-    from truestep.report_folder import check_out
-    from truestep.run_lock import RunLock
+    from truestep.execution.run_lock import RunLock
+    from truestep.reporting.folder import check_out
 
     check_out(exp.out)
     locks = [
@@ -141,7 +141,7 @@ def run(
 def gate_results(
     tables: Tables, *, gates: str | Path | Iterable | None = None, case_gates: bool = True
 ) -> list[GateResult]:
-    """Every gate's verdict (:class:`~truestep.gates.GateResult`) on ``tables``.
+    """Every gate's verdict (:class:`~truestep.ci.gates.GateResult`) on ``tables``.
 
     ``gates``: a gates file, several, or gate dictionaries (the keys of a ``[[gates]]``
     table, with ``cases``); ``case_gates``: also check the gates in the case files. A
@@ -179,7 +179,7 @@ def check(
     tables: Tables, *, gates: str | Path | Iterable | None = None, case_gates: bool = True
 ) -> pd.DataFrame:
     """The gate verdicts as a table: one row per gate and engine/method
-    (:data:`~truestep.gates.GATE_COLUMNS`; ``verdict`` is ``pass``, ``fail`` or ``skip``)."""
+    (:data:`~truestep.ci.gates.GATE_COLUMNS`; ``verdict`` is ``pass``, ``fail`` or ``skip``)."""
     return verdict_table(gate_results(tables, gates=gates, case_gates=case_gates))
 
 
@@ -191,9 +191,9 @@ def compare(
     time_against: str | None = None,
 ) -> pd.DataFrame:
     """What got worse or better from ``baseline`` to ``current`` (output directories or
-    :class:`Tables`), one row per finding (see :mod:`truestep.baseline`)."""
-    from truestep.baseline import compare as _compare
-    from truestep.baseline import read_tables
+    :class:`Tables`), one row per finding (see :mod:`truestep.ci.baseline`)."""
+    from truestep.ci.baseline import compare as _compare
+    from truestep.ci.baseline import read_tables
 
     def tables_of(x: str | Path | Tables) -> dict:
         if isinstance(x, Tables):

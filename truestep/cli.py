@@ -32,7 +32,7 @@ from truestep.cases.limits import CEILING
 from truestep.cases.limits import KEYS as LIMIT_KEYS
 from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
 from truestep.cases.plugins import PluginError
-from truestep.table_spec import compared
+from truestep.tables.spec import compared
 from truestep.visible import visible
 
 REPORT_SPACE_MB = 64
@@ -86,11 +86,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     SIGTERM or SIGINT stops the run: the children are killed, the staging folder is
     removed, the previous report stays as it was, and the exit code is 128 + the signal
     with one line that says so. Finished sweeps (and the analyses, once done) stay in the
-    journal beside ``--out`` (:mod:`truestep.journal`) until the report is published.
+    journal beside ``--out`` (:mod:`truestep.execution.journal`) until the report is published.
     """
-    from truestep.interrupts import Interrupted, handled
-    from truestep.isolation import set_run_budget
-    from truestep.journal import Journal
+    from truestep.execution.interrupts import Interrupted, handled
+    from truestep.execution.isolation import set_run_budget
+    from truestep.execution.journal import Journal
 
     with handled():
         try:
@@ -125,12 +125,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     """``truestep run`` once its arguments are checked: :func:`truestep.run` (the one
-    experiment driver, :mod:`truestep.experiment`) with the report in ``--out``."""
+    experiment driver, :mod:`truestep.execution.experiment`) with the report in ``--out``."""
     from truestep.api import run, select_engines
-    from truestep.cluster import ClusterError
-    from truestep.journal import JournalError
-    from truestep.report_folder import OutRefused
-    from truestep.run_lock import LockBusy
+    from truestep.execution.cluster import ClusterError
+    from truestep.execution.journal import JournalError
+    from truestep.execution.run_lock import LockBusy
+    from truestep.reporting.folder import OutRefused
 
     args.out = args.out or args.resume or "reports"
     if not 0 < args.budget < float("inf"):
@@ -170,11 +170,11 @@ def _run(args: argparse.Namespace) -> int:
 
 def _check_out(out: Path) -> None:
     """Fail before the sweep if the report cannot be published at ``out``: a folder that
-    is not a report truestep wrote (:func:`truestep.report_folder.check_out`: a file, a
+    is not a report truestep wrote (:func:`truestep.reporting.folder.check_out`: a file, a
     folder of other things, a link elsewhere), a mount point (the report is put in place
     by renaming a directory), a parent where this process cannot create the staging
     folder and the journal, or too little space beside it."""
-    from truestep.report_folder import OutRefused, check_out
+    from truestep.reporting.folder import OutRefused, check_out
 
     try:
         real = check_out(out)
@@ -200,7 +200,7 @@ def _check_out(out: Path) -> None:
 
 
 def _read_csv(path: Path, needs: set[str], kind: str = "results") -> pd.DataFrame:
-    from truestep.tables_io import TableError, read_table
+    from truestep.tables.io import TableError, read_table
 
     try:
         return read_table(path, kind, needs, rows=kind == "results")
@@ -213,7 +213,7 @@ def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
     if not os.path.lexists(results_path):
         raise UsageError(f"{results_path}: no such file (run `truestep run` first)")
     tables = {"results": _read_csv(results_path, RESULTS_NEEDS, "results")}
-    from truestep.tables_io import REQUIRED
+    from truestep.tables.io import REQUIRED
 
     for name in ("stability", "restitution"):
         path = results_path.parent / f"{name}.csv"
@@ -245,9 +245,9 @@ def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Cas
 
 
 def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
-    """The declared-order gates (:mod:`truestep.declared`) of the installed engines that
+    """The declared-order gates (:mod:`truestep.measures.declared`) of the installed engines that
     ran, each on its own case."""
-    from truestep.declared import declared_order_pairs
+    from truestep.measures.declared import declared_order_pairs
 
     ran = [
         e
@@ -258,7 +258,7 @@ def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
 
 
 def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
-    from truestep.baseline import TOLERANCES
+    from truestep.ci.baseline import TOLERANCES
 
     tol: dict[str, float] = {}
     for f in files:
@@ -284,7 +284,7 @@ def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
 
 
 def _narrowed(tables: dict, cases: set[str] | None, engines: set[str] | None) -> dict:
-    from truestep.baseline import narrow
+    from truestep.ci.baseline import narrow
 
     return narrow(tables, cases=cases, engines=engines)
 
@@ -296,7 +296,7 @@ def _baseline_scope(
     for (its ``run.json``; else those in its results), narrowed by ``--cases`` and
     ``--engines``. Baseline rows outside them are not "vanished": the run never asked
     for them."""
-    from truestep.report import read_run_record
+    from truestep.reporting.report import read_run_record
 
     record = read_run_record(run_dir) or {}
     ran_cases = set(record.get("cases") or results["case"].astype(str))
@@ -312,9 +312,9 @@ def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path, 
     """``--identical``: every non-timing cell equal to the baseline's, when both runs had
     the same packages and floating-point environment (their ``run.json``); else one line
     saying why the promise does not apply, and the tolerances alone decide."""
-    from truestep.baseline import identical
+    from truestep.ci.baseline import identical
     from truestep.numerics import differences
-    from truestep.report import read_run_record
+    from truestep.reporting.report import read_run_record
 
     old, new = read_run_record(base_dir), read_run_record(run_dir)
     if old is None or new is None:
@@ -383,7 +383,7 @@ def cmd_gate(args: argparse.Namespace) -> int:
 def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -> tuple[list, list]:
     """The cases a ``truestep gate`` checks and every gate's verdict (the cases' own, the
     ``--gates`` files' and, with ``--declared-orders``, the methods' declared orders)."""
-    from truestep.gates import check_gates
+    from truestep.ci.gates import check_gates
 
     results = tables["results"]
     engines = set(registered()) | set(results["engine"].astype(str))
@@ -405,8 +405,8 @@ def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -
 
 
 def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path, cases: list):
-    """The comparison with ``--baseline`` (:func:`truestep.baseline.compare`), or ``None``."""
-    from truestep.baseline import compare
+    """The comparison with ``--baseline`` (:func:`truestep.ci.baseline.compare`), or ``None``."""
+    from truestep.ci.baseline import compare
 
     if not args.baseline:
         if args.tolerance or args.time_against or args.identical:
@@ -456,7 +456,7 @@ def _write_ci_outputs(
 ) -> None:
     """The JUnit, Markdown and JSON files ``truestep gate`` was asked for, and the GitHub
     step summary when ``GITHUB_STEP_SUMMARY`` is set."""
-    from truestep import ci_outputs
+    from truestep.ci import outputs as ci_outputs
 
     md = ci_outputs.markdown(verdicts, comparison, reasons, passed=passed)
     try:
@@ -493,8 +493,8 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_figures(args: argparse.Namespace) -> int:
-    from truestep.figures import write_lecture_figures
-    from truestep.report_folder import OutRefused, prepare
+    from truestep.figures.lecture import write_lecture_figures
+    from truestep.reporting.folder import OutRefused, prepare
 
     try:
         out = prepare(Path(args.out))
@@ -507,7 +507,7 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     from truestep.api import select_engines
-    from truestep.bench import COLUMNS, scaling_plot, scaling_table
+    from truestep.execution.bench import COLUMNS, scaling_plot, scaling_table
 
     try:
         sizes = [float(s) for s in args.sizes.split(",") if s.strip()]
@@ -522,7 +522,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     engines = select_engines(args.engines, say=_say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
-    from truestep.report_folder import OutRefused, check_out, prepare
+    from truestep.reporting.folder import OutRefused, check_out, prepare
 
     try:
         check_out(Path(args.out))
@@ -584,7 +584,7 @@ def cmd_compile(args: argparse.Namespace) -> int:
     import time
 
     from truestep.cases import load_case, load_cases
-    from truestep.figure_scenes import FIGURE_CASE_DIR
+    from truestep.figures.scenes import FIGURE_CASE_DIR
     from truestep.reference_impl.precompile import compile_all
 
     began = time.perf_counter()
@@ -808,7 +808,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     comp.set_defaults(func=cmd_compile)
 
-    from truestep.bench import BUDGET_S, SIZES
+    from truestep.execution.bench import BUDGET_S, SIZES
 
     sizes = ",".join(f"{n:.0e}".replace("e+0", "e") for n in SIZES)
     bench = sub.add_parser(

@@ -102,8 +102,8 @@ class GateCheck:
         return f"{self.case.name}:{g.where}:{g.kind}:{g.engine}/{g.method}{dt}"
 
     def result(self):
-        """The :class:`~truestep.gates.GateResult` (runs the selection on first use)."""
-        from truestep.gates import check_gate
+        """The :class:`~truestep.ci.gates.GateResult` (runs the selection on first use)."""
+        from truestep.ci.gates import check_gate
 
         tables = _tables(self.selection)
         return check_gate(self.case, self.gate, tables.results, tables.stability, tables.restitution)
@@ -123,7 +123,7 @@ def _gates(sel: Selection) -> tuple[list, list]:
     """The selection's cases and its (case, gate) pairs: the cases' own gates (unless
     ``case_gates`` is false), then the gates files' on every case they name."""
     from truestep.cases.loader import load_cases, load_gates_file
-    from truestep.gates import gates_to_check
+    from truestep.ci.gates import gates_to_check
 
     cases = load_cases(list(sel.cases))
     own = cases if sel.case_gates else [dataclasses.replace(c, gates=[]) for c in cases]

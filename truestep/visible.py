@@ -6,7 +6,7 @@ controls (U+202E turns the rest of a line around), zero-width characters and lin
 separators. :func:`visible` writes each of them as a ``\\uXXXX`` escape (``\\n``, ``\\r``
 and ``\\t`` for the common three), so what a reader sees is every character there is. It
 is applied to everything truestep prints and writes that came from outside: console
-lines, the report (through :func:`truestep.report_markdown.text`), JUnit and the
+lines, the report (through :func:`truestep.reporting.markdown.text`), JUnit and the
 markdown summary.
 """
 

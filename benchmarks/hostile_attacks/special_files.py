@@ -141,7 +141,7 @@ def attack_compare_on_a_fifo(c: Campaign, where: Path) -> tuple[bool, str]:
     bad.mkdir()
     mkfifo(bad / "results.csv")
     result = c.python(
-        "import truestep\nfrom truestep.tables_io import TableError\ntry:\n"
+        "import truestep\nfrom truestep.tables.io import TableError\ntry:\n"
         f"    truestep.compare({str(bad)!r}, {str(tables)!r})\n"
         "except TableError as e:\n    print('CLEAN', e)\n",
         where,

@@ -122,7 +122,7 @@ def attack_compare_on_duplicated_rows(c: Campaign, where: Path) -> tuple[bool, s
     base = damaged(where / "b", lambda rows: [*rows, rows[first_ok(rows)]])
     tables = shipped_tables(where / "current")
     result = c.python(
-        "import truestep\nfrom truestep.tables_io import TableError\ntry:\n"
+        "import truestep\nfrom truestep.tables.io import TableError\ntry:\n"
         f"    truestep.compare({str(base)!r}, {str(tables)!r})\n"
         "except TableError as e:\n    print('CLEAN', e)\n",
         where,

@@ -1,0 +1,1 @@
+"""Gates, the baseline compare and the CI outputs (JUnit, Markdown, JSON)."""

@@ -1,0 +1,459 @@
+"""Check gates (from case files and gates files) against the tables ``truestep run`` wrote.
+
+A gate names the rows it reads by case, engine, method and step; ``*`` for the engine or
+the method stands for every engine (every method) that ran the case, and the gate is
+checked once for each. Each check is a :class:`GateResult`: held, failed, or not
+evaluated (the run left that case or engine out). A row the gate reads that ``crashed``
+or timed out fails the gate: a gate that checked nothing has not passed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fnmatch
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from truestep.cases.case import Case, Gate
+from truestep.measures.metrics import fit_order
+
+NOT_RUN = frozenset({"unsupported", "skipped"})
+"""Row statuses of pairs the run did not simulate."""
+BROKEN = frozenset({"crashed", "timeout"})
+"""Row statuses of runs that produced nothing to measure."""
+DECLARED = "declared"
+"""The ``where`` of the gates :mod:`truestep.measures.declared` makes from the methods' facts. A
+sweep that gives no fittable order (unstable, or not yet converged, at every step) leaves
+such a gate not evaluated: the case's own gates and the baseline say what went wrong."""
+GATE_COLUMNS = ["case", "source", "gate", "kind", "engine", "method", "dt", "verdict", "measured", "required"]
+"""The columns of :func:`verdict_table` (and of ``truestep gate --json``'s gates)."""
+
+
+@dataclass
+class GateResult:
+    """One gate's verdict on one engine and method: what it read, what it needed, and
+    whether it held (``evaluated`` is false when the run has no rows for it)."""
+
+    case: str
+    gate: Gate
+    passed: bool
+    measured: str
+    required: str
+    evaluated: bool = True
+
+    @property
+    def verdict(self) -> str:
+        """``pass``, ``fail`` or ``skip``."""
+        return "skip" if not self.evaluated else "pass" if self.passed else "fail"
+
+    @property
+    def label(self) -> str:
+        """``case gates[i] kind engine/method [dt=...]``: the gate's id in every output."""
+        g = self.gate
+        dt = f" dt={g.dt:g}" if g.dt is not None else ""
+        return f"{self.case} {g.where} {g.kind} {g.engine}/{g.method}{dt}"
+
+    def row(self) -> dict:
+        """This verdict as a row of the verdict table (:data:`GATE_COLUMNS`, in order)."""
+        return {
+            "case": self.case,
+            "source": self.gate.file,
+            "gate": self.gate.where,
+            "kind": self.gate.kind,
+            "engine": self.gate.engine,
+            "method": self.gate.method,
+            "dt": self.gate.dt,
+            "verdict": self.verdict,
+            "measured": self.measured,
+            "required": self.required,
+        }
+
+    def line(self) -> str:
+        verdict = {"skip": "SKIP", "pass": "ok  ", "fail": "FAIL"}[self.verdict]
+        return f"{verdict} {self.label}: measured {self.measured}, required {self.required}"
+
+
+def _num(series: pd.Series) -> np.ndarray:
+    return pd.to_numeric(series, errors="coerce").to_numpy(float)
+
+
+def _at_dt(rows: pd.DataFrame, dt: float | None) -> pd.DataFrame:
+    if dt is None or not len(rows):
+        return rows
+    return rows[np.isclose(_num(rows["dt"]), dt, rtol=1e-9, atol=0)]
+
+
+def _within(value: float, lo: float | None, hi: float | None) -> bool:
+    return bool(np.isfinite(value) and (lo is None or value >= lo) and (hi is None or value <= hi))
+
+
+def _pairs(results: pd.DataFrame, case: str, g: Gate) -> list[tuple[str, str]]:
+    """The (engine, method) pairs a gate stands for: itself, or what ``*`` expands to
+    among the pairs the run simulated for ``case`` (at the gate's ``dt``, if it names one;
+    with fixed steps, for an order gate)."""
+    if g.engine != "*" and g.method != "*":
+        return [(g.engine, g.method)]
+    ran = results[(results["case"] == case) & ~results["status"].isin(NOT_RUN)]
+    if g.dt is not None:
+        ran = _at_dt(ran, g.dt)
+    elif g.kind == "order":
+        ran = ran[ran["dt_kind"] == "step"]
+    pairs = ran[["engine", "method"]].drop_duplicates().itertuples(index=False)
+    return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
+
+
+def _status(row: pd.Series) -> str:
+    """``status unstable at t=0.31 s`` (the time when the row has one)."""
+    t = pd.to_numeric(pd.Series([row.get("t_fail")]), errors="coerce").iloc[0]
+    return f"status {row['status']}" + (f" at t={t:.4g} s" if np.isfinite(t) else "")
+
+
+def _broken(rows: pd.DataFrame) -> str | None:
+    bad = rows[rows["status"].isin(BROKEN)]
+    if not len(bad):
+        return None
+    r = bad.iloc[0]
+    message = str(r.get("message", "") or "")
+    return f"row dt={r['dt']} {r['status']}" + (f" ({message[:120]})" if message else "")
+
+
+def check_gate(
+    case: Case,
+    g: Gate,
+    results: pd.DataFrame,
+    stability: pd.DataFrame | None = None,
+    restitution: pd.DataFrame | None = None,
+) -> GateResult:
+    """Evaluate one gate for one engine and method (no ``*``); a gate with no row to read
+    fails, saying so, and a gate whose case or engine the run left out altogether
+    (``--cases``, ``--engines``) is not evaluated and says so."""
+    p = g.params
+    ran = results[(results["case"] == case.name) & (results["engine"] == g.engine)]
+    if g.kind == "restitution":
+        return _restitution(case.name, g, restitution)
+    if not len(ran):
+        return GateResult(case.name, g, True, "not run", "a run of this case and engine", evaluated=False)
+    rows = ran[ran["method"] == g.method]
+    if g.kind == "stability-limit":
+        return _stability(case, g, stability)
+    if not len(rows):
+        return GateResult(case.name, g, False, "no result row", "a row to read")
+    if rows["status"].isin(NOT_RUN).all():
+        r = rows.iloc[0]
+        why = r.get("missing") if r["status"] == "unsupported" else r.get("message")
+        return GateResult(case.name, g, False, f"{r['status']} ({why})", "a run to read")
+    if g.kind == "order":
+        return _order(case, g, rows)
+    if g.kind == "no-worse-than":
+        return _no_worse(case, g, results, rows)
+    rows = _at_dt(rows, g.dt)
+    if not len(rows):
+        return GateResult(case.name, g, False, "no result row at this dt", "a row to read")
+    row = rows.iloc[0]
+    if row["status"] in BROKEN:
+        return GateResult(case.name, g, False, _broken(rows) or str(row["status"]), "a measured row")
+    if g.kind == "status":
+        return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]), str(p["expect"]))
+    if row["status"] != "ok":
+        return GateResult(case.name, g, False, _status(row), "status ok")
+    if g.kind in ("error", "energy_drift"):
+        value = float(_num(rows[g.kind])[0])
+        return GateResult(
+            case.name, g, _within(value, None, p["max"]), f"{g.kind} {value:.3g}", f"<= {p['max']:g}"
+        )
+    if g.kind == "property":
+        return _property(case, g, rows)
+    if g.kind == "speedup":
+        return _speedup(case, g, results, row)
+    raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
+
+
+def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
+    """An ``order`` gate on one method's sweep: the order fitted to its measured rows."""
+    p = g.params
+    broken = _broken(rows)
+    if broken:
+        return GateResult(case.name, g, False, broken, "every row of the sweep measured")
+    ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
+    order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale)
+    if g.where == DECLARED:
+        return _declared_order(case, g, ok, order)
+    return GateResult(
+        case.name,
+        g,
+        _within(abs(order - p["expect"]), None, p["tol"]),
+        f"order {order:.3f}",
+        f"{p['expect']:g} +- {p['tol']:g}",
+    )
+
+
+def _property(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
+    """A ``property`` gate: the named property of the row at the gate's step, in bounds."""
+    p = g.params
+    name = p["name"]
+    value = float(_num(rows[name])[0]) if name in rows else np.nan
+    lo, hi = p.get("min"), p.get("max")
+    bounds = " and ".join(
+        s for s in (f">= {lo:g}" if lo is not None else "", f"<= {hi:g}" if hi is not None else "") if s
+    )
+    return GateResult(case.name, g, _within(value, lo, hi), f"{name} {value:.4g}", bounds)
+
+
+def _speedup(case: Case, g: Gate, results: pd.DataFrame, row: pd.Series) -> GateResult:
+    """A ``speedup`` gate: the row's speed-up over each engine of ``over``, at the same step,
+    timed on the same host (the smallest counts)."""
+    p = g.params
+    ratios, elsewhere = [], []
+    for other in p["over"]:
+        o = _at_dt(
+            results[
+                (results["case"] == case.name) & (results["engine"] == other) & (results["status"] == "ok")
+            ],
+            g.dt,
+        )
+        if "host" in o and "host" in row.index:  # wall times compare within one machine
+            here = "" if pd.isna(row["host"]) else str(row["host"])
+            same = o["host"].fillna("").astype(str) == here
+            elsewhere += [other] if len(o) and not same.any() else []
+            o = o[same]
+        if len(o):
+            ratios.append(float(np.nanmin(_num(o["wall_s"]))) / float(row["wall_s"]))
+    value = min(ratios) if ratios and not elsewhere else np.nan
+    where = f" ({', '.join(elsewhere)} timed on another host: not compared)" if elsewhere else ""
+    return GateResult(
+        case.name,
+        g,
+        _within(value, p["min"], None),
+        f"speed-up {value:.3g}x over {', '.join(p['over'])}{where}",
+        f">= {p['min']:g}x",
+    )
+
+
+def _stability(case: Case, g: Gate, stability: pd.DataFrame | None) -> GateResult:
+    p = g.params
+    need = " and ".join(
+        s
+        for s in (
+            f"within {p['rel_tol']:.3%} of exact" if "rel_tol" in p else "",
+            f">= {p['min']:g} s" if "min" in p else "",
+        )
+        if s
+    )
+    s = pd.DataFrame() if stability is None else stability
+    if len(s):
+        s = s[(s["case"] == case.name) & (s["engine"] == g.engine) & (s["method"] == g.method)]
+    if not len(s):
+        return GateResult(case.name, g, False, "no stability row", need)
+    r = s.iloc[0]
+    if r.get("status", "ok") != "ok":
+        return GateResult(case.name, g, False, f"search {r['status']}: {r.get('note', '')}", need)
+    limit, exact = float(r["dt_limit"]), float(r["dt_limit_exact"])
+    ok, text = np.isfinite(limit), f"dt_limit {limit:.6g}"
+    if "rel_tol" in p:
+        rel = abs(limit - exact) / exact if np.isfinite(exact) and exact > 0 else np.nan
+        ok = ok and _within(rel, None, p["rel_tol"])
+        text += f" (exact {exact:.6g}, off by {rel:.3%})"
+    if "min" in p:
+        ok = ok and limit >= p["min"]
+    return GateResult(case.name, g, bool(ok), text, need)
+
+
+CONVERGING = 0.5
+"""The least local order (:func:`truestep.measures.metrics.local_orders`) at the finest steps of a
+sweep that shows a method converging: every consistent method's error falls at least as
+``dt^1`` once it converges, so a slower fall means the sweep has not reached that regime
+(implicit Euler damping a stiff cloth's motion away at every swept step)."""
+
+
+def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> GateResult:
+    """A declared-order gate: the fitted order at least the declared one, less ``tol``.
+
+    Not evaluated (saying why) where the sweep cannot show an order: fewer than two errors
+    in the asymptotic range, or errors that do not yet fall with the step at the finest
+    steps (a local order below :data:`CONVERGING`). A method whose error falls faster
+    over the sweep than its declared order says (symplectic Euler's second-order term
+    outweighing its first-order one on a chain down to 1e-4 s) holds it: the declared order
+    is the least it delivers."""
+    p = g.params
+    need = f">= {p['expect']:g} - {p['tol']:g}"
+    if not np.isfinite(order):
+        return GateResult(
+            case.name,
+            g,
+            True,
+            "no order: fewer than two errors in the asymptotic range",
+            need,
+            evaluated=False,
+        )
+    from truestep.measures.metrics import local_orders
+
+    dts, errors = _num(ok["dt"]), _num(ok["error"])
+    usable = np.isfinite(errors) & (errors > 0)
+    local = local_orders(dts[usable], errors[usable])
+    if len(local) and local[-1] < CONVERGING:
+        return GateResult(
+            case.name,
+            g,
+            True,
+            f"no order yet: the error falls as dt^"
+            f"{local[-1]:.2f} at the finest steps (the sweep is not in the "
+            "asymptotic range)",
+            need,
+            evaluated=False,
+        )
+    return GateResult(case.name, g, order >= p["expect"] - p["tol"], f"order {order:.3f}", need)
+
+
+def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
+    p = g.params
+    need = f"|{p['quantity']} - e_set| <= {p['tol']:g} on every bounce"
+    t = pd.DataFrame() if table is None else table
+    if len(t):
+        t = t[(t["engine"] == g.engine) & (t["method"] == g.method)]
+    if not len(t):
+        return GateResult(
+            case, g, True, "no restitution rows for this engine", "a restitution sweep of it", evaluated=False
+        )
+    t = _at_dt(t, g.dt)
+    for key in ("e_set", "bounce"):
+        if key in p:
+            t = t[np.isclose(_num(t[key]), p[key], rtol=0, atol=1e-12)]
+    broken = t[t["status"] != "ok"]
+    if len(broken):
+        r = broken.iloc[0]
+        return GateResult(case, g, False, f"drop e={r['e_set']} dt={r['dt']:.4g} {r['status']}", need)
+    values = _num(t[p["quantity"]])
+    dev = np.abs(values - _num(t["e_set"]))
+    measured = dev[np.isfinite(dev)]
+    if not len(measured):
+        return GateResult(case, g, False, "no bounce measured", need)
+    worst = int(np.nanargmax(np.where(np.isfinite(dev), dev, -1)))
+    r = t.iloc[worst]
+    return GateResult(
+        case,
+        g,
+        bool(np.max(measured) <= p["tol"]),
+        f"worst {p['quantity']} {values[worst]:.4g} at e={r['e_set']:g} "
+        f"dt={float(r['dt']):.4g} bounce {int(r['bounce'])} ({len(measured)} bounces)",
+        need,
+    )
+
+
+def _no_worse(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) -> GateResult:
+    p = g.params
+    other_engine, other_method = p["than"]
+    q, factor = p["quantity"], p["factor"]
+    need = f"{q} <= {factor:g} x {other_engine}/{other_method}'s at every dt both ran"
+    other = results[
+        (results["case"] == case.name)
+        & (results["engine"] == other_engine)
+        & (results["method"] == other_method)
+    ]
+    rows, other = _at_dt(rows, g.dt), _at_dt(other, g.dt)
+    if not len(other) or other["status"].isin(NOT_RUN).all():
+        return GateResult(case.name, g, True, f"{other_engine}/{other_method} not run", need, evaluated=False)
+    broken = _broken(rows)
+    if broken:
+        return GateResult(case.name, g, False, broken, need)
+    pairs = 0
+    for _, r in rows.iterrows():
+        o = other[
+            (other["dt_kind"] == r["dt_kind"])
+            & np.isclose(_num(other["dt"]), float(r["dt"]), rtol=1e-9, atol=0)
+        ]
+        if not len(o) or o.iloc[0]["status"] != "ok":
+            continue
+        pairs += 1
+        mine, theirs = float(pd.to_numeric(r[q], errors="coerce")), float(_num(o[q])[0])
+        if r["status"] != "ok" or not mine <= factor * theirs:
+            shown = _status(r) if r["status"] != "ok" else f"{q} {mine:.3g}"
+            return GateResult(
+                case.name, g, False, f"dt={float(r['dt']):g}: {shown} against {theirs:.3g}", need
+            )
+    if not pairs:
+        return GateResult(
+            case.name, g, False, f"no dt that both this run and {other_engine}/{other_method} measured", need
+        )
+    return GateResult(case.name, g, True, f"no worse at {pairs} dt", need)
+
+
+def check_gates(
+    cases: list[Case],
+    results: pd.DataFrame,
+    stability: pd.DataFrame | None = None,
+    restitution: pd.DataFrame | None = None,
+    extra: list[tuple[list[str], Gate]] | None = None,
+) -> list[GateResult]:
+    """Every gate of every case, in case order, then every gate of ``extra`` (the gates
+    of a gates file, :func:`truestep.cases.loader.load_gates_file`) on every case whose
+    name matches one of its patterns (a ``restitution`` gate of a gates file reads the
+    restitution sweep, which belongs to no case: it is checked once, as case
+    :data:`SWEEP`). ``*`` engines and methods are expanded to the pairs the run
+    simulated; such a gate with nothing to expand to is not evaluated."""
+    out = []
+    for c, g in gates_to_check(cases, extra):
+        if g.kind in ("stability-limit", "restitution") and "*" in (g.engine, g.method):
+            pairs = _table_pairs(c, g, stability if g.kind == "stability-limit" else restitution)
+        else:
+            pairs = _pairs(results, c.name, g)
+        if not pairs:
+            out.append(
+                GateResult(
+                    c.name,
+                    g,
+                    True,
+                    "nothing ran that it names",
+                    "a run of a matching engine and method",
+                    evaluated=False,
+                )
+            )
+        for e, m in pairs:
+            out.append(
+                check_gate(c, dataclasses.replace(g, engine=e, method=m), results, stability, restitution)
+            )
+    return out
+
+
+def gates_to_check(
+    cases: list[Case], extra: list[tuple[list[str], Gate]] | None = None
+) -> list[tuple[Case, Gate]]:
+    """(case, gate) pairs: the cases' own gates, then each gates-file gate on every case
+    its patterns match (a restitution gate once, as case :data:`SWEEP`)."""
+    todo = [(c, g) for c in cases for g in c.gates]
+    for patterns, g in extra or []:
+        if g.kind == "restitution":
+            todo.append((_SWEEP_CASE, g))
+            continue
+        todo += [(c, g) for c in cases if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
+    return todo
+
+
+SWEEP = "restitution-sweep"
+"""The case name under which gates on the restitution sweep are reported."""
+
+
+@dataclass
+class _Sweep:
+    name: str = SWEEP
+    file: str = ""
+
+
+_SWEEP_CASE: Case = _Sweep()  # type: ignore[assignment]
+
+
+def _table_pairs(case: Case, g: Gate, table: pd.DataFrame | None) -> list[tuple[str, str]]:
+    if table is None or not len(table):
+        return []
+    t = table
+    if "case" in t:
+        t = t[t["case"] == case.name]
+    t = t[~t["status"].isin(NOT_RUN)]
+    pairs = t[["engine", "method"]].drop_duplicates().itertuples(index=False)
+    return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
+
+
+def verdict_table(verdicts: list[GateResult]) -> pd.DataFrame:
+    """The verdicts as a table (:data:`GATE_COLUMNS`)."""
+    return pd.DataFrame([v.row() for v in verdicts], columns=GATE_COLUMNS)

@@ -1,0 +1,198 @@
+"""What ``truestep gate`` writes for CI: JUnit XML, a markdown summary, JSON.
+
+JUnit: one test case per gate verdict (suite ``truestep.ci.gates``, class name the case,
+name the gate's label) and, with a baseline, one per compared table (suite
+``truestep.ci.baseline``) failing with every row that got worse. Markdown: the counts,
+then tables of the failed gates and of what got worse, for a pull request page (and
+``$GITHUB_STEP_SUMMARY``). JSON: everything, for other tools.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import math
+import os
+import platform
+import stat
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from truestep.ci.baseline import Comparison
+from truestep.ci.gates import GateResult
+from truestep.reporting.markdown import text
+from truestep.visible import visible
+
+
+def _counts(verdicts: list[GateResult]) -> dict[str, int]:
+    out = {"pass": 0, "fail": 0, "skip": 0}
+    for v in verdicts:
+        out[v.verdict] += 1
+    return out
+
+
+def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str]) -> str:
+    """The JUnit XML document (as text)."""
+    suites = ET.Element("testsuites", name="truestep")
+    counts = _counts(verdicts)
+    gates = ET.SubElement(
+        suites,
+        "testsuite",
+        name="truestep.ci.gates",
+        tests=str(len(verdicts)),
+        failures=str(counts["fail"]),
+        skipped=str(counts["skip"]),
+        errors="0",
+        hostname=platform.node(),
+    )
+    for v in verdicts:
+        case = ET.SubElement(
+            gates,
+            "testcase",
+            classname=visible(v.case),
+            name=visible(f"{v.gate.where} {v.gate.kind} {v.gate.engine}/{v.gate.method}")
+            + (f" dt={v.gate.dt:g}" if v.gate.dt is not None else ""),
+            file=visible(v.gate.file or ""),
+        )
+        text = visible(f"measured {v.measured}, required {v.required}")
+        if v.verdict == "fail":
+            ET.SubElement(case, "failure", message=text, type="GateFailed").text = visible(v.line())
+        elif v.verdict == "skip":
+            ET.SubElement(case, "skipped", message=text)
+        else:
+            ET.SubElement(case, "system-out").text = text
+    if reasons:
+        strict = ET.SubElement(
+            suites, "testsuite", name="truestep.strict", tests="1", failures="1", skipped="0", errors="0"
+        )
+        case = ET.SubElement(strict, "testcase", classname="truestep", name="something was checked")
+        ET.SubElement(case, "failure", message=visible(reasons[0]), type="NothingChecked").text = "\n".join(
+            visible(r) for r in reasons
+        )
+    if comparison is not None:
+        tables = ["results", "orders", "stability", "restitution"] + (
+            ["timing"] if comparison.time_against else []
+        )
+        worse = comparison.worse()
+        base = ET.SubElement(
+            suites,
+            "testsuite",
+            name="truestep.ci.baseline",
+            tests=str(len(tables)),
+            failures=str(len({f.table for f in worse})),
+            skipped="0",
+            errors="0",
+        )
+        for table in tables:
+            case = ET.SubElement(base, "testcase", classname="baseline", name=table)
+            bad = [f for f in worse if f.table == table]
+            if bad:
+                ET.SubElement(
+                    case, "failure", message=f"{len(bad)} row(s) worse or gone", type="Regression"
+                ).text = "\n".join(visible(f.line()) for f in bad)
+    ET.indent(suites)
+    return ET.tostring(suites, encoding="unicode", xml_declaration=True) + "\n"
+
+
+def _cell(value: object) -> str:
+    """A table cell of the markdown summary: its text shown as written, never as markup
+    (:func:`truestep.reporting.markdown.text`)."""
+    return text(value)
+
+
+def markdown(
+    verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str], *, passed: bool
+) -> str:
+    """A markdown summary: counts, failed gates, regressions."""
+    c = _counts(verdicts)
+    lines = [
+        f"### truestep gate: {'passed' if passed else 'FAILED'}",
+        "",
+        f"{c['pass']} gates held, {c['fail']} failed, {c['skip']} not evaluated.",
+    ]
+    lines += [f"- **{text(r)}**" for r in reasons]
+    failed = [v for v in verdicts if v.verdict == "fail"]
+    if failed:
+        lines += [
+            "",
+            "| case | gate | engine/method | dt | measured | required |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {_cell(v.case)} | {_cell(v.gate.where)} {_cell(v.gate.kind)} | {_cell(v.gate.engine)}/"
+            f"{_cell(v.gate.method)} | {'' if v.gate.dt is None else f'{v.gate.dt:g}'} | "
+            f"{_cell(v.measured)} | {_cell(v.required)} |"
+            for v in failed
+        ]
+    if comparison is not None:
+        n = {
+            k: sum(f.change == k for f in comparison.findings)
+            for k in ("worse", "better", "appeared", "vanished")
+        }
+        lines += [
+            "",
+            f"Baseline: {comparison.compared} rows compared; {n['worse']} worse, "
+            f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished.",
+        ]
+        worse = comparison.worse()
+        if worse:
+            lines += ["", "| change | table | row | quantity | baseline | now |", "|---|---|---|---|---|---|"]
+            lines += [
+                f"| {f.change} | {f.table} | {_cell(f.key)} | {_cell(f.quantity)} | "
+                f"{_cell(_fmt(f.baseline))} | {_cell(_fmt(f.current))} |"
+                for f in worse[:200]
+            ]
+            if len(worse) > 200:
+                lines.append(f"\n... and {len(worse) - 200} more (see the JSON output).")
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(x: object) -> str:
+    return f"{x:.4g}" if isinstance(x, float) else str(x)
+
+
+def _clean(x: object) -> object:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    if hasattr(x, "item"):
+        return _clean(x.item())
+    return x
+
+
+def as_json(
+    verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str], *, passed: bool
+) -> str:
+    """Everything as one JSON document."""
+    doc = {
+        "passed": passed,
+        "counts": _counts(verdicts),
+        "reasons": reasons,
+        "gates": [v.row() for v in verdicts],
+    }
+    if comparison is not None:
+        doc["baseline"] = {
+            "compared": comparison.compared,
+            "tolerances": comparison.tolerances,
+            "time_against": comparison.time_against,
+            "findings": [{k: _clean(val) for k, val in f.__dict__.items()} for f in comparison.findings],
+        }
+    return json.dumps(doc, indent=1, default=str, ensure_ascii=True) + "\n"
+
+
+def write(path: str | Path, text: str, *, append: bool = False) -> None:
+    """Write ``text`` to ``path`` (append for ``$GITHUB_STEP_SUMMARY``): a regular file
+    or a new one; anything else (a FIFO that would block, a device, a directory) raises
+    :class:`OSError` naming it, without writing."""
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_CLOEXEC | (os.O_APPEND if append else 0)
+    if os.path.lexists(path) and not stat.S_ISREG(os.stat(path).st_mode):
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
+    fd = os.open(path, flags, 0o644)
+    with os.fdopen(fd, "a" if append else "w", encoding="utf-8") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        if not append:
+            fh.truncate(0)
+        fh.write(text)

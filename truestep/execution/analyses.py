@@ -1,0 +1,292 @@
+"""The analyses beyond the main sweep: stability limits, restitution per bounce, and how
+cost grows with the number of particles."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+
+from truestep.adapters import get_adapter
+from truestep.adapters.base import facts_of
+from truestep.cases.case import Case
+from truestep.cases.exact import stability_limit
+from truestep.cases.loader import CASE_DIR, load_case
+from truestep.execution.isolation import run_untimed, untimed_workers
+from truestep.execution.runner import duplicate_of, preload
+from truestep.measures.restitution import bounces, heights
+from truestep.measures.stability import SearchTimeout, search_case
+from truestep.tables.spec import RESTITUTION, SCALING, STABILITY
+
+STABILITY_COLUMNS = STABILITY.names
+"""The columns of ``stability.csv`` (:data:`truestep.tables.spec.STABILITY`)."""
+RESTITUTION_COLUMNS = RESTITUTION.names
+"""The columns of ``restitution.csv`` (:data:`truestep.tables.spec.RESTITUTION`)."""
+
+RESTITUTION_SET = (0.0, 0.5, 0.8, 0.9, 1.0)
+RESTITUTION_DTS = (1 / 240, 1 / 1000)
+QUICK_RESTITUTION_SET = (0.5,)
+QUICK_RESTITUTION_DTS = (1 / 240,)
+REFERENCE_BOUNCE_METHODS = ("lecture", "symplectic-euler", "rk4")
+"""Reference methods in the bounce test: the collision pass is the same for all, so a
+first-order, a symplectic and a fourth-order integrator show whether the integrator
+matters at all."""
+BOUNCES = 3
+SCALING_BUDGET_S = 12.0
+"""Seconds of timed runs for the scaling table of a full run (``truestep bench`` takes
+longer by default, :data:`truestep.execution.bench.BUDGET_S`, and goes to n = 1e6)."""
+SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
+"""Particle counts of a full run's scaling table."""
+
+
+def _search(engine: str, case: Case, method: str, quick: bool):
+    """``(SearchResult or the safety valve's message, seconds)`` of one search."""
+    adapter = get_adapter(engine)
+    start = time.perf_counter()
+    try:
+        result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+    except SearchTimeout as err:
+        return str(err), time.perf_counter() - start
+    return result, time.perf_counter() - start
+
+
+def _say(msg: str) -> None:
+    from truestep.visible import visible
+
+    print(visible(msg), file=sys.stderr)
+
+
+def stability_table(cases: list[Case], engines: list[str], *, quick: bool, workers: int = 1) -> pd.DataFrame:
+    """Bisect the largest stable step for every case that declares a search.
+
+    ``--quick`` searches only cases whose search says ``quick = true``, to 1%. Searches
+    are not timed, so up to ``workers`` run at once, each in its own process.
+    """
+    rows: list[dict] = []
+    calls, slots = [], []
+    for case in cases:
+        if case.stability is None or (quick and not case.stability.quick):
+            continue
+        for engine in engines:
+            adapter = get_adapter(engine)
+            for method in adapter.methods:
+                row: dict[str, object] = {"case": case.name, "engine": engine, "method": method}
+                missing = adapter.missing(case, method)
+                adaptive = method in adapter.adaptive_methods
+                exact = None if adaptive else stability_limit(case, facts_of(adapter, method))
+                row["dt_limit_exact"] = np.nan if exact is None else exact
+                if missing:
+                    rows.append({**row, "status": "unsupported", "note": ",".join(sorted(missing))})
+                elif adaptive:
+                    rows.append({**row, "status": "skipped", "note": "adaptive: chooses its own step"})
+                elif (same := duplicate_of(adapter, case, method)) is not None:
+                    rows.append({**row, "status": "skipped", "note": same})
+                else:
+                    rows.append(row)
+                    slots.append(row)
+                    calls.append(
+                        (_search, (engine, case, method, quick), case.timeout_s * case.stability.max_runs)
+                    )
+
+    def done(k: int, out) -> None:
+        row = slots[k]
+        if out.status != "ok":
+            row.update(status=out.status, note=out.message)
+            _say(f"stability {row['case']} {row['engine']}/{row['method']}: {out.status}")
+            return
+        r, seconds = out.value
+        if isinstance(r, str):  # the safety valve fired: no limit from this machine's speed
+            row.update(status="timeout", note=r)
+            _say(f"stability {row['case']} {row['engine']}/{row['method']}: timeout ({r})")
+            return
+        row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status=r.status, note=r.note)
+        _say(
+            f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
+            f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
+            f"{seconds:.1f} s"
+        )
+
+    # Longest first, so that no long search starts last while the other cores idle.
+    order = sorted(
+        range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
+    )
+    run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
+    return STABILITY.frame(rows)
+
+
+IMPLICIT_COST = 8.0
+"""Evaluations a step of a method whose count varies (implicit Euler's Newton iterations)
+is taken to cost, for scheduling only."""
+
+
+def _search_cost(engine: str, case: Case, method: str) -> float:
+    """A rough relative cost of a search, for scheduling only: steps of its smallest-step
+    run times the particles, times the evaluations a step of ``method`` makes (its
+    declared facts; :data:`IMPLICIT_COST` where the count varies)."""
+    from truestep.adapters.base import facts_of
+
+    spec = case.stability
+    if spec is None:
+        raise ValueError(f"{case.name}: the case declares no stability search")
+    steps = max(spec.min_steps, spec.horizon / spec.dt_lo)
+    facts = facts_of(get_adapter(engine), method)
+    per_step = 1.0 if facts is None else float(facts.evaluations_per_step or IMPLICIT_COST)
+    return steps * (case.model.n if case.model is not None else 1) * per_step
+
+
+DROP_CASE = CASE_DIR / "analyses" / "restitution-drop.toml"
+"""The restitution sweep's scene: a ball of radius 0.05 m dropped from 1 m onto y = 0."""
+
+
+@functools.cache
+def _drop() -> Case:
+    return load_case(DROP_CASE)
+
+
+def drop_geometry() -> tuple[float, float, float]:
+    """The drop's ball radius (m), the height of its lowest point above the plane (m) and
+    gravity along the plane's normal (m/s^2), as :data:`DROP_CASE` sets them."""
+    model = _drop().particles
+    plane = model.planes[0]
+    radius = float(model.radius[0])
+    height = float((model.x0[0] - plane.point) @ plane.normal) - radius
+    return radius, height, float(-model.gravity @ plane.normal)
+
+
+def bounce_case(e: float, dt: float) -> Case:
+    """The drop of :data:`DROP_CASE` with restitution ``e`` at step ``dt`` (s), run in whole
+    steps past the third bounce."""
+    drop = _drop()
+    model = drop.particles
+    _, height, g = drop_geometry()
+    t_first = np.sqrt(2 * height / g)
+    steps = int(np.ceil((t_first * (1 + 2 * (e + e**2 + e**3)) + 0.25) / dt))
+    duration = steps * dt  # whole steps: the run steps exactly the dt its rows are labelled with
+    return dataclasses.replace(
+        drop,
+        name=f"bounce-e{e:g}",
+        model=dataclasses.replace(model, planes=[dataclasses.replace(model.planes[0], restitution=e)]),
+        duration=duration,
+        dts=[dt],
+        quick_dts=[dt],
+        max_records=int(np.ceil(duration / dt)) + 1,
+    )
+
+
+def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
+    case = bounce_case(e, dt)
+    traj = get_adapter(engine).simulate(case, method, dt)
+    base = {"engine": engine, "method": method, "dt": dt, "e_set": e}
+    if traj.status != "ok":
+        return [{**base, "bounce": 1, "status": traj.status, "note": traj.message}]
+    plane = case.particles.planes[0]
+    radius, _, g = drop_geometry()
+    h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, radius)
+    found = bounces(traj.t, h, vn, g)
+    rows = []
+    for k in range(1, BOUNCES + 1):
+        if k <= len(found):
+            b = found[k - 1]
+            rows.append(
+                {
+                    **base,
+                    "bounce": k,
+                    "e_measured": b.e_velocity,
+                    "e_apex": b.e_apex,
+                    "v_in": b.v_in,
+                    "v_out": b.v_out,
+                    "apex": b.apex,
+                    "penetration": b.penetration,
+                    "status": "ok",
+                    "note": "",
+                }
+            )
+        else:
+            why = "ball at rest after the previous contact" if found else "no contact found"
+            rows.append({**base, "bounce": k, "status": "ok", "note": why})
+    return rows
+
+
+def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> pd.DataFrame:
+    """Drop a ball at every requested restitution and step, in every engine and method.
+
+    The drops are not timed, so up to ``workers`` run at once, each in its own process.
+    """
+    e_set = QUICK_RESTITUTION_SET if quick else RESTITUTION_SET
+    dts = QUICK_RESTITUTION_DTS if quick else RESTITUTION_DTS
+    groups: list[list[dict]] = []  # the rows of one drop (or one unsupported method)
+    calls, slots = [], []
+    for engine in engines:
+        adapter = get_adapter(engine)
+        probe = bounce_case(0.5, dts[0])
+        for method in adapter.methods:
+            if engine == "reference" and method not in REFERENCE_BOUNCE_METHODS:
+                continue
+            missing = adapter.missing(probe, method)
+            if missing or method in adapter.adaptive_methods:
+                why = ",".join(sorted(missing)) or "adaptive integrator: no collision events"
+                groups.append([{"engine": engine, "method": method, "status": "unsupported", "note": why}])
+                continue
+            for dt in dts:
+                for e in e_set:
+                    groups.append([])
+                    slots.append((len(groups) - 1, engine, method, e, dt))
+                    calls.append((_bounce_rows, (engine, method, e, dt), 60.0))
+
+    def done(k: int, out) -> None:
+        g, engine, method, e, dt = slots[k]
+        _say(f"restitution {engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
+        if out.status == "ok":
+            groups[g].extend(out.value)
+        else:
+            groups[g].append(
+                {
+                    "engine": engine,
+                    "method": method,
+                    "dt": dt,
+                    "e_set": e,
+                    "bounce": 1,
+                    "status": out.status,
+                    "note": out.message,
+                }
+            )
+
+    run_untimed(calls, workers, done)
+    return RESTITUTION.frame([r for g in groups for r in g])
+
+
+def run_analyses(
+    cases: list[Case], engines: list[str], results: pd.DataFrame, *, quick: bool
+) -> dict[str, pd.DataFrame]:
+    """Every table besides ``results``: ``stability`` (for the cases with a search),
+    ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
+    and ``scaling`` (particle-steps per second against n, :func:`truestep.execution.bench.scaling_table`
+    in :data:`SCALING_BUDGET_S`, when the rain case is among ``cases`` and the run is not
+    ``quick``; else empty).
+
+    The first two are not timed: their runs share the machine's cores
+    (:func:`untimed_workers`). The scaling table is timed, so it runs after them, one run
+    at a time.
+    """
+    from truestep.execution.bench import RAIN_CASE, scaling_table
+
+    preload()
+    workers = untimed_workers()
+    bouncing = any("restitution" in c.tags for c in cases)
+    tables = {
+        "stability": stability_table(cases, engines, quick=quick, workers=workers),
+        "restitution": restitution_table(engines, quick=quick, workers=workers)
+        if bouncing
+        else RESTITUTION.frame([]),
+    }
+    rain = next((c for c in cases if c.name == RAIN_CASE), None)
+    tables["scaling"] = (
+        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain)
+        if rain is not None and not quick
+        else SCALING.frame([])
+    )
+    return tables

@@ -1,0 +1,329 @@
+"""Run simulations in child processes, so a crash or a hang becomes a row.
+
+Each call forks a fresh process (engine parameters cannot leak from one run into the
+next, as pybullet's would between clients of one process), waits at most its timeout and
+reports what happened. :func:`run_isolated` runs one child at a time: timed runs never
+share the CPU with other runs of the harness. :func:`run_isolated_all` keeps up to
+``workers`` children busy at once, for work whose wall time is not measured (stability
+searches, bounce tests).
+
+No child outlives its parent: each one asks the kernel for SIGKILL when its parent dies
+(Linux, :func:`truestep.execution.oscalls.die_with_parent`), ignores SIGINT (the parent decides)
+and takes SIGTERM by default; the parent kills the live ones when it is interrupted
+(:func:`kill_children`, :mod:`truestep.execution.interrupts`).
+
+What runs in a child is contained: the child leads a process group of its own and
+adopts every orphaned process below it (:func:`truestep.execution.oscalls.become_subreaper`), and
+whatever the adapter started there (helpers, a daemon that left the group with
+``setsid``) is killed when the call ends, after a normal finish, a crash, a timeout or
+an interruption (:func:`truestep.execution.process_tree.kill_tree`). Its standard output and error
+(the file descriptors, so its own subprocesses' too) go to a pipe whose last
+:data:`OUTPUT_TAIL` bytes come back in :attr:`Outcome.output`, never to truestep's own
+output; standard input is ``/dev/null``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import fcntl
+import multiprocessing as mp
+import os
+import signal
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import wait
+from typing import Any
+
+from truestep.execution import faults
+from truestep.execution.oscalls import become_subreaper, die_with_parent
+from truestep.execution.process_tree import has_children, kill_group, kill_tree, reap_children
+
+
+@dataclass
+class Outcome:
+    """What became of an isolated call: ``ok`` with its value, or why not; ``output``:
+    the end of what it wrote to its standard output and error."""
+
+    status: str  # ok | crashed | timeout
+    value: Any = None
+    message: str = ""
+    output: str = ""
+
+
+OUTPUT_TAIL = 4000
+"""The bytes of a child's standard output and error kept (its last ones)."""
+PIPE_BYTES = 2**20
+"""The capture pipe's buffer: what an engine's C code may write in one call while it
+holds the interpreter lock, before the thread that drains the pipe can run."""
+
+
+Call = tuple[Callable[..., Any], tuple, float]
+"""``(fn, args, timeout_s)``: one isolated call."""
+
+
+_RUN_DEADLINE: list[float | None] = [None]
+"""When the whole run's budget ends (``time.monotonic()``), if it has one."""
+BUDGET_SPENT = "the run's budget (truestep run --budget) was spent before this finished"
+
+
+def set_run_budget(seconds: float | None) -> None:
+    """Give every isolated call from now on at most ``seconds`` (s) in all, counted from
+    now (``None``: no run-wide budget). A call that would outlast it is cut at the end
+    of the budget, and calls after it are not started: both are ``timeout`` outcomes that
+    say so."""
+    _RUN_DEADLINE[0] = None if seconds is None else time.monotonic() + seconds
+
+
+def _budget_left() -> float:
+    end = _RUN_DEADLINE[0]
+    return float("inf") if end is None else end - time.monotonic()
+
+
+_LIVE: dict[int, Any] = {}
+"""The children started by this process and not yet joined, by pid."""
+
+
+class _Capture:
+    """Standard output and error of this process (file descriptors 1 and 2) into a pipe
+    drained by a thread that keeps the last :data:`OUTPUT_TAIL` bytes; standard input
+    from ``/dev/null``."""
+
+    def __init__(self) -> None:
+        read, write = os.pipe()  # text buffered before the fork is flushed into it too
+        with contextlib.suppress(OSError, AttributeError):  # room for a chatty C library
+            fcntl.fcntl(write, fcntl.F_SETPIPE_SZ, PIPE_BYTES)
+        self.saved = (os.dup(1), os.dup(2))
+        os.dup2(write, 1)
+        os.dup2(write, 2)
+        os.close(write)
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.close(null)
+        self.streams = (sys.stdout, sys.stderr)  # maybe not on fds 1 and 2 (pytest's)
+        sys.stdout = open(1, "w", buffering=1, closefd=False, errors="backslashreplace")
+        sys.stderr = open(2, "w", buffering=1, closefd=False, errors="backslashreplace")
+        self.tail = bytearray()
+        self.thread = threading.Thread(target=self._drain, args=(read,), daemon=True)
+        self.thread.start()
+
+    def _drain(self, fd: int) -> None:
+        try:
+            while chunk := os.read(fd, 65536):
+                self.tail += chunk
+                del self.tail[:-OUTPUT_TAIL]
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+    def stop(self) -> str:
+        """Put standard output and error back, kill what is left below this process
+        (its copies of the pipe), and return what was written."""
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        with contextlib.suppress(OSError, AttributeError):  # C stdio's buffers too
+            ctypes.CDLL(None).fflush(None)
+        sys.stdout, sys.stderr = self.streams
+        os.dup2(self.saved[0], 1)
+        os.dup2(self.saved[1], 2)
+        for fd in self.saved:
+            os.close(fd)
+        _kill_below()
+        self.thread.join(timeout=2.0)
+        return bytes(self.tail).decode("utf-8", "replace")
+
+
+def _kill_below() -> None:
+    """Kill every process below this one, and this process group's other members."""
+    if has_children():
+        kill_tree(os.getpid())
+        reap_children()
+
+
+def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
+    die_with_parent(parent)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(OSError):
+        os.setpgid(0, 0)
+    become_subreaper()
+    capture = _Capture()
+    try:
+        reply: tuple = ("ok", fn(*args))
+    except BaseException as err:  # everything: the parent turns it into a row
+        tb = traceback.extract_tb(err.__traceback__)
+        where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+        reply = ("crashed", f"{type(err).__name__}: {str(err)[:MESSAGE_CHARS]}{where}")
+    output = capture.stop()
+    try:
+        conn.send((*reply, output))
+    except Exception as err:  # a value that cannot be pickled: the call's row says so
+        conn.send(
+            ("crashed", f"its result cannot be sent back: {type(err).__name__}: {str(err)[:200]}", output)
+        )
+    finally:
+        conn.close()
+
+
+MESSAGE_CHARS = 1000
+"""The most characters of an exception's message a crashed row keeps."""
+
+
+def _end(proc: Any) -> None:
+    """Kill a child, everything below it and its process group, and reap it."""
+    kill_tree(proc.pid)
+    proc.kill()
+    proc.join()
+    kill_group(proc.pid)
+
+
+@dataclass
+class Running:
+    """A call started by :func:`start_isolated`, to be collected by :func:`finish_isolated`."""
+
+    index: int
+    proc: Any
+    conn: Any
+    deadline: float
+    timeout: float
+    by_budget: bool = False
+
+
+def _start(index: int, call: Call) -> Running:
+    fn, args, timeout = call
+    ctx = mp.get_context("fork")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(child, os.getpid(), fn, args), daemon=True)
+    proc.start()
+    with contextlib.suppress(OSError):  # as the child does: no moment outside its group
+        os.setpgid(proc.pid, proc.pid)
+    _LIVE[proc.pid] = proc
+    faults.note_child(proc.pid)
+    child.close()
+    left = _budget_left()
+    return Running(
+        index, proc, parent, time.monotonic() + min(timeout, left), timeout, by_budget=left < timeout
+    )
+
+
+def _finish(run: Running, *, timed_out: bool) -> Outcome:
+    try:
+        if timed_out:
+            return Outcome(
+                "timeout", message=BUDGET_SPENT if run.by_budget else f"no result within {run.timeout:g} s"
+            )
+        try:
+            status, value, output = run.conn.recv()
+        except (EOFError, OSError, ValueError):
+            _end(run.proc)
+            return Outcome("crashed", message=f"engine process died (exit code {run.proc.exitcode})")
+        return (
+            Outcome("ok", value, output=output)
+            if status == "ok"
+            else Outcome("crashed", message=value, output=output)
+        )
+    finally:
+        run.conn.close()
+        if timed_out:
+            _end(run.proc)
+        run.proc.join()
+        kill_group(run.proc.pid)
+        _LIVE.pop(run.proc.pid, None)
+
+
+def kill_children() -> None:
+    """SIGKILL every child this process started and has not joined yet, with everything
+    below it, and reap them."""
+    for pid, proc in list(_LIVE.items()):
+        if proc._parent_pid == os.getpid():  # not a copy inherited through a fork
+            _end(proc)
+        _LIVE.pop(pid, None)
+
+
+def run_isolated_all(
+    calls: Sequence[Call], workers: int = 1, done: Callable[[int, Outcome], None] | None = None
+) -> list[Outcome]:
+    """Run every ``fn(*args)`` in its own forked child, at most ``workers`` at a time.
+
+    Returns the outcomes in the order of ``calls``; never raises for what happens inside a
+    child. ``done(index, outcome)`` is called as each one finishes.
+    """
+    outcomes: list[Outcome | None] = [None] * len(calls)
+    pending = list(enumerate(calls))[::-1]
+    running: list[Running] = []
+    try:
+        while pending or running:
+            while pending and len(running) < max(1, workers):
+                if _budget_left() <= 0:  # not started: this call's row says why
+                    index, _ = pending.pop()
+                    outcomes[index] = Outcome("timeout", message=BUDGET_SPENT)
+                    if done is not None:
+                        done(index, outcomes[index])
+                    continue
+                running.append(_start(*pending.pop()))
+            if not running:
+                continue
+            now = time.monotonic()
+            ready = wait([r.conn for r in running], timeout=max(0.0, min(r.deadline for r in running) - now))
+            for r in list(running):
+                timed_out = r.conn not in ready and time.monotonic() >= r.deadline
+                if r.conn in ready or timed_out:
+                    running.remove(r)
+                    outcomes[r.index] = _finish(r, timed_out=timed_out)
+                    if done is not None:
+                        done(r.index, outcomes[r.index])
+                    faults.child_finished()
+    finally:
+        for r in running:
+            _end(r.proc)
+            r.conn.close()
+            _LIVE.pop(r.proc.pid, None)
+    return outcomes  # type: ignore[return-value]
+
+
+_UNTIMED: list[Any] = [None]
+"""The cluster untimed calls go to (:func:`set_untimed_runner`), if any."""
+
+
+def set_untimed_runner(cluster: Any) -> None:
+    """Send the calls of :func:`run_untimed` to ``cluster`` (a
+    :class:`truestep.execution.cluster.Cluster`), or back to this machine's cores (``None``)."""
+    _UNTIMED[0] = cluster
+
+
+def run_untimed(
+    calls: Sequence[Call], workers: int, done: Callable[[int, Outcome], None] | None = None
+) -> list[Outcome]:
+    """Work whose wall time is not measured (stability searches, bounce drops): on every
+    worker of the cluster set by :func:`set_untimed_runner`, else as
+    :func:`run_isolated_all` with ``workers`` children at once."""
+    if _UNTIMED[0] is not None:
+        return _UNTIMED[0].untimed(calls, done)
+    return run_isolated_all(calls, workers, done)
+
+
+def start_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Running:
+    """Start ``fn(*args)`` in a forked child and return at once (untimed work only)."""
+    return _start(0, (fn, args, timeout))
+
+
+def finish_isolated(run: Running) -> Outcome:
+    """Wait for a started call until its result arrives or its time runs out."""
+    ready = wait([run.conn], timeout=max(0.0, run.deadline - time.monotonic()))
+    return _finish(run, timed_out=not ready)
+
+
+def run_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Outcome:
+    """Call ``fn(*args)`` in a forked child, alone; never raises for what happens inside it."""
+    return run_isolated_all([(fn, args, timeout)])[0]
+
+
+def untimed_workers() -> int:
+    """How many children may run at once for work that is not timed: the usable cores."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1

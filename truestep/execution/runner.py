@@ -1,0 +1,571 @@
+"""Expand case x engine x method x dt, run each pair in isolation, measure, tabulate."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import os
+import statistics
+import traceback
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+from truestep.adapters import get_adapter
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
+from truestep.execution import faults
+from truestep.execution.isolation import Outcome, run_isolated
+from truestep.execution.progress import Progress
+from truestep.execution.sweep_job import SweepJob, host_name
+from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+from truestep.measures import metrics
+from truestep.measures.trust import checked
+from truestep.tables.spec import RESULTS
+
+if TYPE_CHECKING:
+    from truestep.execution.cluster import Cluster
+    from truestep.execution.journal import Journal
+
+RESULT_COLUMNS = RESULTS.names
+"""The columns of ``results.csv`` (:data:`truestep.tables.spec.RESULTS`); one column per named
+property follows them."""
+MACHINE_COLUMNS = RESULTS.where(machine=True)
+"""The columns of ``results.csv`` that depend on the machine and its load (timings, the
+host) or on where the case file lies (``case_source`` of a file outside the library).
+Every other column is the same, bit for bit, for the same revision and package versions on any
+machine (:mod:`truestep.numerics`), except the message of a row whose engine is not
+deterministic (:data:`NOT_REPEATABLE`)."""
+
+
+@dataclass(frozen=True)
+class Timing:
+    """How runs are timed: a short warm-up, a first timed run (whose trajectory is kept),
+    then more timed runs until the timing is stable.
+
+    The warm-up runs the same scene, engine and method for :attr:`warmup_fraction` of the
+    duration (JIT compilation, caches, lazy imports, first-call costs). A first run
+    shorter than :attr:`min_total_s` is repeated until the timed runs add up to
+    :attr:`min_total_s` and number at least :attr:`min_repeats` (at most
+    :attr:`max_repeats`): short runs are the ones scheduling and timer noise distort most.
+    A run up to :attr:`long_run_s` is timed twice, so that its spread is known; a longer
+    one once (one run of that length is not moved by noise beyond a few percent). The
+    reported wall time is the median of the timed runs, and ``wall_s_spread`` half their
+    interquartile range (:func:`spread`). Neither the warm-up nor scene building is
+    timed. How many runs are timed depends on the machine's speed; nothing else does.
+    """
+
+    min_total_s: float = 0.05
+    min_repeats: int = 3
+    max_repeats: int = 25
+    long_run_s: float = 0.5
+    warmup_fraction: float = 0.05
+
+    def runs_after(self, first_s: float) -> int:
+        """How many timed runs in all, after a first one of ``first_s`` seconds."""
+        if first_s >= self.long_run_s:
+            return 1
+        if first_s >= self.min_total_s:
+            return 2
+        wanted = int(np.ceil(self.min_total_s / max(first_s, 1e-9)))
+        return int(np.clip(wanted, self.min_repeats, self.max_repeats))
+
+
+QUICK_TIMING = Timing(min_total_s=0.0, min_repeats=1, max_repeats=1, long_run_s=0.0)
+"""``--quick`` runs time each row once: a smoke run (its ties are read against the least
+noise, :data:`truestep.measures.picks.TIE_NOISE`, with no spread of its own)."""
+
+
+def spread(walls: list[float]) -> float:
+    """Half the interquartile range of timed runs' wall times, s (half their range with
+    fewer than four runs; NaN for one run): how far the median may move with noise."""
+    if len(walls) < 2:
+        return float("nan")
+    if len(walls) < 4:
+        return (max(walls) - min(walls)) / 2
+    q25, q75 = np.percentile(walls, [25, 75])
+    return float(q75 - q25) / 2
+
+
+def _same_run(a: Trajectory, b: Trajectory) -> bool:
+    """Whether two runs of the same scene ended in the same state, bit for bit (runs that
+    did not finish are only checked to have failed alike: a run watched at every step
+    finds a blow-up earlier than one checked every few steps)."""
+    if a.status != b.status:
+        return False
+    if a.status != "ok":
+        return True
+    if (a.nfev, a.steps, len(a.t)) != (b.nfev, b.steps, len(b.t)):
+        return False
+    pairs = [(a.t[-1:], b.t[-1:]), (a.x[-1:], b.x[-1:])]
+    if a.v is not None and b.v is not None:
+        pairs.append((a.v[-1:], b.v[-1:]))
+    return all(np.array_equal(p, q, equal_nan=True) for p, q in pairs)
+
+
+NOT_REPEATABLE = "not repeatable: timed runs of the same scene ended in different states"
+"""The note of a row whose engine gave another end state when run again (an engine that is
+not deterministic): its numbers may differ from run to run and machine to machine."""
+
+
+def watches_every_step(adapter) -> bool:
+    """Whether ``adapter.simulate`` takes ``monitor=True`` (Adapter protocol, item 9)."""
+    import inspect
+
+    try:
+        return "monitor" in inspect.signature(adapter.simulate).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def simulate_timed(
+    engine: str, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool = True
+) -> Trajectory:
+    """Make the run the row is measured from, then time; runs inside the child process.
+
+    The measured run is watched at every step where the adapter can
+    (``simulate(..., monitor=True)``: the energy's extremes over every step) and is not
+    timed; it also warms the process up (compilation, caches, first-call costs) for the
+    timed runs. An adapter that cannot watch is warmed up instead by a short run
+    (:attr:`Timing.warmup_fraction` of the duration; unless ``warm_up`` is false: this
+    process has just run the same case and method). The timed runs follow
+    (:meth:`Timing.runs_after`), and every one of them is checked to end where the
+    measured run did, bit for bit; one that does not puts :data:`NOT_REPEATABLE` in the
+    row's message.
+    """
+    adapter = get_adapter(engine)
+    monitor = watches_every_step(adapter)
+    if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
+        short = dataclasses.replace(
+            case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
+        )
+        adapter.simulate(short, method, dt)
+    traj = adapter.simulate(case, method, dt, monitor=True) if monitor else None
+    timed = adapter.simulate(case, method, dt)
+    if traj is None:
+        traj = timed
+    walls = [timed.wall_s]
+    repeatable = traj is timed or _same_run(traj, timed)
+    if timed.status == "ok":
+        for _ in range(timing.runs_after(timed.wall_s) - 1):
+            again = adapter.simulate(case, method, dt)
+            walls.append(again.wall_s)
+            repeatable = repeatable and _same_run(traj, again)
+    traj.wall_s = statistics.median(walls)
+    traj.path = timed.path or traj.path
+    if not repeatable:
+        traj.message = "; ".join(m for m in (traj.message, NOT_REPEATABLE) if m)
+    traj.extra["repeats"] = np.array(len(walls))
+    traj.extra["wall_s_spread"] = np.array(spread(walls))
+    return traj
+
+
+def measure(case: Case, traj: Trajectory) -> dict[str, float]:
+    """Every metric of one run, from its trajectory and the case's reference."""
+    from truestep.measures.properties import PROPERTIES
+
+    out: dict[str, float] = {}
+    exact = metrics.exact_for(case, traj.t) if traj.status == "ok" else None
+    if exact is not None:
+        out["error"] = metrics.position_error(case, traj, exact)
+        out["error_final"] = metrics.position_error(case, traj, exact, norm="final")
+        out["error_v"] = metrics.position_error(case, traj, exact, part="v")
+    else:
+        out["error"] = out["error_final"] = out["error_v"] = np.nan
+    drift, drift_end = metrics.energy_drift(case, traj, exact)
+    out["energy_drift"], out["energy_drift_final"] = drift, drift_end
+    for name in case.properties:
+        out[name] = PROPERTIES[name](case, traj) if traj.status == "ok" else np.nan
+    return out
+
+
+TRACE_POINTS = 400
+"""Energy traces kept for the report are thinned to at most this many points."""
+
+
+def energy_trace(traj: Trajectory) -> tuple[np.ndarray, np.ndarray] | None:
+    """Times (s) and energies (J), thinned to :data:`TRACE_POINTS`, or ``None``."""
+    if traj.energy is None or len(traj.t) < 2:
+        return None
+    keep = np.unique(np.linspace(0, len(traj.t) - 1, TRACE_POINTS).round().astype(int))
+    return traj.t[keep], traj.energy[keep]
+
+
+def simulate_sweep(
+    engine: str, case: Case, method: str, dts: list[float], timing: Timing
+) -> list[Trajectory | Outcome | str]:
+    """:func:`simulate_timed` at every step of a sweep, in one child process.
+
+    Each entry is the step's Trajectory, the error message of an exception it raised, or
+    a ``timeout`` :class:`Outcome` for a step that ran past the case's ``timeout`` (the
+    other steps still run; a step stuck in compiled code that no signal interrupts is
+    left to the process's own timeout, :func:`run_sweep`). Runs of one case, engine and
+    method share a process: the engine's first-use costs are paid once, and no engine state outlives a run
+    (every adapter builds and tears down its scene per run). The first step that runs
+    warms the process up for all of them.
+    """
+    out: list[Trajectory | Outcome | str] = []
+    for dt in dts:
+        warm = any(isinstance(o, Trajectory) for o in out)
+        try:
+            with time_limit(case.timeout_s, f"the run at {dt:g}"):
+                out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
+        except TimeLimitExceeded as err:  # this step's timeout row; the sweep goes on
+            out.append(Outcome("timeout", message=str(err)))
+        except Exception as err:  # a row that says so; the sweep goes on
+            tb = traceback.extract_tb(err.__traceback__)
+            where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+            out.append(f"{type(err).__name__}: {err}{where}")
+    return out
+
+
+def row_from(
+    case: Case,
+    engine: str,
+    method: str,
+    dt: float,
+    *,
+    adaptive: bool,
+    outcome: Trajectory | Outcome | str,
+    traces: dict | None = None,
+) -> dict:
+    """One row of ``results.csv`` from what a run gave: a Trajectory, an exception's
+    message (``crashed``) or an isolation outcome that is not ``ok``.
+
+    If ``traces`` is given, the run's thinned energy trace is stored in it under
+    ``(case, engine, method, dt_kind, dt)``.
+    """
+    row = {
+        "case": case.name,
+        "engine": engine,
+        "method": method,
+        "dt": dt,
+        "dt_kind": "tolerance" if adaptive else "step",
+    }
+    if isinstance(outcome, str):
+        row.update(status="crashed", message=outcome[:MESSAGE_CHARS])
+        return row
+    if isinstance(outcome, Outcome):
+        row.update(status=outcome.status, message=with_output(outcome.message, outcome.output))
+        return row
+    traj = checked(outcome, case.model.n if case.model is not None else None, duration=case.duration)
+    if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
+        row.update(status="crashed", message=traj)
+        return row
+    row.update(
+        nfev=traj.nfev,
+        steps=traj.steps,
+        wall_s=traj.wall_s,
+        wall_s_spread=float(traj.extra.get("wall_s_spread", np.nan)),
+        repeats=int(traj.extra.get("repeats", 0)),
+        path=str(traj.path)[:MESSAGE_CHARS],
+    )
+    timed_out = _MEASURE_TIMED_OUT.get(case.file)
+    try:
+        if timed_out:
+            raise TimeLimitExceeded(timed_out)
+        with time_limit(case.timeout_s, "measuring the run (exact solution included)"):
+            if traj.status == "ok" and (failed := _motion_failure(case, traj)) is not None:
+                traj.status, traj.t_fail = "unstable", failed.t
+                traj.message = "; ".join(m for m in (traj.message, failed.reason) if m)
+            row.update(status=traj.status, t_fail=traj.t_fail, message=str(traj.message)[:MESSAGE_CHARS])
+            row.update(measure(case, traj))
+    except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
+        _MEASURE_TIMED_OUT[case.file] = str(err)
+        row.update(status="timeout", message=str(err))
+    except Exception as err:  # measuring this run failed: this row says so, the run goes on
+        row.update(
+            status="crashed", message=f"measuring the run failed: {type(err).__name__}: {str(err)[:120]}"
+        )
+    if traces is not None:
+        trace = energy_trace(traj)
+        if trace is not None:
+            traces[(case.name, engine, method, row["dt_kind"], dt)] = trace
+    return row
+
+
+def _motion_failure(case: Case, traj: Trajectory):
+    """:func:`truestep.measures.stability.motion_failure` against the case's energy scale."""
+    from truestep.measures.energy_scale import energy_scale
+    from truestep.measures.stability import motion_failure
+
+    return motion_failure(case, traj, energy_scale(case))
+
+
+MESSAGE_CHARS = 2000
+"""The most characters of a row's message (an adapter's, an exception's, its output)."""
+OUTPUT_CHARS = 500
+"""The most characters of an engine process's own output a failed row shows."""
+
+
+def with_output(message: str, output: str) -> str:
+    """A failed row's message, with the end of what its engine process wrote (captured by
+    :mod:`truestep.execution.isolation`, never shown on truestep's own output)."""
+    output = " ".join(output.split())
+    if output:
+        shown = output if len(output) <= OUTPUT_CHARS else "..." + output[-OUTPUT_CHARS:]
+        message = f"{message}; engine output: {shown}" if message else f"engine output: {shown}"
+    return message[:MESSAGE_CHARS]
+
+
+SWEEP_SLACK = 1.25
+"""The sweep process's own limit over the sum of its steps' limits: each step stops at its
+``timeout`` inside the process (:func:`simulate_sweep`); the process limit is the backstop
+for a step stuck where no signal reaches it."""
+_MEASURE_TIMED_OUT: dict[str, str] = {}
+"""Case files whose measuring ran out of time once (its exact solution, mostly): their
+later rows say so at once instead of waiting out the limit again."""
+
+
+def run_one(
+    case: Case,
+    engine: str,
+    method: str,
+    dt: float,
+    *,
+    adaptive: bool,
+    timing: Timing,
+    traces: dict | None = None,
+) -> dict:
+    """One row of ``results.csv``: run one step in its own process, then measure."""
+    outcome = run_isolated(simulate_timed, (engine, case, method, dt, timing), case.timeout_s)
+    row = row_from(
+        case,
+        engine,
+        method,
+        dt,
+        adaptive=adaptive,
+        traces=traces,
+        outcome=outcome.value if outcome.status == "ok" else outcome,
+    )
+    if outcome.status == "ok" and row["status"] in ("crashed", "timeout"):
+        row["message"] = with_output(row.get("message", ""), outcome.output)
+    return row
+
+
+def run_sweep(
+    case: Case,
+    engine: str,
+    method: str,
+    dts: list[float],
+    *,
+    adaptive: bool,
+    timing: Timing,
+    traces: dict | None = None,
+) -> list[dict]:
+    """The rows of one case, engine and method over its sweep.
+
+    The sweep runs in one child process (see :func:`simulate_sweep`); if that process
+    dies or runs out of time (``timeout_s`` per step), every step is run again in a
+    process of its own, so that the row of the step that crashed or hung says so and the
+    others are measured.
+    """
+    prepare = getattr(get_adapter(engine), "prepare", None)
+    if prepare is not None:  # compile here, before the fork: every run finds it ready
+        try:
+            prepare(case, method)
+        except Exception:  # the sweep's own process fails alike, and its rows say why
+            pass
+    outcome = run_isolated(
+        simulate_sweep, (engine, case, method, dts, timing), SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
+    )
+    if outcome.status != "ok":
+        return [
+            run_one(case, engine, method, dt, adaptive=adaptive, timing=timing, traces=traces) for dt in dts
+        ]
+    rows = [
+        row_from(case, engine, method, dt, adaptive=adaptive, outcome=o, traces=traces)
+        for dt, o in zip(dts, outcome.value, strict=True)
+    ]
+    for row in rows:
+        if row["status"] in ("crashed", "timeout"):
+            row["message"] = with_output(row.get("message", ""), outcome.output)
+    return rows
+
+
+def preload() -> None:
+    """Prepare this process for runs, once for every forked run: one thread for every BLAS
+    and OpenMP runtime (:func:`truestep.numerics.pin_threads`) and the compiled spring loop
+    of the reference implementation (the engine modules are imported by :func:`plan`; the
+    reference's stepping loops are compiled by :func:`compile_ahead`)."""
+    from truestep.numerics import pin_threads
+    from truestep.reference_impl.forces import compile_springs
+
+    pin_threads()
+    compile_springs()
+
+
+def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
+    """Compile what the planned sweeps (case, engine, method, entries) will run before the
+    first is timed, for each engine that can (``prepare_all(pairs, workers=...)``), on
+    ``workers`` cores (default: all). Nothing a run measures depends on it."""
+    pairs: dict[str, list[tuple]] = {}
+    for case, engine, method, entries in planned:
+        if not entries[0][3]:
+            pairs.setdefault(engine, []).append((case, method))
+    for engine, wanted in pairs.items():
+        ahead = getattr(get_adapter(engine), "prepare_all", None)
+        if ahead is not None:
+            ahead(wanted, workers=workers or len(os.sched_getaffinity(0)))
+
+
+def duplicate_of(adapter, case: Case, method: str) -> str | None:
+    """Why ``method`` would repeat another method of the adapter bit for bit, or ``None``."""
+    duplicate = getattr(adapter, "duplicate", None)
+    return duplicate(case, method) if duplicate is not None else None
+
+
+def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float | None, bool, str]]:
+    """(method, dt, adaptive, why-not) for every row this case and engine produce.
+
+    ``why-not`` is empty for a run, else ``unsupported: <features>`` or ``skipped: <reason>``
+    and the row is written without running.
+    """
+    adapter = get_adapter(engine)
+    for method in adapter.methods:
+        adaptive = method in adapter.adaptive_methods
+        missing = adapter.missing(case, method)
+        if missing:
+            yield method, None, adaptive, "unsupported:" + ",".join(sorted(missing))
+            continue
+        skip = [r for e, m, r in case.skip if e == engine and m in (method, "*")]
+        skip += [r for r in [duplicate_of(adapter, case, method)] if r]
+        if skip:
+            yield method, None, adaptive, "skipped:" + skip[0]
+            continue
+        for dt in case.sweep(adaptive=adaptive, quick=quick):
+            yield method, dt, adaptive, ""
+
+
+def run_matrix(
+    cases: list[Case],
+    engines: list[str],
+    *,
+    quick: bool = False,
+    timing: Timing | None = None,
+    progress: Callable[[str], None] | None = None,
+    traces: dict | None = None,
+    journal: Journal | None = None,
+    cluster: Cluster | None = None,
+) -> pd.DataFrame:
+    """Run every (case, engine, method, dt) and return the tidy results table.
+
+    Each case, engine and method's sweep runs in one child process at a time
+    (:func:`run_sweep`), or, with a ``cluster`` (:class:`truestep.execution.cluster.Cluster`), as
+    one task on its workers (one timed run per host at a time). The rows come in the
+    same order either way. Energy traces of the runs go into ``traces`` when it is given
+    (see :func:`row_from`). Progress goes to standard error (:class:`Progress`), or each
+    row's line to ``progress`` when it is given. With a ``journal``
+    (:class:`truestep.execution.journal.Journal`), each finished sweep is checkpointed there, and a
+    sweep it already holds is taken from it instead of being run again. Every row
+    records the ``host`` it ran on.
+    """
+    timing = timing or (QUICK_TIMING if quick else Timing())
+    preload()
+    planned = [
+        (case, engine, method, list(entries))
+        for case in cases
+        for engine in engines
+        for method, entries in itertools.groupby(plan(case, engine, quick=quick), key=lambda e: e[0])
+    ]
+    total = sum(len(entries) for *_, entries in planned if not entries[0][3])
+    if cluster is None:
+        compile_ahead(planned)
+    here = host_name()
+    parts: list[list[dict]] = [[] for _ in planned]
+    jobs: list[SweepJob] = []
+    with Progress(total, "sweep", say=progress) as bar:
+
+        def finished(k: int, done: list[dict], swept: dict) -> None:
+            case, engine, method, entries = planned[k]
+            parts[k] = done
+            for row in done:
+                bar.done(
+                    f"{case.name:24s} {engine:9s} {method:17s} {row['dt']:<9.3g} "
+                    f"{row['status']:9s} err={row.get('error', np.nan):.3g} "
+                    f"wall={row.get('wall_s', np.nan):.3g}s"
+                )
+                faults.point("sweep")
+            if traces is not None:
+                traces.update(swept)
+            if journal is not None:
+                journal.put_sweep((case.name, engine, method), [dt for _, dt, _, _ in entries], done, swept)
+
+        for k, (case, engine, method, entries) in enumerate(planned):
+            adaptive, why_not = entries[0][2], entries[0][3]
+            if why_not:
+                status, _, detail = why_not.partition(":")
+                parts[k] = [
+                    {
+                        "case": case.name,
+                        "engine": engine,
+                        "method": method,
+                        "dt_kind": "tolerance" if adaptive else "step",
+                        "status": status,
+                        "missing": detail if status == "unsupported" else "",
+                        "message": detail if status == "skipped" else "",
+                        "host": "",
+                    }
+                ]
+                continue
+            dts = [dt for _, dt, _, _ in entries]
+            kept = journal.sweep((case.name, engine, method), dts) if journal is not None else None
+            if kept is not None:
+                parts[k] = kept[0]
+                if traces is not None:
+                    traces.update(kept[1])
+                bar.done(
+                    f"{case.name:24s} {engine:9s} {method:17s} {len(kept[0])} rows from the interrupted run",
+                    n=len(kept[0]),
+                )
+                continue
+            if cluster is not None:
+                jobs.append(SweepJob(k, case, engine, method, dts, adaptive, timing, traces is not None))
+                continue
+            swept: dict = {}
+            done = run_sweep(
+                case,
+                engine,
+                method,
+                dts,
+                adaptive=adaptive,
+                timing=timing,
+                traces=swept if traces is not None else None,
+            )
+            for row in done:
+                row["host"] = here
+            finished(k, done, swept)
+        if jobs:
+            for k, done, swept in cluster.sweeps(jobs):
+                finished(k, done, swept)
+    return tidy([row for part in parts for row in part], cases)
+
+
+def case_source(case: Case, lib: dict | None = None) -> str:
+    """The case's name if the case library holds this very file, else its file path."""
+    from truestep.cases.loader import library
+
+    lib = library() if lib is None else lib
+    known = lib.get(case.name)
+    same = known is not None and Path(known).resolve() == Path(case.file).resolve()
+    return case.name if same else case.file
+
+
+def tidy(rows: list[dict], cases: list[Case]) -> pd.DataFrame:
+    """Rows as a DataFrame with the contract's columns first, then property columns."""
+    from truestep.cases.loader import library
+
+    props = sorted({p for c in cases for p in c.properties})
+    lib = library()
+    sources = {c.name: case_source(c, lib) for c in cases}
+    df = pd.DataFrame(rows)
+    if len(df):
+        df["case_source"] = df["case"].map(sources)
+    for col in RESULT_COLUMNS + props:
+        if col not in df:
+            df[col] = np.nan
+    return df[RESULT_COLUMNS + props]

@@ -1,0 +1,1 @@
+"""The lecture's figures, reproduced from their case files."""

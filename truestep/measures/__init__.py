@@ -1,0 +1,1 @@
+"""What a run is measured by: errors, energy, properties, stability, restitution, picks."""

@@ -1,0 +1,132 @@
+"""What a run found, computed once from its tables beside the analyses, for the report to
+render (it recomputes nothing): the fitted orders of convergence, the cheapest run to each
+accuracy, the scorecard, how true each engine's restitution is, the largest step each
+engine/method survives on the hard cases, and the speed tables of the speed-up gates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from truestep.cases.case import Case
+from truestep.measures.metrics import fit_order
+from truestep.measures.picks import cheapest, restitution_fidelity, scorecard, survival
+
+
+@dataclass(frozen=True)
+class Findings:
+    """What a run found.
+
+    orders : :func:`orders_table`
+    cheapest : :func:`truestep.measures.picks.cheapest` at every accuracy target
+    scorecard : :func:`truestep.measures.picks.scorecard`
+    fidelity : :func:`truestep.measures.picks.restitution_fidelity`
+    survival : case name -> :func:`truestep.measures.picks.survival`, for the hard cases
+    speed : (case name, the gate's ``where``) -> :func:`speed_table`, for each ``speedup`` gate
+    """
+
+    orders: pd.DataFrame
+    cheapest: pd.DataFrame
+    scorecard: pd.DataFrame
+    fidelity: pd.DataFrame
+    survival: dict[str, pd.DataFrame]
+    speed: dict[tuple[str, str], pd.DataFrame]
+
+
+def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> Findings:
+    """The findings of a run: its cases, its results table and the analyses' ``tables``
+    (``stability``, ``restitution``; either may be missing)."""
+    return Findings(
+        orders=orders_table(results, cases),
+        cheapest=cheapest(results, cases),
+        scorecard=scorecard(results, cases, tables.get("stability")),
+        fidelity=restitution_fidelity(tables.get("restitution")),
+        survival={c.name: survival(c, results) for c in cases if c.hard},
+        speed=speed_tables(cases, results),
+    )
+
+
+def speed_tables(cases: list[Case], results: pd.DataFrame) -> dict[tuple[str, str], pd.DataFrame]:
+    """(case name, the gate's ``where``) -> :func:`speed_table`, for each ``speedup`` gate."""
+    return {
+        (c.name, g.where): speed_table(c, results, g.engine, g.method)
+        for c in cases
+        for g in c.gates
+        if g.kind == "speedup"
+    }
+
+
+def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
+    """Fitted order of convergence per case, engine and fixed-step method, beside the
+    order its engine declares there (:mod:`truestep.measures.declared`; empty where none is
+    declared: non-smooth scenes, no exact solution, a method exact on the case) and
+    whether the fit is within the declared-order gates' tolerance of it."""
+    from truestep.adapters import engine_status, registered
+    from truestep.measures.declared import DECLARED_ORDER_TOL, declared_order_pairs
+
+    ran = [
+        e
+        for e in dict.fromkeys(results["engine"].astype(str))
+        if e in registered() and engine_status(e) == "installed"
+    ]
+    declared = {
+        (names[0], g.engine, g.method): g.params["expect"] for names, g in declared_order_pairs(cases, ran)
+    }
+    rows = []
+    scales = {c.name: c.error_scale for c in cases}
+    steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
+    for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
+        order = fit_order(g["dt"].astype(float), g["error"].astype(float), scale=scales.get(case, 1.0))
+        expect = declared.get((case, engine, method), np.nan)
+        agrees = (
+            ""
+            if not (np.isfinite(expect) and np.isfinite(order))
+            else ("yes" if order >= expect - DECLARED_ORDER_TOL else "no")
+        )
+        rows.append(
+            {
+                "case": case,
+                "engine": engine,
+                "method": method,
+                "order": order,
+                "declared": expect,
+                "agrees": agrees,
+                "points": int(g["error"].notna().sum()),
+            }
+        )
+    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "declared", "agrees", "points"])
+
+
+def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> pd.DataFrame:
+    """Particle-steps per second of every engine/method beside ``engine/method``'s, per step.
+
+    Columns: ``dt`` (s), ``engine``, ``method``, ``wall_s`` (s), ``particle_steps_per_s``
+    (particles x steps / wall time), ``error`` and ``slower_by`` (that row's wall time over
+    ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
+    """
+    n = case.model.n if case.model is not None else 1
+    d = results[
+        (results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")
+    ].dropna(subset=["wall_s"])
+    rows = []
+    for dt, g in d.groupby(d["dt"].astype(float)):
+        base = g[(g["engine"] == engine) & (g["method"] == method)]
+        base_wall = float(base["wall_s"].iloc[0]) if len(base) else np.nan
+        for r in g.sort_values("wall_s").itertuples(index=False):
+            rows.append(
+                {
+                    "dt": dt,
+                    "engine": r.engine,
+                    "method": r.method,
+                    "wall_s": r.wall_s,
+                    "particle_steps_per_s": n * r.steps / r.wall_s,
+                    "error": r.error,
+                    "slower_by": r.wall_s / base_wall,
+                }
+            )
+    return pd.DataFrame(
+        rows, columns=["dt", "engine", "method", "wall_s", "particle_steps_per_s", "error", "slower_by"]
+    )

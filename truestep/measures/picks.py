@@ -1,0 +1,305 @@
+"""Which run to pick, read off the tables: the cheapest run that reaches an accuracy, and
+the largest step that survives a hard case with its accuracy intact.
+
+Both are pure functions of ``results.csv`` and the cases; the report's summary sentences
+and its scorecard are made from them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from truestep.cases.case import Case
+from truestep.measures.metrics import energy_behaviour
+
+ACCURACY_TARGETS = (1e-2, 1e-4, 1e-6)
+"""Accuracy targets, as fractions of each case's error scale (``[reference] scale``)."""
+SURVIVAL_ERROR = 0.1
+"""A run survives a hard case only if its error is at most this fraction of the case's
+scale: a tenth of an orbit's radius, of a cloth's size. Beyond it the run is garbage
+however stable it stayed (close-encounter at 1 ms: errors of 3 to 43 scales)."""
+SURVIVAL_ENERGY = 1.0
+"""... and its relative energy error is at most this: a bound three-body system whose
+energy went from -2.4 J to +525 J has been blown apart, whatever its positions say."""
+PICK_COLUMNS = [
+    "case",
+    "target",
+    "error_needed",
+    "by",
+    "engine",
+    "method",
+    "dt",
+    "dt_kind",
+    "error",
+    "wall_s",
+    "nfev",
+    "runs_reaching",
+    "tied",
+]
+TIE_NOISE = 0.15
+"""The least relative noise of a wall time: two runs of the same revision on one machine
+moved single rows by up to 12% (a shared machine's load, caches, frequency), more than the
+spread of one row's repeats shows. Wall times closer than their noise bands are a tie."""
+TIMER_FLOOR_S = 1e-6
+"""The least absolute noise of a wall time, s (the timer and the call around the stepping)."""
+
+
+def _num(frame: pd.DataFrame, column: str) -> np.ndarray:
+    return pd.to_numeric(frame[column], errors="coerce").to_numpy(float)
+
+
+def noise_band(wall: np.ndarray, spread: np.ndarray | None = None) -> np.ndarray:
+    """Half-widths (s) of the intervals wall times (s) are known to: a row's own spread
+    (``wall_s_spread``), at least :data:`TIE_NOISE` of the time and :data:`TIMER_FLOOR_S`."""
+    wall = np.asarray(wall, float)
+    band = np.maximum(TIE_NOISE * wall, TIMER_FLOOR_S)
+    if spread is not None:
+        band = np.fmax(band, np.asarray(spread, float))
+    return band
+
+
+def _bands(frame: pd.DataFrame) -> np.ndarray:
+    spread = _num(frame, "wall_s_spread") if "wall_s_spread" in frame else None
+    return noise_band(_num(frame, "wall_s"), spread)
+
+
+def tied_with_fastest(frame: pd.DataFrame) -> np.ndarray:
+    """Which rows' wall times cannot be told from the fastest's: their intervals
+    (:func:`noise_band`) reach down to the top of the fastest's. Rows without a wall
+    time are not tied."""
+    wall, band = _num(frame, "wall_s"), _bands(frame)
+    if not np.isfinite(wall).any():
+        return np.zeros(len(frame), bool)
+    k = int(np.nanargmin(wall))
+    return np.isfinite(wall) & (wall - band <= wall[k] + band[k])
+
+
+def _label(r: pd.Series) -> str:
+    kind = "tol" if r["dt_kind"] == "tolerance" else "dt"
+    return f"{r['engine']} / {r['method']} ({kind} {float(r['dt']):.3g})"
+
+
+def _pick_by_wall(reach: pd.DataFrame) -> tuple[pd.Series, str]:
+    """The run to name as the fastest of ``reach`` and the others tied with it.
+
+    Among the runs tied with the fastest (:func:`tied_with_fastest`), the one named is
+    the one with the fewest evaluations (then the first in the table's order): timing
+    noise never decides which run is named, only whether a run is in the tie."""
+    tied = reach[tied_with_fastest(reach)]
+    order = np.lexsort((np.arange(len(tied)), np.nan_to_num(_num(tied, "nfev"), nan=np.inf)))
+    named = tied.iloc[int(order[0])]
+    others = [_label(tied.iloc[int(k)]) for k in order[1:]]
+    return named, "; ".join(others)
+
+
+def cheapest(
+    results: pd.DataFrame, cases: list[Case], targets: tuple[float, ...] = ACCURACY_TARGETS
+) -> pd.DataFrame:
+    """For each case with measured errors and each target: the cheapest ``ok`` run whose
+    error is at most ``target x scale``, by wall time (``by = wall_s``) and by derivative
+    evaluations (``by = nfev``). A target no run reaches is a row with an empty engine
+    and ``runs_reaching`` 0. Columns :data:`PICK_COLUMNS`; ``error_needed`` in the
+    case's error units. By wall time, runs within timing noise of the fastest are a tie
+    (:func:`_pick_by_wall`): ``tied`` lists the others, ``engine / method (dt ...)``
+    separated by ``;``."""
+    rows = []
+    for case in cases:
+        d = results[(results["case"] == case.name) & (results["status"] == "ok")]
+        error = _num(d, "error")
+        if not np.isfinite(error).any():
+            continue
+        for target in targets:
+            needed = target * case.error_scale
+            reach = d[error <= needed]
+            for by in ("wall_s", "nfev"):
+                base = {
+                    "case": case.name,
+                    "target": target,
+                    "error_needed": needed,
+                    "by": by,
+                    "runs_reaching": len(reach),
+                    "tied": "",
+                }
+                cost = _num(reach, by)
+                if not np.isfinite(cost).any():
+                    rows.append({**base, "engine": "", "method": ""})
+                    continue
+                if by == "wall_s":
+                    r, base["tied"] = _pick_by_wall(reach)
+                else:
+                    r = reach.iloc[int(np.nanargmin(cost))]
+                rows.append(
+                    {
+                        **base,
+                        **{k: r[k] for k in ("engine", "method", "dt", "dt_kind", "error", "wall_s", "nfev")},
+                    }
+                )
+    return pd.DataFrame(rows, columns=PICK_COLUMNS)
+
+
+def outcome(case: Case, row: pd.Series) -> str:
+    """Why a run does not survive the case, or ``""`` when it does: its status
+    (``unstable``...), a failure the scene tests (``tunnelled``), ``inaccurate`` (error
+    above :data:`SURVIVAL_ERROR` of the scale) or ``energy`` (relative energy error above
+    :data:`SURVIVAL_ENERGY` in a scene without energy sources)."""
+    from truestep.measures.properties import FAILURES
+
+    if row["status"] != "ok":
+        return str(row["status"])
+    for prop, word in FAILURES.items():
+        if prop in row and float(pd.to_numeric(row[prop], errors="coerce")) > 0:
+            return word
+    error = float(pd.to_numeric(row.get("error"), errors="coerce"))
+    if np.isfinite(error) and error > SURVIVAL_ERROR * case.error_scale:
+        return "inaccurate"
+    drift = float(pd.to_numeric(row.get("energy_drift"), errors="coerce"))
+    if energy_behaviour(case) != "source" and np.isfinite(drift) and drift > SURVIVAL_ENERGY:
+        return "energy"
+    return ""
+
+
+def survival(case: Case, results: pd.DataFrame) -> pd.DataFrame:
+    """Per engine/method of a case's fixed-step sweep: the largest step survived
+    (:func:`outcome` empty) and what became of the run at the largest step.
+
+    Columns ``engine, method, dt_survived`` (s, NaN if none) and ``failure`` (the outcome
+    at the largest step of the sweep, empty if it survived).
+    """
+    d = results[(results["case"] == case.name) & (results["dt_kind"] == "step")]
+    d = d[np.isfinite(_num(d, "dt"))]
+    out = []
+    for (engine, method), g in d.groupby(["engine", "method"], sort=False):
+        outcomes = [outcome(case, r) for _, r in g.iterrows()]
+        dts = _num(g, "dt")
+        survived = [dt for dt, o in zip(dts, outcomes, strict=True) if not o]
+        out.append(
+            {
+                "engine": engine,
+                "method": method,
+                "dt_survived": max(survived) if survived else np.nan,
+                "failure": outcomes[int(np.argmax(dts))],
+            }
+        )
+    return pd.DataFrame(out, columns=["engine", "method", "dt_survived", "failure"])
+
+
+SCORECARD_TARGET = 1e-4
+"""The accuracy the scorecard's cost column asks for, as a fraction of each case's scale."""
+SCORECARD_COLUMNS = [
+    "engine",
+    "method",
+    "family",
+    "cases_run",
+    "cases_reached",
+    "cost_ratio",
+    "stability_cases",
+    "stability_ratio",
+]
+
+
+def _limit_reference(stability: pd.DataFrame) -> pd.Series:
+    """Per stability row: the exact limit where one exists (finite, positive), else the
+    best limit any engine/method reached on that case."""
+    limit = pd.to_numeric(stability["dt_limit"], errors="coerce")
+    exact = pd.to_numeric(stability["dt_limit_exact"], errors="coerce")
+    best = limit.groupby(stability["case"]).transform("max")
+    return exact.where(np.isfinite(exact) & (exact > 0), best)
+
+
+def scorecard(
+    results: pd.DataFrame,
+    cases: list[Case],
+    stability: pd.DataFrame | None = None,
+    *,
+    target: float = SCORECARD_TARGET,
+) -> pd.DataFrame:
+    """One row per engine, method and family of scenes (:data:`SCORECARD_COLUMNS`).
+
+    ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
+    on, the median of its cheapest wall time there over the cheapest of all runs (1: the
+    fastest, or within timing noise of it, :func:`tied_with_fastest`); NaN if it reached
+    none. ``cases_run`` / ``cases_reached``: the family's cases
+    it ran / reached the target on. ``stability_ratio``: over the family's cases with a
+    stability search, the median of its largest stable step over the exact limit (or, with
+    no exact one, the best any method reached); NaN without searches.
+    """
+    family = {c.name: c.family for c in cases}
+    scale = {c.name: c.error_scale for c in cases}
+    ran = results[~results["status"].isin(["unsupported", "skipped"]) & results["case"].isin(list(family))]
+    ok = ran[ran["status"] == "ok"].copy()
+    ok["reaches"] = _num(ok, "error") <= target * ok["case"].map(scale).to_numpy(float)
+    ok["band"] = _bands(ok) if len(ok) else np.zeros(0)
+    reached = ok[ok["reaches"] & np.isfinite(_num(ok, "wall_s"))]
+    fastest = {
+        case: g.iloc[int(np.argmin(_num(g, "wall_s")))] for case, g in reached.groupby("case", sort=False)
+    }
+    stab = None
+    if stability is not None and len(stability):
+        stab = stability[stability["status"] == "ok"].copy()
+        stab["ratio"] = pd.to_numeric(stab["dt_limit"], errors="coerce") / _limit_reference(stab)
+    rows = []
+    for (engine, method), mine in ran.groupby(["engine", "method"], sort=False):
+        for fam in dict.fromkeys(family[c] for c in mine["case"]):
+            names = [c for c in dict.fromkeys(mine["case"]) if family[c] == fam]
+            ratios = []
+            for case in names:
+                hit = reached[
+                    (reached["case"] == case) & (reached["engine"] == engine) & (reached["method"] == method)
+                ]
+                if len(hit):
+                    mine_best = hit.iloc[int(np.argmin(_num(hit, "wall_s")))]
+                    top = fastest[case]
+                    tied = mine_best["wall_s"] - mine_best["band"] <= top["wall_s"] + top["band"]
+                    ratios.append(1.0 if tied else float(mine_best["wall_s"] / top["wall_s"]))
+            s = (
+                stab[(stab["engine"] == engine) & (stab["method"] == method) & stab["case"].isin(names)]
+                if stab is not None
+                else pd.DataFrame()
+            )
+            s_ratio = _num(s, "ratio") if len(s) else np.array([])
+            s_ratio = s_ratio[np.isfinite(s_ratio)]
+            rows.append(
+                {
+                    "engine": engine,
+                    "method": method,
+                    "family": fam,
+                    "cases_run": len(names),
+                    "cases_reached": len(ratios),
+                    "cost_ratio": float(np.median(ratios)) if ratios else np.nan,
+                    "stability_cases": len(s_ratio),
+                    "stability_ratio": float(np.median(s_ratio)) if len(s_ratio) else np.nan,
+                }
+            )
+    order = {
+        pair: k
+        for k, pair in enumerate(dict.fromkeys(zip(results["engine"], results["method"], strict=True)))
+    }
+    card = pd.DataFrame(rows, columns=SCORECARD_COLUMNS)
+    return card.iloc[
+        sorted(range(len(card)), key=lambda k: order[(card["engine"].iloc[k], card["method"].iloc[k])])
+    ].reset_index(drop=True)
+
+
+def restitution_fidelity(restitution: pd.DataFrame | None) -> pd.DataFrame:
+    """Per engine and method: the median and the largest ``|e_measured - e_set|`` over every
+    bounce of the restitution sweep (columns ``engine, method, bounces, median, worst``)."""
+    cols = ["engine", "method", "bounces", "median", "worst"]
+    if restitution is None or not len(restitution):
+        return pd.DataFrame(columns=cols)
+    r = restitution[restitution["status"] == "ok"].copy()
+    r["gap"] = (
+        pd.to_numeric(r["e_measured"], errors="coerce") - pd.to_numeric(r["e_set"], errors="coerce")
+    ).abs()
+    r = r.dropna(subset=["gap"])
+    out = [
+        {
+            "engine": e,
+            "method": m,
+            "bounces": len(g),
+            "median": float(g["gap"].median()),
+            "worst": float(g["gap"].max()),
+        }
+        for (e, m), g in r.groupby(["engine", "method"], sort=False)
+    ]
+    return pd.DataFrame(out, columns=cols)

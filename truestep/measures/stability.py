@@ -1,0 +1,375 @@
+"""Stable or not, read from the motion; and the largest stable time step, by bisection.
+
+A run is **unstable** when its state goes non-finite, or when its motion does what the
+scene cannot do (:func:`motion_failure`), each judged against the case's energy scale
+``S`` (:func:`truestep.measures.energy_scale.energy_scale`, the same wherever the potential's zero
+lies), over every step where the run was watched at every step:
+
+- **escape**: a case that declares an escape energy (``[reference] escape_energy``: a bound
+  orbit's is 0) reaches it and stays there to the end (a symplectic method's energy
+  error spikes through a close encounter and comes back: no escape);
+- **gain**: a dissipative scene (damping, drag, inelastic or frictional contact, no energy
+  source) keeps its energy more than :data:`RISE_TOL` of ``S`` above its start through the
+  late half of the run (its median), wherever in the run the rise began (a stable
+  method's overshoot that it then gives off is no gain);
+- **left for good**: a conservative scene's energy rises above its start by more than
+  :data:`LEAVE_TOL` of ``S`` and never comes back within it in the late half of the run
+  (a jump to another energy that then stays, as an orbit taken with too large a step
+  through its pericentre does);
+- **growth**: the energy of a passive scene keeps growing through every quarter of the
+  run (:func:`energy_keeps_growing`) once it has moved by more than ``S``.
+
+A bounded oscillation of energy (a symplectic method below its limit) comes back to its
+start in every period and is none of these; a damped run's energy falls.
+
+The stability search (:func:`search_case`) is stricter about growth: the late half's peak
+may not rise above the early half's band (:func:`energy_grows`). With ``D(t) = E(t) -
+E(0)`` and the early half's band ``[lo, hi]`` of ``D`` (``D(0) = 0`` included), the run
+grows when the late half's peak exceeds ``hi + tol (hi - lo)`` plus a round-off floor.
+Exponential growth from ``D(0) = 0`` gives ``D(T) >= 2 D(T/2)``: a rise of 100% of the
+band, whatever the rate. A step at which the solver fails (status ``solver-failed``) is
+neither stable nor unstable: the search stops and says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from truestep.adapters.base import Trajectory
+from truestep.cases.case import Case
+
+GROWTH_TOL = 0.25
+"""Rise of the late half's energy peak above the early half's band, as a fraction of the
+band's width, that counts as growth.
+
+Exponential growth rises by at least 100%; bounded oscillations of multi-mode scenes
+drift by about 10% over a few thousand steps (spring-chain, mass-ratio-chain). Near a
+limit the growth is fast enough that the tolerance moves a bisection by far less than
+its 0.1% bracket (measured on the oscillators: the limits do not change)."""
+ROUNDOFF = 1e-9
+"""Energy rises below this fraction of the energy scale are round-off, not growth."""
+MIN_STEPS = 5000  # the default of StabilitySpec.min_steps
+"""The default least number of steps of a search run (``[stability] min_steps``): slow
+growth near a limit needs them."""
+QUICK_MIN_STEPS = 2000
+"""Steps per run in ``--quick`` searches, which stop at 1% of the limit."""
+
+
+def _floor(scale: float | None, energy: np.ndarray) -> float:
+    """The round-off floor of energy changes, J: :data:`ROUNDOFF` of the energy scale (of
+    the largest energy of the run when no scale is given)."""
+    if scale is None or not np.isfinite(scale):
+        scale = max(float(np.max(np.abs(energy))), 1e-300)
+    return ROUNDOFF * scale
+
+
+def energy_grows(
+    t: np.ndarray, energy: np.ndarray, *, tol: float | None = None, scale: float | None = None
+) -> bool:
+    """Whether ``energy`` (J, shape (T,), at times ``t``) grows without bound: the late
+    half's peak above the early half's band (the search's test, see the module docstring).
+
+    ``tol`` defaults to :data:`GROWTH_TOL`; ``scale`` is the case's energy scale (J), whose
+    :data:`ROUNDOFF` is the floor below which a rise is round-off.
+    """
+    tol = GROWTH_TOL if tol is None else tol
+    energy = np.asarray(energy, float)
+    if not np.all(np.isfinite(energy)):
+        return True
+    d = energy - energy[0]
+    half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
+    early, late = d[:half], d[half:]
+    if not len(late):
+        return False
+    hi, lo = float(np.max(early)), float(np.min(early))
+    return float(np.max(late)) > hi + tol * (hi - lo) + _floor(scale, energy)
+
+
+def energy_keeps_growing(
+    t: np.ndarray, energy: np.ndarray, *, tol: float | None = None, scale: float | None = None
+) -> bool:
+    """Whether ``energy`` grows in every quarter of the run: each quarter's peak rises above
+    the band of the quarter before it (the test of :func:`energy_grows`, quarter by
+    quarter). Exponential or steady growth does; a single jump (a close encounter taken
+    with too large a step) followed by a plateau does not, wherever the jump falls.
+    ``scale``: as :func:`energy_grows` (without one, the energy so far sets the floor)."""
+    energy = np.asarray(energy, float)
+    if not np.all(np.isfinite(energy)):
+        return True
+    tol = GROWTH_TOL if tol is None else tol
+    edges = np.searchsorted(t, t[0] + (t[-1] - t[0]) * np.array([0.25, 0.5, 0.75]))
+    quarters = [q for q in np.split(energy - energy[0], edges) if len(q)]
+    if len(quarters) < 4:
+        return energy_grows(t, energy, tol=tol, scale=scale)
+    start = abs(float(energy[0]))
+    for before, now in itertools.pairwise(quarters):
+        hi, lo = max(float(np.max(before)), 0.0), min(float(np.min(before)), 0.0)
+        # Without a scale, round-off is judged against the energy so far, not the run's
+        # largest: a run that explodes would hide its early quarters' growth under its end.
+        floor = (
+            ROUNDOFF * scale
+            if scale is not None and np.isfinite(scale)
+            else ROUNDOFF * max(start, float(np.max(np.abs(before + energy[0]))), 1e-300)
+        )
+        if not float(np.max(now)) > hi + tol * (hi - lo) + floor:
+            return False
+    return True
+
+
+RISE_TOL = 0.1
+"""How far above its start, as a fraction of the energy scale, a dissipative scene's energy
+may stay through the late half of a run (its median there). A stable method may overshoot
+for a while and then give the energy off: symplectic Euler on the damped oscillator at 0.47
+of its limit peaks 0.16 of the scale above the start, at 0.99 of it 24 scales, and both
+decay to nothing; methods that pump a damped cloth near their limit keep it 0.5 to 12
+scales above the start through the late half."""
+LEAVE_TOL = 0.5
+"""How far above its start, as a fraction of the energy scale, a conservative scene's energy
+may stay through the late half of a run. A bounded energy error comes back to the start in
+every period of the motion; an orbit taken through its pericentre with too large a step
+jumps by 0.49 to 11 of its scale and stays there."""
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Why a finite run's motion is not the scene's: when (s) and what happened."""
+
+    t: float
+    reason: str
+
+
+def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None:
+    """How a finite run's motion broke what the scene allows, or ``None``.
+
+    ``scale``: the case's energy scale, J (:func:`truestep.measures.energy_scale.energy_scale`).
+    Reads the energy at every step where the run was watched at every step
+    (:meth:`Trajectory.watched`), else at its records. See the module docstring for the
+    four failures: escape, gain, left for good, growth.
+    """
+    from truestep.measures.metrics import energy_behaviour
+
+    t, e = traj.watched()
+    if e is None or len(e) < 2 or not np.isfinite(scale):
+        return None
+    t, e = np.asarray(t, float), np.asarray(e, float)
+    e0 = float(e[0])
+    escape = case.escape_energy
+    if escape is not None and e[-1] >= escape:
+        below = np.nonzero(e < escape)[0]
+        first = int(below[-1]) + 1 if len(below) else 0  # above it from here to the end
+        return Failure(
+            float(t[first]),
+            f"escaped: its energy rose to {e[first]:.4g} J, at or "
+            f"above the case's escape energy {escape:g} J, and stayed there",
+        )
+    behaviour = energy_behaviour(case)
+    if behaviour == "source":
+        return None
+    rise = e - e0
+    far = np.abs(rise) > scale
+    if far.any() and energy_keeps_growing(t, e, scale=scale):
+        first = int(np.argmax(far))
+        return Failure(
+            float(t[first]),
+            f"finite, but its energy grew from {e0:.4g} J to {e[-1]:.4g} J and was still rising",
+        )
+    half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
+    late = rise[half:]
+    if behaviour == "dissipative":
+        if len(late) and float(np.median(late)) > RISE_TOL * scale:
+            first = int(np.argmax(rise > RISE_TOL * scale))
+            return Failure(
+                float(t[first]),
+                f"a dissipative scene gained energy and kept it: "
+                f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above its "
+                f"start from here, {float(np.median(late)) / scale:.3g} through the "
+                "late half (median)",
+            )
+    else:
+        if len(late) and float(np.min(late)) > LEAVE_TOL * scale:
+            first = int(np.argmax(rise > LEAVE_TOL * scale))
+            return Failure(
+                float(t[first]),
+                f"its energy left its start for good: "
+                f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above it "
+                "and never back in the late half",
+            )
+    return None
+
+
+def is_stable(traj: Trajectory, *, case: Case | None = None, scale: float | None = None) -> bool:
+    """Stable: finished ``ok``, finite, energy that does not grow (:func:`energy_grows`),
+    and, given the ``case`` and its energy ``scale``, no :func:`motion_failure`."""
+    if traj.status != "ok":
+        return False
+    if traj.energy is None:
+        return True
+    if energy_grows(traj.t, traj.energy, scale=scale):
+        return False
+    return case is None or scale is None or motion_failure(case, traj, scale) is None
+
+
+@dataclass
+class SearchResult:
+    """The outcome of one bisection.
+
+    dt_limit : largest step found stable (s); 0 if even ``dt_lo`` was unstable
+    dt_unstable : smallest step found unstable (s); inf if even ``dt_hi`` was stable
+    runs : simulations made;  note : how to read the limit
+    status : ``ok``, or ``solver-failed`` (no limit: the solver failed at some step)
+    """
+
+    dt_limit: float
+    dt_unstable: float
+    runs: int
+    note: str
+    status: str = "ok"
+
+
+class SearchTimeout(Exception):
+    """A search still running when its safety limit (``[stability] budget_s``) ran out:
+    its row is ``timeout`` and reports no limit, so that no machine's speed decides one."""
+
+
+def bisect_limit(
+    stable_at: Callable[[float], bool],
+    dt_lo: float,
+    dt_hi: float,
+    *,
+    rel_tol: float = 1e-3,
+    max_runs: int = 30,
+    budget_s: float = math.inf,
+) -> SearchResult:
+    """Bisect (geometrically) for the boundary between stable and unstable steps.
+
+    Assumes stability is monotone in dt. Bounded by work alone: it stops when
+    ``dt_unstable / dt_limit - 1`` is below ``rel_tol`` or after ``max_runs`` calls of
+    ``stable_at``, so the same code gives the same bracket on every machine. ``budget_s``
+    is a safety valve, not a bound: a search whose calls have taken longer raises
+    :class:`SearchTimeout` instead of reporting the bracket it happened to reach.
+    """
+    start = time.perf_counter()
+
+    def stable(dt: float) -> bool:
+        if time.perf_counter() - start > budget_s:
+            raise SearchTimeout(
+                f"still searching after its {budget_s:g} s safety limit "
+                f"([stability] budget_s), at {runs} runs: no limit reported"
+            )
+        return stable_at(dt)
+
+    runs = 1
+    if not stable(dt_lo):
+        return SearchResult(0.0, dt_lo, runs, f"unstable at every step tried (even {dt_lo:g} s)")
+    runs += 1
+    if stable(dt_hi):
+        return SearchResult(dt_hi, math.inf, runs, f"stable at every step tried (up to {dt_hi:g} s)")
+    lo, hi = dt_lo, dt_hi
+    while hi / lo - 1 > rel_tol and runs < max_runs:
+        mid = math.sqrt(lo * hi)
+        runs += 1
+        if stable(mid):
+            lo = mid
+        else:
+            hi = mid
+    note = "" if hi / lo - 1 <= rel_tol else f"stopped after {runs} runs"
+    return SearchResult(lo, hi, runs, note)
+
+
+MONOTONE_PROBES = (0.9, 0.5)
+"""After the bisection, steps at these fractions of the limit found are run too: a step
+below the limit that is unstable shows a boundary that is not monotone, and the search is
+bisected again below it."""
+
+
+class _SolverFailedAt(Exception):
+    def __init__(self, dt: float, message: str) -> None:
+        super().__init__(message)
+        self.dt = dt
+
+
+def search_case(
+    case: Case, simulate: Callable[[Case, float], Trajectory], *, quick: bool = False
+) -> SearchResult:
+    """Bisect ``case.stability``'s bracket; ``simulate(case, dt)`` runs one engine and method.
+
+    Each run covers the horizon, and at least :data:`MIN_STEPS` steps, recording every
+    step, and is judged by :func:`is_stable` against the case's energy scale. ``quick``
+    stops at 1% instead of the case's ``rel_tol`` and runs at least
+    :data:`QUICK_MIN_STEPS` steps. The limit found is checked at
+    :data:`MONOTONE_PROBES` of itself; an unstable probe starts the bisection again below
+    it, and the note says the boundary is not monotone. A run whose solver fails ends the
+    search with status ``solver-failed`` and no limit. A search still running after
+    ``budget_s`` seconds raises :class:`SearchTimeout` (a safety valve: it never shortens
+    a search).
+    """
+    from truestep.measures.energy_scale import energy_scale
+
+    spec = case.stability
+    if spec is None:
+        raise ValueError(f"{case.name}: the case declares no stability search")
+    min_steps = min(QUICK_MIN_STEPS, spec.min_steps) if quick else spec.min_steps
+    rel_tol = max(spec.rel_tol, 1e-2) if quick else spec.rel_tol
+    scale = energy_scale(case)
+
+    made = [0]
+
+    def stable_at(dt: float) -> bool:
+        n = max(min_steps, math.ceil(spec.horizon / dt))
+        trial = dataclasses.replace(case, duration=n * dt, max_records=n)
+        made[0] += 1
+        traj = simulate(trial, dt)
+        if traj.status == "solver-failed":
+            raise _SolverFailedAt(dt, traj.message)
+        return is_stable(traj, case=case, scale=scale)
+
+    start = time.perf_counter()
+
+    def search(lo: float, hi: float, runs_before: int) -> SearchResult:
+        left = spec.budget_s - (time.perf_counter() - start)
+        r = bisect_limit(
+            stable_at, lo, hi, rel_tol=rel_tol, max_runs=max(spec.max_runs - runs_before, 2), budget_s=left
+        )
+        return dataclasses.replace(r, runs=r.runs + runs_before)
+
+    try:
+        result = search(spec.dt_lo, spec.dt_hi, 0)
+        first = result.dt_limit
+        for fraction in MONOTONE_PROBES:
+            probe = fraction * result.dt_limit
+            if result.dt_limit <= 0 or probe <= spec.dt_lo or result.runs >= spec.max_runs:
+                break
+            result = dataclasses.replace(result, runs=result.runs + 1)
+            if not stable_at(probe):
+                again = search(spec.dt_lo, probe, result.runs - 1)  # the probe's run counts
+                result = dataclasses.replace(
+                    again,
+                    note="; ".join(
+                        n
+                        for n in (
+                            again.note,
+                            f"not monotone: unstable at {probe:.4g} s, below the first "
+                            f"boundary found ({first:.4g} s); the limit is the largest step below "
+                            "which every step tried was stable",
+                        )
+                        if n
+                    ),
+                )
+                break
+    except _SolverFailedAt as err:
+        return SearchResult(
+            float("nan"),
+            float("nan"),
+            made[0],
+            f"the solver failed at dt {err.dt:.4g} s ({str(err)[:160]}): a "
+            "solver failure is not a stability limit",
+            status="solver-failed",
+        )
+    return result

@@ -1,0 +1,1 @@
+"""The report: its pages, tables, figures and how it is published."""

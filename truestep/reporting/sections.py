@@ -1,0 +1,344 @@
+"""The report's sections, each a list of markdown lines generated from the tables.
+
+No sentence here states a number it did not read from a table or from the constant that
+made it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from truestep.cases.case import Case
+from truestep.measures.findings import Findings
+from truestep.measures.picks import (
+    ACCURACY_TARGETS,
+    SURVIVAL_ENERGY,
+    SURVIVAL_ERROR,
+)
+from truestep.reporting.markdown import fmt, md_table, text, with_units
+
+_fmt = fmt
+
+
+def _run_label(r: pd.Series) -> str:
+    """``engine / method (dt ...)`` (a tolerance for adaptive rows)."""
+    kind = "tol" if r["dt_kind"] == "tolerance" else "dt"
+    return f"{r['engine']} / {r['method']} ({kind} {_fmt(float(r['dt']))})"
+
+
+def cheapest_table(cases: list[Case], picks: pd.DataFrame) -> pd.DataFrame:
+    """Per case, the cheapest run by wall time that reaches each accuracy target, with
+    its time, and the cheapest by evaluations where it is another run (``picks``:
+    :attr:`Findings.cheapest <truestep.measures.findings.Findings>`)."""
+    rows = []
+    for case in cases:
+        mine = picks[picks["case"] == case.name]
+        if mine.empty:
+            continue
+        row = {"case": case.name}
+        for target in ACCURACY_TARGETS:
+            wall = mine[(mine["target"] == target) & (mine["by"] == "wall_s")].iloc[0]
+            evals = mine[(mine["target"] == target) & (mine["by"] == "nfev")].iloc[0]
+            if not wall["engine"]:
+                row[f"error <= {target:g} scale"] = "none of the runs"
+                continue
+            cell = f"{_run_label(wall)}, {_fmt(float(wall['wall_s']))} s"
+            if wall["tied"]:
+                tied = wall["tied"].split("; ")
+                more = f" and {len(tied) - 3} more" if len(tied) > 3 else ""
+                cell += f" (tied within timing noise: {', '.join(tied[:3])}{more})"
+            key = ("engine", "method", "dt")
+            if [wall[k] for k in key] != [evals[k] for k in key]:
+                cell += f"; fewest evaluations: {_run_label(evals)}, {int(evals['nfev'])}"
+            row[f"error <= {target:g} scale"] = cell
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def summary(cases: list[Case], found: Findings, tables: dict[str, pd.DataFrame]) -> list[str]:
+    """The summary, every sentence generated from the findings and the tables."""
+    lines = ["## Summary\n"]
+    table = cheapest_table(cases, found.cheapest)
+    if len(table):
+        lines.append(
+            "The cheapest run that reaches each accuracy (error at most 1e-2, 1e-4 "
+            "and 1e-6 of the case's scale), by wall time; where another run needs "
+            "fewer derivative evaluations it is named too:\n"
+        )
+        lines.append(md_table(table))
+    rest = tables.get("restitution")
+    if rest is not None and len(rest):
+        r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
+        if len(r):
+            r = r.assign(gap=(r["e_measured"] - r["e_set"]).abs())
+            worst = r.sort_values("gap", ascending=False).drop_duplicates(["engine", "method"]).head(4)
+            lines.append("Widest gaps between requested and measured restitution (first bounce):\n")
+            for w in worst.itertuples(index=False):
+                lines.append(
+                    f"- {text(w.engine)} / {text(w.method)}: requested {w.e_set:g}, measured "
+                    f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s."
+                )
+            lines.append("")
+    hard = [c for c in cases if c.hard]
+    if hard:
+        lines.append(
+            f"Hard cases: the largest step of the sweep at which each engine/method "
+            f"survives: it finishes stable, does not fail what the scene tests (such "
+            f"as tunnelling), its error is at most {SURVIVAL_ERROR:g} of the case's "
+            f"scale and its energy error at most {SURVIVAL_ENERGY:g} of its energy:\n"
+        )
+        for c in hard:
+            lines.append(hard_case_line(c, found.survival[c.name]))
+        lines.append("")
+    return lines
+
+
+def hard_case_line(case: Case, s: pd.DataFrame) -> str:
+    """One summary bullet: engine/methods grouped by the largest step they survive
+    (``s``: :func:`truestep.measures.picks.survival` of the case)."""
+    if s.empty:
+        return f"- **{case.name}**: no fixed-step runs."
+    groups = []
+    for dt, g in sorted(s.dropna(subset=["dt_survived"]).groupby("dt_survived"), key=lambda kv: -kv[0]):
+        names = ", ".join(f"{text(e)}/{text(m)}" for e, m in zip(g["engine"], g["method"], strict=True))
+        groups.append(f"{_fmt(float(dt))} s: {names}")
+    never = s[s["dt_survived"].isna()]
+    if len(never):
+        names = ", ".join(
+            f"{text(e)}/{text(m)} ({text(f or 'failed')})"
+            for e, m, f in zip(never["engine"], never["method"], never["failure"], strict=True)
+        )
+        groups.append(f"at no step of the sweep: {names}")
+    return f"- **{case.name}**: " + "; ".join(groups) + "."
+
+
+def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
+    """How many times as long the fastest engine takes as ``mine`` at the gate's step, with
+    the interval the timings' noise leaves (:func:`truestep.measures.picks.noise_band`); engines
+    tied for fastest are named together."""
+    from truestep.measures.picks import noise_band, tied_with_fastest
+
+    tied = others[tied_with_fastest(others)].sort_values(["engine", "method"])
+    names = " and ".join(f"{text(r.engine)} / {text(r.method)}" for r in tied.itertuples(index=False))
+    fastest = tied.loc[tied["wall_s"].astype(float).idxmin()]
+    w_e, w_r = float(fastest["wall_s"]), float(mine["wall_s"])
+    b_e = float(noise_band(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))[0])
+    b_r = float(noise_band(np.array([w_r]), np.array([mine.get("wall_s_spread", np.nan)]))[0])
+    low, high = (w_e - b_e) / (w_r + b_r), (w_e + b_e) / max(w_r - b_r, 1e-300)
+    who = (
+        f"the fastest engine, {names},"
+        if len(tied) == 1
+        else f"the fastest engines, {names} (tied within timing noise),"
+    )
+    return (
+        f"At dt {_fmt(gate.dt)} s {who} take{'s' if len(tied) == 1 else ''} "
+        f"{low:.0f} to {high:.0f} times as long as {text(gate.engine)} / {text(gate.method)} "
+        f"({w_e / w_r:.0f} times by the median wall times; the interval is each time's "
+        f"noise band; gate: at least {gate.params['min']:g} times).\n"
+    )
+
+
+def speed_section(cases: list[Case], speed: dict[tuple[str, str], pd.DataFrame]) -> list[str]:
+    """For each case with a ``speedup`` gate: what modelling only what the scene needs is
+    worth, the gated method against every engine at the same steps."""
+    parts: list[str] = []
+    for case in cases:
+        for g in (g for g in case.gates if g.kind == "speedup"):
+            table = speed[(case.name, g.where)]
+            if table.empty or g.dt is None:
+                continue
+            at = table[np.isclose(table["dt"], g.dt)]
+            others = at[at["engine"] != g.engine]
+            parts.append(f"## What modelling only what a scene needs is worth: {case.name}\n")
+            parts.append(
+                f"{text(case.title)}: {text(g.engine)} / {text(g.method)} runs only what the "
+                "scene needs (here "
+                "a compiled loop over independent particles, on one thread like the "
+                "engines), the engines their general machinery (broad phase, contact "
+                "solver, one body per particle). Each row: "
+                "particle-steps per second at the same step and the error against the exact "
+                "bounce solution; `slower_by` is its wall time over "
+                f"{text(g.engine)} / {text(g.method)}'s.\n"
+            )
+            mine = at[(at["engine"] == g.engine) & (at["method"] == g.method)]
+            if len(others) and len(mine):
+                parts.append(speedup_sentence(g, others, mine.iloc[0]))
+            parts.append(md_table(with_units(table)))
+    return parts
+
+
+def _pair(r) -> str:
+    """``engine / method`` of a row, as markdown text (:func:`text`)."""
+    return f"{text(r.engine)} / {text(r.method)}"
+
+
+def _tied_group(ranked: pd.DataFrame) -> pd.DataFrame:
+    """The head of a scorecard ranking (sorted by cases reached, then cost ratio) that
+    cannot be told apart by timing: the same cases reached, and cost ratios within
+    timing noise of the first's (:data:`truestep.measures.picks.TIE_NOISE` on each side)."""
+    from truestep.measures.picks import TIE_NOISE
+
+    top = ranked.iloc[0]
+    ratio = ranked["cost_ratio"].to_numpy(float)
+    same = (ranked["cases_reached"].to_numpy() == top.cases_reached) & (
+        ratio * (1 - TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE)
+    )
+    return ranked[same]
+
+
+def family_sentence(
+    family: str, names: list[str], card: pd.DataFrame, fidelity: pd.DataFrame, picks: pd.DataFrame
+) -> str:
+    """One bullet for a family of scenes: the pick for accuracy per second, the pick for
+    large steps and, where the scenes bounce, the truest restitution, with the numbers.
+    ``picks``: :func:`truestep.measures.picks.cheapest` at the loosest target, named when no run
+    reaches the scorecard's."""
+    from truestep.cases.case import FAMILIES
+    from truestep.measures.picks import SCORECARD_TARGET
+
+    mine = card[card["family"] == family]
+    parts = []
+    fast = mine[np.isfinite(mine["cost_ratio"].to_numpy(float))].sort_values(
+        ["cases_reached", "cost_ratio", "engine", "method"], ascending=[False, True, True, True]
+    )
+    if len(fast):
+        top = fast.iloc[0]
+        group = _tied_group(fast)
+        picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
+        tie = " (tied within timing noise)" if len(group) > 1 else ""
+        line = (
+            f"for accuracy per second, {picked}{tie}: "
+            f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
+            f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
+            f"{float(top.cost_ratio):.2g}x the fastest run's time (median)"
+        )
+        rest = fast.iloc[len(group) :]
+        if len(rest):
+            nxt = rest.iloc[0]
+            line += f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), {float(nxt.cost_ratio):.2g}x)"
+        parts.append(line)
+    else:
+        loose = picks[
+            (picks["case"].isin(names)) & (picks["by"] == "wall_s") & (picks["engine"] != "")
+        ].sort_values("wall_s")
+        line = f"no run reaches {SCORECARD_TARGET:g} of the scale on any of its cases"
+        if len(loose):
+            r = loose.iloc[0]
+            line += (
+                f"; the cheapest to reach {r.target:g} is **{_pair(r)}** on {r.case} "
+                f"({fmt(float(r.wall_s))} s)"
+            )
+        parts.append(line)
+    steady = mine[np.isfinite(mine["stability_ratio"].to_numpy(float))]
+    if len(steady):
+        best = float(steady["stability_ratio"].max())
+        tops = steady[np.isclose(steady["stability_ratio"], best, rtol=5e-3)]
+        named = ", ".join(_pair(r) for r in tops.head(3).itertuples(index=False))
+        more = f" and {len(tops) - 3} more" if len(tops) > 3 else ""
+        parts.append(f"for the largest stable step, {named}{more} ({best:.2f} of the exact or best limit)")
+    if family in ("contact", "particles") and len(fidelity):
+        true = fidelity.sort_values("median").iloc[0]
+        parts.append(
+            f"the truest restitution, {_pair(true)} (median |e_measured - e_set| "
+            f"{fmt(float(true['median']))} over {int(true.bounces)} bounces)"
+        )
+    return f"- **{FAMILIES.get(family, family)}** ({', '.join(names)}): " + "; ".join(parts) + "."
+
+
+def scorecard_section(cases: list[Case], found: Findings, fig_dir) -> list[str]:
+    """The overview at the top of the report: the scorecard figure and a sentence per
+    family of scenes naming the picks."""
+    from truestep.cases.case import FAMILIES
+    from truestep.measures.picks import SCORECARD_TARGET
+    from truestep.reporting import plots
+
+    card, fidelity = found.scorecard, found.fidelity
+    families = [f for f in FAMILIES if any(c.family == f for c in cases)]
+    lines = [
+        "## Which engine, which method\n",
+        f"Each row is an engine and method; each column of the left panel a family of "
+        f"scenes. Left: the wall time it takes to reach an error of {SCORECARD_TARGET:g} "
+        f"of each case's scale, as a multiple of the fastest run that does (median over "
+        f"the family's cases it reaches; `-`: it ran but never got there). Middle: its "
+        f"largest stable step over the exact limit, or over the best any method reached "
+        f"where none is known. Right: how far the restitution it gives is from the one "
+        f"asked (median over the bounces of the restitution sweep).\n",
+    ]
+    fig = plots.scorecard(card, fidelity, families, SCORECARD_TARGET, fig_dir / "scorecard.png")
+    if fig is not None:
+        lines.append(
+            f"![scorecard: cost to reach the accuracy, stability, restitution](figures/{fig.name})\n"
+        )
+    loose = found.cheapest[found.cheapest["target"] == ACCURACY_TARGETS[0]]
+    for family in families:
+        names = [c.name for c in cases if c.family == family]
+        lines.append(family_sentence(family, names, card, fidelity, loose))
+    lines.append("")
+    return lines
+
+
+def methods_section(cases: list[Case]) -> list[str]:
+    """How the numbers are made, with every number read from the constant that sets it."""
+    from truestep.execution.analyses import RESTITUTION_DTS, RESTITUTION_SET, drop_geometry
+    from truestep.execution.runner import Timing
+    from truestep.measures.picks import TIE_NOISE
+    from truestep.measures.stability import GROWTH_TOL, LEAVE_TOL, RISE_TOL
+
+    radius, height, _ = drop_geometry()
+
+    timing = Timing()
+    steps = sorted({c.stability.min_steps for c in cases if c.stability})
+    lines = [
+        "## How the numbers are made\n",
+        f"- **Timing**: scenes are built outside the timed region; each case, engine and "
+        f"method runs in a process of its own, one at a time, on one thread; each row is "
+        f"first run untimed and watched at every step (its numbers come from that run, "
+        f"which also warms the process up), then timed, each timed run checked to end "
+        f"where it did; runs shorter than "
+        f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
+        f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
+        f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
+        f"longer ones once; the wall time is the median and `wall_s_spread` half the "
+        f"interquartile range. Runs whose times lie within each other's noise "
+        f"(their spread, and at least {100 * TIE_NOISE:.0f}% of the time) are "
+        f"**tied**: a pick names them together.",
+        "- **One answer on every machine**: every column but the timings and the host "
+        "is the same, bit for bit, for the same revision and package versions "
+        "(`run.json` records them, and the floating-point environment).",
+        "- **Engines as configured**: engine defaults that would distort a comparison "
+        "are switched off (pybullet's linear and angular damping; pymunk's pixel-scale "
+        "collision slop; MuJoCo's joint armature, damping and friction loss); no damping "
+        "or clamp is added anywhere.",
+        f"- **Errors** are distances from the exact solution (or, where none exists, "
+        f"from a fine run of the reference that the case names, known along the whole "
+        f"run) in the case's units, the worst over the run (`error`; `error_final` at "
+        f"the end, `error_v` the velocities'); the targets "
+        f"{', '.join(f'{t:g}' for t in ACCURACY_TARGETS)} are fractions of each case's "
+        f"scale. **Energy drift** is the energy error over the case's energy scale (the "
+        f"largest kinetic energy, or swing of potential energy, along the exact motion: "
+        f"the same wherever the potential's zero lies), over every step.",
+        f"- **Unstable**: the state goes non-finite; or the motion does what the scene "
+        f"cannot: a bound orbit reaches its escape energy and keeps it, a damped scene "
+        f"stays more than {RISE_TOL:g} of its energy scale above its start through the "
+        f"late half (median), a conservative scene more than {LEAVE_TOL:g} of it through "
+        f"the whole late half, or the energy keeps growing through every quarter of the "
+        f"run, read at every step. A "
+        f"solver that cannot solve a step is `solver-failed`, never unstable. Searches "
+        f"bisect the step over each case's horizon, with at least "
+        f"{', '.join(str(s) for s in steps)} steps per run; there the late half's peak "
+        f"may also not rise above the early half's band by more than {GROWTH_TOL:g} of "
+        f"its width; the limit found is checked below itself for a boundary that is not "
+        f"monotone.",
+        f"- **Surviving a hard case**: stable, not failing what the scene tests, an "
+        f"error at most {SURVIVAL_ERROR:g} of the scale and an energy error at most "
+        f"{SURVIVAL_ENERGY:g} of the energy.",
+        f"- **Restitution**: a ball of radius {radius:g} m dropped from "
+        f"{height:g} m onto a floor, restitution {', '.join(f'{e:g}' for e in RESTITUTION_SET)}"
+        f" at steps {', '.join(f'1/{1 / d:.0f}' for d in RESTITUTION_DTS)} s, every step "
+        f"recorded; per bounce from the rebound and impact speeds (the samples either "
+        f"side of the contact) and from apex heights (the highest height each flight "
+        f"reached at a step).",
+        "",
+    ]
+    return lines

@@ -1,0 +1,1 @@
+"""The tables' columns (one spec) and their readers."""
