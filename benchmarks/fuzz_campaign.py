@@ -26,7 +26,7 @@ Outcomes (``classify_load``, ``classify_run``, ``classify_gate``):
   (``Traceback`` on stderr), ``hang``, ``memory`` (killed by a signal), and
   ``accepted-then-failed`` (any other non-zero exit, or exit 0 with every row crashed or
   timed out).
-* gate: one of the shipped tables damaged (``tests/fuzz_strategies.table_mutant``), the
+* gate: one of the shipped tables damaged (``tests/fuzz/fuzz_strategies.table_mutant``), the
   others as shipped, ``truestep gate --results DIR/results.csv``: ``clean`` (exit 2, one
   line), ``long-error``, ``traceback``, ``hang``, ``accepted`` (exit 0 on garbage) and
   ``judged`` (exit 1: garbage read as a table whose gates fail).

@@ -5,7 +5,7 @@ The kernels of :mod:`truestep.reference_impl.forces_kernels` and
 compiles on its own) and compared with the numpy functions they are the twins of: the
 same bits where both sum in the same order, else to 1e-15 of the result's size (the
 numpy vector products may sum in another order). The composed step built from them is
-tested equal to the numpy path on every case in ``test_compiled_path.py``.
+tested equal to the numpy path on every case in ``test_compiled.py``.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 """The checkout this file belongs to (its ``cases/`` and ``reports/`` are the defaults)."""
 
 TABLE_NAMES = ("results", "stability", "restitution")

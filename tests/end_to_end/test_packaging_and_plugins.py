@@ -20,7 +20,7 @@ import pytest
 
 import truestep
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _python(code: str, *, path: Path | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:

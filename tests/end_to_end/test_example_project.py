@@ -18,7 +18,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "leapfrog-lab"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "leapfrog-lab"
 ENGINE = "leapfrog_lab.adapter:LeapfrogAdapter"
 CASES = (
     "free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball,"

@@ -12,7 +12,7 @@ a failure reports the generated file's recipe (``how``) and its first bytes inst
 ``test_fuzz_campaign_long`` is the long campaign (10 000 case files through the loader,
 200 through ``truestep run``, 100 tables through ``truestep gate``; about half an hour
 on two cores). It is marked ``fuzz`` and skipped unless asked for: ``pytest -m fuzz``
-or ``TRUESTEP_FUZZ=1 pytest tests/test_fuzz.py`` (``addopts`` is left alone, so a plain
+or ``TRUESTEP_FUZZ=1 pytest tests/fuzz/test_fuzz.py`` (``addopts`` is left alone, so a plain
 ``pytest`` collects it and reports it skipped).
 """
 
@@ -35,7 +35,7 @@ from hypothesis import strategies as st
 
 from truestep.tables.io import TableError, read_table
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 LOAD_TIMEOUT_S = 3.0
 """Per file: the slowest shipped case loads in well under a second."""
 

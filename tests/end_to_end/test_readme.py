@@ -9,7 +9,7 @@ import numpy as np
 
 from truestep.adapters.reference import ReferenceAdapter
 
-README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 BLOCKS = re.findall(r"```python\n(.*?)```", README, re.S)
 
 
