@@ -38,12 +38,12 @@ KILLS=(tests/test_forces.py tests/test_collisions.py tests/test_solvers.py tests
 # The kill tests live in these files since 2026-12-02 (folded into the modules' unit tests):
 # BEFORE=1 now leaves out only the files' place at the front, not the kill tests themselves.
 if [ "${BEFORE:-0}" = 1 ]; then KILLS=(); fi
-SOLVER_TESTS=(tests/test_tableaux.py tests/test_solvers.py tests/test_dopri5_equivalence.py
-              tests/test_stability_and_restitution.py)
-FORCE_TESTS=(tests/test_forces.py tests/test_solvers.py tests/test_bounce_properties.py)
-COLLISION_TESTS=(tests/test_collisions.py tests/test_bounce_properties.py
-                 tests/test_stability_and_restitution.py)
-METRIC_TESTS=(tests/test_energy_criteria.py tests/test_orders_in_run.py tests/test_reference.py)
+SOLVER_TESTS=(tests/test_tableaux.py tests/test_solvers.py tests/test_explicit_rk.py
+              tests/test_restitution.py)
+FORCE_TESTS=(tests/test_forces.py tests/test_solvers.py tests/test_properties.py)
+COLLISION_TESTS=(tests/test_collisions.py tests/test_properties.py
+                 tests/test_restitution.py)
+METRIC_TESTS=(tests/test_stability.py tests/test_orders_in_run.py tests/test_reference.py)
 # The compiled path's kernels run as Python here (NUMBA_DISABLE_JIT=1): a mutant would
 # otherwise recompile every loop the tests use, minutes a mutant. Its kernel tests, then
 # the compiled path against the numpy oracle (less two 20 s scenes its other scenes and
