@@ -19,7 +19,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 from truestep.cases.case import Case
-from truestep.reference_impl.integrate import BLOWUP, record_indices
+from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
 from truestep.reference_impl.particles import total_energy
 from truestep.reference_impl.solvers import MethodFacts, get_solver
 
@@ -312,8 +312,9 @@ class FixedStepAdapter(abc.ABC):
     evaluations_per_step: ClassVar[Mapping[str, int]] = MappingProxyType({})
     """Force evaluations one step of a method makes, for a method whose facts do not
     say (:meth:`evaluations`)."""
-    check_every: ClassVar[int] = 64
-    """Steps between blow-up checks: a blown-up run stops within this many steps."""
+    check_every: ClassVar[int] = CHECK_EVERY
+    """Steps between blow-up checks: a blown-up run stops within this many steps (the
+    reference's :data:`~truestep.reference_impl.integrate.CHECK_EVERY`)."""
 
     def missing(self, case: Case, method: str) -> set[str]:
         """Features of ``case`` beyond :attr:`capabilities`."""

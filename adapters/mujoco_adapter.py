@@ -170,7 +170,7 @@ from mujoco import rollout
 from truestep.adapters.base import FactsSpec, FixedStepAdapter, Recording, resolve_facts
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
-from truestep.reference_impl.integrate import record_indices
+from truestep.reference_impl.integrate import CHECK_EVERY, record_indices
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts, Stability
 
@@ -233,8 +233,6 @@ _BAD_STATE = (
     mujoco.mjtWarning.mjWARN_BADQVEL,
     mujoco.mjtWarning.mjWARN_BADQACC,
 )
-_CHECK_EVERY = 64
-"""Steps between checks for a diverged state when no record falls sooner."""
 ROLLOUT_STEPS = 64
 """The most steps one ``mujoco.rollout`` call takes (it stores the state of every step)."""
 
@@ -632,7 +630,7 @@ def _step(
     (state and warm start restored, warning counters cleared: the state and counters
     the ``mj_step`` path would have there) by ``mj_step``, which takes the rest of the
     run, so a run that warns ends exactly as it would without rollout.
-    ``mj_step`` goes from record to record in chunks of at most ``_CHECK_EVERY`` steps,
+    ``mj_step`` goes from record to record in chunks of at most :data:`CHECK_EVERY` steps,
     one step at a time with ``held`` (``qfrc_applied`` set from the state before every
     step, a Python loop). Stops at the first check that finds MuJoCo's bad-state
     warning, recording the state there. The state at a record is MuJoCo's own
@@ -684,7 +682,7 @@ def _step(
             continue
         target = steps_at[i + 1]
         while step < target:
-            chunk = min(target - step, _CHECK_EVERY)
+            chunk = min(target - step, CHECK_EVERY)
             if held:
                 for _ in range(chunk):
                     d.qfrc_applied[:] = applied(d.qpos, d.qvel, d.time)
