@@ -80,15 +80,23 @@ class ImplicitEuler(Solver):
             jac[:, j] = (self.fun(yj, t) - fy) / eps[j]
         return jac
 
-    def _factorise(self, y: np.ndarray, t: float, fy: np.ndarray, dt: float) -> None:
+    def _factorise(
+        self, y: np.ndarray, t: float, fy: np.ndarray, dt: float
+    ) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorise ``I - dt J`` at ``y``; keep and return its solve."""
         jac = self._jacobian(y, t, fy)
+        solve: Callable[[np.ndarray], np.ndarray]
         if sp.issparse(jac) and y.size > DENSE_UP_TO:
-            self._solve = spla.splu(sp.csc_matrix(sp.identity(y.size) - dt * jac)).solve
+            solve = spla.splu(sp.csc_matrix(sp.identity(y.size) - dt * jac)).solve
         else:
             dense = jac.toarray() if sp.issparse(jac) else jac
             lu_piv = la.lu_factor(np.eye(y.size) - dt * dense)
-            self._solve = lambda b: la.lu_solve(lu_piv, b)
-        self._solve_dt = dt
+
+            def solve(b: np.ndarray) -> np.ndarray:
+                return la.lu_solve(lu_piv, b)
+
+        self._solve, self._solve_dt = solve, dt
+        return solve
 
     def _size(self, delta: np.ndarray, y: np.ndarray) -> float:
         return float(np.sqrt(np.mean((delta / (1.0 + np.abs(y))) ** 2)))
@@ -101,15 +109,16 @@ class ImplicitEuler(Solver):
         fy = self.fun(y, t1)
         if not (np.isfinite(y).all() and np.isfinite(fy).all()):
             return None
-        if self._solve is None or self._solve_dt != dt:
-            self._factorise(y, t1, fy, dt)
+        solve = self._solve
+        if solve is None or self._solve_dt != dt:
+            solve = self._factorise(y, t1, fy, dt)
         rebuilt = False  # at an iterate of this step (a matrix of the predictor does not count)
         prev = np.inf
         for _ in range(self.max_iter):
             residual = y - x - dt * fy
             if not np.isfinite(residual).all():
                 return None
-            delta = self._solve(-residual)
+            delta = solve(-residual)
             y = y + delta
             fy = self.fun(y, t1)
             size = self._size(delta, y)
@@ -118,7 +127,7 @@ class ImplicitEuler(Solver):
             if not np.isfinite(size):
                 return None
             if size > 0.5 * prev and not rebuilt:
-                self._factorise(y, t1, fy, dt)
+                solve = self._factorise(y, t1, fy, dt)
                 rebuilt = True
             prev = size
         return None
@@ -136,8 +145,7 @@ class ImplicitEuler(Solver):
         for _ in range(self.max_damped_iter):
             if not np.isfinite(norm):
                 break
-            self._factorise(y, t1, fy, dt)
-            delta = self._solve(-residual)
+            delta = self._factorise(y, t1, fy, dt)(-residual)
             if self._size(delta, y) < self.tol:  # converged: the residual is round-off
                 y = y + delta
                 if np.isfinite(self.fun(y, t1)).all():

@@ -201,10 +201,12 @@ def _start(index: int, call: Call) -> Running:
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, os.getpid(), fn, args), daemon=True)
     proc.start()
+    pid = proc.pid
+    assert pid is not None  # a started process has one
     with contextlib.suppress(OSError):  # as the child does: no moment outside its group
-        os.setpgid(proc.pid, proc.pid)
-    _LIVE[proc.pid] = proc
-    faults.note_child(proc.pid)
+        os.setpgid(pid, pid)
+    _LIVE[pid] = proc
+    faults.note_child(pid)
     child.close()
     left = _budget_left()
     return Running(
@@ -262,9 +264,9 @@ def run_isolated_all(
             while pending and len(running) < max(1, workers):
                 if _budget_left() <= 0:  # not started: this call's row says why
                     index, _ = pending.pop()
-                    outcomes[index] = Outcome("timeout", message=BUDGET_SPENT)
+                    spent = outcomes[index] = Outcome("timeout", message=BUDGET_SPENT)
                     if done is not None:
-                        done(index, outcomes[index])
+                        done(index, spent)
                     continue
                 running.append(_start(*pending.pop()))
             if not running:
@@ -275,9 +277,9 @@ def run_isolated_all(
                 timed_out = r.conn not in ready and time.monotonic() >= r.deadline
                 if r.conn in ready or timed_out:
                     running.remove(r)
-                    outcomes[r.index] = _finish(r, timed_out=timed_out)
+                    finished = outcomes[r.index] = _finish(r, timed_out=timed_out)
                     if done is not None:
-                        done(r.index, outcomes[r.index])
+                        done(r.index, finished)
                     faults.child_finished()
     finally:
         for r in running:

@@ -10,7 +10,7 @@ import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -144,7 +144,8 @@ def simulate_timed(
             case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
         )
         adapter.simulate(short, method, dt)
-    traj = adapter.simulate(case, method, dt, monitor=True) if monitor else None
+    watched: Any = adapter.simulate  # takes monitor= where watches_every_step says so
+    traj = watched(case, method, dt, monitor=True) if monitor else None
     timed = adapter.simulate(case, method, dt)
     if traj is None:
         traj = timed
@@ -493,7 +494,7 @@ def run_matrix(
             if traces is not None:
                 traces.update(swept)
             if journal is not None:
-                journal.put_sweep((case.name, engine, method), [dt for _, dt, _, _ in entries], done, swept)
+                journal.put_sweep((case.name, engine, method), _steps(entries), done, swept)
 
         for k, (case, engine, method, entries) in enumerate(planned):
             adaptive, why_not = entries[0][2], entries[0][3]
@@ -512,7 +513,7 @@ def run_matrix(
                     }
                 ]
                 continue
-            dts = [dt for _, dt, _, _ in entries]
+            dts = _steps(entries)
             kept = journal.sweep((case.name, engine, method), dts) if journal is not None else None
             if kept is not None:
                 parts[k] = kept[0]
@@ -539,7 +540,7 @@ def run_matrix(
             for row in done:
                 row["host"] = here
             finished(k, done, swept)
-        if jobs:
+        if jobs and cluster is not None:
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
     return tidy([row for part in parts for row in part], cases)
@@ -553,6 +554,11 @@ def case_source(case: Case, lib: dict | None = None) -> str:
     known = lib.get(case.name)
     same = known is not None and Path(known).resolve() == Path(case.file).resolve()
     return case.name if same else case.file
+
+
+def _steps(entries: list[tuple]) -> list[float]:
+    """The steps (or tolerances) of a planned sweep's entries (method, dt, adaptive, why not)."""
+    return [dt for _, dt, _, _ in entries if dt is not None]
 
 
 def tidy(rows: list[dict], cases: list[Case]) -> pd.DataFrame:
