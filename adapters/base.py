@@ -55,10 +55,11 @@ class Trajectory:
     t : ndarray, shape (T,)
         Recorded times, s, starting with the initial state.
     x : ndarray, shape (T, n, 3)
-        Positions read back from the engine, m. ODE scenes store their whole state as
-        ``(T, 1, dim)``.
+        Positions read back from the engine, m. For an ODE scene, ``y[:, None, :]``: the
+        layout ODE states had before :attr:`y` (deprecated there; build ODE runs with
+        :meth:`of_ode`).
     v : ndarray, shape (T, n, 3), or None
-        Velocities, m/s (``None`` for ODE scenes, whose state is in ``x``).
+        Velocities, m/s (``None`` for ODE scenes, whose state is in ``y``).
     energy : ndarray, shape (T,), or None
         Total energy, J, computed from the read-back state by the same function for every
         engine (:func:`truestep.reference_impl.particles.total_energy`), or ``None``.
@@ -90,6 +91,8 @@ class Trajectory:
     step_t, step_energy : ndarray, shape (S,), or None
         Times (s) and total energies (J) at every step of a run watched at every step,
         where the records keep fewer (the stability verdicts read these).
+    y : ndarray, shape (T, dim), or None
+        The state of an ODE scene at each record (``None`` for particle scenes).
     """
 
     t: np.ndarray
@@ -108,6 +111,16 @@ class Trajectory:
     extremes: EnergyExtremes | None = None
     step_t: np.ndarray | None = None
     step_energy: np.ndarray | None = None
+    y: np.ndarray | None = None
+
+    @classmethod
+    def of_ode(
+        cls, t: np.ndarray, y: np.ndarray, energy: np.ndarray | None = None, **fields: Any
+    ) -> Trajectory:
+        """The run of an ODE scene: states ``y`` (T, dim) at times ``t`` (T,) s, energy
+        (T,) or ``None``; ``fields`` are the other attributes (``status``, ``nfev`` ...)."""
+        y = np.asarray(y)
+        return cls(t=t, x=y[:, None, :], v=None, energy=energy, y=y, **fields)
 
     def watched(self) -> tuple[np.ndarray, np.ndarray | None]:
         """Times and energies at the finest the run was seen: every step where it was
@@ -226,7 +239,7 @@ def thin_records(traj: Trajectory, n_steps: int, max_records: int) -> Trajectory
     keep = keep[keep < len(traj.t)]
     if keep[-1] != len(traj.t) - 1:
         keep = np.append(keep, len(traj.t) - 1)
-    for name in ("t", "x", "v", "energy", "alive"):
+    for name in ("t", "x", "v", "y", "energy", "alive"):
         value = getattr(traj, name)
         if value is not None:
             setattr(traj, name, value[keep])

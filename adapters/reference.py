@@ -14,10 +14,11 @@ from truestep.adapters.base import (
     thin_records,
     unwatched_note,
 )
-from truestep.cases.case import Case
+from truestep.cases.case import Case, OdeSpec
 from truestep.cases.plugins import ode_system
 from truestep.reference_impl.compiled import compiled_reason, prepared, run_compiled
 from truestep.reference_impl.integrate import integrate
+from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.particles import ParticleSystem, total_energy
 from truestep.reference_impl.passes import passes_for
 from truestep.reference_impl.precompile import compile_all
@@ -28,17 +29,31 @@ from truestep.reference_impl.system import SecondOrderSystem, System
 def build_system(case: Case) -> System:
     """The reference system for a case: its ODE system (the lecture's or an installed
     one, :func:`truestep.cases.plugins.ode_system`) or its particles."""
-    if case.kind == "ode":
-        return ode_system(case.ode_spec.system)(case.ode_spec.y0, **case.ode_spec.params)
-    return ParticleSystem(case.particles, passes_for(case.particles))
+    match case.scene:
+        case OdeSpec() as ode:
+            return ode_system(ode.system)(ode.y0, **ode.params)
+        case ParticleModel() as model:
+            return ParticleSystem(model, passes_for(model))
 
 
-def trajectory_from_states(case: Case, t: np.ndarray, states: np.ndarray) -> tuple:
-    """Split flat states (T, dim) into positions, velocities and energy as a Trajectory has them."""
-    if case.kind == "ode":
-        return states[:, None, :], None
-    n = case.particles.n
-    return states[:, : 3 * n].reshape(-1, n, 3), states[:, 3 * n :].reshape(-1, n, 3)
+def trajectory_of_states(
+    case: Case, system: System, t: np.ndarray, states: np.ndarray, *, energy: bool = True, **fields
+) -> Trajectory:
+    """The Trajectory of flat states (T, dim) at times ``t`` (T,) s: an ODE's states as
+    they are (``y``), a particle scene's split into positions and velocities (T, n, 3);
+    with the energy (J) of each record when ``energy``; ``fields`` are the Trajectory's
+    other attributes (``status``, ``nfev``, ``alive`` ...)."""
+    match case.scene:
+        case OdeSpec():
+            e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)] if energy else []
+            known = bool(e) and all(v is not None for v in e)
+            return Trajectory.of_ode(t, states, np.array(e, dtype=float) if known else None, **fields)
+        case ParticleModel() as model:
+            n = model.n
+            x, v = states[:, : 3 * n].reshape(-1, n, 3), states[:, 3 * n :].reshape(-1, n, 3)
+            with np.errstate(all="ignore"):
+                e_particles = total_energy(model, x, v, fields.get("alive")) if energy else None
+            return Trajectory(t=t, x=x, v=v, energy=e_particles, **fields)
 
 
 class ReferenceAdapter:
@@ -78,7 +93,11 @@ class ReferenceAdapter:
 
     def missing(self, case: Case, method: str) -> set[str]:
         missing = case.features - self.capabilities
-        if METHODS[method].needs_second_order and case.kind == "ode" and "second-order" not in case.features:
+        if (
+            METHODS[method].needs_second_order
+            and isinstance(case.scene, OdeSpec)
+            and "second-order" not in case.features
+        ):
             missing.add("second-order")
         return missing
 
@@ -111,7 +130,7 @@ class ReferenceAdapter:
         unwatched = ""
         if monitor and not get_solver(method).adaptive:
             n_steps = case.steps_for(dt)[0]
-            size = n_steps * (case.model.n if case.model is not None else 1) * 48
+            size = n_steps * case.bodies * 48
             if n_steps > case.max_records and size <= MONITOR_BYTES:
                 traj = self._simulate(replace(case, max_records=n_steps), method, dt)
                 return thin_records(traj, n_steps, case.max_records)
@@ -140,24 +159,17 @@ class ReferenceAdapter:
             solver = cls(system)
             step = case.steps_for(dt)[1]
         run = integrate(solver, case.duration, step, max_records=case.max_records, sample_at=samples)
-        x, v = trajectory_from_states(case, run.t, run.x)
-        alive = run.extra.get("alive")
-        if case.kind == "ode":
-            energy = np.array([system.energy(s, t) for s, t in zip(run.x, run.t, strict=True)])
-            energy = None if energy.dtype == object else energy
-        else:
-            energy = total_energy(case.particles, x, v, alive)
-        return Trajectory(
-            t=run.t,
-            x=x,
-            v=v,
-            energy=energy,
+        return trajectory_of_states(
+            case,
+            system,
+            run.t,
+            run.x,
             status=run.status,
             t_fail=run.t_fail,
             nfev=run.nfev,
             steps=run.steps,
             wall_s=run.wall_s,
-            alive=alive,
+            alive=run.extra.get("alive"),
             path="numpy",
             message=run.message,
         )

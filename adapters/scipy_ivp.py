@@ -11,9 +11,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from truestep.adapters.base import EnergyExtremes, Trajectory, finite_until
-from truestep.adapters.reference import build_system, trajectory_from_states
+from truestep.adapters.reference import build_system, trajectory_of_states
 from truestep.cases.case import Case
-from truestep.reference_impl.particles import total_energy
+from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts, Stability
 
 INF = float("inf")
@@ -97,7 +97,7 @@ class ScipyAdapter:
 
         start = time.perf_counter()
         try:
-            if case.model is not None and case.model.planes:
+            if isinstance(case.scene, ParticleModel) and case.scene.planes:
                 sol = _with_impacts(case, system, derivative, method, dt, options)
             else:
                 sol = solve_ivp(
@@ -115,21 +115,15 @@ class ScipyAdapter:
         if len(t) > case.max_records + 1:
             keep = np.unique(np.linspace(0, len(t) - 1, case.max_records + 1).round().astype(int))
             t, states = t[keep], states[keep]
-        x, v = trajectory_from_states(case, t, states)
-        if case.kind == "ode":
-            e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
-            energy = None if e[0] is None else np.array(e)
-        else:
-            energy = total_energy(case.particles, x, v)
         status, t_fail = finite_until(states, t)
         message = ""
         if not sol.success and status == "ok":  # finite, but scipy could not go on
             status, t_fail, message = "solver-failed", float(sol.t[-1]), sol.message
-        return Trajectory(
-            t=t,
-            x=x,
-            v=v,
-            energy=energy,
+        return trajectory_of_states(
+            case,
+            system,
+            t,
+            states,
             status=status,
             t_fail=t_fail,
             nfev=int(sol.nfev),
@@ -256,12 +250,8 @@ def _step_energies(
     case: Case, system, t: np.ndarray, states: np.ndarray
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Times and total energies at every accepted step (``None`` for an ODE without one)."""
-    x, v = trajectory_from_states(case, t, states)
-    if case.kind == "ode":
-        e = [system.energy(s, ti) for s, ti in zip(states, t, strict=True)]
-        return (None, None) if e[0] is None else (t, np.array(e, dtype=float))
-    with np.errstate(all="ignore"):
-        return t, np.asarray(total_energy(case.particles, x, v), float)
+    energy = trajectory_of_states(case, system, t, states).energy
+    return (None, None) if energy is None else (t, np.asarray(energy, float))
 
 
 class _NonFinite(Exception):
@@ -276,15 +266,12 @@ def _unstable_at(case: Case, system, x0: np.ndarray, bad: _NonFinite, nfev: int,
     """The start and the first non-finite state: status ``unstable`` at its time."""
     t = np.array([0.0, bad.t])
     states = np.stack([x0, bad.y])
-    x, v = trajectory_from_states(case, t, states)
-    energy = None
-    if case.kind != "ode":
-        energy = total_energy(case.particles, x, v)
-    return Trajectory(
-        t=t,
-        x=x,
-        v=v,
-        energy=energy,
+    return trajectory_of_states(
+        case,
+        system,
+        t,
+        states,
+        energy=isinstance(case.scene, ParticleModel),
         status="unstable",
         t_fail=bad.t,
         nfev=nfev,

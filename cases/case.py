@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar, TypeAlias
 
 import numpy as np
 
@@ -32,10 +33,21 @@ class OdeSpec:
     (``None``: as its class says)
     """
 
+    kind: ClassVar[str] = "ode"
+
     system: str
     y0: np.ndarray
     params: dict[str, float] = field(default_factory=dict)
     second_order: bool | None = None
+
+    @property
+    def dim(self) -> int:
+        """The length of the state vector."""
+        return len(self.y0)
+
+    def features(self) -> set[str]:
+        """Modelling features the ODE needs (``ode``, and ``second-order`` if it splits)."""
+        return {"ode"} | ({"second-order"} if self.is_second_order else set())
 
     @property
     def is_second_order(self) -> bool:
@@ -46,6 +58,29 @@ class OdeSpec:
             cls = ode_system(self.system)
             return cls is not None and issubclass(cls, SecondOrderSystem)
         return self.second_order
+
+
+Scene: TypeAlias = ParticleModel | OdeSpec
+"""What a case simulates: a particle scene or a plain ODE. Each kind carries its own
+state shape (particles: positions and velocities (n, 3); an ODE: the state (dim,)), its
+features (``features()``) and its ``kind`` name; consumers dispatch on the type once
+(``match case.scene``) instead of testing a string."""
+
+
+def ode_states(run: Any) -> np.ndarray:
+    """The states (T, dim) of an ODE run or exact solution: its ``y``; from code written
+    before ``y`` existed, ``x[:, 0, :]`` of its ``x`` (T, 1, dim), with a
+    ``DeprecationWarning``."""
+    y = getattr(run, "y", None)
+    if y is not None:
+        return np.asarray(y)
+    warnings.warn(
+        "an ODE's states belong in y (T, dim); x as (T, 1, dim) is deprecated "
+        "(build runs with Trajectory.of_ode, exact solutions with Exact.of_ode)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return np.asarray(run.x)[:, 0, :]
 
 
 @dataclass
@@ -100,7 +135,8 @@ class StabilitySpec:
 class Case:
     """A scene, how to run it, what it is measured against and its gates.
 
-    name : the file name without ``.toml``;  kind : ``ode`` or ``particles``
+    name : the file name without ``.toml``
+    scene : the particle scene or the ODE (:data:`Scene`);  ``kind`` names which
     duration : simulated time, s
     dts, quick_dts : fixed-step sweep (s) for full and ``--quick`` runs
     tolerances, quick_tolerances : rtol = atol sweep for adaptive methods
@@ -118,14 +154,12 @@ class Case:
     file: str
     title: str
     description: str
-    kind: str
+    scene: Scene
     duration: float
     dts: list[float]
     quick_dts: list[float]
     tolerances: list[float]
     quick_tolerances: list[float]
-    model: ParticleModel | None = None
-    ode: OdeSpec | None = None
     exact: str | None = None
     exact_params: dict[str, Any] = field(default_factory=dict)
     error_norm: str = "max"
@@ -144,27 +178,47 @@ class Case:
     escape_energy: float | None = None
 
     @property
+    def kind(self) -> str:
+        """``particles`` or ``ode``: the name of the scene's kind."""
+        return self.scene.kind
+
+    @property
+    def model(self) -> ParticleModel | None:
+        """The particle scene, or ``None`` for an ODE case (kept for plugins written
+        before :attr:`scene`; new code matches on :attr:`scene`)."""
+        return self.scene if isinstance(self.scene, ParticleModel) else None
+
+    @property
+    def ode(self) -> OdeSpec | None:
+        """The ODE, or ``None`` for a particle case (kept for plugins written before
+        :attr:`scene`; new code matches on :attr:`scene`)."""
+        return self.scene if isinstance(self.scene, OdeSpec) else None
+
+    @property
     def particles(self) -> ParticleModel:
-        """The particle scene of a ``particles`` case (a ``TypeError`` for an ODE case): the
-        typed view of :attr:`model` for code that runs only on particle scenes."""
-        if self.model is None:
+        """The particle scene of a ``particles`` case (a ``TypeError`` for an ODE case):
+        for code that runs only on particle scenes."""
+        if not isinstance(self.scene, ParticleModel):
             raise TypeError(f"{self.name}: an ODE case has no particle scene")
-        return self.model
+        return self.scene
 
     @property
     def ode_spec(self) -> OdeSpec:
-        """The ODE of an ``ode`` case (a ``TypeError`` for a particle case): the typed view
-        of :attr:`ode`."""
-        if self.ode is None:
+        """The ODE of an ``ode`` case (a ``TypeError`` for a particle case)."""
+        if not isinstance(self.scene, OdeSpec):
             raise TypeError(f"{self.name}: a particle case has no ODE")
-        return self.ode
+        return self.scene
 
     @property
     def features(self) -> set[str]:
         """Modelling features the scene needs (an ODE needs ``ode``)."""
-        if self.model is not None:
-            return self.model.features()
-        return {"ode"} | ({"second-order"} if self.ode and self.ode.is_second_order else set())
+        return self.scene.features()
+
+    @property
+    def bodies(self) -> int:
+        """What a step moves, for per-body costs and speeds: the particles at the start
+        (``n``), or 1 for an ODE (one state)."""
+        return self.scene.n if isinstance(self.scene, ParticleModel) else 1
 
     def sweep(self, *, adaptive: bool, quick: bool) -> list[float]:
         """Steps (s) for fixed-step methods, or tolerances for adaptive ones."""

@@ -14,11 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from truestep.cases import exact_particles
-from truestep.cases.case import Case
+from truestep.cases.case import Case, OdeSpec
 from truestep.cases.closed_forms import kepler_state, oscillator
 from truestep.cases.exact_registry import EXACT, Exact, ExactFn, exact_solution
 from truestep.cases.plugins import EXACT_GROUP, find_entry, names_with_entries
+from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts, get_solver
+from truestep.reference_impl.system import System
 
 __all__ = [
     "EXACT",
@@ -39,7 +41,7 @@ def circle(case: Case, t: np.ndarray) -> Exact:
     y0 = case.ode_spec.y0
     c, s = np.cos(t), np.sin(t)
     x = np.stack([c * y0[0] - s * y0[1], s * y0[0] + c * y0[1]], axis=1)
-    return Exact(t, x[:, None, :], None, np.full(t.shape, 0.5 * float(y0 @ y0)))
+    return Exact.of_ode(t, x, np.full(t.shape, 0.5 * float(y0 @ y0)))
 
 
 @exact_solution("anchored-oscillator", params={}, kind="particles")
@@ -73,11 +75,11 @@ def kepler(case: Case, t: np.ndarray) -> Exact:
     a = -mu / (2 * energy)
     e = 1 - r0 / a
     state = kepler_state(e, mu, a, t)
-    return Exact(t, state[:, None, :], None, np.full(t.shape, energy))
+    return Exact.of_ode(t, state, np.full(t.shape, energy))
 
 
 def _check_period(case: Case) -> None:
-    if case.kind != "ode":
+    if not isinstance(case.scene, OdeSpec):
         raise ValueError("'periodic' is for ODE cases")
     period = case.exact_params.get("period")
     if isinstance(period, bool) or not isinstance(period, int | float) or not 0 < period < np.inf:
@@ -91,7 +93,7 @@ def periodic(case: Case, t: np.ndarray) -> Exact:
     k = np.round(t / period)
     keep = np.abs(t - k * period) <= 1e-9 * max(1.0, period)
     y0 = case.ode_spec.y0
-    return Exact(t[keep], np.tile(y0, (int(keep.sum()), 1))[:, None, :])
+    return Exact.of_ode(t[keep], np.tile(y0, (int(keep.sum()), 1)))
 
 
 LINEAR_MAX_PARTICLES = 1000
@@ -360,10 +362,10 @@ steps the case's rows record are kept."""
 
 
 def _reference(case: Case) -> ReferencePath:
-    key = (case.file, case.name, case.duration, repr(case.exact_params), repr(case.ode), id(case.model))
+    key = (case.file, case.name, case.duration, repr(case.exact_params), repr(case.ode), id(case.scene))
     hit = _REFERENCE_RUNS.get(key)
-    if hit is None or hit[0] is not case.model:
-        hit = _REFERENCE_RUNS[key] = (case.model, ReferencePath.of(case))
+    if hit is None or hit[0] is not case.scene:
+        hit = _REFERENCE_RUNS[key] = (case.scene, ReferencePath.of(case))
     return hit[1]
 
 
@@ -393,12 +395,12 @@ class ReferencePath:
         from truestep.reference_impl.solvers import get_solver
 
         cls_ = get_solver(case.exact_params.get("method", "dopri5"))
-        if case.kind == "ode":
-            system = ode_system(case.ode_spec.system)(case.ode_spec.y0, **case.ode_spec.params)
-            n = None
-        else:
-            system = ParticleSystem(case.particles, passes_for(case.particles))
-            n = case.particles.n
+        system: System
+        match case.scene:
+            case OdeSpec() as ode:
+                system, n = ode_system(ode.system)(ode.y0, **ode.params), None
+            case ParticleModel() as model:
+                system, n = ParticleSystem(model, passes_for(model)), model.n
         if cls_.adaptive:
             tol = float(case.exact_params.get("rtol", 1e-12))
             solver = cls_(system, rtol=tol, atol=tol)
@@ -473,10 +475,10 @@ class ReferencePath:
 
     def at(self, t: np.ndarray) -> Exact:
         """The run at times ``t`` (s) as an :class:`Exact`: particles' positions and
-        velocities (NaN for particles not alive), or an ODE's states as ``x``."""
+        velocities (NaN for particles not alive), or an ODE's states as ``y``."""
         states = self.states_at(t)
         if self.n is None:
-            return Exact(t, states[:, None, :])
+            return Exact.of_ode(t, states)
         n = self.n
         x, v = states[:, : 3 * n].reshape(-1, n, 3), states[:, 3 * n :].reshape(-1, n, 3)
         alive = self.alive_at(t)

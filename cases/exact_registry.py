@@ -15,12 +15,25 @@ from truestep.cases.case import Case
 
 @dataclass
 class Exact:
-    """Exact positions (and velocities, energy where known) at times ``t`` (s)."""
+    """Exact positions (and velocities, energy where known) at times ``t`` (s).
+
+    t : (T,) s;  x : (T, n, 3) m;  v : (T, n, 3) m/s or ``None``;  energy : (T,) J or
+    ``None``;  y : (T, dim), an ODE's exact states (``None`` for particle scenes; then
+    ``x`` is ``y[:, None, :]``, the layout before ``y``). Build an ODE's with
+    :meth:`of_ode`.
+    """
 
     t: np.ndarray
     x: np.ndarray
     v: np.ndarray | None = None
     energy: np.ndarray | None = None
+    y: np.ndarray | None = None
+
+    @classmethod
+    def of_ode(cls, t: np.ndarray, y: np.ndarray, energy: np.ndarray | None = None) -> Exact:
+        """An ODE's exact states ``y`` (T, dim) at times ``t`` (T,) s, energy (T,) J or ``None``."""
+        y = np.asarray(y)
+        return cls(t, y[:, None, :], None, energy, y)
 
 
 ExactFn = Callable[[Case, np.ndarray], Exact]

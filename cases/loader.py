@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from truestep.cases import plugins
-from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, StabilitySpec
+from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, Scene, StabilitySpec, ode_states
 from truestep.cases.errors import CaseError, SelectionError
 from truestep.cases.exact import exact_named, exact_names
 from truestep.cases.fields import Fields, short
@@ -33,6 +33,7 @@ from truestep.cases.limits import (
 )
 from truestep.cases.scene import read_scene
 from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.system import SecondOrderSystem
 from truestep.tables.spec import RESULTS
 
@@ -228,13 +229,14 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
             f"{limits.steps:.3g} (raise it with [limits] steps or --limit steps=N)",
         )
 
-    ode = model = None
+    scene: Scene
+    model = None
     if kind == "ode":
-        ode = _read_ode(f.sub("ode"), limits)
+        scene = _read_ode(f.sub("ode"), limits)
         if f.has("scene"):
             raise f.error("scene", 'an ode case has no scene (kind = "ode")')
     else:
-        model = read_scene(f.sub("scene"), Budget(limits))
+        scene = model = read_scene(f.sub("scene"), Budget(limits))
         if model.n == 0:
             raise f.error("scene", "the scene has no particles")
     _check_cost(f, limits, steps, max_records, model)
@@ -260,14 +262,12 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
         file=file,
         title=f.text("title", name, max_length=200),
         description=f.text("description", ""),
-        kind=kind,
+        scene=scene,
         duration=duration,
         dts=sorted(dts, reverse=True),
         quick_dts=sorted(quick_dts, reverse=True),
         tolerances=sorted(tolerances, reverse=True),
         quick_tolerances=sorted(quick_tolerances, reverse=True),
-        model=model,
-        ode=ode,
         exact=exact,
         exact_params=exact_params,
         error_norm=error_norm,
@@ -573,16 +573,22 @@ def _check_exact(case: Case) -> None:
             start = fn(case, np.array([0.0]))
     except (Exception, TimeLimitExceeded) as err:  # it says why it does not fit by raising
         raise CaseError(case.file, where, f"{case.exact!r} does not fit this case: {err}") from None
-    if case.kind == "ode":
-        x0, shape = case.ode_spec.y0[None, None, :], (1, 1, len(case.ode_spec.y0))
-    else:
-        x0, shape = case.particles.x0[None], (1, case.particles.n, 3)
-    x = np.asarray(getattr(start, "x", None))
     if len(getattr(start, "t", [])) == 0:
         return  # known at some times only, not at the start
+    shape: tuple[int, ...]
+    match case.scene:
+        case OdeSpec() as ode:
+            x0, shape, what = ode.y0[None, :], (1, ode.dim), "states"
+            legacy = getattr(start, "y", None) is None  # x as (T, 1, dim): deprecated, still read
+            x = np.asarray(getattr(start, "x" if legacy else "y", None))
+            if legacy and x.ndim == 3 and x.shape[1] == 1:
+                x = ode_states(start)
+        case ParticleModel() as model:
+            x0, shape, what = model.x0[None], (1, model.n, 3), "positions"
+            x = np.asarray(getattr(start, "x", None))
     if x.shape != shape:
         raise CaseError(
-            case.file, where, f"{case.exact!r} gives positions of shape {x.shape}; this case's are {shape}"
+            case.file, where, f"{case.exact!r} gives {what} of shape {x.shape}; this case's are {shape}"
         )
     if not np.allclose(x, x0, rtol=1e-9, atol=1e-12):
         raise CaseError(

@@ -9,6 +9,7 @@ Units are SI throughout: metres, kilograms, seconds, newtons.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -172,6 +173,8 @@ class ParticleModel:
         closed triangle meshes (global particle indices, outward orientation), one per
         closed mass-spring object: their signed volume tells when one turned inside out
     """
+
+    kind: ClassVar[str] = "particles"
 
     mass: np.ndarray
     x0: np.ndarray

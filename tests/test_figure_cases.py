@@ -296,7 +296,7 @@ def test_a_caption_states_what_its_runs_did(tmp_path, monkeypatch):
     import truestep.figures.odes as odes
 
     case = figure_case("viscous-decay")
-    weaker = replace(case, model=replace(case.model, drag=0.5))
+    weaker = replace(case, scene=replace(case.particles, drag=0.5))
     monkeypatch.setattr(odes, "figure_case", lambda name: weaker)
     caption = odes.fig_euler_instability(tmp_path / "instability.png")
     assert "at kh = 1.25 it multiplies v by -0.25 per step and decays" in caption

@@ -37,13 +37,12 @@ def case_of(model: ParticleModel, exact: str, duration: float) -> Case:
         file="t",
         title="t",
         description="",
-        kind="particles",
         duration=duration,
         dts=[0.1],
         quick_dts=[0.1],
         tolerances=[1e-6],
         quick_tolerances=[1e-6],
-        model=model,
+        scene=model,
         exact=exact,
     )
 

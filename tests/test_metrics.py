@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from truestep.adapters.base import EnergyExtremes, Trajectory
-from truestep.cases.case import Case
+from truestep.cases.case import Case, OdeSpec
 from truestep.cases.exact import Exact
 from truestep.measures import metrics
 from truestep.reference_impl.model import Anchors, ParticleModel, Plane, Springs
@@ -27,18 +27,20 @@ def particles(n=2, **kw):
 def case(kind="particles", *, duration=0.3, error_norm="final", conservative=False, model=None, exact=None):
     if kind == "particles" and model is None:
         model = particles()
+    scene = (
+        model if kind == "particles" else OdeSpec("circle-field", np.array([1.0, 0.0]), second_order=False)
+    )
     return Case(
         name="m",
         file="m",
         title="m",
         description="",
-        kind=kind,
+        scene=scene,
         duration=duration,
         dts=[0.1],
         quick_dts=[0.1],
         tolerances=[1e-6],
         quick_tolerances=[1e-6],
-        model=model,
         exact=exact,
         error_norm=error_norm,
         conservative=conservative,
@@ -97,15 +99,32 @@ def test_position_error_of_particles_is_the_worst_euclidean_distance():
 
 
 def test_position_error_of_an_ode_is_the_largest_component():
-    x = np.zeros((4, 1, 3))
-    x[3, 0] = [0.3, -0.4, 0.1]
-    x[1, 0] = [0.0, 0.0, 0.5]
-    traj = Trajectory(t=T, x=x, v=None, energy=None, alive=np.zeros((4, 1), bool))
-    exact = Exact(t=T.copy(), x=np.zeros((4, 1, 3)))
+    y = np.zeros((4, 3))
+    y[3] = [0.3, -0.4, 0.1]
+    y[1] = [0.0, 0.0, 0.5]
+    traj = Trajectory.of_ode(T, y, alive=np.zeros((4, 1), bool))
+    exact = Exact.of_ode(T.copy(), np.zeros((4, 3)))
     c = case("ode", model=None)
     assert metrics.position_error(c, traj, exact) == pytest.approx(0.4)  # alive ignored for an ODE
     c_max = case("ode", model=None, error_norm="max")
     assert metrics.position_error(c_max, traj, exact) == pytest.approx(0.5)
+
+
+def test_an_ode_run_in_the_old_layout_is_still_measured_with_a_deprecation_warning():
+    """Adapters and exact solutions written before ``y`` put an ODE's states in ``x`` as
+    (T, 1, dim): they are read the same, and told where the states belong now."""
+    y = np.zeros((4, 2))
+    y[3] = [0.3, -0.4]
+    new = metrics.position_error(
+        case("ode"), Trajectory.of_ode(T, y), Exact.of_ode(T.copy(), np.zeros((4, 2)))
+    )
+    with pytest.warns(DeprecationWarning, match=r"Trajectory.of_ode"):
+        old = metrics.position_error(
+            case("ode"),
+            Trajectory(t=T, x=y[:, None, :], v=None, energy=None),
+            Exact(T.copy(), np.zeros((4, 1, 2))),
+        )
+    assert old == new == pytest.approx(0.4)
 
 
 def test_energy_drift_is_over_the_energy_scale_and_every_step():

@@ -35,13 +35,12 @@ def make_case(model: ParticleModel, duration: float, dt: float, max_records: int
         file="<test>",
         title="",
         description="",
-        kind="particles",
         duration=duration,
         dts=[dt],
         quick_dts=[dt],
         tolerances=[],
         quick_tolerances=[],
-        model=model,
+        scene=model,
         max_records=max_records,
     )
 
@@ -68,13 +67,12 @@ def test_protocol_and_missing_features():
         file="",
         title="",
         description="",
-        kind="ode",
         duration=1.0,
         dts=[0.1],
         quick_dts=[0.1],
         tolerances=[],
         quick_tolerances=[],
-        ode=OdeSpec("circle-field", np.array([1.0, 0.0])),
+        scene=OdeSpec("circle-field", np.array([1.0, 0.0])),
     )
     assert adapter.missing(ode, "RK4") == {"ode"}
     assert adapter.missing(load_case(CASES / "harmonic-oscillator.toml"), "Euler") == set()

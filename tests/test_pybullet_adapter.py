@@ -45,13 +45,12 @@ def make_case(model: ParticleModel, duration: float, dt: float, max_records: int
         file="<test>",
         title="",
         description="",
-        kind="particles",
         duration=duration,
         dts=[dt],
         quick_dts=[dt],
         tolerances=[],
         quick_tolerances=[],
-        model=model,
+        scene=model,
         max_records=max_records,
     )
 
@@ -102,13 +101,12 @@ def test_protocol_and_missing_features(adapter, case_named):
         file="",
         title="",
         description="",
-        kind="ode",
         duration=1.0,
         dts=[0.1],
         quick_dts=[0.1],
         tolerances=[],
         quick_tolerances=[],
-        ode=OdeSpec("circle-field", np.array([1.0, 0.0])),
+        scene=OdeSpec("circle-field", np.array([1.0, 0.0])),
     )
     assert adapter.missing(ode, "default") == {"ode"}
     with pytest.raises(ValueError, match="method"):

@@ -84,3 +84,27 @@ def test_clocks_that_do_not_start_at_the_start_and_advance_are_crashed_rows(good
     case, traj = good
     row = _row(case, dataclasses.replace(traj, **change(traj)))
     assert row["status"] == "crashed" and reason in row["message"], row["message"]
+
+
+@pytest.fixture(scope="module")
+def ode_run(case_named):
+    case = case_named("circle-field")
+    return case, get_adapter("reference").simulate(case, "rk4", case.dts[-1])
+
+
+def test_an_ode_run_in_the_layout_before_y_is_measured_the_same_with_a_warning(ode_run):
+    """An adapter written before ``Trajectory.y`` returns an ODE's states as ``x`` (T, 1,
+    dim): its row is the one the new layout gives, and it is told where states belong."""
+    case, traj = ode_run
+    new = _row(case, dataclasses.replace(traj))
+    with pytest.warns(DeprecationWarning, match="Trajectory.of_ode"):
+        old = _row(case, dataclasses.replace(traj, x=traj.y[:, None, :].copy(), y=None))
+    assert new["status"] == old["status"] == "ok"
+    assert new["error"] == old["error"] and np.isfinite(new["error"])
+
+
+@pytest.mark.parametrize("y", [np.zeros((3, 2)), np.zeros((2,)), np.zeros((1, 1, 1, 1))])
+def test_ode_states_of_the_wrong_shape_are_a_crashed_row(ode_run, y):
+    case, traj = ode_run
+    row = _row(case, dataclasses.replace(traj, y=y))
+    assert row["status"] == "crashed" and row["message"].startswith("adapter returned y of shape")

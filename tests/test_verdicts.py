@@ -62,7 +62,7 @@ def _translated(case, shift):
     anchors = dataclasses.replace(m.anchors, point=m.anchors.point + shift)
     planes = [dataclasses.replace(p, point=p.point + shift) for p in m.planes]
     model = dataclasses.replace(m, x0=m.x0 + shift, anchors=anchors, planes=planes)
-    return dataclasses.replace(case, model=model, exact=None)
+    return dataclasses.replace(case, scene=model, exact=None)
 
 
 @pytest.mark.parametrize(

@@ -38,6 +38,7 @@ _EXPORTS: dict[str, str] = {
     "CaseError": "truestep.cases.errors",
     "SelectionError": "truestep.cases.errors",
     "Gate": "truestep.cases.case",
+    "OdeSpec": "truestep.cases.case",
     "load_case": "truestep.cases.loader",
     "load_cases": "truestep.cases.loader",
     "Exact": "truestep.cases.exact",
@@ -63,6 +64,7 @@ __all__ = [
     "FixedStepAdapter",
     "Gate",
     "MethodFacts",
+    "OdeSpec",
     "ParticleModel",
     "Recording",
     "SecondOrderSystem",
@@ -100,7 +102,7 @@ if TYPE_CHECKING:
     from truestep.adapters import get_adapter
     from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
     from truestep.api import Tables, check, compare, run, select_engines
-    from truestep.cases.case import Case, Gate
+    from truestep.cases.case import Case, Gate, OdeSpec
     from truestep.cases.errors import CaseError, SelectionError
     from truestep.cases.exact import Exact, exact_solution
     from truestep.cases.loader import load_case, load_cases

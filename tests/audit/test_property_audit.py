@@ -230,7 +230,7 @@ def case_of(
             keep = slice(0, particles)
             case = dataclasses.replace(
                 case,
-                model=dataclasses.replace(
+                scene=dataclasses.replace(
                     m,
                     mass=m.mass[keep],
                     x0=m.x0[keep],
@@ -1048,7 +1048,7 @@ def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
     )
     key = ("no-reference", lift)
     if key not in _CASES:
-        _CASES[key] = dataclasses.replace(base, model=model, exact=None)
+        _CASES[key] = dataclasses.replace(base, scene=model, exact=None)
         # this file's scale needs a motion to read: the same cloth's DOP853 run (lifted
         # or not, the exchange is the same)
         t = np.linspace(0.0, base.duration, SCALE_GRID)

@@ -135,7 +135,7 @@ def _search_cost(engine: str, case: Case, method: str) -> float:
     steps = max(spec.min_steps, spec.horizon / spec.dt_lo)
     facts = facts_of(get_adapter(engine), method)
     per_step = 1.0 if facts is None else float(facts.evaluations_per_step or IMPLICIT_COST)
-    return steps * (case.model.n if case.model is not None else 1) * per_step
+    return steps * case.bodies * per_step
 
 
 DROP_CASE = CASE_DIR / "analyses" / "restitution-drop.toml"
@@ -169,7 +169,7 @@ def bounce_case(e: float, dt: float) -> Case:
     return dataclasses.replace(
         drop,
         name=f"bounce-e{e:g}",
-        model=dataclasses.replace(model, planes=[dataclasses.replace(model.planes[0], restitution=e)]),
+        scene=dataclasses.replace(model, planes=[dataclasses.replace(model.planes[0], restitution=e)]),
         duration=duration,
         dts=[dt],
         quick_dts=[dt],

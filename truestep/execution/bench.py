@@ -161,7 +161,7 @@ def rain_case(n: int, case: Case | None = None) -> Case:
     if len(blocks) != 1 or any(k in table for k in ("particles", "meshes", "emitters")):
         raise ValueError(f"case: {case.name} has no single [[scene.blocks]] to scale")
     scene = {**table, "blocks": [{**blocks[0], "count": int(n)}]}
-    return dataclasses.replace(case, model=read_scene(Fields(case.file, scene, "scene")))
+    return dataclasses.replace(case, scene=read_scene(Fields(case.file, scene, "scene")))
 
 
 def _with_steps(case: Case, steps: int, dt: float) -> Case:

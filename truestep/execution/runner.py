@@ -25,6 +25,7 @@ from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.time_limit import TimeLimitExceeded, time_limit
 from truestep.measures import metrics
 from truestep.measures.trust import checked
+from truestep.reference_impl.model import ParticleModel
 from truestep.tables.spec import RESULTS
 
 if TYPE_CHECKING:
@@ -253,7 +254,9 @@ def row_from(
     if isinstance(outcome, Outcome):
         row.update(status=outcome.status, message=with_output(outcome.message, outcome.output))
         return row
-    traj = checked(outcome, case.model.n if case.model is not None else None, duration=case.duration)
+    traj = checked(
+        outcome, case.particles.n if isinstance(case.scene, ParticleModel) else None, duration=case.duration
+    )
     if isinstance(traj, str):  # the adapter broke its contract: this row, not the run
         row.update(status="crashed", message=traj)
         return row

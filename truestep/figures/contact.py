@@ -56,7 +56,7 @@ def floor_bounces(case: Case, traj: Trajectory) -> list[PlaneBounce]:
 def with_restitution(case: Case, e: float) -> Case:
     """The case with every plane's coefficient of restitution set to ``e``."""
     planes = [replace(p, restitution=e) for p in case.particles.planes]
-    return replace(case, model=replace(case.model, planes=planes))
+    return replace(case, scene=replace(case.particles, planes=planes))
 
 
 def _box_outline(case: Case) -> tuple[np.ndarray, np.ndarray]:

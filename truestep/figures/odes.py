@@ -15,9 +15,10 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from truestep.cases.case import ode_states
 from truestep.cases.exact import EXACT
 from truestep.cases.plugins import ode_system
-from truestep.figures.scenes import figure_case, ode_states, run_reference, step_taken
+from truestep.figures.scenes import figure_case, run_reference, step_taken
 from truestep.figures.style import (
     SCENE_COLOURS,
     exact_style,
@@ -66,7 +67,7 @@ def _radius(traj) -> np.ndarray:
 
 def _exact_circle(case, points: int = 400) -> np.ndarray:
     """The case's exact solution over one period, ``points`` states (points, 2)."""
-    return EXACT[case.exact](case, np.linspace(0.0, 2 * np.pi, points)).x[:, 0, :]
+    return ode_states(EXACT[case.exact](case, np.linspace(0.0, 2 * np.pi, points)))
 
 
 # -- 1. vector field and integral curves ----------------------------------------------------
@@ -80,7 +81,7 @@ def fig_vector_field(path: Path) -> str:
     f = np.array([field.derivative(p, 0.0) for p in pts])
     tol = case.tolerances[0]
     starts = [case.ode_spec.y0, *(np.array(s) for s in MORE_STARTS)]
-    runs = [run_reference(replace(case, ode=replace(case.ode, y0=s)), "dopri5", tol) for s in starts]
+    runs = [run_reference(replace(case, scene=replace(case.ode_spec, y0=s)), "dopri5", tol) for s in starts]
     closure = max(float(np.linalg.norm(ode_states(r)[-1] - s)) for r, s in zip(runs, starts, strict=True))
     drift = max(float(np.max(np.abs(_radius(r) / _radius(r)[0] - 1))) for r in runs)
 

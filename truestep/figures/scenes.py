@@ -13,8 +13,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-
 from truestep.adapters.base import Trajectory
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases.case import Case
@@ -59,8 +57,3 @@ def run_reference(case: Case, method: str, dt: float | None = None) -> Trajector
 def step_taken(case: Case, dt: float) -> float:
     """The step (s) the adapter takes for a nominal ``dt``: the one that fills the duration."""
     return case.steps_for(dt)[1]
-
-
-def ode_states(traj: Trajectory) -> np.ndarray:
-    """The states (T, dim) of an ODE case's trajectory (stored as (T, 1, dim))."""
-    return traj.x[:, 0, :]

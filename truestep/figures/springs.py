@@ -95,7 +95,7 @@ def fig_springs(path: Path) -> str:
 def _undamped(case):
     """The case with every spring's damper removed."""
     springs = replace(case.particles.springs, damping=np.zeros_like(case.particles.springs.damping))
-    return replace(case, model=replace(case.model, springs=springs))
+    return replace(case, scene=replace(case.particles, springs=springs))
 
 
 def fig_spring_damper_pair(path: Path) -> str:

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from truestep.cases.case import Case
+from truestep.cases.case import Case, OdeSpec, ode_states
+from truestep.reference_impl.model import ParticleModel
 
 GRID = 2001
 """Times along the reference path (evenly over the run) at which the scale is read."""
@@ -46,9 +47,11 @@ def _scale(case: Case) -> float:
     if path is None:
         return _run_scale(case)
     t, x, v, alive = path
-    if case.kind == "ode":
-        return _ode_scale(case, t, x)
-    return _particle_scale(case, x, v, alive)
+    match case.scene:
+        case OdeSpec():
+            return _ode_scale(case, t, x)
+        case ParticleModel():
+            return _particle_scale(case, x, v, alive)
 
 
 def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None) -> float:
@@ -98,7 +101,7 @@ def _run_scale(case: Case) -> float:
     """Without an exact solution or reference run: the scale along a run of the reference
     implementation (:data:`RUN_METHOD` at the case's finest step), NaN if that run fails or
     the scene is an ODE without one."""
-    if case.kind == "ode" or case.model is None:
+    if not isinstance(case.scene, ParticleModel):
         return float("nan")
     from truestep.adapters.reference import ReferenceAdapter
 
@@ -127,8 +130,8 @@ def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | Non
             raise ValueError(f"{case.name}: no exact solution named {case.exact!r}")
         ex = solution(case, np.linspace(0.0, case.duration, GRID))
         alive = None
-    if case.kind == "ode":
-        return ex.t, ex.x[:, 0, :], None, None
+    if isinstance(case.scene, OdeSpec):
+        return ex.t, ode_states(ex), None, None
     if ex.v is None or len(ex.t) < 2:
         return None
     return ex.t, ex.x, ex.v, alive

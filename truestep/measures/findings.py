@@ -107,7 +107,7 @@ def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> 
     (particles x steps / wall time), ``error`` and ``slower_by`` (that row's wall time over
     ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
     """
-    n = case.model.n if case.model is not None else 1
+    n = case.bodies
     d = results[
         (results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")
     ].dropna(subset=["wall_s"])

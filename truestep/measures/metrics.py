@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from truestep.adapters.base import Trajectory
-from truestep.cases.case import Case
+from truestep.cases.case import Case, OdeSpec, ode_states
 from truestep.cases.exact import Exact, exact_named
+from truestep.reference_impl.model import ParticleModel
 
 _EXACT_CACHE: dict[tuple[int, bytes], tuple[Case, Exact]] = {}
 _EXACT_CACHE_SIZE = 32
@@ -48,24 +49,26 @@ def _matching(t: np.ndarray, t_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 def _parts(case: Case, traj: Trajectory, exact: Exact, part: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The run's and the exact solution's positions (``part = "x"``) or velocities
-    (``"v"``) at their shared times: particles (T, n, 3); an ODE's state (T, 1, dim), of
+    (``"v"``) at their shared times: particles (K, n, 3); an ODE's states (K, dim), of
     which a second-order system's half (its positions or its velocities) is kept, a
     first-order system's whole (its state is its position; it has no velocity)."""
     k, j = _matching(traj.t, exact.t)
     if len(k) == 0:
         return None
-    if case.kind == "ode":
-        mine, theirs = traj.x[k], exact.x[j]
-        half = mine.shape[-1] // 2
-        if case.ode is not None and case.ode.is_second_order:
-            cut = slice(0, half) if part == "x" else slice(half, None)
-            return mine[..., cut], theirs[..., cut]
-        return (mine, theirs) if part == "x" else None
-    if part == "x":
-        return traj.x[k], exact.x[j]
-    if traj.v is None or exact.v is None:
-        return None
-    return traj.v[k], exact.v[j]
+    match case.scene:
+        case OdeSpec() as ode:
+            mine, theirs = ode_states(traj)[k], ode_states(exact)[j]
+            if ode.is_second_order:
+                half = mine.shape[-1] // 2
+                cut = slice(0, half) if part == "x" else slice(half, None)
+                return mine[:, cut], theirs[:, cut]
+            return (mine, theirs) if part == "x" else None
+        case ParticleModel():
+            if part == "x":
+                return traj.x[k], exact.x[j]
+            if traj.v is None or exact.v is None:
+                return None
+            return traj.v[k], exact.v[j]
 
 
 def position_error(
@@ -88,12 +91,11 @@ def position_error(
     mine, theirs = pair
     k, _ = _matching(traj.t, exact.t)
     d = mine - theirs
-    if traj.alive is not None and case.kind != "ode":
+    particles = isinstance(case.scene, ParticleModel)
+    if particles and traj.alive is not None:
         d = np.where(traj.alive[k][..., None], d, np.nan)
     d = np.where(np.isnan(theirs), 0.0, np.nan_to_num(d, nan=0.0)) if np.isnan(d).any() else d
-    per_record = (
-        np.max(np.abs(d), axis=(1, 2)) if case.kind == "ode" else np.max(np.linalg.norm(d, axis=2), axis=1)
-    )
+    per_record = np.max(np.linalg.norm(d, axis=2), axis=1) if particles else np.max(np.abs(d), axis=1)
     if (norm or case.error_norm) == "final":
         if abs(traj.t[k[-1]] - case.duration) > 1e-9 * max(1.0, case.duration):
             return float("nan")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from truestep.adapters.base import Trajectory
+from truestep.cases.case import ode_states
 
 STATUSES = ("ok", "unstable", "solver-failed")
 """Statuses an adapter may return; the harness adds ``crashed``, ``timeout`` and the rest."""
@@ -32,10 +33,11 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
 
     ``t`` (T,) finite and strictly increasing, from the case's start (t = 0) and, with
     ``duration`` given, no further than its end; ``x`` (T, n, 3) for a particle scene of
-    ``n`` particles (``n`` given), else (T, 1, dim) for an ODE case; ``v`` as ``x`` or
-    ``None``; ``energy`` (T,) or ``None``; ``alive`` (T, n) or ``None``; a known status;
-    at least two records when the status is ``ok``; a wall time that is positive and
-    finite, and counts (``nfev``, ``steps``) that are not negative.
+    ``n`` particles (``n`` given), else ``y`` (T, dim) for an ODE case (or, from an
+    adapter written before ``y``, ``x`` as (T, 1, dim)); ``v`` as ``x`` or ``None``;
+    ``energy`` (T,) or ``None``; ``alive`` (T, n) or ``None``; a known status; at least
+    two records when the status is ``ok``; a wall time that is positive and finite, and
+    counts (``nfev``, ``steps``) that are not negative.
     """
     if not isinstance(traj, Trajectory):
         return f"adapter returned {type(traj).__name__}, not a Trajectory"
@@ -43,9 +45,9 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
         return f"adapter returned status {str(traj.status)[:40]!r} (known: {', '.join(STATUSES)})"
     try:
         t = np.asarray(traj.t, dtype=float)
-        x = np.asarray(traj.x, dtype=float)
-    except (TypeError, ValueError) as err:
-        return f"adapter returned non-numeric t or x ({str(err)[:60]})"
+        x = np.asarray(traj.x if n is not None or traj.y is None else traj.y[:, None], dtype=float)
+    except (TypeError, ValueError, IndexError) as err:
+        return f"adapter returned non-numeric t or {'x' if n is not None else 'y'} ({str(err)[:60]})"
     breach = _times_breach(t, duration)
     if breach is not None:
         return breach
@@ -56,8 +58,12 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
         count = _number(getattr(traj, name))
         if not (np.isfinite(count) and count >= 0):
             return f"adapter returned {name} = {count:.6g} (a count, at least 0)"
+    if n is None and traj.y is not None and np.ndim(traj.y) != 2:
+        return f"adapter returned y of shape {_shape(traj.y)}, expected (T, dim) = ({len(t)}, dim)"
     want = (len(t), n, 3) if n is not None else (len(t), 1, x.shape[-1] if x.ndim else 0)
     if x.shape != want:
+        if n is None and traj.y is not None:
+            return f"adapter returned y of shape {_shape(traj.y)}, expected ({len(t)}, dim)"
         return f"adapter returned x of shape {_shape(x)}, expected {want}"
     for name, want in (("v", x.shape), ("energy", (len(t),)), ("alive", x.shape[:2])):
         value = getattr(traj, name)
@@ -102,6 +108,9 @@ def checked(traj: object, n: int | None = None, *, duration: float | None = None
     why = contract_breach(traj, n, duration=duration)
     if why is not None:
         return why
+    assert isinstance(traj, Trajectory)  # contract_breach said so
+    if n is None:
+        _ode_states(traj)
     if traj.status == "ok":
         bad = ~np.isfinite(traj.x).all(axis=(1, 2))
         if traj.v is not None:
@@ -118,3 +127,11 @@ def checked(traj: object, n: int | None = None, *, duration: float | None = None
                 if m
             )
     return traj
+
+
+def _ode_states(traj: Trajectory) -> None:
+    """Give an ODE run both layouts: its states in ``y`` (T, dim) and, for code written
+    before ``y``, the view ``x = y[:, None, :]``. An adapter that filled only ``x`` gets
+    a ``DeprecationWarning`` (build the run with :meth:`Trajectory.of_ode`)."""
+    traj.y = ode_states(traj)
+    traj.x = traj.y[:, None, :]

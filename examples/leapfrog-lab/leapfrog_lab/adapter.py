@@ -26,7 +26,7 @@ class LeapfrogAdapter(truestep.FixedStepAdapter):
     schemes: ClassVar = {"leapfrog": "verlet"}  # stability interval omega h < 2, as Verlet's
 
     def build(self, case, method, h):
-        m = case.model
+        m = case.particles
         s, a = m.springs, m.anchors
         return World(
             m.x0.copy(),
