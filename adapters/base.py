@@ -399,7 +399,7 @@ class FixedStepAdapter(abc.ABC):
         check_at = np.zeros(n_steps + 1, dtype=bool)
         check_at[checks] = True
         check_at[n_steps] = True
-        record_at, check_at = record_at.tolist(), check_at.tolist()
+        record_list, check_list = record_at.tolist(), check_at.tolist()
         snaps = [self.snapshot(scene)]
         advance, snapshot, is_sane, keep = self.advance, self.snapshot, self.is_sane, snaps.append
         k, stopped, extra = 0, "", []
@@ -407,10 +407,10 @@ class FixedStepAdapter(abc.ABC):
         for stop in stops:
             advance(scene, k, stop - k, h)
             k = stop
-            if record_at[k]:
+            if record_list[k]:
                 keep(snapshot(scene))
-            if check_at[k] and not is_sane(scene):
-                if not record_at[k]:
+            if check_list[k] and not is_sane(scene):
+                if not record_list[k]:
                     keep(snapshot(scene))
                     extra.append(k)
                 stopped = "non-finite or runaway state read back"

@@ -101,6 +101,7 @@ def two_body(case: Case, t: np.ndarray) -> Exact:
         case,
         "exactly two free bodies under unsoftened gravitation alone",
     )
+    assert g is not None  # _require said so
     m0, m1 = m.mass
     total = m0 + m1
     mu = g.G * total

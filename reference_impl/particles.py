@@ -184,15 +184,14 @@ class ParticleSystem(SecondOrderSystem):
         return {"alive": self.alive.copy()} if self.model.emitters else {}
 
     # -- observables -------------------------------------------------------------------
-    def energy(self, x: np.ndarray, t: float) -> float | np.ndarray | None:
+    def energy(self, x: np.ndarray, t: float) -> float | None:
         """Kinetic plus potential energy (gravity, springs, gravitation), J.
 
         Force fields and impulses have no potential; scenes with them report the
         mechanical energy of the rest, which the metrics then treat as not conserved.
         """
-        return total_energy(
-            self.model, x[: 3 * self.n].reshape(-1, 3), x[3 * self.n :].reshape(-1, 3), self.alive
-        )
+        n3 = 3 * self.n
+        return float(total_energy(self.model, x[:n3].reshape(-1, 3), x[n3:].reshape(-1, 3), self.alive))
 
 
 class PlaneEvents:
@@ -265,11 +264,12 @@ class PlaneEvents:
 
 def total_energy(
     model: ParticleModel, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None = None
-) -> float | np.ndarray:
+) -> np.ndarray:
     """Kinetic + gravitational + spring energy of particles at ``x``, ``v``, J.
 
     ``x`` and ``v`` have shape (n, 3) for one state, or (T, n, 3) for T recorded states
-    at once (then ``alive`` is (T, n) and the result an array of shape (T,)). Potential
+    at once (then ``alive`` is (T, n) and the result an array of shape (T,); for one
+    state, an array of shape ()). Potential
     energy of uniform gravity is ``-m g . x`` (zero at the origin).
     """
     m = np.where(model.fixed, 0.0, model.mass)
@@ -280,4 +280,4 @@ def total_energy(
     energy += forces.spring_energy(x, model.springs) + forces.anchor_energy(x, model.anchors)
     if model.gravitation is not None:
         energy += forces.gravitation_energy(x, model.mass, model.gravitation)
-    return float(energy) if np.ndim(energy) == 0 else energy
+    return np.asarray(energy)

@@ -357,7 +357,7 @@ class DormandPrince54(Solver):
         afresh at the state as it is.
         """
         x, t = self.system.get_state(), self.system.get_time()
-        if self._f0 is None or not np.array_equal(x, self._x_end):
+        if self._f0 is None or self._x_end is None or not np.array_equal(x, self._x_end):
             self._f0 = self.fun(x, t)
         if self._h is None:
             self._h = self._initial_step(x, t, self._f0, dt)

@@ -183,6 +183,7 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
     base = {"engine": engine, "method": method, "dt": dt, "e_set": e}
     if traj.status != "ok":
         return [{**base, "bounce": 1, "status": traj.status, "note": traj.message}]
+    assert traj.v is not None, "a particle run records its velocities"
     plane = case.particles.planes[0]
     radius, _, g = drop_geometry()
     h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, radius)

@@ -51,7 +51,7 @@ def _scale(case: Case) -> float:
         case OdeSpec():
             return _ode_scale(case, t, x)
         case ParticleModel():
-            return _particle_scale(case, x, v, alive)
+            return float("nan") if v is None else _particle_scale(case, x, v, alive)
 
 
 def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None) -> float:

@@ -7,6 +7,8 @@ went non-finite under an ``ok`` status into ``unstable`` at the first such recor
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from truestep.adapters.base import Trajectory
@@ -16,7 +18,7 @@ STATUSES = ("ok", "unstable", "solver-failed")
 """Statuses an adapter may return; the harness adds ``crashed``, ``timeout`` and the rest."""
 
 
-def _shape(a: object) -> str:
+def _shape(a: Any) -> str:
     return "x".join(map(str, np.shape(a))) or "a scalar"
 
 
@@ -65,10 +67,10 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
         if n is None and traj.y is not None:
             return f"adapter returned y of shape {_shape(traj.y)}, expected ({len(t)}, dim)"
         return f"adapter returned x of shape {_shape(x)}, expected {want}"
-    for name, want in (("v", x.shape), ("energy", (len(t),)), ("alive", x.shape[:2])):
+    for name, expect in (("v", x.shape), ("energy", (len(t),)), ("alive", x.shape[:2])):
         value = getattr(traj, name)
-        if value is not None and np.shape(value) != want:
-            return f"adapter returned {name} of shape {_shape(value)}, expected {want}"
+        if value is not None and np.shape(value) != expect:
+            return f"adapter returned {name} of shape {_shape(value)}, expected {expect}"
     if traj.status == "ok" and len(t) < 2:
         return "adapter returned status 'ok' with one record: nothing was simulated"
     return None
