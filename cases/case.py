@@ -97,6 +97,7 @@ class Gate:
     dt : the step (or tolerance) it reads, if one
     params : the kind's numbers (``expect``, ``tol``, ``max``, ``min``, ``name`` ...)
     where : ``gates[i]``, for messages;  file : the case file or gates file it is in
+    id : the gate's own id, if the file gives one (its verdicts' id is then ``case/id``)
     """
 
     kind: str
@@ -106,6 +107,7 @@ class Gate:
     params: dict[str, Any]
     where: str
     file: str = ""
+    id: str | None = None
 
 
 @dataclass

@@ -600,10 +600,20 @@ def _check_exact(case: Case) -> None:
 
 
 def _read_gates(f: Fields) -> list[Gate]:
-    return [read_gate(g, f"gates[{i}]") for i, g in enumerate(f.subs("gates"))]
+    gates, ids = [], set()
+    for i, sub in enumerate(f.subs("gates")):
+        g = read_gate(sub, f"gates[{i}]")
+        if g.id is not None and g.id in ids:
+            raise sub.error("id", f"another gate of this file has the id {g.id!r}")
+        ids.add(g.id)
+        gates.append(g)
+    return gates
 
 
 STATUS_VALUES = {"ok", "unstable"}
+GATE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,79}")
+"""What a gate's ``id`` may be: a short name that reads the same in a URL, a JUnit
+report and a shell."""
 QUANTITIES = set(RESULTS.where(gate=True))
 """The results columns a ``no-worse-than`` gate may compare (:mod:`truestep.tables.spec`)."""
 RESTITUTION_QUANTITIES = {"e_measured", "e_apex"}
@@ -613,7 +623,9 @@ def read_gate(g: Fields, where: str) -> Gate:
     """One ``[[gates]]`` table (of a case file or a gates file), checked field by field.
 
     ``engine`` (default ``reference``) and ``method`` may be ``*``: every engine that
-    ran, every method of it. Kinds and their numbers:
+    ran, every method of it. ``id`` (optional, letters, digits, ``.``, ``_``, ``-``): the
+    gate's own name in every output (else one is made from what it checks, see
+    :func:`truestep.ci.gates.gate_id`). Kinds and their numbers:
 
     - ``order``: ``expect``, ``tol`` (fitted order within ``tol`` of ``expect``);
     - ``error``, ``energy_drift``: ``dt``, ``max``;
@@ -629,6 +641,9 @@ def read_gate(g: Fields, where: str) -> Gate:
     - ``speedup``: ``dt``, ``over`` (engines), ``min`` (times faster).
     """
     kind = g.string("kind", choices=GATE_KINDS)
+    gate_id = g.string("id", None)
+    if gate_id is not None and not GATE_ID.fullmatch(gate_id):
+        raise g.error("id", f"expected letters, digits, '.', '_' or '-' (at most 80), got {short(gate_id)}")
     engine = g.string("engine", "reference")
     method = g.string("method")
     dt = g.number("dt", None, positive=True)
@@ -654,7 +669,7 @@ def read_gate(g: Fields, where: str) -> Gate:
         params["quantity"] = g.string("quantity", "e_measured", choices=RESTITUTION_QUANTITIES)
     _require(g, kind, params, dt)
     g.done()
-    return Gate(kind, engine, method, dt, params, where, file=g.file)
+    return Gate(kind, engine, method, dt, params, where, file=g.file, id=gate_id)
 
 
 def _require(g: Fields, kind: str, params: dict, dt: float | None) -> None:

@@ -9,10 +9,12 @@ import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
 import truestep
+from truestep.cases.plugins import CASE_DIR
 from truestep.cli import main
 
 GATES = """
@@ -173,6 +175,54 @@ def test_junit_markdown_and_json_outputs(run_dir, tmp_path, monkeypatch, capsys)
     assert doc["baseline"]["compared"] > 0 and doc["baseline"]["findings"] == []
     assert md.read_text().startswith("### truestep gate: passed")
     assert summary.read_text().startswith("earlier step\n### truestep gate: passed")
+
+
+def _json_gates(run_dir: Path, gates_file: str, out: Path, cwd: Path, monkeypatch) -> list[dict]:
+    monkeypatch.chdir(cwd)
+    code = main(
+        ["gate", "--results", str(run_dir / "results.csv"), "--gates", gates_file, "--json", str(out)]
+    )
+    assert code == 0
+    return json.loads(out.read_text())["gates"]
+
+
+def test_json_gates_carry_numbers_stable_ids_and_relative_paths(run_dir, tmp_path, monkeypatch, capsys):
+    """Numbers are JSON numbers (the measured value and the gate's limits), paths are
+    relative to the working directory, and a verdict's id names what it checks: the
+    same when the gates file lists its gates in another order."""
+    gates = _json_gates(run_dir, _gates_file(tmp_path), tmp_path / "a.json", tmp_path, monkeypatch)
+    capsys.readouterr()
+    for g in gates:
+        assert isinstance(g["dt"], float | None) and isinstance(g["value"], float | None)
+        assert all(isinstance(v, float | int | str | list) for v in g["limits"].values())
+        assert g["source"] == "gates.toml" or g["source"] == str(CASE_DIR / "harmonic-oscillator.toml")
+    order = next(g for g in gates if g["kind"] == "order" and g["method"] == "rk4")
+    assert order["id"] == "harmonic-oscillator/order/reference/rk4"
+    assert order["limits"] == {"expect": 4.0, "tol": 0.15} and abs(order["value"] - 4.0) < 0.15
+    # the order measured by another route: the slope of log error against log dt
+    rows = pd.read_csv(run_dir / "results.csv").query(
+        "method == 'rk4' and dt_kind == 'step' and status == 'ok'"
+    )
+    slope = np.polyfit(np.log(rows["dt"]), np.log(rows["error"]), 1)[0]
+    assert abs(order["value"] - slope) < 0.3
+    assert len({g["id"] for g in gates}) == len(gates)
+    blocks = GATES.strip().split("\n\n")
+    (tmp_path / "sub").mkdir()
+    reordered = _gates_file(tmp_path / "sub", "\n\n".join(reversed(blocks)))
+    again = _json_gates(run_dir, reordered, tmp_path / "b.json", tmp_path, monkeypatch)
+    capsys.readouterr()
+    assert {g["id"]: g["value"] for g in gates} == {g["id"]: g["value"] for g in again}
+    assert "sub/gates.toml" in {g["source"] for g in again}
+
+
+def test_a_gate_may_name_its_own_id(run_dir, tmp_path, monkeypatch, capsys):
+    named = GATES.replace('method = "rk4"\nexpect = 4.0', 'method = "rk4"\nid = "rk4-order"\nexpect = 4.0', 1)
+    gates = _json_gates(run_dir, _gates_file(tmp_path, named), tmp_path / "n.json", tmp_path, monkeypatch)
+    capsys.readouterr()
+    assert "harmonic-oscillator/rk4-order" in {g["id"] for g in gates}
+    bad = named.replace('id = "rk4-order"', 'id = "rk4 order!"')
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates", _gates_file(tmp_path, bad)])
+    assert code == 2 and "gates[0].id" in capsys.readouterr().err
 
 
 def test_baseline_lists_worse_better_appeared_and_vanished(run_dir, copy, capsys):

@@ -27,8 +27,23 @@ DECLARED = "declared"
 """The ``where`` of the gates :mod:`truestep.measures.declared` makes from the methods' facts. A
 sweep that gives no fittable order (unstable, or not yet converged, at every step) leaves
 such a gate not evaluated: the case's own gates and the baseline say what went wrong."""
-GATE_COLUMNS = ["case", "source", "gate", "kind", "engine", "method", "dt", "verdict", "measured", "required"]
-"""The columns of :func:`verdict_table` (and of ``truestep gate --json``'s gates)."""
+GATE_COLUMNS = [
+    "case",
+    "source",
+    "gate",
+    "kind",
+    "engine",
+    "method",
+    "dt",
+    "verdict",
+    "measured",
+    "required",
+    "id",
+    "value",
+]
+"""The columns of :func:`verdict_table` (and of ``truestep gate --json``'s gates): ``id``
+(:attr:`GateResult.id`, the same from run to run), ``value`` (the measured number, or
+empty where the gate reads a status or found nothing to measure)."""
 
 
 @dataclass
@@ -42,6 +57,11 @@ class GateResult:
     measured: str
     required: str
     evaluated: bool = True
+    value: float | None = None
+    """The measured number the verdict rests on (the error, the fitted order, the limit,
+    the speed-up ...), ``None`` where there is none."""
+    id: str = ""
+    """Set by :func:`check_gates`: see :func:`gate_id`."""
 
     @property
     def verdict(self) -> str:
@@ -57,6 +77,7 @@ class GateResult:
 
     def row(self) -> dict:
         """This verdict as a row of the verdict table (:data:`GATE_COLUMNS`, in order)."""
+        value = None if self.value is None or not np.isfinite(self.value) else float(self.value)
         return {
             "case": self.case,
             "source": self.gate.file,
@@ -68,6 +89,8 @@ class GateResult:
             "verdict": self.verdict,
             "measured": self.measured,
             "required": self.required,
+            "id": self.id or gate_id(self.case, self.gate),
+            "value": value,
         }
 
     def line(self) -> str:
@@ -161,7 +184,12 @@ def check_gate(
     if g.kind in ("error", "energy_drift"):
         value = float(_num(rows[g.kind])[0])
         return GateResult(
-            case.name, g, _within(value, None, p["max"]), f"{g.kind} {value:.3g}", f"<= {p['max']:g}"
+            case.name,
+            g,
+            _within(value, None, p["max"]),
+            f"{g.kind} {value:.3g}",
+            f"<= {p['max']:g}",
+            value=value,
         )
     if g.kind == "property":
         return _property(case, g, rows)
@@ -186,6 +214,7 @@ def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
         _within(abs(order - p["expect"]), None, p["tol"]),
         f"order {order:.3f}",
         f"{p['expect']:g} +- {p['tol']:g}",
+        value=order,
     )
 
 
@@ -198,7 +227,7 @@ def _property(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
     bounds = " and ".join(
         s for s in (f">= {lo:g}" if lo is not None else "", f"<= {hi:g}" if hi is not None else "") if s
     )
-    return GateResult(case.name, g, _within(value, lo, hi), f"{name} {value:.4g}", bounds)
+    return GateResult(case.name, g, _within(value, lo, hi), f"{name} {value:.4g}", bounds, value=value)
 
 
 def _speedup(case: Case, g: Gate, results: pd.DataFrame, row: pd.Series) -> GateResult:
@@ -228,6 +257,7 @@ def _speedup(case: Case, g: Gate, results: pd.DataFrame, row: pd.Series) -> Gate
         _within(value, p["min"], None),
         f"speed-up {value:.3g}x over {', '.join(p['over'])}{where}",
         f">= {p['min']:g}x",
+        value=value,
     )
 
 
@@ -257,7 +287,7 @@ def _stability(case: Case, g: Gate, stability: pd.DataFrame | None) -> GateResul
         text += f" (exact {exact:.6g}, off by {rel:.3%})"
     if "min" in p:
         ok = ok and limit >= p["min"]
-    return GateResult(case.name, g, bool(ok), text, need)
+    return GateResult(case.name, g, bool(ok), text, need, value=limit)
 
 
 CONVERGING = 0.5
@@ -303,7 +333,7 @@ def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> Gate
             need,
             evaluated=False,
         )
-    return GateResult(case.name, g, order >= p["expect"] - p["tol"], f"order {order:.3f}", need)
+    return GateResult(case.name, g, order >= p["expect"] - p["tol"], f"order {order:.3f}", need, value=order)
 
 
 def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
@@ -338,6 +368,7 @@ def _restitution(case: str, g: Gate, table: pd.DataFrame | None) -> GateResult:
         f"worst {p['quantity']} {values[worst]:.4g} at e={r['e_set']:g} "
         f"dt={float(r['dt']):.4g} bounce {int(r['bounce'])} ({len(measured)} bounces)",
         need,
+        value=float(values[worst]),
     )
 
 
@@ -392,7 +423,7 @@ def check_gates(
     restitution sweep, which belongs to no case: it is checked once, as case
     :data:`SWEEP`). ``*`` engines and methods are expanded to the pairs the run
     simulated; such a gate with nothing to expand to is not evaluated."""
-    out = []
+    out: list[GateResult] = []
     for c, g in gates_to_check(cases, extra):
         if g.kind in ("stability-limit", "restitution") and "*" in (g.engine, g.method):
             pairs = _table_pairs(c, g, stability if g.kind == "stability-limit" else restitution)
@@ -413,7 +444,34 @@ def check_gates(
             out.append(
                 check_gate(c, dataclasses.replace(g, engine=e, method=m), results, stability, restitution)
             )
+    seen: dict[str, int] = {}
+    for v in out:
+        base = gate_id(v.case, v.gate)
+        seen[base] = seen.get(base, 0) + 1
+        v.id = base if seen[base] == 1 else f"{base}#{seen[base]}"
     return out
+
+
+def gate_id(case: str, g: Gate) -> str:
+    """A gate verdict's id, the same from run to run and whatever the order of the gates:
+    ``case/id`` when the gate file gives it an ``id``, else ``case/kind/engine/method`` with the
+    step (``@dt``) and what else tells the gate apart (a property's name, the run a
+    ``no-worse-than`` compares with, a restitution gate's quantity). A second gate with
+    the same id in one run gets ``#2`` (in file order)."""
+    if g.id:
+        return f"{case}/{g.id}"
+    parts = [case, g.kind, g.engine, g.method]
+    p = g.params
+    if g.kind == "property":
+        parts.append(str(p.get("name", "")))
+    elif g.kind == "no-worse-than":
+        parts.append(f"{p.get('quantity', '')}-vs-{'/'.join(p.get('than', ()))}")
+    elif g.kind == "restitution":
+        parts.append(str(p.get("quantity", "")))
+    if g.where == DECLARED:
+        parts.append(DECLARED)
+    dt = f"@{g.dt:g}" if g.dt is not None else ""
+    return "/".join(parts) + dt
 
 
 def gates_to_check(

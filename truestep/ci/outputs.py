@@ -1,10 +1,13 @@
 """What ``truestep gate`` writes for CI: JUnit XML, a markdown summary, JSON.
 
 JUnit: one test case per gate verdict (suite ``truestep.ci.gates``, class name the case,
-name the gate's label) and, with a baseline, one per compared table (suite
+name the verdict's id, :func:`truestep.ci.gates.gate_id`; file relative to the working
+directory) and, with a baseline, one per compared table (suite
 ``truestep.ci.baseline``) failing with every row that got worse. Markdown: the counts,
 then tables of the failed gates and of what got worse, for a pull request page (and
-``$GITHUB_STEP_SUMMARY``). JSON: everything, for other tools.
+``$GITHUB_STEP_SUMMARY``). JSON: everything, for other tools: numbers as JSON numbers
+(``null`` for one that is not finite or not measured), each gate with its ``id``, its
+measured ``value`` and its ``limits`` (the gate's own numbers).
 """
 
 from __future__ import annotations
@@ -22,6 +25,18 @@ from truestep.ci.baseline import Comparison
 from truestep.ci.gates import GateResult
 from truestep.reporting.markdown import text
 from truestep.visible import visible
+
+
+def shown_path(path: str) -> str:
+    """``path`` as CI output shows it: relative to the working directory when it lies
+    under it (a checkout's own case files), else as given (an installed package's)."""
+    if not path:
+        return ""
+    try:
+        rel = Path(path).resolve().relative_to(Path.cwd().resolve())
+    except (ValueError, OSError):
+        return path
+    return rel.as_posix()
 
 
 def _counts(verdicts: list[GateResult]) -> dict[str, int]:
@@ -50,9 +65,8 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
             gates,
             "testcase",
             classname=visible(v.case),
-            name=visible(f"{v.gate.where} {v.gate.kind} {v.gate.engine}/{v.gate.method}")
-            + (f" dt={v.gate.dt:g}" if v.gate.dt is not None else ""),
-            file=visible(v.gate.file or ""),
+            name=visible(v.row()["id"]),
+            file=visible(shown_path(v.gate.file or "")),
         )
         text = visible(f"measured {v.measured}, required {v.required}")
         if v.verdict == "fail":
@@ -152,11 +166,24 @@ def _fmt(x: object) -> str:
 
 
 def _clean(x: object) -> object:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None if math.isnan(x) else ("inf" if x > 0 else "-inf")
-    if hasattr(x, "item"):
+    """A JSON value: numbers as numbers (numpy's too), a number that is not finite as
+    ``null`` (JSON has none), tuples as lists."""
+    if hasattr(x, "item") and not isinstance(x, str | bytes):
         return _clean(x.item())
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, tuple | list):
+        return [_clean(i) for i in x]
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
     return x
+
+
+def _gate_json(v: GateResult) -> dict:
+    row = {k: _clean(val) for k, val in v.row().items()}
+    row["source"] = shown_path(v.gate.file or "")
+    row["limits"] = {k: _clean(val) for k, val in v.gate.params.items()}
+    return row
 
 
 def as_json(
@@ -167,16 +194,16 @@ def as_json(
         "passed": passed,
         "counts": _counts(verdicts),
         "reasons": reasons,
-        "gates": [v.row() for v in verdicts],
+        "gates": [_gate_json(v) for v in verdicts],
     }
     if comparison is not None:
         doc["baseline"] = {
             "compared": comparison.compared,
-            "tolerances": comparison.tolerances,
+            "tolerances": _clean(comparison.tolerances),
             "time_against": comparison.time_against,
             "findings": [{k: _clean(val) for k, val in f.__dict__.items()} for f in comparison.findings],
         }
-    return json.dumps(doc, indent=1, default=str, ensure_ascii=True) + "\n"
+    return json.dumps(doc, indent=1, ensure_ascii=True, allow_nan=False) + "\n"
 
 
 def write(path: str | Path, text: str, *, append: bool = False) -> None:
