@@ -167,7 +167,7 @@ from truestep.cases.case import Case
 from truestep.reference_impl import forces
 from truestep.reference_impl.model import ParticleModel
 
-p = import_quietly("pybullet")  # it prints its build time on stdout when imported
+p = import_quietly("pybullet", banner=r"^pybullet build time:")  # its greeting, on stderr
 
 POINT_RADIUS = 0.01
 """Radius (m) of the sphere standing in for a radius-0 particle; its planes move back as much."""

@@ -9,6 +9,8 @@ processes, so that the runs, timed one at a time, find them ready.
 from __future__ import annotations
 
 import multiprocessing
+import sys
+import time
 from collections.abc import Callable, Iterable
 
 import numba
@@ -35,8 +37,28 @@ def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type]]) -> li
 
 
 def _prepare_each(pairs: list[tuple], progress: Callable[[str], None] | None) -> None:
-    for model, method in pairs:
-        compiled.prepared(model, method, progress=progress)
+    """Prepare each (model, method) of ``pairs``; the lines of a slow one (``progress``,
+    standard error by default) carry how many of ``pairs`` are done and, from the pace so
+    far, the seconds left: ``[3/12, ~40 s left] compiling ...``."""
+    say = progress or _stderr
+    began = time.perf_counter()
+    for i, (model, method) in enumerate(pairs):
+        compiled.prepared(model, method, progress=_counted(say, i, len(pairs), began))
+
+
+def _counted(say: Callable[[str], None], done: int, total: int, began: float) -> Callable[[str], None]:
+    """``say`` with ``[done + 1/total, ~ETA]`` before each line (``done`` finished so far)."""
+
+    def counted(line: str) -> None:
+        spent = time.perf_counter() - began
+        eta = f", ~{spent / done * (total - done):.0f} s left" if done else ""
+        say(f"[{done + 1}/{total}{eta}] {line}")
+
+    return counted
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
 
 
 def compile_all(

@@ -15,25 +15,21 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from truestep import __version__
-from truestep.adapters import (
-    EngineNotInstalled,
-    UnknownEngine,
-    engine_status,
-    get_adapter,
-    registered,
-)
-from truestep.cases import CaseError, SelectionError, load_case, load_cases
-from truestep.cases.case import Case
 from truestep.cases.limits import CEILING
 from truestep.cases.limits import KEYS as LIMIT_KEYS
-from truestep.cases.loader import library, load_baseline_tolerances, load_gates_file
-from truestep.cases.plugins import PluginError
 from truestep.tables.spec import compared
 from truestep.visible import visible
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from truestep.cases.case import Case
+
+# The command answers --version and --help without the engines, pandas or scipy: each
+# command imports what it uses when it runs.
 
 REPORT_SPACE_MB = 64
 """Room a new report needs beside ``--out`` besides twice the old one's size, MiB (the
@@ -59,6 +55,7 @@ def _quoted(value: object) -> str:
 
 
 def _load(selection: str, limit_items: list[str] | None = None, *, trust_limits: bool = False) -> list[Case]:
+    from truestep.cases import load_cases
     from truestep.cases.limits import parse_override
 
     try:
@@ -224,6 +221,8 @@ def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
 def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Case]:
     """The cases a results table covers: by the file it names (``case_source``), else by
     name in the case library; their gates may name ``engines``."""
+    from truestep.cases import library, load_case
+
     lib = library()
     sources = {}
     if "case_source" in results:
@@ -247,6 +246,7 @@ def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Cas
 def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
     """The declared-order gates (:mod:`truestep.measures.declared`) of the installed engines that
     ran, each on its own case."""
+    from truestep.adapters import engine_status, registered
     from truestep.measures.declared import declared_order_pairs
 
     ran = [
@@ -258,6 +258,7 @@ def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
 
 
 def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
+    from truestep.cases.loader import load_baseline_tolerances
     from truestep.ci.baseline import TOLERANCES
 
     tol: dict[str, float] = {}
@@ -383,6 +384,9 @@ def cmd_gate(args: argparse.Namespace) -> int:
 def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -> tuple[list, list]:
     """The cases a ``truestep gate`` checks and every gate's verdict (the cases' own, the
     ``--gates`` files' and, with ``--declared-orders``, the methods' declared orders)."""
+    from truestep.adapters import registered
+    from truestep.cases import CaseError, load_cases
+    from truestep.cases.loader import load_gates_file
     from truestep.ci.gates import check_gates
 
     results = tables["results"]
@@ -475,6 +479,8 @@ def _write_ci_outputs(
 
 
 def cmd_list(args: argparse.Namespace) -> int:
+    from truestep.adapters import engine_status, get_adapter, registered
+
     cases = _load(args.cases)
     print("cases:")
     for c in cases:
@@ -506,6 +512,8 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    import pandas as pd
+
     from truestep.api import select_engines
     from truestep.execution.bench import COLUMNS, scaling_plot, scaling_table
 
@@ -808,7 +816,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     comp.set_defaults(func=cmd_compile)
 
-    from truestep.execution.bench import BUDGET_S, SIZES
+    from truestep.execution.bench_defaults import BUDGET_S, SIZES
 
     sizes = ",".join(f"{n:.0e}".replace("e+0", "e") for n in SIZES)
     bench = sub.add_parser(
@@ -845,6 +853,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from truestep.adapters import EngineNotInstalled, UnknownEngine
+    from truestep.cases.errors import CaseError, SelectionError
+    from truestep.cases.plugins import PluginError
+
     try:
         return args.func(args)
     except (CaseError, UsageError, SelectionError, UnknownEngine, EngineNotInstalled, PluginError) as err:

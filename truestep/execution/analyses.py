@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
@@ -17,6 +17,7 @@ from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
 from truestep.cases.loader import CASE_DIR, load_case
 from truestep.execution.isolation import run_untimed, untimed_workers
+from truestep.execution.progress import Progress
 from truestep.execution.runner import duplicate_of, preload
 from truestep.measures.restitution import bounces, heights
 from truestep.measures.stability import SearchTimeout, search_case
@@ -38,7 +39,7 @@ matters at all."""
 BOUNCES = 3
 SCALING_BUDGET_S = 12.0
 """Seconds of timed runs for the scaling table of a full run (``truestep bench`` takes
-longer by default, :data:`truestep.execution.bench.BUDGET_S`, and goes to n = 1e6)."""
+longer by default, :data:`truestep.execution.bench_defaults.BUDGET_S`, and goes to n = 1e6)."""
 SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
 """Particle counts of a full run's scaling table."""
 
@@ -54,17 +55,20 @@ def _search(engine: str, case: Case, method: str, quick: bool):
     return result, time.perf_counter() - start
 
 
-def _say(msg: str) -> None:
-    from truestep.visible import visible
-
-    print(visible(msg), file=sys.stderr)
-
-
-def stability_table(cases: list[Case], engines: list[str], *, quick: bool, workers: int = 1) -> pd.DataFrame:
+def stability_table(
+    cases: list[Case],
+    engines: list[str],
+    *,
+    quick: bool,
+    workers: int = 1,
+    progress: Callable[[str], None] | None = None,
+) -> pd.DataFrame:
     """Bisect the largest stable step for every case that declares a search.
 
     ``--quick`` searches only cases whose search says ``quick = true``, to 1%. Searches
-    are not timed, so up to ``workers`` run at once, each in its own process.
+    are not timed, so up to ``workers`` run at once, each in its own process. Each
+    finished search is a line with done / total and the time left (:class:`Progress`;
+    ``progress`` takes the lines instead).
     """
     rows: list[dict] = []
     calls, slots = [], []
@@ -96,16 +100,16 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool, worke
         row = slots[k]
         if out.status != "ok":
             row.update(status=out.status, note=out.message)
-            _say(f"stability {row['case']} {row['engine']}/{row['method']}: {out.status}")
+            bar.done(f"{row['case']} {row['engine']}/{row['method']}: {out.status}")
             return
         r, seconds = out.value
         if isinstance(r, str):  # the safety valve fired: no limit from this machine's speed
             row.update(status="timeout", note=r)
-            _say(f"stability {row['case']} {row['engine']}/{row['method']}: timeout ({r})")
+            bar.done(f"{row['case']} {row['engine']}/{row['method']}: timeout ({r})")
             return
         row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status=r.status, note=r.note)
-        _say(
-            f"stability {row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
+        bar.done(
+            f"{row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
             f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
             f"{seconds:.1f} s"
         )
@@ -114,7 +118,8 @@ def stability_table(cases: list[Case], engines: list[str], *, quick: bool, worke
     order = sorted(
         range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
     )
-    run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
+    with Progress(len(calls), "stability", say=progress) as bar:
+        run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return STABILITY.frame(rows)
 
 
@@ -212,10 +217,14 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
     return rows
 
 
-def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> pd.DataFrame:
+def restitution_table(
+    engines: list[str], *, quick: bool, workers: int = 1, progress: Callable[[str], None] | None = None
+) -> pd.DataFrame:
     """Drop a ball at every requested restitution and step, in every engine and method.
 
-    The drops are not timed, so up to ``workers`` run at once, each in its own process.
+    The drops are not timed, so up to ``workers`` run at once, each in its own process;
+    each finished drop is a line with done / total and the time left (as
+    :func:`stability_table`).
     """
     e_set = QUICK_RESTITUTION_SET if quick else RESTITUTION_SET
     dts = QUICK_RESTITUTION_DTS if quick else RESTITUTION_DTS
@@ -240,7 +249,7 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
 
     def done(k: int, out) -> None:
         g, engine, method, e, dt = slots[k]
-        _say(f"restitution {engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
+        bar.done(f"{engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
         if out.status == "ok":
             groups[g].extend(out.value)
         else:
@@ -256,12 +265,18 @@ def restitution_table(engines: list[str], *, quick: bool, workers: int = 1) -> p
                 }
             )
 
-    run_untimed(calls, workers, done)
+    with Progress(len(calls), "restitution", say=progress) as bar:
+        run_untimed(calls, workers, done)
     return RESTITUTION.frame([r for g in groups for r in g])
 
 
 def run_analyses(
-    cases: list[Case], engines: list[str], results: pd.DataFrame, *, quick: bool
+    cases: list[Case],
+    engines: list[str],
+    results: pd.DataFrame,
+    *,
+    quick: bool,
+    progress: Callable[[str], None] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """Every table besides ``results``: ``stability`` (for the cases with a search),
     ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
@@ -271,7 +286,8 @@ def run_analyses(
 
     The first two are not timed: their runs share the machine's cores
     (:func:`untimed_workers`). The scaling table is timed, so it runs after them, one run
-    at a time.
+    at a time. Each phase shows done / total and the time left (``progress`` takes the
+    lines instead).
     """
     from truestep.execution.bench import RAIN_CASE, scaling_table
 
@@ -279,14 +295,14 @@ def run_analyses(
     workers = untimed_workers()
     bouncing = any("restitution" in c.tags for c in cases)
     tables = {
-        "stability": stability_table(cases, engines, quick=quick, workers=workers),
-        "restitution": restitution_table(engines, quick=quick, workers=workers)
+        "stability": stability_table(cases, engines, quick=quick, workers=workers, progress=progress),
+        "restitution": restitution_table(engines, quick=quick, workers=workers, progress=progress)
         if bouncing
         else RESTITUTION.frame([]),
     }
     rain = next((c for c in cases if c.name == RAIN_CASE), None)
     tables["scaling"] = (
-        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain)
+        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress)
         if rain is not None and not quick
         else SCALING.frame([])
     )

@@ -69,6 +69,7 @@ import pandas as pd
 
 from truestep.adapters import get_adapter
 from truestep.cases.case import Case
+from truestep.execution.bench_defaults import BUDGET_S, SIZES
 from truestep.execution.isolation import Outcome, run_isolated
 from truestep.execution.progress import Progress
 from truestep.tables.spec import SCALING
@@ -76,11 +77,6 @@ from truestep.tables.spec import SCALING
 RAIN_CASE = "particle-rain"
 """The case whose scene is scaled: independent balls over a floor."""
 
-SIZES: tuple[float, ...] = (1e2, 1e3, 1e4, 1e5, 1e6)
-"""Particle counts of the table, by default."""
-
-BUDGET_S = 35.0
-"""Default seconds for every run of the table (all engines, methods and sizes)."""
 
 TARGET_S = 0.2
 """Seconds of timed stepping each run aims at."""

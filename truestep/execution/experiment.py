@@ -129,6 +129,7 @@ def run_experiment(exp: Experiment) -> Tables:
                 traces=None if exp.quick else traces,
                 with_lecture_figures=exp.lecture_figures,
                 findings=found,
+                progress=exp.rows,
             )
             laps.lap("report")
     finally:
@@ -174,7 +175,7 @@ def _analyses(exp: Experiment, results: pd.DataFrame, journal) -> dict:
     tables = journal.analyses() if journal is not None and exp.resume is not None else None
     if tables is None:
         with faults.phase("analyses"):
-            tables = run_analyses(exp.cases, exp.engines, results, quick=exp.quick)
+            tables = run_analyses(exp.cases, exp.engines, results, quick=exp.quick, progress=exp.rows)
         if journal is not None:
             journal.put_analyses(tables)
     return tables

@@ -393,9 +393,12 @@ def write_report(
     traces: dict | None = None,
     with_lecture_figures: bool = True,
     findings: Findings | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> None:
     """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
-    the table), index.md, index.html, figures/.
+    the table), index.md, index.html, figures/; each of its steps is a line with done /
+    total and the time left (:class:`~truestep.execution.progress.Progress`; ``progress``
+    takes the lines instead).
 
     The whole new report is written into a staging folder beside ``out`` and put in
     place of the old one as a whole (:mod:`truestep.reporting.publish`): at every instant ``out``
@@ -408,6 +411,7 @@ def write_report(
     """
     from truestep.execution import faults
     from truestep.execution.isolation import kill_children
+    from truestep.execution.progress import Progress
     from truestep.reporting import publish
     from truestep.reporting.folder import check_out, write_marker
 
@@ -415,6 +419,7 @@ def write_report(
     publish.recover(out)
     check_out(out)
     stage = publish.new_stage(out)
+    bar = Progress(4, "report", say=progress)
     try:
         write_marker(stage)
         results.to_csv(stage / "results.csv", index=False)
@@ -431,6 +436,7 @@ def write_report(
             json.dumps(run_record(cases, results, quick=quick, argv=argv), indent=1) + "\n"
         )
         faults.point("report-csv")
+        bar.done("tables written")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None
         md = render_markdown(
             stage,
@@ -445,11 +451,15 @@ def write_report(
         )
         faults.point("report-figures")
         (stage / "index.md").write_text(md)
+        bar.done(f"figures drawn, index.md written ({len(cases)} cases)")
         faults.point("report-index")
         (stage / "index.html").write_text(markdown_to_html(md, stage))
+        bar.done("index.html written")
         publish.swap(stage, out)
+        bar.done(f"published in {out}")
     except BaseException:
         kill_children()
         raise
     finally:
+        bar.close()
         shutil.rmtree(stage, ignore_errors=True)
