@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+from collections.abc import Callable
 from importlib import metadata
 
 from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
@@ -116,10 +117,11 @@ def get_adapter(name: str) -> Adapter:
     return adapter_class(name)()
 
 
-def resolve_engine(spec: str) -> str:
+def resolve_engine(spec: str, say: Callable[[str], None] | None = None) -> str:
     """The engine name for ``spec``: a registered name, or ``module:Class`` of an adapter
-    that is importable but not registered (then registered in this process under the
-    adapter's ``name``)."""
+    (then registered in this process, and the processes it forks, under the adapter's
+    ``name``). A class whose ``name`` another registration holds replaces it in this
+    process (a patched copy of an engine under test), and ``say`` is told which."""
     if ":" not in spec:
         if spec not in registered():
             raise UnknownEngine(f"unknown engine {spec!r}; known: {', '.join(registered())}")
@@ -129,8 +131,8 @@ def resolve_engine(spec: str) -> str:
     if not isinstance(name, str) or not name:
         raise UnknownEngine(f"{spec}: an adapter needs a class attribute `name` (a string)")
     known = registered().get(name)
-    if known is not None and known != spec:
-        raise UnknownEngine(f"{spec}: its name {name!r} is already the engine {known}")
+    if known is not None and known != spec and say is not None:
+        say(f"engine {name}: {spec} replaces the registered {known} in this run")
     _RESOLVED[name] = spec
     return name
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -158,9 +159,10 @@ class Adapter(Protocol):
        symplectic, stability data: :class:`~truestep.reference_impl.solvers.MethodFacts`),
        which the harness uses for declared-order gates, exact stability limits and
        ``nfev``: ``method_facts``, a mapping from a method to its ``MethodFacts`` or to
-       the name of the reference method whose facts it shares (``"verlet"``,
-       ``"symplectic-euler"``, ``"rk4"`` ...); ``schemes``, a mapping to such names only,
-       is read too (:func:`facts_of`);
+       the name of the reference method whose facts it shares, every one of them
+       (``"verlet"``, ``"symplectic-euler"``, ``"rk4"`` ...;
+       ``MethodFacts.like("verlet", velocity_order=2)`` where some differ). The older
+       ``schemes`` mapping is still read, with a ``DeprecationWarning`` (:func:`facts_of`);
     9. optionally, accept ``simulate(case, method, dt, monitor=True)``: the run a row is
        measured from (untimed), watched at every step, its ``Trajectory.extremes`` the
        lowest and highest energy over every step; the harness then times plain runs and
@@ -198,18 +200,30 @@ def resolve_facts(spec: FactsSpec | None) -> MethodFacts | None:
 def facts_of(adapter: Any, method: str) -> MethodFacts | None:
     """The declared facts of an adapter's method, or ``None`` if it declares none.
 
-    Read from the adapter's ``method_facts`` (a record or a reference method's name),
-    else from its ``schemes`` (a reference method's name, the spelling that declares the
-    facts a method shares with one). A name that is no reference method raises
-    ``KeyError`` naming the adapter, the attribute and the method.
+    Read from the adapter's ``method_facts`` (a record or a reference method's name: every
+    fact of that method). An adapter written before it may still name the method in
+    ``schemes``: read the same, with a ``DeprecationWarning`` that says so, since a name
+    there copies every fact (the order with velocity-dependent forces too), not only the
+    stability interval it was often written for. A name that is no reference method
+    raises ``KeyError`` naming the adapter, the attribute and the method.
     """
+    name = getattr(adapter, "name", type(adapter).__name__)
     for attribute in ("method_facts", "schemes"):
         declared = getattr(adapter, attribute, None) or {}
         if method in declared:
+            if attribute == "schemes":
+                warnings.warn(
+                    f"{name}: schemes[{method!r}] = {declared[method]!r} is deprecated: it copies every "
+                    "fact of that reference method (order, order with velocity-dependent forces, "
+                    "evaluations, symplectic, stability); write method_facts = "
+                    f"{{{method!r}: {declared[method]!r}}}, or MethodFacts.like({declared[method]!r}, ...) "
+                    "with the facts where yours differ",
+                    DeprecationWarning,
+                    stacklevel=2,
+                )
             try:
                 return resolve_facts(declared[method])
             except KeyError as err:
-                name = getattr(adapter, "name", type(adapter).__name__)
                 raise KeyError(f"{name}: {attribute}[{method!r}]: {err.args[0]}") from None
     return None
 
@@ -332,6 +346,12 @@ class FixedStepAdapter(abc.ABC):
     def missing(self, case: Case, method: str) -> set[str]:
         """Features of ``case`` beyond :attr:`capabilities`."""
         return set(case.features) - self.capabilities
+
+    def evaluations_for(self, case: Case, method: str) -> int:
+        """Force evaluations per step of ``method`` on ``case``'s scene, for ``nfev``:
+        :meth:`evaluations` unless the adapter overrides this (a method whose count depends
+        on the scene: sub-steps per contact, an iteration count set per scene ...)."""
+        return self.evaluations(method)
 
     def evaluations(self, method: str) -> int:
         """Force evaluations per step of ``method``: :attr:`evaluations_per_step` where it
@@ -465,7 +485,7 @@ class FixedStepAdapter(abc.ABC):
             energy=energy,
             status=status,
             t_fail=t_fail,
-            nfev=rec.steps * self.evaluations(method),
+            nfev=rec.steps * self.evaluations_for(case, method),
             steps=rec.steps,
             wall_s=rec.wall_s,
             message="; ".join(notes),

@@ -70,6 +70,13 @@ def case_directories() -> list[tuple[str, Path]]:
             where = obj() if callable(obj) else obj
         if not isinstance(where, str | Path) or not Path(where).is_dir():
             raise PluginError(f"entry point {CASES_GROUP} {name} = {value!r}: {where!r} is not a directory")
+        if not any(Path(where).glob("*.toml")):
+            package = value.partition(":")[0].split(".")[0]
+            raise PluginError(
+                f"entry point {CASES_GROUP} {name} = {value!r}: {where} holds no case files (*.toml); "
+                "an install that is not editable ships them only when the package declares them, "
+                f'e.g. [tool.setuptools.package-data] {package} = ["*.toml"] in its pyproject.toml'
+            )
         if Path(where).resolve() != CASE_DIR:
             dirs.append((name, Path(where)))
     return dirs

@@ -9,6 +9,7 @@ real quick run.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -93,14 +94,56 @@ def test_every_engine_method_declares_its_facts(item):
         assert facts.evaluations_per_step is not None or method == "implicit-euler"
 
 
-def test_the_older_spelling_schemes_still_declares_facts():
-    """A user adapter that says ``schemes = {"m": "verlet"}`` gets Verlet's facts."""
+def test_the_older_spelling_schemes_still_declares_facts_and_says_what_it_copies():
+    """A user adapter that says ``schemes = {"m": "verlet"}`` gets Verlet's facts, every
+    one of them, and a warning that says so and names the spelling to use."""
 
     class Mine:
+        name = "mine"
         schemes = {"leap": "verlet"}  # noqa: RUF012 (an adapter's class attribute)
 
-    assert facts_of(Mine(), "leap") is METHODS["verlet"].facts
+    with pytest.warns(DeprecationWarning, match=r"copies every fact.*method_facts = \{'leap': 'verlet'\}"):
+        assert facts_of(Mine(), "leap") is METHODS["verlet"].facts
     assert facts_of(Mine(), "other") is None
+
+
+def test_facts_like_a_reference_method_change_only_what_they_name():
+    """A velocity Verlet that keeps second order with dampers: Verlet's facts but that one."""
+    mine = MethodFacts.like("verlet", velocity_order=2)
+    verlet = METHODS["verlet"].facts
+    assert verlet.order_for(velocity_forces=True) == 1 and mine.order_for(velocity_forces=True) == 2
+    assert dataclasses.replace(mine, velocity_order=verlet.velocity_order) == verlet
+    with pytest.raises(KeyError):
+        MethodFacts.like("no-such-method")
+
+
+def test_an_adapter_may_count_evaluations_per_scene(case_named):
+    """``evaluations_for(case, method)``: nfev is steps times what it says for that scene."""
+
+    class PerParticle(FixedStepAdapter):
+        name = "per-particle"
+        methods = ("m",)
+        capabilities = frozenset({"point-masses", "2d", "3d", "uniform-gravity"})
+        method_facts = {"m": "symplectic-euler"}  # noqa: RUF012
+
+        def evaluations_for(self, case, method):
+            return 3 * case.particles.n
+
+        def build(self, case, method, h):
+            return [case.particles.x0.copy(), case.particles.v0.copy(), case.particles.gravity]
+
+        def advance(self, s, k, steps, h):
+            for _ in range(steps):
+                s[1] = s[1] + h * s[2]
+                s[0] = s[0] + h * s[1]
+
+        def read(self, s):
+            return s[0], s[1]
+
+    case = case_named("free-fall")
+    traj = PerParticle().simulate(case, "m", case.dts[0])
+    assert traj.steps == case.steps_for(case.dts[0])[0]
+    assert traj.nfev == traj.steps * 3 * case.particles.n
 
 
 def test_nfev_of_a_fixed_step_engine_comes_from_its_facts(case_named):

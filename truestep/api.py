@@ -52,7 +52,7 @@ def select_engines(
     items = engines.split(",") if isinstance(engines, str) else list(engines)
     names = []
     for item in (i.strip() for i in items if i.strip()):
-        name = resolve_engine(item)
+        name = resolve_engine(item, say)
         adapter_class(name)  # raises EngineNotInstalled when its library is missing
         if name not in names:
             names.append(name)

@@ -20,6 +20,7 @@ the real rate ``-c``.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -175,6 +176,15 @@ class MethodFacts:
         e = self.evaluations_per_step
         if e is not None and (isinstance(e, bool) or not isinstance(e, int) or e < 1):
             raise ValueError(f"MethodFacts.evaluations_per_step: a positive integer or None, got {e!r}")
+
+    @classmethod
+    def like(cls, method: str, **changes: object) -> MethodFacts:
+        """The facts of the reference method ``method`` with ``changes`` (field -> value):
+        ``MethodFacts.like("verlet", velocity_order=2)`` for a velocity Verlet that keeps
+        its order with dampers."""
+        from truestep.reference_impl.solvers import get_solver
+
+        return dataclasses.replace(get_solver(method).facts, **changes)  # type: ignore[arg-type]
 
     def order_for(self, *, velocity_forces: bool) -> int:
         """The declared order on a problem whose forces do (or do not) depend on velocity."""

@@ -16,6 +16,7 @@ import zipfile
 from importlib import metadata
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 import truestep
@@ -307,6 +308,33 @@ def test_an_adapter_by_module_and_class_runs_unregistered(fake_site, tmp_path):
     assert "drifting-pair,drift,straight" in (out / "results.csv").read_text()
 
 
+def test_a_patched_class_replaces_the_registered_engine_of_its_name_saying_so(fake_site, tmp_path):
+    """``--engines module:Class`` of a class named like a registered engine (a patched copy
+    under test) runs in its place, and the run says which registration it replaced."""
+    (fake_site / "patched.py").write_text(
+        "import fakepkg\n\n\nclass Drift(fakepkg.Drift):\n"
+        "    def advance(self, s, k, steps, h):\n"
+        "        s[0] = s[0] + steps * h * 1.5 * s[1]  # a broken drift: half again too far\n"
+    )
+    out = tmp_path / "out"
+    case = fake_site / "fakecases" / "drifting-pair.toml"
+    done = _cli(
+        "run",
+        "--quick",
+        "--cases",
+        str(case),
+        "--engines",
+        "patched:Drift",
+        "--out",
+        str(out),
+        path=fake_site,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "engine drift: patched:Drift replaces the registered fakepkg:Drift in this run" in done.stderr
+    rows = pd.read_csv(out / "results.csv").query("engine == 'drift'")
+    assert len(rows) and (rows["error"] > 0.1).all()  # the patched class ran, not the exact one
+
+
 def test_a_broken_registration_is_one_line_exit_2(tmp_path):
     site = tmp_path / "site"
     info = site / "broken-1.0.dist-info"
@@ -316,3 +344,19 @@ def test_a_broken_registration_is_one_line_exit_2(tmp_path):
     done = _cli("list", path=site)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "entry point truestep.cases broken = 'no_such_module'" in done.stderr
+
+
+def test_a_case_package_that_ships_no_case_files_says_how_to_ship_them(tmp_path):
+    """A non-editable install without a package-data line leaves the case files behind:
+    the registration names the empty folder and the pyproject line that ships them."""
+    site = tmp_path / "site"
+    (site / "emptycases").mkdir(parents=True)
+    (site / "emptycases" / "__init__.py").write_text("")
+    info = site / "emptycases-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: emptycases\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text("[truestep.cases]\nmine = emptycases\n")
+    done = _cli("list", path=site)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "holds no case files (*.toml)" in done.stderr
+    assert '[tool.setuptools.package-data] emptycases = ["*.toml"]' in done.stderr

@@ -23,7 +23,7 @@ class LeapfrogAdapter(truestep.FixedStepAdapter):
             "pinned-particles",
         }
     )
-    schemes: ClassVar = {"leapfrog": "verlet"}  # stability interval omega h < 2, as Verlet's
+    method_facts: ClassVar = {"leapfrog": "verlet"}  # every fact of Verlet's: omega h < 2, order 2
 
     def build(self, case, method, h):
         m = case.particles
