@@ -34,6 +34,7 @@ _EXPORTS: dict[str, str] = {
     "Recording": "truestep.adapters.base",
     "Trajectory": "truestep.adapters.base",
     "get_adapter": "truestep.adapters",
+    "build_system": "truestep.adapters.reference",
     "Case": "truestep.cases.case",
     "CaseError": "truestep.cases.errors",
     "SelectionError": "truestep.cases.errors",
@@ -74,6 +75,7 @@ __all__ = [
     "Tables",
     "Trajectory",
     "__version__",
+    "build_system",
     "check",
     "compare",
     "exact_solution",
@@ -101,6 +103,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:
     from truestep.adapters import get_adapter
     from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
+    from truestep.adapters.reference import build_system
     from truestep.api import Tables, check, compare, run, select_engines
     from truestep.cases.case import Case, Gate, OdeSpec
     from truestep.cases.errors import CaseError, SelectionError

@@ -97,9 +97,10 @@ class GateCheck:
 
     @property
     def id(self) -> str:
-        g = self.gate
-        dt = f"-dt={g.dt:g}" if g.dt is not None else ""
-        return f"{self.case.name}:{g.where}:{g.kind}:{g.engine}/{g.method}{dt}"
+        """The gate's id, as every CI output names it (:func:`truestep.ci.gates.gate_id`)."""
+        from truestep.ci.gates import gate_id
+
+        return gate_id(self.case.name, self.gate)
 
     def result(self):
         """The :class:`~truestep.ci.gates.GateResult` (runs the selection on first use)."""

@@ -3,6 +3,7 @@ its :class:`MethodFacts` as ``facts``."""
 
 from __future__ import annotations
 
+from truestep.reference_impl.solvers import facts
 from truestep.reference_impl.solvers.base import Solver
 from truestep.reference_impl.solvers.explicit_rk import (
     RK4,
@@ -33,6 +34,9 @@ METHODS: dict[str, type[Solver]] = {
         LectureUpdate,
     )
 }
+
+
+facts.NAMED.update({name: cls.facts for name, cls in METHODS.items()})
 
 
 def get_solver(method: str | type[Solver]) -> type[Solver]:

@@ -182,9 +182,9 @@ class MethodFacts:
         """The facts of the reference method ``method`` with ``changes`` (field -> value):
         ``MethodFacts.like("verlet", velocity_order=2)`` for a velocity Verlet that keeps
         its order with dampers."""
-        from truestep.reference_impl.solvers import get_solver
-
-        return dataclasses.replace(get_solver(method).facts, **changes)  # type: ignore[arg-type]
+        if method not in NAMED:
+            raise KeyError(f"unknown method {method!r}; known: {', '.join(NAMED)}")
+        return dataclasses.replace(NAMED[method], **changes)  # type: ignore[arg-type]
 
     def order_for(self, *, velocity_forces: bool) -> int:
         """The declared order on a problem whose forces do (or do not) depend on velocity."""
@@ -198,3 +198,8 @@ class MethodFacts:
         if self.exact_constant_acceleration is None:
             return self.order >= 2
         return self.exact_constant_acceleration
+
+
+NAMED: dict[str, MethodFacts] = {}
+"""The facts of the reference's methods by name (:meth:`MethodFacts.like` reads them),
+filled by :mod:`truestep.reference_impl.solvers`, this module's package, as it loads."""
