@@ -542,6 +542,13 @@ class MujocoAdapter(FixedStepAdapter):
 
     name = "mujoco"
     methods = tuple(INTEGRATORS)
+    method_notes: ClassVar = {
+        "Euler": "MuJoCo's semi-implicit Euler (velocity first)",
+        "implicit": "MuJoCo's implicit-in-velocity Euler (damping and its derivatives implicit)",
+        "implicitfast": "MuJoCo's implicit Euler without the Coriolis terms' derivatives",
+        "RK4": "MuJoCo's classical Runge-Kutta 4",
+    }
+    """One line per method, for the report's glossary."""
     method_facts: ClassVar[dict[str, FactsSpec]] = METHOD_FACTS
     capabilities = frozenset(
         {

@@ -426,6 +426,12 @@ class PybulletAdapter(FixedStepAdapter):
 
     name = "pybullet"
     methods = ("default", "clean")
+    method_notes: ClassVar = {
+        "default": "Bullet as a user gets it: multibody particles, its contact settings at their defaults",
+        "clean": "the same step with the contact treatment that would distort a comparison normalised "
+        "(split impulse, no restitution threshold): see the pybullet engine page",
+    }
+    """One line per method, for the report's glossary."""
     method_facts: ClassVar[dict[str, str]] = {"default": "symplectic-euler", "clean": "symplectic-euler"}
     """Bullet steps velocity then position (semi-implicit Euler) with the numpy forces,
     dampers included, held at the start of the step: the reference's symplectic Euler."""

@@ -252,6 +252,10 @@ class PymunkAdapter(FixedStepAdapter):
     name = "pymunk"
     methods = ("default",)
     adaptive_methods = ()
+    method_notes: ClassVar = {
+        "default": "Chipmunk2D's step (symplectic Euler with an impulse contact solver), as shipped"
+    }
+    """One line per method, for the report's glossary."""
     method_facts: ClassVar[dict[str, MethodFacts]] = {
         "default": MethodFacts(
             order=1,

@@ -62,6 +62,20 @@ class ReferenceAdapter:
     name = "reference"
     methods = tuple(METHODS)
     adaptive_methods = tuple(m for m, cls in METHODS.items() if cls.adaptive)
+    method_notes = MappingProxyType(
+        {
+            "euler": "explicit (forward) Euler: order 1",
+            "midpoint": "explicit midpoint rule: order 2",
+            "heun": "Heun's method (explicit trapezoid): order 2",
+            "rk4": "classical Runge-Kutta: order 4",
+            "dopri5": "Dormand-Prince 5(4) with step control; its dt is the tolerance (rtol = atol)",
+            "symplectic-euler": "symplectic (semi-implicit) Euler, velocity first: order 1, symplectic",
+            "verlet": "velocity Verlet: order 2 (1 with velocity-dependent forces), symplectic",
+            "implicit-euler": "backward Euler by Newton's method: order 1, damps the motion",
+            "lecture": "the lecture's update v' = v + a h, x' = x + (v + v') h / 2: order 1",
+        }
+    )
+    """One line per method, for the report's glossary."""
 
     @property
     def method_facts(self) -> MappingProxyType:

@@ -33,6 +33,14 @@ class ScipyAdapter:
     name = "scipy"
     methods = ("RK45", "DOP853", "Radau")
     adaptive_methods = methods
+    method_notes = MappingProxyType(
+        {
+            "RK45": "solve_ivp's Dormand-Prince 5(4) with step control; dt is the tolerance (rtol = atol)",
+            "DOP853": "solve_ivp's Dormand-Prince 8(5,3); dt is the tolerance",
+            "Radau": "solve_ivp's implicit Radau IIA of order 5; dt is the tolerance",
+        }
+    )
+    """One line per method, for the report's glossary."""
     method_facts = MappingProxyType(
         {
             "RK45": "dopri5",

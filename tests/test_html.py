@@ -146,6 +146,28 @@ def test_every_image_is_an_embedded_png_that_decodes(page):
             pytest.fail(f"bad base64 in {img.get('alt')!r}: {err}")
         pixels = _decode_png(data)
         assert pixels.shape[0] > 100 and pixels.shape[1] > 100, img.get("alt")
+        # Every figure is drawn at least 1000 pixels across, its text at a readable size.
+        assert pixels.shape[1] >= 1000, (img.get("alt"), pixels.shape)
+
+
+def test_every_case_section_ends_in_its_conclusion_and_the_names_are_explained(report):
+    """Each case's section closes with its computed conclusion, whose most accurate run is
+    the run of least error in results.csv (read here by another route); the glossary under
+    the scorecard explains every engine/method of the run."""
+    md = (report / "index.md").read_text()
+    results = pd.read_csv(report / "results.csv")
+    sections = md.split("\n### ")[1:]
+    for case, rows in results.groupby("case"):
+        section = next(sec for sec in sections if sec.startswith(f"{case}:"))
+        assert "**In short:**" in section, case
+        ok = rows[(rows["status"] == "ok") & rows["error"].notna()]
+        if len(ok):
+            best = ok.loc[ok["error"].idxmin()]
+            line = section[section.index("**In short:**") :].splitlines()[0]
+            assert f"the most accurate is {best['engine']} / {best['method']} (" in line, (case, line)
+    glossary = md[md.index("What the names and numbers mean") :].split("</details>")[0]
+    for engine, method in results[["engine", "method"]].drop_duplicates().itertuples(index=False):
+        assert f"**{engine} / {method}**:" in glossary, (engine, method)
 
 
 def test_every_case_in_the_results_appears_in_the_page(report, page):

@@ -7,7 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from truestep.measures.picks import cheapest, survival
+from truestep.measures.findings import conclude
+from truestep.measures.picks import cheapest, scorecard, survival
 
 COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev", "wall_s"]
 
@@ -86,3 +87,49 @@ def test_scorecard_cost_and_stability_ratios(case_named):
     )
     fid = restitution_fidelity(rest).iloc[0]
     assert fid["median"] == pytest.approx(0.04) and fid["worst"] == pytest.approx(0.06)
+
+
+def test_the_scorecard_counts_the_cases_it_rests_on_and_sets_exact_zero_limits_apart(case_named):
+    """Of a family's cases a method ran, those with an error measure are counted apart from
+    those reached (the sentences rank by them); a stability search whose exact limit is 0
+    gives no ratio (the method is unstable at every step, as theory says) but is counted."""
+    osc, chain = case_named("harmonic-oscillator"), case_named("spring-chain")
+    rows = [
+        (osc.name, "reference", "euler", 1e-3, "step", "ok", 1.0, 0.1, 100, 1e-3),
+        (chain.name, "reference", "euler", 1e-3, "step", "ok", 1e-9, 0.1, 100, 1e-3),
+        (osc.name, "reference", "rk4", 1e-3, "step", "ok", 1e-9, 0.0, 400, 2e-3),
+    ]
+    stab = pd.DataFrame(
+        [
+            (osc.name, "reference", "euler", 0.0, 0.0, "ok"),
+            (osc.name, "reference", "rk4", 0.0278, 0.0278, "ok"),
+        ],
+        columns=["case", "engine", "method", "dt_limit", "dt_limit_exact", "status"],
+    )
+    card = scorecard(pd.DataFrame(rows, columns=COLUMNS), [osc, chain], stab).set_index(["method", "family"])
+    euler = card.loc[("euler", osc.family)]
+    assert (euler.cases_run, euler.cases_measured, euler.cases_reached) == (1, 1, 0)
+    assert np.isnan(euler.stability_ratio) and euler.stability_zero == 1
+    assert card.loc[("rk4", osc.family)].stability_ratio == pytest.approx(1.0)
+
+
+def test_a_conclusion_names_what_the_rows_say(case_named):
+    """The most accurate run, the least and greatest energy drift (a conserved-energy
+    case; the two lists never share a run) and the runs that failed, read off the rows."""
+    case = case_named("harmonic-oscillator")
+    rows = [
+        (case.name, "reference", m, dt, "step", st, err, drift, 100, 1e-3)
+        for m, dt, st, err, drift in [
+            ("rk4", 1e-3, "ok", 1e-9, 1e-10),
+            ("verlet", 1e-3, "ok", 1e-5, 1e-6),
+            ("euler", 1e-3, "unstable", np.nan, np.nan),
+            ("midpoint", 1e-3, "ok", 1e-6, 1e-3),
+            ("heun", 1e-3, "ok", 2e-6, 2e-3),
+        ]
+    ]
+    c = conclude(case, pd.DataFrame(rows, columns=COLUMNS))
+    assert (c.runs, c.ok) == (5, 4)
+    assert c.most_accurate[:2] == ("reference", "rk4") and c.most_accurate[4] == 1e-9
+    assert [r[1] for r in c.least_drift] == ["rk4", "verlet", "midpoint"]
+    assert [r[1] for r in c.most_drift] == ["heun"]
+    assert c.failed == [("reference", "euler", "unstable", 1)]

@@ -74,3 +74,21 @@ def test_a_run_whose_cases_are_in_no_family_draws_no_scorecard(tmp_path, recwarn
     assert plots.scorecard(card, fidelity, [], 1e-4, tmp_path / "card.png") is None
     assert not (tmp_path / "card.png").exists()
     assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
+
+
+def test_every_built_in_series_has_its_own_colour_and_each_engine_its_marker():
+    """One colour per engine/method, the same in every figure (``series_style`` is what
+    every figure draws a series with), and one marker per engine."""
+    from truestep.adapters import get_adapter
+
+    pairs = [
+        (e, m) for e in ("reference", "scipy", "pymunk", "pybullet", "mujoco") for m in get_adapter(e).methods
+    ]
+    colours = [plots.series_style(e, m)["color"] for e, m in pairs]
+    assert len(set(colours)) == len(pairs), "two built-in series share a colour"
+    markers = {e: plots.series_style(e, m)["marker"] for e, m in pairs}
+    assert len(set(markers.values())) == len(markers)
+    # A plugin's series gets a colour too, the same on every call (and in every run).
+    assert plots.series_colour("my-euler", "semi-implicit") == plots.series_colour(
+        "my-euler", "semi-implicit"
+    )

@@ -110,7 +110,7 @@ def stability_table(
         row.update(dt_limit=r.dt_limit, dt_unstable=r.dt_unstable, runs=r.runs, status=r.status, note=r.note)
         bar.done(
             f"{row['case']:20s} {row['engine']:9s} {row['method']:17s} dt_limit "
-            f"{r.dt_limit:.5g} (exact {row['dt_limit_exact']:.5g}) in {r.runs} runs, "
+            f"{r.dt_limit:.5g} ({_exact_words(row['dt_limit_exact'])}) in {r.runs} runs, "
             f"{seconds:.1f} s"
         )
 
@@ -121,6 +121,12 @@ def stability_table(
     with Progress(len(calls), "stability", say=progress) as bar:
         run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return STABILITY.frame(rows)
+
+
+def _exact_words(limit: object) -> str:
+    """The exact limit as a progress line says it: ``exact 0.0199``, or that there is none."""
+    value = float(limit) if isinstance(limit, int | float) else float("nan")
+    return f"exact {value:.5g}" if np.isfinite(value) or value == np.inf else "no exact limit known"
 
 
 IMPLICIT_COST = 8.0

@@ -25,11 +25,10 @@ from truestep.figures.style import (
     legend_below,
     reference_style,
     save_figure,
-    shade,
 )
 from truestep.reference_impl.solvers import get_solver
 from truestep.reference_impl.system import System
-from truestep.reporting.plots import ENGINE_COLOURS
+from truestep.reporting.plots import series_colour
 
 MORE_STARTS = ((0.9, 0.75), (1.6, -0.9))
 """Starting points of the vector-field figure's other integral curves (its case has the first)."""
@@ -281,7 +280,7 @@ def _midpoint_diagram(ax: plt.Axes, case) -> None:
     arc = np.linspace(-0.2, 1.25, 100)
     ax.plot(np.cos(arc), np.sin(arc), label="exact integral curve", **exact_style())
     arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.012}
-    euler_c, mid_c = shade(ENGINE_COLOURS["reference"], 2, 3), ENGINE_COLOURS["reference"]
+    euler_c, mid_c = series_colour("reference", "euler"), series_colour("reference", "midpoint")
     ax.quiver(*x0, *dx, color=euler_c, **arrow)
     ax.quiver(*xm, *(0.5 * hs * f_mid), color=SCENE_COLOURS[0], **arrow)
     ax.quiver(*x0, *(x_mid - x0), color=mid_c, **arrow)

@@ -1,8 +1,8 @@
 """How the lecture's figures look: resolution, colours, line styles, legends.
 
 A line that is an engine/method series is styled by :func:`truestep.reporting.plots.series_style`
-(every line of the lecture's figures is the reference engine; shades of its colour tell
-step sizes apart). Things that are not engines (particles, scene variants) take
+(every line of the lecture's figures is the reference engine, in its method's colour;
+shades of that colour tell step sizes apart). Things that are not engines (particles, scene variants) take
 :data:`SCENE_COLOURS`, none of which is an engine's colour; exact solutions are a light
 grey band under the computed lines.
 """
@@ -20,10 +20,12 @@ import numpy as np
 
 from truestep.reporting.plots import save, series_style
 
-DPI = 80
-"""Resolution of every figure, dots per inch (as the report's other figures)."""
-SCENE_COLOURS = ("#ff7f0e", "#17becf", "#8c564b", "#bcbd22", "#e377c2")
-"""Colours for particles and scene variants; none is in :data:`truestep.reporting.plots.ENGINE_COLOURS`."""
+DPI = 100
+"""Resolution of every figure, dots per inch (as the report's other figures:
+:data:`truestep.reporting.plots.REPORT_DPI`)."""
+SCENE_COLOURS = ("#e69f00", "#56b4e9", "#999933", "#cc79a7", "#44aa99")
+"""Colours for particles and scene variants (none is an engine/method series' colour,
+:data:`truestep.reporting.plots.SERIES_COLOURS`)."""
 NIGHT = "#0d0d17"
 """Background of the particle renderings: particles add light, as point light sources."""
 EXACT_COLOUR = "#c9c9c9"

@@ -1,11 +1,13 @@
 """What a run found, computed once from its tables beside the analyses, for the report to
 render (it recomputes nothing): the fitted orders of convergence, the cheapest run to each
 accuracy, the scorecard, how true each engine's restitution is, the largest step each
-engine/method survives on the hard cases, and the speed tables of the speed-up gates.
+engine/method survives on the hard cases, the speed tables of the speed-up gates, and
+each case's conclusion.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +28,9 @@ class Findings:
     fidelity : :func:`truestep.measures.picks.restitution_fidelity`
     survival : case name -> :func:`truestep.measures.picks.survival`, for the hard cases
     speed : (case name, the gate's ``where``) -> :func:`speed_table`, for each ``speedup`` gate
+    conclusions : case name -> :class:`Conclusion`
+    notes : (engine, method) -> what the method is, in a line (the adapter's
+    ``method_notes``), for every pair in the results whose adapter says
     """
 
     orders: pd.DataFrame
@@ -34,6 +39,63 @@ class Findings:
     fidelity: pd.DataFrame
     survival: dict[str, pd.DataFrame]
     speed: dict[tuple[str, str], pd.DataFrame]
+    conclusions: dict[str, Conclusion] = dataclasses.field(default_factory=dict)
+    notes: dict[tuple[str, str], str] = dataclasses.field(default_factory=dict)
+
+
+Run = tuple[str, str, float, str, float]
+"""(engine, method, dt, dt_kind, value): one row's value of a measure."""
+
+
+@dataclass(frozen=True)
+class Conclusion:
+    """What one case's rows say, none of it timing (the same on every machine).
+
+    runs : the rows that ran (not unsupported or skipped);  ok : those that ended ok
+    most_accurate : the row of least error among the ok ones (``None`` without errors)
+    least_drift, most_drift : the ok rows of least and greatest energy drift (up to three
+    each, least first / greatest first), for a case whose energy is conserved
+    failed : (engine, method, status, rows) for each engine/method with rows not ok
+    """
+
+    runs: int
+    ok: int
+    most_accurate: Run | None
+    least_drift: list[Run]
+    most_drift: list[Run]
+    failed: list[tuple[str, str, str, int]]
+
+
+def conclude(case: Case, results: pd.DataFrame) -> Conclusion:
+    """The :class:`Conclusion` of ``case`` from its rows of ``results``."""
+    rows = results[(results["case"] == case.name) & ~results["status"].isin(["unsupported", "skipped"])]
+    ok = rows[rows["status"] == "ok"]
+
+    def run(r: pd.Series, column: str) -> Run:
+        return (str(r["engine"]), str(r["method"]), float(r["dt"]), str(r["dt_kind"]), float(r[column]))
+
+    error = pd.to_numeric(ok["error"], errors="coerce")
+    best = ok.loc[error.idxmin()] if error.notna().any() else None
+    least: list[Run] = []
+    most: list[Run] = []
+    if case.conservative and "energy_drift" in ok:
+        drift = ok.assign(d=pd.to_numeric(ok["energy_drift"], errors="coerce")).dropna(subset=["d"])
+        drift = drift.sort_values(["d", "engine", "method", "dt"], kind="stable")
+        least = [run(r, "d") for _, r in drift.head(3).iterrows()]
+        rest = drift.iloc[len(least) :]
+        most = [run(r, "d") for _, r in rest.iloc[::-1].head(3).iterrows()]
+    failed = [
+        (str(e), str(m), str(st), len(g))
+        for (e, m, st), g in rows[rows["status"] != "ok"].groupby(["engine", "method", "status"], sort=False)
+    ]
+    return Conclusion(
+        runs=len(rows),
+        ok=len(ok),
+        most_accurate=None if best is None else run(best, "error"),
+        least_drift=least,
+        most_drift=most,
+        failed=failed,
+    )
 
 
 def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFrame]) -> Findings:
@@ -46,7 +108,26 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         fidelity=restitution_fidelity(tables.get("restitution")),
         survival={c.name: survival(c, results) for c in cases if c.hard},
         speed=speed_tables(cases, results),
+        conclusions={c.name: conclude(c, results) for c in cases},
+        notes=method_notes(results),
     )
+
+
+def method_notes(results: pd.DataFrame) -> dict[tuple[str, str], str]:
+    """(engine, method) -> its adapter's one-line ``method_notes`` entry, for every pair in
+    ``results`` (an engine not installed here, or whose adapter says nothing, has none)."""
+    from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
+
+    notes: dict[tuple[str, str], str] = {}
+    for engine, methods in results.groupby("engine", sort=False)["method"]:
+        try:
+            said = getattr(adapter_class(str(engine)), "method_notes", None) or {}
+        except (UnknownEngine, EngineNotInstalled):
+            continue
+        for method in dict.fromkeys(methods.astype(str)):
+            if isinstance(said.get(method), str):
+                notes[(str(engine), method)] = said[method]
+    return notes
 
 
 def speed_tables(cases: list[Case], results: pd.DataFrame) -> dict[tuple[str, str], pd.DataFrame]:

@@ -195,6 +195,8 @@ SCORECARD_COLUMNS = [
     "cost_ratio",
     "stability_cases",
     "stability_ratio",
+    "cases_measured",
+    "stability_zero",
 ]
 
 
@@ -219,11 +221,15 @@ def scorecard(
     ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
     on, the median of its cheapest wall time there over the cheapest of all runs (1: the
     fastest, or within timing noise of it, :func:`tied_with_fastest`); NaN if it reached
-    none. ``cases_run`` / ``cases_reached``: the family's cases
-    it ran / reached the target on. ``stability_ratio``: over the family's cases with a
-    stability search, the median of its largest stable step over the exact limit (or, with
-    no exact one, the best any method reached); NaN without searches.
+    none. ``cases_run`` / ``cases_measured`` / ``cases_reached``: the family's cases it
+    ran / ran that have an error measure (an exact solution or reference run) / reached
+    the target on. ``stability_ratio``: over the family's cases with a stability search
+    whose exact limit is not 0, the median of its largest stable step over the exact limit
+    (or, with no exact one, the best any method reached); NaN without such searches.
+    ``stability_zero``: the searches whose exact limit is 0 (the method is unstable at
+    every step there, as theory says: no ratio to take).
     """
+    measured = {c.name for c in cases if c.exact is not None}
     family = {c.name: c.family for c in cases}
     scale = {c.name: c.error_scale for c in cases}
     ran = results[~results["status"].isin(["unsupported", "skipped"]) & results["case"].isin(list(family))]
@@ -237,7 +243,10 @@ def scorecard(
     stab = None
     if stability is not None and len(stability):
         stab = stability[stability["status"] == "ok"].copy()
-        stab["ratio"] = pd.to_numeric(stab["dt_limit"], errors="coerce") / _limit_reference(stab)
+        stab["zero"] = pd.to_numeric(stab["dt_limit_exact"], errors="coerce").to_numpy(float) == 0
+        stab["ratio"] = (pd.to_numeric(stab["dt_limit"], errors="coerce") / _limit_reference(stab)).where(
+            ~stab["zero"]
+        )
     rows = []
     for (engine, method), mine in ran.groupby(["engine", "method"], sort=False):
         for fam in dict.fromkeys(family[c] for c in mine["case"]):
@@ -259,6 +268,7 @@ def scorecard(
             )
             s_ratio = _num(s, "ratio") if len(s) else np.array([])
             s_ratio = s_ratio[np.isfinite(s_ratio)]
+            zero = int(s["zero"].sum()) if len(s) else 0
             rows.append(
                 {
                     "engine": engine,
@@ -269,6 +279,8 @@ def scorecard(
                     "cost_ratio": float(np.median(ratios)) if ratios else np.nan,
                     "stability_cases": len(s_ratio),
                     "stability_ratio": float(np.median(s_ratio)) if len(s_ratio) else np.nan,
+                    "cases_measured": sum(c in measured for c in names),
+                    "stability_zero": zero,
                 }
             )
     order = {

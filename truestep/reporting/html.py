@@ -97,7 +97,7 @@ def markdown_to_html(md: str, base: Path) -> str:
             out.append(f"<p>{inline(line)}</p>")
         i += 1
     style = (
-        "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;"
+        "body{font-family:system-ui,sans-serif;max-width:1320px;margin:2em auto;"
         "padding:0 1em;color:#222}table{border-collapse:collapse;font-size:12px;"
         "margin:1em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
         "th{background:#f3f3f3}img{max-width:100%}code{background:#f3f3f3}"

@@ -1,7 +1,9 @@
-"""Figures of the report: one colour per engine, one line style per method, everywhere."""
+"""Figures of the report: one colour per engine and method, one marker and line style per
+engine, the same in every figure (the lecture's figures and the scaling plot too)."""
 
 from __future__ import annotations
 
+import zlib
 from pathlib import Path
 
 import matplotlib
@@ -13,39 +15,60 @@ import pandas as pd
 
 from truestep.visible import visible
 
-ENGINE_COLOURS = {
-    "reference": "#1f77b4",
-    "scipy": "#7f7f7f",
-    "pymunk": "#2ca02c",
-    "pybullet": "#d62728",
-    "mujoco": "#9467bd",
+SERIES_COLOURS: dict[tuple[str, str], str] = {
+    ("reference", "euler"): "#e6194b",
+    ("reference", "midpoint"): "#3cb44b",
+    ("reference", "heun"): "#f58231",
+    ("reference", "rk4"): "#4363d8",
+    ("reference", "dopri5"): "#911eb4",
+    ("reference", "symplectic-euler"): "#12a4c4",
+    ("reference", "verlet"): "#f032e6",
+    ("reference", "implicit-euler"): "#9a6324",
+    ("reference", "lecture"): "#000075",
+    ("scipy", "RK45"): "#469990",
+    ("scipy", "DOP853"): "#808000",
+    ("scipy", "Radau"): "#800000",
+    ("pymunk", "default"): "#d4a000",
+    ("pybullet", "default"): "#ff5c8a",
+    ("pybullet", "clean"): "#556b2f",
+    ("mujoco", "Euler"): "#000000",
+    ("mujoco", "implicit"): "#708090",
+    ("mujoco", "implicitfast"): "#7b68ee",
+    ("mujoco", "RK4"): "#2e8b57",
 }
-METHOD_STYLES = {
-    "euler": ("-", "o"),
-    "midpoint": ("--", "s"),
-    "heun": ("-.", "^"),
-    "rk4": (":", "D"),
-    "dopri5": ("-", "*"),
-    "symplectic-euler": ("--", "v"),
-    "verlet": ("-.", "P"),
-    "implicit-euler": (":", "X"),
-    "lecture": ("-", "h"),
-    "RK45": ("-", "*"),
-    "DOP853": ("--", "p"),
-    "Radau": (":", "X"),
-    "default": ("-", "o"),
-    "clean": ("--", "s"),
-    "Euler": ("-", "o"),
-    "implicit": ("--", "s"),
-    "implicitfast": ("-.", "^"),
-    "RK4": (":", "D"),
+"""A colour for each built-in engine/method series, distinct from every other's, in every
+figure. A series of another engine or method takes one of :data:`MORE_COLOURS`, chosen by
+its name (the same in every run)."""
+MORE_COLOURS = ("#a9a9a9", "#8b4513", "#ff1493", "#1e90ff", "#b22222", "#228b22", "#daa520", "#4b0082")
+ENGINE_MARKERS = {"reference": "o", "scipy": "s", "pymunk": "^", "pybullet": "D", "mujoco": "v"}
+"""A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`)."""
+MORE_MARKERS = ("P", "X", "*", "h", "p", "<", ">")
+ENGINE_LINES: dict[str, str | tuple] = {
+    "reference": "-",
+    "scipy": ":",
+    "pymunk": "--",
+    "pybullet": "-.",
+    "mujoco": (0, (6, 2, 1, 2, 1, 2)),
 }
-"""Engines by colour, methods by line style and marker; within an engine the
-(line style, marker) pair tells its methods apart."""
+"""A line style for each engine (another engine's is solid)."""
+LEGEND_FONT = 9
+"""Legend text, points (12 px at :data:`REPORT_DPI`)."""
 
 
-REPORT_DPI = 72
-"""Resolution of the report's figures: sharp at the page's width, small when inlined."""
+def _chosen(name: str, options: tuple) -> object:
+    """One of ``options`` for ``name``, the same in every run and on every machine."""
+    return options[zlib.crc32(name.encode("utf-8", "replace")) % len(options)]
+
+
+def series_colour(engine: str, method: str) -> str:
+    """The colour of an engine/method series in every figure."""
+    known = SERIES_COLOURS.get((engine, method))
+    return known if known is not None else str(_chosen(f"{engine}/{method}", MORE_COLOURS))
+
+
+REPORT_DPI = 100
+"""Resolution of the report's figures: at least 1000 pixels across at the widths drawn
+(the page shows them at most 1100 wide), small enough to inline."""
 
 
 def _plain(title: str) -> str:
@@ -62,10 +85,11 @@ def _pair(engine: object, method: object) -> str:
 
 
 def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
-    """Write ``fig`` as a compact PNG: ``dpi``, then reduced to a 128-colour palette.
+    """Write ``fig`` as a compact PNG: ``dpi``, then reduced to a 256-colour palette.
 
-    Line plots use a handful of colours, so the palette loses nothing visible and the
-    file (inlined in the HTML report) shrinks about threefold.
+    Line plots use a few dozen colours (one per series, and their anti-aliased edges), so
+    the palette keeps each series' own colour and the file (inlined in the HTML report)
+    shrinks about threefold.
     """
     from PIL import Image
 
@@ -73,50 +97,64 @@ def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     with Image.open(path) as img:
-        small = img.convert("RGB").quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+        small = img.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE)
     small.save(path, optimize=True)
     return path
 
 
 def series_style(engine: str, method: str) -> dict:
-    ls, marker = METHOD_STYLES.get(method, ("-", "o"))
+    """Matplotlib keywords of an engine/method series: its colour (:func:`series_colour`),
+    its engine's marker and line style."""
     return {
-        "color": ENGINE_COLOURS.get(engine, "black"),
-        "linestyle": ls,
-        "marker": marker,
-        "markersize": 4,
-        "linewidth": 1.3,
+        "color": series_colour(engine, method),
+        "linestyle": ENGINE_LINES.get(engine, "-"),
+        "marker": ENGINE_MARKERS.get(engine) or _chosen(engine, MORE_MARKERS),
+        "markersize": 5,
+        "linewidth": 1.4,
     }
 
 
-def work_precision(df: pd.DataFrame, case: str, title: str, path: Path) -> Path | None:
+def work_precision(df: pd.DataFrame, case: str, title: str, path: Path, unit: str = "m") -> Path | None:
     """Error against wall time and against derivative evaluations (log-log), per series.
 
     ``df`` holds one case's rows; only runs with status ok and a positive error appear.
-    Returns the figure's path, or ``None`` when no row has an error to plot.
+    ``unit``: the error's (``m`` for particles, the state's units for an ODE). An adaptive
+    method's points are labelled with the tolerance each ran at (in the left panel). Returns the figure's
+    path, or ``None`` when no row has an error to plot.
     """
     ok = df[(df["status"] == "ok") & (df["error"].astype(float) > 0)]
     if ok.empty:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.4), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), sharey=True)
     for (engine, method), g in ok.groupby(["engine", "method"], sort=False):
-        g = g.sort_values("wall_s")
         style = series_style(engine, method)
         label = _pair(engine, method)
-        axes[0].plot(g["wall_s"], g["error"], label=label, **style)
-        g = g.sort_values("nfev")
-        axes[1].plot(g["nfev"], g["error"], label=label, **style)
+        for ax, x in zip(axes, ("wall_s", "nfev"), strict=True):
+            g = g.sort_values(x)
+            ax.plot(g[x], g["error"], label=label, **style)
+            tolerances = g[g["dt_kind"] == "tolerance"] if x == "wall_s" else g.iloc[:0]
+            for r in tolerances.itertuples(index=False):
+                ax.annotate(
+                    f"tol {r.dt:.0e}",
+                    (getattr(r, x), r.error),
+                    xytext=(4, 3),
+                    textcoords="offset points",
+                    fontsize=7.5,
+                    color=style["color"],
+                )
     axes[0].set_xlabel("wall time per run (s, median of repeats)")
-    axes[1].set_xlabel("derivative evaluations (engine steps for engines)")
-    axes[0].set_ylabel("error against the exact solution")
+    axes[1].set_xlabel("derivative evaluations per run (steps x evaluations per step)")
+    axes[0].set_ylabel(f"largest error against the exact solution ({unit})")
     for ax in axes:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.grid(True, which="major", alpha=0.3)
     fig.suptitle(f"{_plain(title)}: work against precision")
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.81, 0.5), fontsize=7, frameon=False)
-    fig.tight_layout(rect=(0, 0, 0.81, 1))
+    fig.legend(
+        handles, labels, loc="center left", bbox_to_anchor=(0.79, 0.5), fontsize=LEGEND_FONT, frameon=False
+    )
+    fig.tight_layout(rect=(0, 0, 0.79, 1))
     return save(fig, path)
 
 
@@ -135,8 +173,8 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
         return None
     labels = [_pair(e, m) for e, m in zip(s["engine"], s["method"], strict=True)]
     y = np.arange(len(s))
-    fig, ax = plt.subplots(figsize=(8, 0.32 * len(s) + 1.4))
-    colours = [ENGINE_COLOURS.get(e, "black") for e in s["engine"]]
+    fig, ax = plt.subplots(figsize=(10.5, 0.34 * len(s) + 1.6))
+    colours = [series_colour(e, m) for e, m in zip(s["engine"], s["method"], strict=True)]
     ok = (s["status"] == "ok").to_numpy()
     limits = np.where(ok, pd.to_numeric(s["dt_limit"], errors="coerce"), np.nan)
     floor = np.nanmin(np.where(limits > 0, limits, np.nan)) / 10 if np.any(limits > 0) else 1e-4
@@ -176,23 +214,28 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
 
 
 def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
-    """Requested against measured restitution (first bounce), per engine and method."""
+    """The restitution each engine and method gives on the first bounce, as its deviation
+    from the one requested (``e_measured - e_set``) against the one requested: a method
+    that keeps what it is asked lies on zero, and the scale shows how far the others miss."""
     r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
     if r.empty:
         return None
     dts = sorted(r["dt"].astype(float).unique(), reverse=True)
-    fig, axes = plt.subplots(1, len(dts), figsize=(5.2 * len(dts), 4.4), squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(dts), figsize=(max(6.5 * len(dts), 10.5), 5.0), squeeze=False, sharey=True
+    )
     for ax, dt in zip(axes[0], dts, strict=True):
         d = r[np.isclose(r["dt"].astype(float), dt)]
         for (engine, method), g in d.groupby(["engine", "method"], sort=False):
             g = g.sort_values("e_set")
-            ax.plot(g["e_set"], g["e_measured"], label=_pair(engine, method), **series_style(engine, method))
-        ax.plot([0, 1], [0, 1], color="black", linewidth=0.8, label="requested = measured")
-        ax.set_xlabel("requested restitution")
-        ax.set_ylabel("measured (rebound / impact speed, bounce 1)")
+            deviation = g["e_measured"].astype(float) - g["e_set"].astype(float)
+            ax.plot(g["e_set"], deviation, label=_pair(engine, method), **series_style(engine, method))
+        ax.axhline(0.0, color="black", linewidth=0.8, label="measured = requested")
+        ax.set_xlabel("requested restitution e_set (rebound / impact normal speed)")
         ax.set_title(f"dt = 1/{1 / dt:.0f} s")
         ax.grid(True, alpha=0.3)
-    axes[0][-1].legend(fontsize=7, loc="upper left", frameon=False)
+    axes[0][0].set_ylabel("measured - requested restitution (bounce 1)")
+    axes[0][-1].legend(fontsize=LEGEND_FONT, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()
     return save(fig, path)
 
@@ -214,7 +257,7 @@ def energy_over_time(
     chosen = {k: v for k, v in traces.items() if shown(k)}
     if not chosen:
         return None
-    fig, ax = plt.subplots(figsize=(9.5, 4.4))
+    fig, ax = plt.subplots(figsize=(12, 4.8))
     for (_, engine, method, kind, dt), (t, e) in chosen.items():
         scale = abs(e[0]) if e[0] != 0 else (np.max(np.abs(e)) or 1.0)
         rel = np.maximum(np.abs(e - e[0]) / scale, 1e-16)
@@ -225,7 +268,7 @@ def energy_over_time(
     ax.set_ylabel("|E(t) - E(0)| / |E(0)|  (floor 1e-16)")
     ax.set_title(f"{_plain(title)}: energy error over time")
     ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+    ax.legend(fontsize=LEGEND_FONT, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()
     return save(fig, path)
 
@@ -256,11 +299,15 @@ def scorecard(
     cost = np.full((len(rows), len(families)), np.nan)
     ran = np.zeros_like(cost, dtype=bool)
     limit = np.full_like(cost, np.nan)
+    counts = np.full(cost.shape, "", dtype=object)
+    zero = np.zeros_like(cost, dtype=bool)
     for r in card.itertuples(index=False):
         if r.family not in col:
             continue
         i, j = index[(r.engine, r.method)], col[r.family]
         cost[i, j], ran[i, j], limit[i, j] = r.cost_ratio, r.cases_run > 0, r.stability_ratio
+        counts[i, j] = f"{r.cases_reached}/{r.cases_measured}"
+        zero[i, j] = r.stability_zero > 0 and not np.isfinite(r.stability_ratio)
     rest = np.full((len(rows), 1), np.nan)
     for r in fidelity.itertuples(index=False):
         if (r.engine, r.method) in index:
@@ -268,7 +315,7 @@ def scorecard(
     fig, axes = plt.subplots(
         1,
         3,
-        figsize=(12.5, 0.3 * len(rows) + 2.2),
+        figsize=(13, 0.42 * len(rows) + 2.4),
         gridspec_kw={"width_ratios": [len(families), len(families), 1.3]},
     )
     panels = [
@@ -278,7 +325,8 @@ def scorecard(
             cost,
             "RdYlGn_r",
             (0, 3),
-            f"time to reach {target:g} of the scale,\n x the fastest run",
+            f"time to reach {target:g} of the scale, x the fastest\n"
+            "(cases reached / cases with an error measure)",
             lambda v: f"{v:.3g}x",
         ),
         (
@@ -303,10 +351,13 @@ def scorecard(
     for ax, shade, values, cmap, (lo, hi), title, text in panels:
         ax.imshow(np.ma.masked_invalid(shade), cmap=cmap, vmin=lo, vmax=hi, aspect="auto")
         for (i, j), v in np.ndenumerate(values):
+            count = f"\n{counts[i, j]}" if values is cost and counts[i, j] else ""
             if np.isfinite(v):
-                ax.text(j, i, text(v), ha="center", va="center", fontsize=7)
+                ax.text(j, i, text(v) + count, ha="center", va="center", fontsize=7.5, linespacing=0.95)
             elif values is cost and ran[i, j]:
-                ax.text(j, i, "-", ha="center", va="center", fontsize=8, color="#777777")
+                ax.text(j, i, "-" + count, ha="center", va="center", fontsize=7.5, color="#555555")
+            elif values is limit and zero[i, j]:
+                ax.text(j, i, "exact 0", ha="center", va="center", fontsize=7, color="#555555")
         ax.set_title(title, fontsize=9)
         ax.set_xticks(
             range(values.shape[1]),

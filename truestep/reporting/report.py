@@ -31,6 +31,7 @@ from truestep.reporting.html import markdown_to_html
 from truestep.reporting.markdown import folded, link, md_table, text, with_units
 from truestep.reporting.scaling import scaling_section
 from truestep.reporting.sections import (
+    conclusion_sentence,
     hard_case_line,
     methods_section,
     scorecard_section,
@@ -102,7 +103,10 @@ def _case_figures(
     out = {}
     for case in cases:
         df = results[results["case"] == case.name]
-        fig = plots.work_precision(df, case.name, case.title, fig_dir / f"{case.name}-work-precision.png")
+        unit = "m" if case.kind == "particles" else "state units"
+        fig = plots.work_precision(
+            df, case.name, case.title, fig_dir / f"{case.name}-work-precision.png", unit=unit
+        )
         energy_fig = None
         if traces and case.conservative:
             steps = df.loc[df["dt_kind"] == "step", "dt"].dropna().astype(float).unique().tolist()
@@ -249,6 +253,8 @@ def render_markdown(
             *case.properties,
         ]
         parts.append(folded(f"{len(shown)} runs of {case.name}", md_table(with_units(shown[cols]))))
+        if case.name in found.conclusions:
+            parts.append(conclusion_sentence(case, found.conclusions[case.name]))
     stab = tables.get("stability")
     parts.append("## Stability limits\n")
     if stab is not None and len(stab):

@@ -10,13 +10,13 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case
-from truestep.measures.findings import Findings
+from truestep.measures.findings import Conclusion, Findings
 from truestep.measures.picks import (
     ACCURACY_TARGETS,
     SURVIVAL_ENERGY,
     SURVIVAL_ERROR,
 )
-from truestep.reporting.markdown import fmt, md_table, text, with_units
+from truestep.reporting.markdown import fmt, folded, md_table, text, with_units
 
 _fmt = fmt
 
@@ -207,16 +207,23 @@ def family_sentence(
         group = _tied_group(fast)
         picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
         tie = " (tied within timing noise)" if len(group) > 1 else ""
+        unmeasured = int(top.cases_run) - int(top.cases_measured)
+        without = f" ({unmeasured} more without one)" if unmeasured else ""
         line = (
-            f"for accuracy per second, {picked}{tie}: "
+            f"for accuracy per second (most cases reached, then least time: the scorecard's "
+            f"two numbers), {picked}{tie}: "
             f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
-            f"of the scale on {top.cases_reached} of its {top.cases_run} case(s), in "
-            f"{float(top.cost_ratio):.2g}x the fastest run's time (median)"
+            f"of the scale on {top.cases_reached} of the {top.cases_measured} case(s) with an "
+            f"error measure it ran{without}, in {float(top.cost_ratio):.3g}x the fastest "
+            "run's time (median)"
         )
         rest = fast.iloc[len(group) :]
         if len(rest):
             nxt = rest.iloc[0]
-            line += f"; next {_pair(nxt)} ({nxt.cases_reached} case(s), {float(nxt.cost_ratio):.2g}x)"
+            line += (
+                f"; next {_pair(nxt)} ({nxt.cases_reached}/{nxt.cases_measured} case(s), "
+                f"{float(nxt.cost_ratio):.3g}x)"
+            )
         parts.append(line)
     else:
         loose = picks[
@@ -260,10 +267,13 @@ def scorecard_section(cases: list[Case], found: Findings, fig_dir) -> list[str]:
         f"Each row is an engine and method; each column of the left panel a family of "
         f"scenes. Left: the wall time it takes to reach an error of {SCORECARD_TARGET:g} "
         f"of each case's scale, as a multiple of the fastest run that does (median over "
-        f"the family's cases it reaches; `-`: it ran but never got there). Middle: its "
-        f"largest stable step over the exact limit, or over the best any method reached "
-        f"where none is known. Right: how far the restitution it gives is from the one "
-        f"asked (median over the bounces of the restitution sweep).\n",
+        f"the family's cases it reaches; `-`: it ran but never got there), and under it how "
+        f"many of the family's cases it reached that accuracy on, of those it ran that have "
+        f"an error measure; the sentences below rank by those two numbers, cases first. "
+        f"Middle: its largest stable step over the exact limit, or over the best any method "
+        f"reached where none is known (`exact 0`: the method is unstable at every step there, "
+        f"as theory says). Right: how far the restitution it gives is from the one asked "
+        f"(median over the bounces of the restitution sweep).\n",
     ]
     fig = plots.scorecard(card, fidelity, families, SCORECARD_TARGET, fig_dir / "scorecard.png")
     if fig is not None:
@@ -275,6 +285,7 @@ def scorecard_section(cases: list[Case], found: Findings, fig_dir) -> list[str]:
         names = [c.name for c in cases if c.family == family]
         lines.append(family_sentence(family, names, card, fidelity, loose))
     lines.append("")
+    lines.append(glossary(found.notes))
     return lines
 
 
@@ -341,4 +352,82 @@ def methods_section(cases: list[Case]) -> list[str]:
         f"reached at a step).",
         "",
     ]
+    from truestep.tables.spec import markdown as columns
+
+    lines.append(
+        folded(
+            "The columns of the tables (results.csv, stability.csv, restitution.csv, scaling.csv)", columns()
+        )
+    )
     return lines
+
+
+def _run_words(run: tuple[str, str, float, str, float]) -> str:
+    engine, method, dt, kind, _ = run
+    at = f"tol {dt:g}" if kind == "tolerance" else f"dt {dt:g} s"
+    return f"{text(engine)} / {text(method)} ({at})"
+
+
+def conclusion_sentence(case: Case, c: Conclusion) -> str:
+    """The line that ends a case's section: how many runs ended ok, the most accurate,
+    the least and most energy drift (conserved-energy cases), and what failed; every
+    number from :class:`~truestep.measures.findings.Conclusion`, none a timing."""
+    if not c.runs:
+        return "**In short:** no engine ran this case.\n"
+    unit = "m" if case.kind == "particles" else "(state units)"
+    parts = [f"{c.ok} of {c.runs} runs ended ok"]
+    if c.most_accurate is not None:
+        parts.append(
+            f"the most accurate is {_run_words(c.most_accurate)}, error {fmt(c.most_accurate[4])} {unit}"
+        )
+    if c.least_drift:
+        least = ", ".join(f"{_run_words(r)} {fmt(r[4])}" for r in c.least_drift)
+        parts.append(f"the least energy drift (of the energy scale): {least}")
+    if c.most_drift:
+        most = ", ".join(f"{_run_words(r)} {fmt(r[4])}" for r in c.most_drift)
+        parts.append(f"the most: {most}")
+    if c.failed:
+        shown = ", ".join(f"{text(e)} / {text(m)} ({n} {st})" for e, m, st, n in c.failed[:6])
+        more = f" and {len(c.failed) - 6} more" if len(c.failed) > 6 else ""
+        parts.append(f"not ok: {shown}{more}")
+    return "**In short:** " + "; ".join(parts) + ".\n"
+
+
+TERMS = (
+    (
+        "scale",
+        "each case's length scale for errors (its `[reference] scale`, 1 m unless the case says): "
+        '"0.0001 of the scale" is an error of 1e-4 times it',
+    ),
+    (
+        "dt",
+        "the fixed step of a run, s; for an adaptive method (`dt_kind` tolerance) the tolerance it ran at "
+        '(rtol = atol), shown as "tol"',
+    ),
+    ("error", "the largest distance from the exact solution over the run (m; an ODE's state units)"),
+    (
+        "energy drift",
+        "the largest energy error over the run (|E(t) - E(0)| where energy is conserved, else "
+        "against the exact energy curve), as a fraction of the case's energy scale (the "
+        "energy the motion exchanges)",
+    ),
+    (
+        "nfev",
+        "derivative (force) evaluations: counted where the engine exposes them, else steps x its "
+        "evaluations per step",
+    ),
+    (
+        "x the fastest",
+        "wall time over the fastest run that reaches the same accuracy; runs within timing "
+        "noise of each other are tied and count as 1x",
+    ),
+)
+"""The report's words and abbreviations, each in a line."""
+
+
+def glossary(notes: dict[tuple[str, str], str]) -> str:
+    """What the report's words and every engine/method of the run mean, folded: shown
+    where the names first appear (under the scorecard)."""
+    lines = [f"- **{name}**: {meaning}" for name, meaning in TERMS]
+    lines += [f"- **{text(e)} / {text(m)}**: {text(note)}" for (e, m), note in notes.items()]
+    return folded("What the names and numbers mean", "\n".join(lines) + "\n")
