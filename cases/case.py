@@ -34,6 +34,7 @@ class OdeSpec:
     """
 
     kind: ClassVar[str] = "ode"
+    error_unit: ClassVar[str] = "state units"
 
     system: str
     y0: np.ndarray

@@ -175,6 +175,7 @@ class ParticleModel:
     """
 
     kind: ClassVar[str] = "particles"
+    error_unit: ClassVar[str] = "m"
 
     mass: np.ndarray
     x0: np.ndarray

@@ -103,9 +103,8 @@ def _case_figures(
     out = {}
     for case in cases:
         df = results[results["case"] == case.name]
-        unit = "m" if case.kind == "particles" else "state units"
         fig = plots.work_precision(
-            df, case.name, case.title, fig_dir / f"{case.name}-work-precision.png", unit=unit
+            df, case.name, case.title, fig_dir / f"{case.name}-work-precision.png", unit=case.scene.error_unit
         )
         energy_fig = None
         if traces and case.conservative:

@@ -374,7 +374,7 @@ def conclusion_sentence(case: Case, c: Conclusion) -> str:
     number from :class:`~truestep.measures.findings.Conclusion`, none a timing."""
     if not c.runs:
         return "**In short:** no engine ran this case.\n"
-    unit = "m" if case.kind == "particles" else "(state units)"
+    unit = case.scene.error_unit
     parts = [f"{c.ok} of {c.runs} runs ended ok"]
     if c.most_accurate is not None:
         parts.append(
