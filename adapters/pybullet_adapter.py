@@ -429,7 +429,7 @@ class PybulletAdapter(FixedStepAdapter):
     method_notes: ClassVar = {
         "default": "Bullet as a user gets it: multibody particles, its contact settings at their defaults",
         "clean": "the same step with the contact treatment that would distort a comparison normalised "
-        "(split impulse, no restitution threshold): see the pybullet engine page",
+        "(split impulse, no restitution threshold): see docs/engines/pybullet.md",
     }
     """One line per method, for the report's glossary."""
     method_facts: ClassVar[dict[str, str]] = {"default": "symplectic-euler", "clean": "symplectic-euler"}

@@ -11,6 +11,7 @@ types, shown, not run.
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -33,44 +34,67 @@ def blocks(page: Path) -> list[tuple[str, str | None, str]]:
 
 
 RUNNER = """
-import sys, tomllib
+import json, os, sys, tomllib, traceback
 from pathlib import Path
-sys.path.insert(0, ".")
 import truestep
 from truestep.cases.loader import load_gates_file
 
-namespace = {"__name__": "__main__"}  # one reader's session per page
-for lang, title, code in BLOCKS:
-    if title is not None:
-        Path(title).write_text(code)
-        if lang == "toml" and title != "pyproject.toml":
-            doc = tomllib.loads(code)
-            if "kind" in doc:
-                truestep.load_case(title)
-            else:
-                load_gates_file(title)
+def run_page(blocks, folder):
+    os.chdir(folder)
+    sys.path.insert(0, folder)
+    namespace = {"__name__": "__main__"}  # one reader's session per page
+    for lang, title, code in blocks:
+        if title is not None:
+            Path(title).write_text(code)
+            if lang == "toml" and title != "pyproject.toml":
+                doc = tomllib.loads(code)
+                if "kind" in doc:
+                    truestep.load_case(title)
+                else:
+                    load_gates_file(title)
+            elif lang == "toml":
+                tomllib.loads(code)
+            elif lang == "python" and title.startswith("test_"):
+                import pytest
+                assert pytest.main(["-q", "-p", "no:cacheprovider", title]) == 0, "its test failed"
+            continue
+        if lang == "python":
+            exec(compile(code, "<docs example>", "exec"), namespace)
         elif lang == "toml":
             tomllib.loads(code)
-        continue
-    if lang == "python":
-        exec(compile(code, "<docs example>", "exec"), namespace)
-    elif lang == "toml":
-        tomllib.loads(code)
+
+outcome = {}
+for name, blocks, folder in PAGES:
+    try:
+        run_page(blocks, folder)
+        outcome[name] = ""
+    except BaseException:
+        outcome[name] = traceback.format_exc()[-3000:]
+print("OUTCOME " + json.dumps(outcome))
 """
 
 RUNNABLE = [p for p in PAGES if any(lang in ("python", "toml") for lang, _, _ in blocks(p))]
 
 
+@pytest.fixture(scope="module")
+def outcomes(tmp_path_factory) -> dict[str, str]:
+    """Every runnable page's examples, run in one fresh interpreter (a new namespace and an
+    empty folder per page): page -> the traceback of what failed, or ``""``."""
+    pages = []
+    for page in RUNNABLE:
+        folder = tmp_path_factory.mktemp(page.stem)
+        pages.append((str(page.relative_to(DOCS)), blocks(page), str(folder)))
+    code = f"PAGES = {pages!r}\n" + textwrap.dedent(RUNNER)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
+    line = next((x for x in done.stdout.splitlines() if x.startswith("OUTCOME ")), None)
+    assert line is not None, f"the examples did not finish:\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}"
+    return json.loads(line[len("OUTCOME ") :])
+
+
 @pytest.mark.parametrize("page", RUNNABLE, ids=lambda p: str(p.relative_to(DOCS)))
-def test_every_example_of_the_page_runs(page, tmp_path):
-    code = f"BLOCKS = {blocks(page)!r}\n" + textwrap.dedent(RUNNER)
-    for lang, title, _ in blocks(page):
-        if lang == "python" and title and title.startswith("test_"):
-            code += f"\nimport pytest\nassert pytest.main(['-q', '-p', 'no:cacheprovider', {title!r}]) == 0\n"
-    done = subprocess.run(
-        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600
-    )
-    assert done.returncode == 0, f"{page.name}:\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}"
+def test_every_example_of_the_page_runs(page, outcomes):
+    failed = outcomes[str(page.relative_to(DOCS))]
+    assert not failed, f"{page.name}:\n{failed}"
 
 
 def test_every_case_file_key_the_loader_reads_is_documented():

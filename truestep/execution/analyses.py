@@ -244,7 +244,9 @@ def restitution_table(
                 continue
             missing = adapter.missing(probe, method)
             if missing or method in adapter.adaptive_methods:
-                why = ",".join(sorted(missing)) or "adaptive integrator: no collision events"
+                why = ",".join(sorted(missing)) or (
+                    "adaptive: the sweep compares fixed steps (its bounces are measured in the cases)"
+                )
                 groups.append([{"engine": engine, "method": method, "status": "unsupported", "note": why}])
                 continue
             for dt in dts:

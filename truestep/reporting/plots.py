@@ -119,7 +119,7 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path, unit: st
 
     ``df`` holds one case's rows; only runs with status ok and a positive error appear.
     ``unit``: the error's (``m`` for particles, the state's units for an ODE). An adaptive
-    method's points are labelled with the tolerance each ran at (in the left panel). Returns the figure's
+    method's loosest and tightest points are labelled with their tolerance (left panel). Returns the figure's
     path, or ``None`` when no row has an error to plot.
     """
     ok = df[(df["status"] == "ok") & (df["error"].astype(float) > 0)]
@@ -133,6 +133,10 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path, unit: st
             g = g.sort_values(x)
             ax.plot(g[x], g["error"], label=label, **style)
             tolerances = g[g["dt_kind"] == "tolerance"] if x == "wall_s" else g.iloc[:0]
+            if len(tolerances) > 2:  # the loosest and the tightest: the rest lie between
+                tolerances = tolerances.iloc[
+                    [int(np.argmax(tolerances["dt"])), int(np.argmin(tolerances["dt"]))]
+                ]
             for r in tolerances.itertuples(index=False):
                 ax.annotate(
                     f"tol {r.dt:.0e}",
@@ -241,10 +245,18 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
 
 
 def energy_over_time(
-    traces: dict, case: str, title: str, dt_step: float | None, tol: float | None, path: Path
+    traces: dict,
+    case: str,
+    title: str,
+    dt_step: float | None,
+    tol: float | None,
+    path: Path,
+    scale: float | None = None,
 ) -> Path | None:
-    """Relative energy error ``|E(t) - E(0)| / |E(0)|`` over time (log scale), one line per
-    engine/method: fixed-step methods at step ``dt_step``, adaptive ones at tolerance ``tol``.
+    """Energy error ``|E(t) - E(0)| / S`` over time (log scale), one line per engine/method:
+    fixed-step methods at step ``dt_step``, adaptive ones at tolerance ``tol``. ``S`` is
+    ``scale`` (J), the case's energy scale the tables' energy drift is measured on; without
+    one, ``|E(0)|``.
 
     ``traces`` maps ``(case, engine, method, dt_kind, dt)`` to ``(t, energy)``.
     """
@@ -258,14 +270,17 @@ def energy_over_time(
     if not chosen:
         return None
     fig, ax = plt.subplots(figsize=(12, 4.8))
+    known = scale is not None and np.isfinite(scale) and scale > 0
     for (_, engine, method, kind, dt), (t, e) in chosen.items():
-        scale = abs(e[0]) if e[0] != 0 else (np.max(np.abs(e)) or 1.0)
-        rel = np.maximum(np.abs(e - e[0]) / scale, 1e-16)
+        s = scale if known else (abs(e[0]) if e[0] != 0 else (np.max(np.abs(e)) or 1.0))
+        rel = np.maximum(np.abs(e - e[0]) / s, 1e-16)
         label = f"{_pair(engine, method)} ({'tol' if kind == 'tolerance' else 'dt'} {dt:g})"
         ax.plot(t, rel, label=label, **{**series_style(engine, method), "marker": None})
     ax.set_yscale("log")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("|E(t) - E(0)| / |E(0)|  (floor 1e-16)")
+    ax.set_ylabel(
+        "|E(t) - E(0)| / energy scale  (floor 1e-16)" if known else "|E(t) - E(0)| / |E(0)|  (floor 1e-16)"
+    )
     ax.set_title(f"{_plain(title)}: energy error over time")
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=LEGEND_FONT, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)

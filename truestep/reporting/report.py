@@ -110,6 +110,8 @@ def _case_figures(
         if traces and case.conservative:
             steps = df.loc[df["dt_kind"] == "step", "dt"].dropna().astype(float).unique().tolist()
             tols = df.loc[df["dt_kind"] == "tolerance", "dt"].dropna().astype(float).unique().tolist()
+            from truestep.measures.energy_scale import energy_scale
+
             energy_fig = plots.energy_over_time(
                 traces,
                 case.name,
@@ -117,6 +119,7 @@ def _case_figures(
                 middle(steps),
                 middle(tols),
                 fig_dir / f"{case.name}-energy.png",
+                scale=energy_scale(case),
             )
         out[case.name] = (fig, energy_fig)
     return out

@@ -205,17 +205,15 @@ def family_sentence(
     if len(fast):
         top = fast.iloc[0]
         group = _tied_group(fast)
-        picked = " and ".join(f"**{_pair(r)}**" for r in group.itertuples(index=False))
+        picked = " and ".join(
+            f"**{_pair(r)}** ({r.cases_reached}/{r.cases_measured})" for r in group.itertuples(index=False)
+        )
         tie = " (tied within timing noise)" if len(group) > 1 else ""
-        unmeasured = int(top.cases_run) - int(top.cases_measured)
-        without = f" ({unmeasured} more without one)" if unmeasured else ""
         line = (
             f"for accuracy per second (most cases reached, then least time: the scorecard's "
-            f"two numbers), {picked}{tie}: "
-            f"{'it reaches' if len(group) == 1 else 'each reaches'} {SCORECARD_TARGET:g} "
-            f"of the scale on {top.cases_reached} of the {top.cases_measured} case(s) with an "
-            f"error measure it ran{without}, in {float(top.cost_ratio):.3g}x the fastest "
-            "run's time (median)"
+            f"two numbers), {picked}{tie}: {SCORECARD_TARGET:g} of the scale reached on "
+            f"{top.cases_reached} case(s) (of those it ran that have an error measure), in "
+            f"{float(top.cost_ratio):.3g}x the fastest run's time (median)"
         )
         rest = fast.iloc[len(group) :]
         if len(rest):
@@ -241,9 +239,19 @@ def family_sentence(
     if len(steady):
         best = float(steady["stability_ratio"].max())
         tops = steady[np.isclose(steady["stability_ratio"], best, rtol=5e-3)]
-        named = ", ".join(_pair(r) for r in tops.head(3).itertuples(index=False))
+        tops = tops.sort_values(["stability_zero", "stability_cases"], ascending=[True, False], kind="stable")
+        named = ", ".join(
+            f"{_pair(r)} ({r.stability_cases} search(es)"
+            + (
+                f"; unstable at every step on {r.stability_zero} more, as its exact limit 0 says"
+                if r.stability_zero
+                else ""
+            )
+            + ")"
+            for r in tops.head(3).itertuples(index=False)
+        )
         more = f" and {len(tops) - 3} more" if len(tops) > 3 else ""
-        parts.append(f"for the largest stable step, {named}{more} ({best:.2f} of the exact or best limit)")
+        parts.append(f"for the largest stable step, {named}{more}: {best:.2f} of the exact or best limit")
     if family in ("contact", "particles") and len(fidelity):
         true = fidelity.sort_values("median").iloc[0]
         parts.append(
