@@ -366,3 +366,16 @@ def test_declared_orders_are_gated_on_request(run_dir, monkeypatch, capsys):
     )
     monkeypatch.setattr(RK4, "facts", dataclasses.replace(RK4.facts, order=3))
     assert main(args) == 0  # delivering more than it declares holds
+
+
+def test_identical_names_a_changed_cell_of_a_row_that_did_not_run():
+    """A restitution row of a method the sweep leaves out has no drop or bounce (NaN): a
+    changed note there is one ``differs`` finding with a readable key, not a traceback."""
+    from truestep.ci.baseline import identical
+
+    row = {"engine": "scipy", "method": "RK45", "dt": np.nan, "e_set": np.nan, "bounce": np.nan}
+    old = pd.DataFrame([{**row, "status": "unsupported", "note": "old words"}])
+    new = pd.DataFrame([{**row, "status": "unsupported", "note": "new words"}])
+    findings, cells = identical({"restitution": old}, {"restitution": new})
+    assert cells > 0 and [(f.change, f.quantity) for f in findings] == [("differs", "note")]
+    assert "scipy RK45" in findings[0].key and "nan" not in findings[0].key

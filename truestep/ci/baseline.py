@@ -101,6 +101,8 @@ def _key(row: Mapping, keys: list[str]) -> str:
             out.append(f"({row.get('status', '')})")
         elif k == "dt":
             out.append(f"{'tol' if row.get('dt_kind') == 'tolerance' else 'dt'}={float(v):g}")
+        elif k in ("e_set", "bounce") and not np.isfinite(_as_float(v)):
+            continue  # a row of a pair that did not run has no drop or bounce
         elif k == "e_set":
             out.append(f"e={float(v):g}")
         elif k == "bounce":
