@@ -28,12 +28,13 @@ BUILTIN: dict[str, str] = {
     "pymunk": "truestep.adapters.pymunk_adapter:PymunkAdapter",
     "pybullet": "truestep.adapters.pybullet_adapter:PybulletAdapter",
     "mujoco": "truestep.adapters.mujoco_adapter:MujocoAdapter",
+    "drake": "truestep.adapters.drake_adapter:DrakeAdapter",
 }
 """The built-in engines, as ``pyproject.toml`` registers them (a test keeps the two equal).
 Read only when truestep's own distribution metadata is absent (a checkout run without
 installing it)."""
 
-EXTRAS: dict[str, str] = {"pymunk": "pymunk", "pybullet": "pybullet", "mujoco": "mujoco"}
+EXTRAS: dict[str, str] = {"pymunk": "pymunk", "pybullet": "pybullet", "mujoco": "mujoco", "drake": "drake"}
 """Built-in engine -> the optional extra of truestep that installs its library."""
 
 _RESOLVED: dict[str, str] = {}

@@ -166,7 +166,11 @@ class Adapter(Protocol):
     9. optionally, accept ``simulate(case, method, dt, monitor=True)``: the run a row is
        measured from (untimed), watched at every step, its ``Trajectory.extremes`` the
        lowest and highest energy over every step; the harness then times plain runs and
-       checks they end in the same state.
+       checks they end in the same state;
+    10. optionally, ``peers``: for a method, the reference method whose scheme it says it
+        computes; the report sets their errors at the same steps side by side
+        (:mod:`truestep.measures.peers`), and ``unsupported_notes``: for a feature it
+        cannot model, why (the ``unsupported`` row's message).
 
     :class:`FixedStepAdapter` does 2 to 4 and 9 for an engine that steps a particle scene.
     """

@@ -550,6 +550,8 @@ class MujocoAdapter(FixedStepAdapter):
     }
     """One line per method, for the report's glossary."""
     method_facts: ClassVar[dict[str, FactsSpec]] = METHOD_FACTS
+    peers: ClassVar[dict[str, str]] = {"Euler": "symplectic-euler", "RK4": "rk4"}
+    """The reference method each names as its scheme (compared in the report)."""
     capabilities = frozenset(
         {
             "2d",

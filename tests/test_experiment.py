@@ -77,6 +77,7 @@ def test_the_report_renders_the_findings_and_computes_none(tmp_path, monkeypatch
         (findings, "orders_table"),
         (findings, "find"),
         (findings, "speed_table"),
+        (findings, "same_scheme"),
         (picks, "cheapest"),
         (picks, "scorecard"),
         (picks, "survival"),

@@ -91,7 +91,8 @@ def test_every_engine_method_declares_its_facts(item):
     if method not in adapter.adaptive_methods:
         # A fixed step's limit is known on undamped modes.
         assert facts.stability is not None
-        assert facts.evaluations_per_step is not None or method == "implicit-euler"
+        # an implicit method's evaluations follow its Newton iterations: counted, not declared
+        assert facts.evaluations_per_step is not None or facts.stability.a_stable
 
 
 def test_the_older_spelling_schemes_still_declares_facts_and_says_what_it_copies():
@@ -319,6 +320,10 @@ def test_declared_step_matrix_is_one_step_of_the_engine(engine, method, point):
         / amp
     )
     np.testing.assert_allclose(direct, m, rtol=0, atol=1e-9)
+    if spectral_radius(m) > 1.0:
+        # outside the method's stability region (explicit Euler and Heun everywhere on an
+        # undamped spring): a dozen steps grow it past the anchor, where the spring turns
+        return
     run = _engine_states(engine, method, *point, 0.08, -0.03, 12)
     assert _satisfies_characteristic_recurrence(run, m) < 1e-9
 
@@ -454,14 +459,15 @@ OLD_SCHEMES = {
         "RK4": "rk4",
     },
 }
-"""The adapters' ``schemes`` before the facts."""
+"""The adapters' ``schemes`` before the facts (the engines of that time: the limits below
+compare the old dictionary with the facts, so engines added since have no old side)."""
 SEARCHED = [c for c in load_cases("*") if c.stability is not None]
 
 
 def _limits():
     out = []
     for case in SEARCHED:
-        for engine in ENGINES:
+        for engine in [e for e in ENGINES if e == "reference" or e in OLD_SCHEMES]:
             adapter = get_adapter(engine)
             for method in adapter.methods:
                 if method in adapter.adaptive_methods:

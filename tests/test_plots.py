@@ -82,7 +82,9 @@ def test_every_built_in_series_has_its_own_colour_and_each_engine_its_marker():
     from truestep.adapters import get_adapter
 
     pairs = [
-        (e, m) for e in ("reference", "scipy", "pymunk", "pybullet", "mujoco") for m in get_adapter(e).methods
+        (e, m)
+        for e in ("reference", "scipy", "pymunk", "pybullet", "mujoco", "drake")
+        for m in get_adapter(e).methods
     ]
     colours = [plots.series_style(e, m)["color"] for e, m in pairs]
     assert len(set(colours)) == len(pairs), "two built-in series share a colour"

@@ -73,6 +73,7 @@ PACKAGES = (
     "pymunk",
     "pybullet",
     "mujoco",
+    "drake",
     "distributed",
 )
 """Packages whose versions a run records: a run is reproducible bit for bit with the same
@@ -146,7 +147,10 @@ def _versions() -> dict[str, str]:
 def fingerprint() -> dict[str, Any]:
     """What decides the numbers besides the code: the packages' versions, the machine's
     architecture, the BLAS libraries loaded (their kernels and threads), numpy's SIMD
-    dispatch. Two runs whose fingerprints are equal give the same non-timing numbers.
+    dispatch. OpenMP runtimes are not listed: an engine loads one when it is imported
+    (Drake does), so a process that has not imported it yet would differ, and every
+    runtime is pinned to one thread (:func:`pin_threads`) wherever it is loaded. Two runs
+    whose fingerprints are equal give the same non-timing numbers.
 
     Loads numpy and scipy's linear algebra (so that both BLAS libraries are seen)."""
     import numpy as np
@@ -166,6 +170,7 @@ def fingerprint() -> dict[str, Any]:
             f"{p.get('internal_api')} {p.get('version')} {p.get('architecture', '')} "
             f"threads={p.get('num_threads')}".strip()
             for p in threadpool_info()
+            if p.get("user_api") == "blas"
         }
     )
     return {

@@ -25,6 +25,14 @@ CASES = (
     f"{EXAMPLE / 'leapfrog_lab' / 'cases'}"
 )
 GATES = EXAMPLE / "truestep-gates.toml"
+MUTANT_CASES = {
+    "half-dropped": "harmonic-oscillator,free-fall",
+    "damping-flipped": "damped-oscillator",
+    "restitution-tangential": "bouncing-ball",
+}
+"""The cases each mutant's run needs to show its wrong term (its gates there fail, its rows
+there are worse): the whole list is the good run's, and the plugin's run of a mutant."""
+
 MUTANTS = {
     # the 1/2 dropped in the first drift of the position update
     "half-dropped": ("x_half = self.x + 0.5 * h * self.v", "x_half = self.x + h * self.v"),
@@ -78,7 +86,7 @@ def runs(tmp_path_factory) -> dict[str, Path]:
                     "run",
                     "--quick",
                     "--cases",
-                    CASES,
+                    CASES if name is None else MUTANT_CASES[name],
                     "--engines",
                     engines,
                     "--out",
@@ -162,12 +170,11 @@ PLUGIN_MUTANT = "half-dropped"
 plugin session is a quick run of its own)."""
 
 
-def test_the_plugin_passes_the_example_and_fails_a_mutant(runs):
-    """The example's own pytest test, run on the example and on a mutant (side by side)."""
-    procs = {label: _pytest_example(runs[f"{label}-src"]) for label in ["good", PLUGIN_MUTANT]}
+def test_the_plugin_fails_a_mutant(runs):
+    """The example's own pytest test, run on a mutant: it fails, naming the engine. (On the
+    example itself the same test is ``.ci/run``'s last step: the project's own suite.)"""
+    procs = {label: _pytest_example(runs[f"{label}-src"]) for label in [PLUGIN_MUTANT]}
     outcomes = {label: (p.communicate(timeout=600)[0], p.returncode) for label, p in procs.items()}
-    good, code = outcomes.pop("good")
-    assert code == 0, good[-3000:]
     for mutant, (out, code) in outcomes.items():
         assert code == 1, f"{mutant}: {out[-3000:]}"
         failed = [line for line in out.splitlines() if line.startswith("FAILED")]

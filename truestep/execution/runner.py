@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import get_adapter
+from truestep.adapters import adapter_class, get_adapter
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
@@ -423,6 +423,14 @@ def duplicate_of(adapter, case: Case, method: str) -> str | None:
     return duplicate(case, method) if duplicate is not None else None
 
 
+def unsupported_message(engine: str, missing: str) -> str:
+    """Why ``engine`` cannot model the features ``missing`` (comma-separated), from its
+    adapter's optional ``unsupported_notes`` (feature -> reason), or ``""``."""
+    notes = getattr(adapter_class(engine), "unsupported_notes", None) or {}
+    reasons = [f"{f}: {notes[f]}" for f in missing.split(",") if f in notes]
+    return "; ".join(reasons)
+
+
 def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float | None, bool, str]]:
     """(method, dt, adaptive, why-not) for every row this case and engine produce.
 
@@ -511,7 +519,7 @@ def run_matrix(
                         "dt_kind": "tolerance" if adaptive else "step",
                         "status": status,
                         "missing": detail if status == "unsupported" else "",
-                        "message": detail if status == "skipped" else "",
+                        "message": detail if status == "skipped" else unsupported_message(engine, detail),
                         "host": "",
                     }
                 ]

@@ -15,6 +15,7 @@ import pandas as pd
 
 from truestep.cases.case import Case
 from truestep.measures.metrics import fit_order
+from truestep.measures.peers import PEER_COLUMNS, same_scheme
 from truestep.measures.picks import cheapest, restitution_fidelity, scorecard, survival
 
 
@@ -31,6 +32,8 @@ class Findings:
     conclusions : case name -> :class:`Conclusion`
     notes : (engine, method) -> what the method is, in a line (the adapter's
     ``method_notes``), for every pair in the results whose adapter says
+    peers : :func:`truestep.measures.peers.same_scheme`: each engine method beside the
+    reference method it names as its scheme, their errors' ratio at the same steps
     """
 
     orders: pd.DataFrame
@@ -41,6 +44,7 @@ class Findings:
     speed: dict[tuple[str, str], pd.DataFrame]
     conclusions: dict[str, Conclusion] = dataclasses.field(default_factory=dict)
     notes: dict[tuple[str, str], str] = dataclasses.field(default_factory=dict)
+    peers: pd.DataFrame = dataclasses.field(default_factory=lambda: pd.DataFrame(columns=list(PEER_COLUMNS)))
 
 
 Run = tuple[str, str, float, str, float]
@@ -110,6 +114,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         speed=speed_tables(cases, results),
         conclusions={c.name: conclude(c, results) for c in cases},
         notes=method_notes(results),
+        peers=same_scheme(results, cases),
     )
 
 

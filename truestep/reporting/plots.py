@@ -35,12 +35,22 @@ SERIES_COLOURS: dict[tuple[str, str], str] = {
     ("mujoco", "implicit"): "#708090",
     ("mujoco", "implicitfast"): "#7b68ee",
     ("mujoco", "RK4"): "#2e8b57",
+    ("drake", "explicit_euler"): "#c71585",
+    ("drake", "semi_explicit_euler"): "#00ced1",
+    ("drake", "runge_kutta2"): "#ff8c00",
+    ("drake", "runge_kutta3"): "#6a5acd",
+    ("drake", "implicit_euler"): "#8b0000",
+    ("drake", "radau1"): "#bc8f8f",
+    ("drake", "radau3"): "#006400",
+    ("drake", "runge_kutta5"): "#0000cd",
+    ("drake", "bogacki_shampine3"): "#9acd32",
+    ("drake", "radau3-ec"): "#483d8b",
 }
 """A colour for each built-in engine/method series, distinct from every other's, in every
 figure. A series of another engine or method takes one of :data:`MORE_COLOURS`, chosen by
 its name (the same in every run)."""
 MORE_COLOURS = ("#a9a9a9", "#8b4513", "#ff1493", "#1e90ff", "#b22222", "#228b22", "#daa520", "#4b0082")
-ENGINE_MARKERS = {"reference": "o", "scipy": "s", "pymunk": "^", "pybullet": "D", "mujoco": "v"}
+ENGINE_MARKERS = {"reference": "o", "scipy": "s", "pymunk": "^", "pybullet": "D", "mujoco": "v", "drake": "h"}
 """A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`)."""
 MORE_MARKERS = ("P", "X", "*", "h", "p", "<", ">")
 ENGINE_LINES: dict[str, str | tuple] = {
@@ -49,6 +59,7 @@ ENGINE_LINES: dict[str, str | tuple] = {
     "pymunk": "--",
     "pybullet": "-.",
     "mujoco": (0, (6, 2, 1, 2, 1, 2)),
+    "drake": (0, (1, 1)),
 }
 """A line style for each engine (another engine's is solid)."""
 LEGEND_FONT = 9

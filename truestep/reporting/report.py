@@ -34,13 +34,25 @@ from truestep.reporting.sections import (
     conclusion_sentence,
     hard_case_line,
     methods_section,
+    same_scheme_section,
     scorecard_section,
     speed_section,
     summary,
 )
 from truestep.visible import visible
 
-PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "tqdm", "pymunk", "pybullet", "mujoco")
+PACKAGES = (
+    "numpy",
+    "scipy",
+    "pandas",
+    "matplotlib",
+    "numba",
+    "tqdm",
+    "pymunk",
+    "pybullet",
+    "mujoco",
+    "drake",
+)
 __all__ = [
     "hard_case_line",
     "render_markdown",
@@ -227,6 +239,7 @@ def render_markdown(
         + ".\n"
     )
     parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
+    parts += same_scheme_section(found.peers)
     parts.append("## Work against precision, per case\n")
     drawn = draw_case_figures(cases, results, traces, fig_dir)
     for case in cases:

@@ -11,6 +11,7 @@ import pandas as pd
 
 from truestep.cases.case import Case
 from truestep.measures.findings import Conclusion, Findings
+from truestep.measures.peers import SAME
 from truestep.measures.picks import (
     ACCURACY_TARGETS,
     SURVIVAL_ENERGY,
@@ -439,3 +440,37 @@ def glossary(notes: dict[tuple[str, str], str]) -> str:
     lines = [f"- **{name}**: {meaning}" for name, meaning in TERMS]
     lines += [f"- **{text(e)} / {text(m)}**: {text(note)}" for (e, m), note in notes.items()]
     return folded("What the names and numbers mean", "\n".join(lines) + "\n")
+
+
+def same_scheme_section(peers: pd.DataFrame) -> list[str]:
+    """ "Same scheme, same steps": each engine method beside the reference method it names
+    as its scheme (the adapter's ``peers``), the ratio of their errors at equal steps, and
+    a sentence naming every method whose ratio says it computes something else."""
+    compared = peers[peers["rows"] > 0]
+    if not len(compared):
+        return []
+    lo, hi = SAME
+    off = compared[~compared["ratio"].between(lo, hi)]
+    lines = [
+        "### Same scheme, same steps\n",
+        "An engine's method that names a reference method as its scheme, beside it: the ratio "
+        "of their errors (engine / reference) on the same case at the same step, over every "
+        "pair of rows that ended ok on the cases without contact (where engines model the "
+        f"physics differently). A median ratio within {lo:g}-{hi:g} confirms the name; "
+        f"{len(compared) - len(off)} of {len(compared)} do"
+        + (
+            ". "
+            + " ".join(
+                f"**{text(r.engine)} / {text(r.method)}** makes {_fmt(r.ratio)} times the error of "
+                f"reference / {text(r.peer)} at every step compared "
+                f"({_fmt(r.ratio_min)}-{_fmt(r.ratio_max)}, {r.rows} rows on {r.cases} cases): "
+                f"it is not {text(r.peer)} as such."
+                for r in off.itertuples(index=False)
+            )
+            if len(off)
+            else "."
+        )
+        + "\n",
+    ]
+    lines.append(folded(f"{len(compared)} engine methods beside their named scheme", md_table(compared)))
+    return lines
