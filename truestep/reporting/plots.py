@@ -64,6 +64,15 @@ ENGINE_LINES: dict[str, str | tuple] = {
 """A line style for each engine (another engine's is solid)."""
 LEGEND_FONT = 9
 """Legend text, points (12 px at :data:`REPORT_DPI`)."""
+LEGEND_ROW_IN = 0.2
+"""Inches a legend entry takes at :data:`LEGEND_FONT` (text and spacing)."""
+
+
+def legend_height(entries: int, least: float) -> float:
+    """A figure height (in) at least ``least`` and tall enough for a one-column legend of
+    ``entries`` beside the axes: a run with every engine has about 30 series, which a
+    fixed height would cut at both ends."""
+    return max(least, LEGEND_ROW_IN * entries + 0.8)
 
 
 def _chosen(name: str, options: tuple) -> object:
@@ -136,7 +145,8 @@ def work_precision(df: pd.DataFrame, case: str, title: str, path: Path, unit: st
     ok = df[(df["status"] == "ok") & (df["error"].astype(float) > 0)]
     if ok.empty:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), sharey=True)
+    series = ok.groupby(["engine", "method"], sort=False).ngroups
+    fig, axes = plt.subplots(1, 2, figsize=(13, legend_height(series, 5.2)), sharey=True)
     for (engine, method), g in ok.groupby(["engine", "method"], sort=False):
         style = series_style(engine, method)
         label = _pair(engine, method)
@@ -236,8 +246,13 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
     if r.empty:
         return None
     dts = sorted(r["dt"].astype(float).unique(), reverse=True)
+    series = r.groupby(["engine", "method"]).ngroups + 1
     fig, axes = plt.subplots(
-        1, len(dts), figsize=(max(6.5 * len(dts), 10.5), 5.0), squeeze=False, sharey=True
+        1,
+        len(dts),
+        figsize=(max(6.5 * len(dts), 10.5), legend_height(series, 5.0)),
+        squeeze=False,
+        sharey=True,
     )
     for ax, dt in zip(axes[0], dts, strict=True):
         d = r[np.isclose(r["dt"].astype(float), dt)]
@@ -280,7 +295,7 @@ def energy_over_time(
     chosen = {k: v for k, v in traces.items() if shown(k)}
     if not chosen:
         return None
-    fig, ax = plt.subplots(figsize=(12, 4.8))
+    fig, ax = plt.subplots(figsize=(12, legend_height(len(chosen), 4.8)))
     known = scale is not None and np.isfinite(scale) and scale > 0
     for (_, engine, method, kind, dt), (t, e) in chosen.items():
         s = scale if known else (abs(e[0]) if e[0] != 0 else (np.max(np.abs(e)) or 1.0))
