@@ -5,7 +5,7 @@ same scheme (Drake's ``runge_kutta2`` is Heun's method, MuJoCo's ``RK4`` the cla
 RK4). Two implementations of one scheme on one case at one step make the same error, up
 to round-off and what the engine adds (a contact model, a float32 state). The ratio of
 their errors at equal steps is a measured check of that claim: a ratio of 1 confirms it,
-a steady ratio away from 1 means the engine computes something else under that name (a
+a median ratio away from 1 means the engine computes something else under that name (a
 step split in two, a force held through the stages), and it is reported as found.
 """
 
@@ -38,14 +38,12 @@ def declared_peers(engine: str) -> Mapping[str, str]:
 
 
 def verdict(ratio: float) -> str:
-    """``same scheme`` for a median ratio inside :data:`SAME`, else how far off, in words."""
+    """``same scheme`` for a median ratio inside :data:`SAME`, else the median, in words."""
     if not np.isfinite(ratio):
         return "not compared"
     if SAME[0] <= ratio <= SAME[1]:
         return "same scheme"
-    return (
-        f"{'smaller' if ratio < 1 else 'larger'} error by a steady {ratio:.2g}x: not the named scheme as such"
-    )
+    return f"median error {ratio:.2g}x the reference's: not the named scheme as such"
 
 
 FLOOR = 1e-10

@@ -461,9 +461,9 @@ def same_scheme_section(peers: pd.DataFrame) -> list[str]:
         + (
             ". "
             + " ".join(
-                f"**{text(r.engine)} / {text(r.method)}** makes {_fmt(r.ratio)} times the error of "
-                f"reference / {text(r.peer)} at every step compared "
-                f"({_fmt(r.ratio_min)}-{_fmt(r.ratio_max)}, {r.rows} rows on {r.cases} cases): "
+                f"**{text(r.engine)} / {text(r.method)}** makes a median {_fmt(r.ratio)} times the "
+                f"error of reference / {text(r.peer)} at the same step "
+                f"({_fmt(r.ratio_min)} to {_fmt(r.ratio_max)} over {r.rows} rows on {r.cases} cases): "
                 f"it is not {text(r.peer)} as such."
                 for r in off.itertuples(index=False)
             )
