@@ -29,12 +29,19 @@ BUILTIN: dict[str, str] = {
     "pybullet": "truestep.adapters.pybullet_adapter:PybulletAdapter",
     "mujoco": "truestep.adapters.mujoco_adapter:MujocoAdapter",
     "drake": "truestep.adapters.drake_adapter:DrakeAdapter",
+    "mujoco-warp": "truestep.adapters.mujoco_warp_adapter:MujocoWarpAdapter",
 }
 """The built-in engines, as ``pyproject.toml`` registers them (a test keeps the two equal).
 Read only when truestep's own distribution metadata is absent (a checkout run without
 installing it)."""
 
-EXTRAS: dict[str, str] = {"pymunk": "pymunk", "pybullet": "pybullet", "mujoco": "mujoco", "drake": "drake"}
+EXTRAS: dict[str, str] = {
+    "pymunk": "pymunk",
+    "pybullet": "pybullet",
+    "mujoco": "mujoco",
+    "drake": "drake",
+    "mujoco-warp": "mujoco-warp",
+}
 """Built-in engine -> the optional extra of truestep that installs its library."""
 
 _RESOLVED: dict[str, str] = {}

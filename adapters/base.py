@@ -170,7 +170,12 @@ class Adapter(Protocol):
     10. optionally, ``peers``: for a method, the reference method whose scheme it says it
         computes; the report sets their errors at the same steps side by side
         (:mod:`truestep.measures.peers`), and ``unsupported_notes``: for a feature it
-        cannot model, why (the ``unsupported`` row's message).
+        cannot model, why (the ``unsupported`` row's message);
+    11. optionally, ``skip(case, method) -> str | None``: why it leaves a case it can
+        model unrun (a bound on the work it takes on, stated), a ``skipped`` row with
+        that message; and ``precision``: ``"float32"`` for an engine whose state is
+        single precision, whose order fits then stop at float32's round-off
+        (:func:`truestep.measures.metrics.round_off_floor`).
 
     :class:`FixedStepAdapter` does 2 to 4 and 9 for an engine that steps a particle scene.
     """

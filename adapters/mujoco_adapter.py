@@ -326,12 +326,19 @@ def _vec(a: np.ndarray) -> str:
 
 
 def mjcf(
-    model: ParticleModel, method: str, h: float, *, contact_steps: float = CONTACT_STEPS
+    model: ParticleModel,
+    method: str,
+    h: float,
+    *,
+    contact_steps: float = CONTACT_STEPS,
+    autoreset_flag: bool = True,
 ) -> tuple[str, Layout]:
     """The MJCF text of a particle scene, and where its particles are in the model.
 
     ``method`` is one of :data:`INTEGRATORS`, ``h`` the time step (s); plane contacts
-    last about ``contact_steps`` steps (``t_c = contact_steps * h``).
+    last about ``contact_steps`` steps (``t_c = contact_steps * h``). ``autoreset_flag``
+    writes ``autoreset="disable"``; MuJoCo Warp, which never resets a state and has no
+    such flag, takes the model without it.
     """
     _check_method(method)
     dim = 2 if model.dimension == 2 else 3
@@ -408,13 +415,14 @@ def mjcf(
                 f'solref="{-stiffness:.17g} {-damping:.17g}" solimp="{solimp}"/>'
             )
 
+    reset = ' autoreset="disable"' if autoreset_flag else ""
     text = "\n".join(
         [
             '<mujoco model="truestep">',
             '  <compiler inertiafromgeom="false" angle="radian"/>',
             f'  <option timestep="{h:.17g}" integrator="{method}" gravity="{_vec(model.gravity)}" '
             'cone="elliptic">',
-            '    <flag energy="enable" autoreset="disable"/>',
+            f'    <flag energy="enable"{reset}/>',
             "  </option>",
             "  <default>",
             f'    <joint armature="0" damping="{model.drag:.17g}" frictionloss="0" stiffness="0" '

@@ -13,6 +13,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from truestep.adapters import available_engines, get_adapter
@@ -31,6 +32,7 @@ from truestep.measures.declared import (
     smooth_with_exact,
     velocity_dependent,
 )
+from truestep.measures.metrics import ROUND_OFF, ROUND_OFF_FLOAT32, round_off_floor
 from truestep.reference_impl.model import Anchors, ParticleModel
 from truestep.reference_impl.solvers import (
     METHODS,
@@ -306,8 +308,10 @@ ENGINE_POINTS = [(0.3, 0.0), (1.9, 0.0), (0.3, 0.1), (1.5, 0.1), (1.0, 0.5), (0.
 def test_declared_step_matrix_is_one_step_of_the_engine(engine, method, point):
     """Each engine's declared matrix against one step of the engine itself from two
     starts, and its recurrence against a dozen steps (which would show state the engine
-    keeps between steps). Tolerance 1e-9 of the 0.1 m start: the engines run in double
-    precision (pymunk's exponential damper, MuJoCo's tendon: round-off is 1e-15)."""
+    keeps between steps). Tolerance 1e-9 of the 0.1 m start for engines in double
+    precision (pymunk's exponential damper, MuJoCo's tendon: round-off is 1e-15), 4e-6
+    for a float32 engine (MuJoCo Warp: 8e-7 measured, 7 units in float32's last place)."""
+    tol = 4e-6 if getattr(get_adapter(engine), "precision", "float64") == "float32" else 1e-9
     m = facts_of(get_adapter(engine), method).stability.step_matrix(*_ab(*point))
     amp = 0.1
     direct = (
@@ -319,13 +323,13 @@ def test_declared_step_matrix_is_one_step_of_the_engine(engine, method, point):
         )
         / amp
     )
-    np.testing.assert_allclose(direct, m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(direct, m, rtol=0, atol=tol)
     if spectral_radius(m) > 1.0:
         # outside the method's stability region (explicit Euler and Heun everywhere on an
         # undamped spring): a dozen steps grow it past the anchor, where the spring turns
         return
     run = _engine_states(engine, method, *point, 0.08, -0.03, 12)
-    assert _satisfies_characteristic_recurrence(run, m) < 1e-9
+    assert _satisfies_characteristic_recurrence(run, m) < tol
 
 
 def _radius(stability: Stability, a: float, b: float) -> float:
@@ -600,14 +604,30 @@ def test_declared_orders_hold_on_a_quick_run(quick_run):
     # A sweep the fit cannot read (fewer than two errors in the asymptotic range) leaves
     # its gate not evaluated; every other gate is evaluated and holds.
     skipped = {(v.case, v.gate.engine, v.gate.method): v for v in checked if not v.evaluated}
-    assert set(skipped) == {k for k in UNREADABLE if k[1] in ENGINES}
+    # A float32 engine's sweep whose errors all lie under its round-off floor is not
+    # evaluated either: there float32 rounding, not the scheme, sets the error.
+    scale = {c.name: c.error_scale for c in QUICK_SMOOTH}
+
+    def rows_of(case: str, engine: str, method: str) -> pd.DataFrame:
+        return quick_run[
+            (quick_run["case"] == case) & (quick_run["engine"] == engine) & (quick_run["method"] == method)
+        ]
+
+    stalled = {
+        k
+        for k in skipped
+        if round_off_floor(k[1]) > ROUND_OFF
+        and (rows_of(*k)["error"].astype(float) > round_off_floor(k[1]) * scale[k[0]]).sum() < 2
+    }
+    assert all(round_off_floor(e) == ROUND_OFF_FLOAT32 for _, e, _ in stalled)
+    assert set(skipped) - stalled == {k for k in UNREADABLE if k[1] in ENGINES}
     assert all(v.passed for v in checked if v.evaluated), "\n".join(
         v.line() for v in checked if v.evaluated and not v.passed
     )
     for (case, engine, method), v in skipped.items():
-        rows = quick_run[
-            (quick_run["case"] == case) & (quick_run["engine"] == engine) & (quick_run["method"] == method)
-        ]
+        if (case, engine, method) in stalled:
+            continue
+        rows = rows_of(case, engine, method)
         slope = np.polyfit(np.log(rows["dt"].astype(float)), np.log(rows["error"].astype(float)), 1)[0]
         assert abs(slope - v.gate.params["expect"]) <= DECLARED_ORDER_TOL
 

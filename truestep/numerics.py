@@ -74,6 +74,8 @@ PACKAGES = (
     "pybullet",
     "mujoco",
     "drake",
+    "mujoco-warp",
+    "warp-lang",
     "distributed",
 )
 """Packages whose versions a run records: a run is reproducible bit for bit with the same

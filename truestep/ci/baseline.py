@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from truestep.measures.metrics import fit_order
+from truestep.measures.metrics import ROUND_OFF, fit_order, round_off_floor
 from truestep.tables.spec import DERIVED, RESTITUTION, RESULTS, STABILITY, Compared, Table, compared
 
 TOLERANCES: dict[str, float] = {name: c.tolerance for name, c in compared().items()}
@@ -40,6 +40,9 @@ RESTITUTION_KEYS = list(RESTITUTION.keys)
 ORDER_KEYS = ["case", "engine", "method"]
 STATUS_RANK = {"ok": 0, "unstable": 1, "solver-failed": 1, "timeout": 2, "crashed": 2}
 """Higher is worse: ok -> unstable is a regression, as is anything -> crashed."""
+POSITION_ERRORS = frozenset({"error", "error_final"})
+"""Quantities in a case's error units: a float32 engine's differ by its round-off,
+:func:`~truestep.measures.metrics.round_off_floor` of the case's scale, on another CPU."""
 FINDING_COLUMNS = ["change", "table", "key", "quantity", "baseline", "current", "note"]
 
 
@@ -132,15 +135,23 @@ def _as_float(x: Any) -> float:
 
 
 def _moved(
-    quantity: str, old: float, new: float, tol: float, *, higher_is_worse: bool = True, relative: bool = True
+    quantity: str,
+    old: float,
+    new: float,
+    tol: float,
+    *,
+    higher_is_worse: bool = True,
+    relative: bool = True,
+    floor: float = 0.0,
 ) -> str | None:
-    """``worse``, ``better`` or ``None`` for a quantity that went from ``old`` to ``new``."""
+    """``worse``, ``better`` or ``None`` for a quantity that went from ``old`` to ``new``;
+    differences below ``floor`` (or the quantity's :data:`FLOORS`) are round-off."""
     if not (np.isfinite(old) and np.isfinite(new)):
         if np.isfinite(old) != np.isfinite(new):
             return "worse" if np.isfinite(old) else "better"
         return None
     band = tol * abs(old) if relative else tol
-    band = max(band, FLOORS.get(quantity, 0.0))
+    band = max(band, FLOORS.get(quantity, 0.0), floor)
     delta = new - old if higher_is_worse else old - new
     if delta > band:
         return "worse"
@@ -157,11 +168,15 @@ def _compare_rows(
     quantities: list[tuple[str, bool, bool]],
     tol: Mapping[str, float],
     findings: list[Finding],
+    scales: Mapping[str, float] | None = None,
 ) -> int:
-    """Match rows on ``keys``; compare status and each (quantity, higher_is_worse, relative)."""
+    """Match rows on ``keys``; compare status and each (quantity, higher_is_worse, relative).
+    A float32 engine's errors (:data:`POSITION_ERRORS`) move within its round-off floor
+    times the case's scale (``scales``, default 1) without counting."""
     if old is None or new is None:
         return 0
     a, b = _index(old, keys), _index(new, keys)
+    engine_floor: dict[str, float] = {}
     for k in a.keys() - b.keys():
         findings.append(Finding("vanished", table, _key(a[k], keys), "", "", ""))
     for k in b.keys() - a.keys():
@@ -183,11 +198,24 @@ def _compare_rows(
             continue
         if sb != "ok":
             continue
+        engine = str(rb.get("engine", ""))
+        if engine not in engine_floor:
+            engine_floor[engine] = round_off_floor(engine)
+        floor = engine_floor[engine]
+        floor = floor * (scales or {}).get(str(rb.get("case", "")), 1.0) if floor > ROUND_OFF else 0.0
         for q, higher_is_worse, relative in quantities:
             if q not in ra or q not in rb or q not in tol:
                 continue
             old, new = _as_float(ra[q]), _as_float(rb[q])
-            change = _moved(q, old, new, tol[q], higher_is_worse=higher_is_worse, relative=relative)
+            change = _moved(
+                q,
+                old,
+                new,
+                tol[q],
+                higher_is_worse=higher_is_worse,
+                relative=relative,
+                floor=floor if q in POSITION_ERRORS else 0.0,
+            )
             if change:
                 findings.append(Finding(change, table, label, q, old, new))
     return len(a.keys() & b.keys())
@@ -202,6 +230,7 @@ def orders(results: pd.DataFrame, scales: Mapping[str, float] | None = None) -> 
             pd.to_numeric(g["dt"], errors="coerce"),
             pd.to_numeric(g["error"], errors="coerce"),
             scale=(scales or {}).get(case, 1.0),
+            floor=round_off_floor(str(engine)),
         )
         rows.append({"case": case, "engine": engine, "method": method, "order": order})
     return pd.DataFrame(rows, columns=[*ORDER_KEYS, "order"])
@@ -247,6 +276,7 @@ def compare(
         _quantities(RESULTS),
         tol,
         findings,
+        scales,
     )
     if old_r is not None and new_r is not None:
         compared += _compare_rows(

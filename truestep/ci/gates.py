@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case, Gate
-from truestep.measures.metrics import fit_order
+from truestep.measures.metrics import ROUND_OFF, fit_order, round_off_floor
 
 NOT_RUN = frozenset({"unsupported", "skipped"})
 """Row statuses of pairs the run did not simulate."""
@@ -205,7 +205,8 @@ def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
     if broken:
         return GateResult(case.name, g, False, broken, "every row of the sweep measured")
     ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
-    order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale)
+    floor = round_off_floor(str(rows["engine"].iloc[0])) if len(rows) else ROUND_OFF
+    order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale, floor=floor)
     if g.where == DECLARED:
         return _declared_order(case, g, ok, order)
     return GateResult(

@@ -423,6 +423,13 @@ def duplicate_of(adapter, case: Case, method: str) -> str | None:
     return duplicate(case, method) if duplicate is not None else None
 
 
+def left_out(adapter, case: Case, method: str) -> str | None:
+    """Why the adapter leaves a case it can model unrun (its optional ``skip``: a scene
+    beyond the work it takes on), or ``None``."""
+    skip = getattr(adapter, "skip", None)
+    return skip(case, method) if skip is not None else None
+
+
 def unsupported_message(engine: str, missing: str) -> str:
     """Why ``engine`` cannot model the features ``missing`` (comma-separated), from its
     adapter's optional ``unsupported_notes`` (feature -> reason), or ``""``."""
@@ -445,7 +452,7 @@ def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float |
             yield method, None, adaptive, "unsupported:" + ",".join(sorted(missing))
             continue
         skip = [r for e, m, r in case.skip if e == engine and m in (method, "*")]
-        skip += [r for r in [duplicate_of(adapter, case, method)] if r]
+        skip += [r for r in [duplicate_of(adapter, case, method), left_out(adapter, case, method)] if r]
         if skip:
             yield method, None, adaptive, "skipped:" + skip[0]
             continue

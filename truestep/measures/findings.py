@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case
-from truestep.measures.metrics import fit_order
+from truestep.measures.metrics import fit_order, round_off_floor
 from truestep.measures.peers import PEER_COLUMNS, same_scheme
 from truestep.measures.picks import cheapest, restitution_fidelity, scorecard, survival
 
@@ -165,7 +165,12 @@ def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
     scales = {c.name: c.error_scale for c in cases}
     steps = results[(results["dt_kind"] == "step") & (results["status"] == "ok")]
     for (case, engine, method), g in steps.groupby(["case", "engine", "method"], sort=False):
-        order = fit_order(g["dt"].astype(float), g["error"].astype(float), scale=scales.get(case, 1.0))
+        order = fit_order(
+            g["dt"].astype(float),
+            g["error"].astype(float),
+            scale=scales.get(case, 1.0),
+            floor=round_off_floor(str(engine)),
+        )
         expect = declared.get((case, engine, method), np.nan)
         agrees = (
             ""

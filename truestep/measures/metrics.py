@@ -166,6 +166,25 @@ PRE_ASYMPTOTIC = 0.5
 altogether there, not converging."""
 ROUND_OFF = 1e-11
 """Errors below this fraction of the case's scale are round-off, which has no order."""
+ROUND_OFF_FLOAT32 = 1e-5
+"""The same for an engine whose state is float32 (``precision = "float32"``): float32 keeps
+about 7 digits, and MuJoCo Warp's RK4 on the oscillator stalls at 1.1e-6 of its amplitude
+however small the step; a floor 10 times that keeps the stall out of the fit."""
+
+
+def round_off_floor(engine: str) -> float:
+    """The round-off floor (a fraction of a case's scale) of ``engine``'s errors:
+    :data:`ROUND_OFF_FLOAT32` for an adapter that declares ``precision = "float32"``,
+    else :data:`ROUND_OFF` (also for an engine not installed here)."""
+    from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
+
+    try:
+        precision = getattr(adapter_class(engine), "precision", "float64")
+    except (EngineNotInstalled, UnknownEngine):
+        return ROUND_OFF
+    return ROUND_OFF_FLOAT32 if precision == "float32" else ROUND_OFF
+
+
 AGREE = 0.3
 """Local orders within this of the finest one belong to the asymptotic range (a method whose
 error is ``C dt^p (1 + c dt)`` changes its local order by less, once converging; one that
@@ -180,22 +199,23 @@ def local_orders(dts: np.ndarray, errors: np.ndarray) -> np.ndarray:
     return np.diff(e) / np.diff(d)
 
 
-def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0) -> float:
+def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0, floor: float = ROUND_OFF) -> float:
     """Order of convergence, fitted where the asymptotic regime holds.
 
     Points whose error is above :data:`PRE_ASYMPTOTIC` of ``scale`` (not converging) or
-    below :data:`ROUND_OFF` of it (round-off) are left out. Of the rest, sorted by step,
-    the local orders between successive steps (:func:`local_orders`) are read from the
-    finest pair up: the range extends to a coarser step while its local order is within
-    :data:`AGREE` of the finest pair's. The order is the least-squares slope of log(error)
-    against log(dt) over that range. NaN with fewer than two usable points.
+    below ``floor`` of it (round-off: :func:`round_off_floor` of the engine) are left
+    out. Of the rest, sorted by step, the local orders between successive steps
+    (:func:`local_orders`) are read from the finest pair up: the range extends to a
+    coarser step while its local order is within :data:`AGREE` of the finest pair's. The
+    order is the least-squares slope of log(error) against log(dt) over that range.
+    NaN with fewer than two usable points.
     """
     dts, errors = np.asarray(dts, float), np.asarray(errors, float)
     ok = (
         np.isfinite(errors)
         & np.isfinite(dts)
         & (dts > 0)
-        & (errors > ROUND_OFF * scale)
+        & (errors > floor * scale)
         & (errors < PRE_ASYMPTOTIC * scale)
     )
     dts, errors = dts[ok], errors[ok]

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
+from truestep.measures.metrics import ROUND_OFF, round_off_floor
+
 PEER_COLUMNS = ("engine", "method", "peer", "cases", "rows", "ratio", "ratio_min", "ratio_max", "verdict")
 """The table's columns: the engine and its method, the reference method it names as its
 scheme, the cases and rows compared, the median, least and greatest error ratio
@@ -50,6 +52,10 @@ FLOOR = 1e-10
 """Rows whose reference error is below this are not compared: there the error is
 round-off, whose ratio says nothing about the scheme."""
 
+FLOAT32_MARGIN = 10.0
+"""A float32 engine is compared where the reference's error is at least this many times
+its round-off floor: there float32's rounding moves the ratio by a tenth at most."""
+
 CONTACT = frozenset({"planes", "thin-walls", "friction"})
 """Features where engines model the physics differently (soft contact, restitution
 rules): a case with any of them is no test of an integrator's scheme."""
@@ -60,11 +66,14 @@ def same_scheme(
 ) -> pd.DataFrame:
     """The :data:`PEER_COLUMNS` table: for every engine method with a declared peer, the
     ratio of its error to the peer's on the same case at the same step, over every such
-    pair of rows that ended ok with the reference's error above :data:`FLOOR`, on the
+    pair of rows that ended ok with the reference's error above :data:`FLOOR` (for a
+    float32 engine, above :data:`FLOAT32_MARGIN` times its round-off floor of the case's
+    scale, :func:`~truestep.measures.metrics.round_off_floor`), on the
     ``cases`` without contact (:data:`CONTACT`), at fixed steps only (a tolerance is no
     common step). ``peers``: engine -> method -> reference method (default: what each
     engine's adapter declares)."""
     free = {c.name for c in cases if not (set(c.features) & CONTACT)}
+    scale = {c.name: c.error_scale for c in cases}
     fixed = results[(results["status"] == "ok") & (results["dt_kind"] == "step") & results["case"].isin(free)]
     error = pd.to_numeric(fixed["error"], errors="coerce")
     fixed = fixed.assign(error=error)[error > 0]
@@ -77,6 +86,9 @@ def same_scheme(
         for method, peer in sorted(declared.items()):
             mine = fixed[(fixed["engine"] == engine) & (fixed["method"] == method)][["case", "dt", "error"]]
             theirs = reference[reference["method"] == peer][["case", "dt", "error"]]
+            floor = round_off_floor(engine)
+            if floor > ROUND_OFF:
+                theirs = theirs[theirs["error"] > FLOAT32_MARGIN * floor * theirs["case"].map(scale)]
             both = mine.merge(theirs, on=["case", "dt"], suffixes=("", "_peer"))
             ratio = (both["error"] / both["error_peer"]).to_numpy(float)
             median = float(np.median(ratio)) if len(ratio) else float("nan")
@@ -96,4 +108,13 @@ def same_scheme(
     return pd.DataFrame(rows, columns=list(PEER_COLUMNS))
 
 
-__all__ = ["CONTACT", "FLOOR", "PEER_COLUMNS", "SAME", "declared_peers", "same_scheme", "verdict"]
+__all__ = [
+    "CONTACT",
+    "FLOAT32_MARGIN",
+    "FLOOR",
+    "PEER_COLUMNS",
+    "SAME",
+    "declared_peers",
+    "same_scheme",
+    "verdict",
+]

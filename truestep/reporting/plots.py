@@ -45,12 +45,24 @@ SERIES_COLOURS: dict[tuple[str, str], str] = {
     ("drake", "runge_kutta5"): "#0000cd",
     ("drake", "bogacki_shampine3"): "#9acd32",
     ("drake", "radau3-ec"): "#483d8b",
+    ("mujoco-warp", "Euler"): "#8b7d6b",
+    ("mujoco-warp", "implicit"): "#20b2aa",
+    ("mujoco-warp", "implicitfast"): "#da70d6",
+    ("mujoco-warp", "RK4"): "#9b870c",
 }
 """A colour for each built-in engine/method series, distinct from every other's, in every
 figure. A series of another engine or method takes one of :data:`MORE_COLOURS`, chosen by
 its name (the same in every run)."""
 MORE_COLOURS = ("#a9a9a9", "#8b4513", "#ff1493", "#1e90ff", "#b22222", "#228b22", "#daa520", "#4b0082")
-ENGINE_MARKERS = {"reference": "o", "scipy": "s", "pymunk": "^", "pybullet": "D", "mujoco": "v", "drake": "h"}
+ENGINE_MARKERS = {
+    "reference": "o",
+    "scipy": "s",
+    "pymunk": "^",
+    "pybullet": "D",
+    "mujoco": "v",
+    "drake": "h",
+    "mujoco-warp": "P",
+}
 """A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`)."""
 MORE_MARKERS = ("P", "X", "*", "h", "p", "<", ">")
 ENGINE_LINES: dict[str, str | tuple] = {
@@ -60,6 +72,7 @@ ENGINE_LINES: dict[str, str | tuple] = {
     "pybullet": "-.",
     "mujoco": (0, (6, 2, 1, 2, 1, 2)),
     "drake": (0, (1, 1)),
+    "mujoco-warp": (0, (3, 1, 1, 1)),
 }
 """A line style for each engine (another engine's is solid)."""
 LEGEND_FONT = 9

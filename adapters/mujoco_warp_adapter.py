@@ -1,0 +1,239 @@
+"""MuJoCo Warp behind the Adapter protocol (``pip install "truestep[mujoco-warp]"``).
+
+What runs
+---------
+MuJoCo Warp (``mujoco_warp``) is MuJoCo's pipeline rewritten as Warp kernels, built for
+batches of worlds on a GPU. truestep runs it as a **correctness peer of MuJoCo C**: the
+same MJCF model (:func:`truestep.adapters.mujoco_adapter.mjcf`, so the same slide
+joints, tendons, contact pairs and the restitution-derived ``solref``), the same four
+integrators, one world, stepped by Warp's kernels in float32 on Warp's CPU device
+(:data:`DEVICE`) unless a device is asked. Its rows say whether the GPU pipeline computes
+MuJoCo's physics; its CPU wall times are those of a GPU code run on a CPU (20-50 times
+MuJoCo C's), not a speed claim, and the row's message says so.
+
+What truestep sets
+------------------
+* The model is MuJoCo C's, less ``autoreset="disable"`` (MuJoCo Warp has no autoreset:
+  it never resets a diverged state, so the flag is not needed).
+* Contact capacity: one contact per (particle, plane) pair and the constraint rows they
+  need (``condim`` rows each), so no contact is ever dropped for want of room (MuJoCo
+  Warp drops contacts beyond its capacity, with only a printed warning).
+* Stepping is a captured Warp graph of one ``mujoco_warp.step``, made in :meth:`build`
+  (outside the timed region; the kernels compile there on first use and are cached on
+  disk by Warp) and launched once per step: the same kernels, without Python's dispatch
+  of some hundred launches a step. A test checks that the graph's steps equal plain
+  ``step`` calls bit for bit.
+* Nothing else: no clamp, no extra damping, the model's solver settings as MuJoCo C has
+  them.
+
+What it cannot run
+------------------
+MuJoCo Warp has no passive-force callback, so universal gravitation, force fields and
+impulses (which the MuJoCo adapter adds through ``mjcb_passive``) are ``unsupported``
+rows with that reason, as are 2-D and 3-D features MuJoCo itself lacks.
+
+Precision
+---------
+The state is float32 (:data:`PRECISION`): positions carry about 7 significant digits, so
+errors stall near 1e-6 of a scene's size however small the step. The order fits and the
+baselines judge this engine against what float32 can reach
+(:func:`truestep.measures.metrics.round_off_floor`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+
+from truestep.adapters import mujoco_adapter as mj
+from truestep.adapters.base import FactsSpec, FixedStepAdapter
+from truestep.adapters.quiet import without_banner
+from truestep.cases.case import Case
+from truestep.numerics import OPT_OUT
+
+BANNER = r"^Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
+"""Warp's greeting on a machine without a GPU (its version banner is off by log level)."""
+
+GENERIC_CPU = ""
+"""Warp's CPU compiler flags: a generic x86-64 (or aarch64) target, not Warp's default
+``-march=native``, so that the kernels round alike on every machine of one architecture
+(no FMA contraction or wider vectors chosen by the host). ``TRUESTEP_NUMERICS=native``
+keeps Warp's default."""
+
+with without_banner(BANNER):
+    import mujoco_warp as mjw
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    if os.environ.get(OPT_OUT, "").lower() != "native":
+        wp.config.cpu_compiler_flags = GENERIC_CPU
+    wp.init()
+
+DEVICE = "cpu"
+"""Warp's device unless one is asked: the CPU, so that every machine computes the same
+numbers (a GPU's float32 kernels need not round as the CPU's do)."""
+
+PRECISION = "float32"
+"""The floating-point type of MuJoCo Warp's state."""
+
+APPLIED = ("universal-gravitation", "force-fields", "impulses")
+"""Features the MuJoCo adapter adds through MuJoCo C's passive-force callback."""
+
+CAPABILITIES = mj.MujocoAdapter.capabilities - frozenset(APPLIED)
+
+MAX_CPU_PARTICLES = 500
+"""The most particles a scene may have for a run on the CPU device. Warp's CPU device
+runs each kernel's threads one after another, and MuJoCo Warp's constraint solver is
+written for a GPU's thousands of threads: on this machine particle-rain's 1000 particles
+took 74 ms a step (MuJoCo C: 0.36 ms), some 25 minutes for its sweep. Larger scenes are
+``skipped`` rows that say so; on a GPU (``device="cuda:0"``) there is no bound."""
+
+CPU_NOTE = "Warp CPU device, float32: a correctness peer of MuJoCo C; its wall time is no speed claim"
+"""The note every row on the CPU device carries."""
+
+
+@dataclass
+class Scene:
+    """A compiled case on a Warp device: MuJoCo's host model, the device model and data,
+    the particle layout and the captured one-step graph."""
+
+    host: mujoco.MjModel
+    model: Any
+    data: Any
+    layout: mj.Layout
+    graph: Any
+    pinned_x: np.ndarray
+    """Positions of the pinned particles (site_xpos from MuJoCo C), shape (n_pin, 3), m."""
+    n: int
+    device: str
+    notes: list[str] = field(default_factory=list)
+
+
+def capacity(host: mujoco.MjModel) -> tuple[int, int]:
+    """Contacts and constraint rows the scene can need at once: one contact per explicit
+    pair (a particle touches a plane at one point), ``condim`` rows each (an elliptic
+    cone's rows), at least one of each (MuJoCo Warp allocates no empty arrays)."""
+    pairs = int(host.npair)
+    rows = int(np.sum(host.pair_dim)) if pairs else 0
+    return max(pairs, 1), max(rows, 1)
+
+
+def build(case: Case, method: str, dt: float, *, device: str = DEVICE) -> Scene:
+    """Compile ``case`` for ``method`` at nominal step ``dt`` on ``device`` and capture one step."""
+    model = case.particles
+    h = case.steps_for(dt)[1]
+    xml, layout = mj.mjcf(model, method, h, autoreset_flag=False)
+    host = mujoco.MjModel.from_xml_string(xml)
+    hd = mujoco.MjData(host)
+    hd.qpos[:] = model.x0[layout.free, : layout.dim].ravel()
+    hd.qvel[:] = model.v0[layout.free, : layout.dim].ravel()
+    mujoco.mj_forward(host, hd)
+    pinned_x = np.array([hd.site(s).xpos for s in layout.pinned_sites]).reshape(-1, 3)
+    contacts, rows = capacity(host)
+    with wp.ScopedDevice(device):
+        m = mjw.put_model(host)
+        d = mjw.put_data(host, hd, naconmax=contacts, njmax=rows)
+        with wp.ScopedCapture(device=device) as capture:
+            mjw.step(m, d)
+    return Scene(host, m, d, layout, capture.graph, pinned_x, model.n, device, list(layout.notes))
+
+
+class MujocoWarpAdapter(FixedStepAdapter):
+    """MuJoCo Warp's four integrators on particle scenes (see the module docstring).
+
+    Parameters
+    ----------
+    device : str
+        Warp device to run on (``"cpu"``, ``"cuda:0"``, ...). Default :data:`DEVICE`.
+    """
+
+    name = "mujoco-warp"
+    methods = tuple(mj.INTEGRATORS)
+    precision: ClassVar[str] = PRECISION
+    """The state's floating-point type: order fits and baselines use its round-off floor."""
+    correctness_peer_of: ClassVar[str] = "mujoco"
+    """The engine whose physics this one reimplements (compared in the tests, not timed)."""
+    method_notes: ClassVar = {
+        "Euler": "MuJoCo Warp's semi-implicit Euler (float32)",
+        "implicit": "MuJoCo Warp's implicit-in-velocity Euler (float32)",
+        "implicitfast": "MuJoCo Warp's implicit Euler without Coriolis derivatives (float32)",
+        "RK4": "MuJoCo Warp's classical Runge-Kutta 4 (float32)",
+    }
+    """One line per method, for the report's glossary."""
+    method_facts: ClassVar[dict[str, FactsSpec]] = mj.METHOD_FACTS
+    peers: ClassVar[dict[str, str]] = {"Euler": "symplectic-euler", "RK4": "rk4"}
+    """The reference method each names as its scheme (compared in the report)."""
+    unsupported_notes: ClassVar[dict[str, str]] = {
+        feature: "MuJoCo Warp has no passive-force callback, through which truestep adds this force to MuJoCo"
+        for feature in APPLIED
+    }
+    capabilities = CAPABILITIES
+
+    def __init__(self, *, device: str = DEVICE) -> None:
+        self.device = device
+
+    def skip(self, case: Case, method: str) -> str | None:
+        """Why a scene is left unrun: over :data:`MAX_CPU_PARTICLES` particles on the CPU."""
+        n = case.particles.n if case.model is not None else 0
+        if self.device == "cpu" and n > MAX_CPU_PARTICLES:
+            return (
+                f"{n} particles: over the {MAX_CPU_PARTICLES} MuJoCo Warp runs on the CPU device "
+                "(a GPU pipeline stepping one thread at a time; run it with device='cuda:0')"
+            )
+        return None
+
+    def build(self, case: Case, method: str, h: float) -> Scene:
+        return build(case, method, h, device=self.device)
+
+    def advance(self, scene: Scene, k: int, steps: int, h: float) -> None:
+        """Launch the captured one-step graph ``steps`` times."""
+        launch, graph = wp.capture_launch, scene.graph
+        for _ in range(steps):
+            launch(graph)
+
+    def read(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities (n, 3), float64 copies of the device's float32 state."""
+        lay = scene.layout
+        x, v = np.zeros((scene.n, 3)), np.zeros((scene.n, 3))
+        x[lay.free, : lay.dim] = scene.data.qpos.numpy().reshape(-1, lay.dim)
+        x[lay.pinned] = scene.pinned_x
+        v[lay.free, : lay.dim] = scene.data.qvel.numpy().reshape(-1, lay.dim)
+        return x, v
+
+    def snapshot(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+        """The float32 state now (the device arrays' host copies)."""
+        return scene.data.qpos.numpy().copy(), scene.data.qvel.numpy().copy()
+
+    def unpack(self, scene: Scene, snaps: list[Any]) -> tuple[np.ndarray, np.ndarray]:
+        lay, t = scene.layout, len(snaps)
+        x, v = np.zeros((t, scene.n, 3)), np.zeros((t, scene.n, 3))
+        x[:, lay.free, : lay.dim] = np.stack([s[0] for s in snaps]).reshape(t, -1, lay.dim)
+        x[:, lay.pinned] = scene.pinned_x
+        v[:, lay.free, : lay.dim] = np.stack([s[1] for s in snaps]).reshape(t, -1, lay.dim)
+        return x, v
+
+    def notes(self, case: Case, method: str, scene: Scene) -> list[str]:
+        device = CPU_NOTE if scene.device == "cpu" else f"Warp device {scene.device}, float32"
+        return [f"{mj.EVALUATIONS_PER_STEP[method]} force evaluation(s) per step", device, *scene.notes]
+
+
+def warm(cases: list[Case], *, say: Any = print) -> int:
+    """Build every scene of ``cases`` MuJoCo Warp runs on the CPU, with every method: Warp
+    compiles the kernels each needs into its on-disk cache (a build step; a later run only
+    loads them). Returns the scenes built."""
+    adapter = MujocoWarpAdapter()
+    built = 0
+    for case in cases:
+        for method in adapter.methods:
+            if case.model is None or adapter.missing(case, method) or adapter.skip(case, method):
+                continue
+            began = time.perf_counter()
+            build(case, method, case.sweep(adaptive=False, quick=True)[0])
+            built += 1
+            say(f"mujoco-warp kernels: {case.name} {method} ({time.perf_counter() - began:.1f} s)")
+    return built
