@@ -35,7 +35,8 @@ rows with that reason, as are 2-D and 3-D features MuJoCo itself lacks.
 Precision
 ---------
 The state is float32 (:data:`PRECISION`): positions carry about 7 significant digits, so
-errors stall near 1e-6 of a scene's size however small the step. The order fits and the
+errors stall between 1e-6 and 1e-4 of a scene's size however small the step (more steps,
+more rounding). The order fits and the
 baselines judge this engine against what float32 can reach
 (:func:`truestep.measures.metrics.round_off_floor`).
 """

@@ -48,7 +48,7 @@ SERIES_COLOURS: dict[tuple[str, str], str] = {
     ("mujoco-warp", "Euler"): "#8b7d6b",
     ("mujoco-warp", "implicit"): "#20b2aa",
     ("mujoco-warp", "implicitfast"): "#da70d6",
-    ("mujoco-warp", "RK4"): "#9b870c",
+    ("mujoco-warp", "RK4"): "#e9967a",
 }
 """A colour for each built-in engine/method series, distinct from every other's, in every
 figure. A series of another engine or method takes one of :data:`MORE_COLOURS`, chosen by
