@@ -30,6 +30,7 @@ BUILTIN: dict[str, str] = {
     "mujoco": "truestep.adapters.mujoco_adapter:MujocoAdapter",
     "drake": "truestep.adapters.drake_adapter:DrakeAdapter",
     "mujoco-warp": "truestep.adapters.mujoco_warp_adapter:MujocoWarpAdapter",
+    "newton": "truestep.adapters.newton_adapter:NewtonAdapter",
 }
 """The built-in engines, as ``pyproject.toml`` registers them (a test keeps the two equal).
 Read only when truestep's own distribution metadata is absent (a checkout run without
@@ -41,6 +42,7 @@ EXTRAS: dict[str, str] = {
     "mujoco": "mujoco",
     "drake": "drake",
     "mujoco-warp": "mujoco-warp",
+    "newton": "newton",
 }
 """Built-in engine -> the optional extra of truestep that installs its library."""
 

@@ -43,7 +43,6 @@ baselines judge this engine against what float32 can reach
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -54,33 +53,11 @@ import numpy as np
 from truestep.adapters import mujoco_adapter as mj
 from truestep.adapters.base import FactsSpec, FixedStepAdapter
 from truestep.adapters.quiet import without_banner
+from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, wp
 from truestep.cases.case import Case
-from truestep.numerics import OPT_OUT
-
-BANNER = r"^Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
-"""Warp's greeting on a machine without a GPU (its version banner is off by log level)."""
-
-GENERIC_CPU = ""
-"""Warp's CPU compiler flags: a generic x86-64 (or aarch64) target, not Warp's default
-``-march=native``, so that the kernels round alike on every machine of one architecture
-(no FMA contraction or wider vectors chosen by the host). ``TRUESTEP_NUMERICS=native``
-keeps Warp's default."""
 
 with without_banner(BANNER):
     import mujoco_warp as mjw
-    import warp as wp
-
-    wp.config.log_level = wp.LOG_WARNING
-    if os.environ.get(OPT_OUT, "").lower() != "native":
-        wp.config.cpu_compiler_flags = GENERIC_CPU
-    wp.init()
-
-DEVICE = "cpu"
-"""Warp's device unless one is asked: the CPU, so that every machine computes the same
-numbers (a GPU's float32 kernels need not round as the CPU's do)."""
-
-PRECISION = "float32"
-"""The floating-point type of MuJoCo Warp's state."""
 
 APPLIED = ("universal-gravitation", "force-fields", "impulses")
 """Features the MuJoCo adapter adds through MuJoCo C's passive-force callback."""

@@ -8,6 +8,7 @@ no traceback; nothing already written is touched).
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import shutil
 import signal
@@ -601,15 +602,20 @@ def cmd_compile(args: argparse.Namespace) -> int:
     workers = len(os.sched_getaffinity(0))
     compile_all(models, workers=workers, progress=lambda line: print(line, flush=True))
     print(f"reference loops ready in {time.perf_counter() - began:.1f} s ({workers} workers)")
-    from truestep.adapters import engine_status
+    from truestep.adapters import BUILTIN, engine_status
 
-    if engine_status("mujoco-warp") == "installed":
-        from truestep.adapters.mujoco_warp_adapter import warm
-
-        began = time.perf_counter()
-        built = warm(cases, say=lambda line: print(line, flush=True))
-        print(f"mujoco-warp kernels ready in {time.perf_counter() - began:.1f} s ({built} scenes)")
+    for engine in WARP_ENGINES:
+        if engine_status(engine) == "installed":
+            warm = importlib.import_module(BUILTIN[engine].partition(":")[0]).warm
+            began = time.perf_counter()
+            built = warm(cases, say=lambda line: print(line, flush=True))
+            print(f"{engine} kernels ready in {time.perf_counter() - began:.1f} s ({built} scenes)")
     return 0
+
+
+WARP_ENGINES = ("mujoco-warp", "newton")
+"""Engines built on Warp, whose kernels ``truestep compile`` compiles into Warp's cache
+(each adapter module's ``warm``)."""
 
 
 CASES_HELP = (

@@ -75,6 +75,7 @@ PACKAGES = (
     "mujoco",
     "drake",
     "mujoco-warp",
+    "newton",
     "warp-lang",
     "distributed",
 )

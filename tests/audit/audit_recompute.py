@@ -220,13 +220,14 @@ def bounce_height(h0: float, g: float, e: float, t):
 # -- flights and contacts, detected from samples ----------------------------------------------
 
 
-def flights(t, u, w, g: float) -> list[np.ndarray]:
+def flights(t, u, w, g: float, noise: float = 0.0) -> list[np.ndarray]:
     """Runs of consecutive samples in free flight: both ends above the plane (``u > 0``)
     and the normal velocity changed by exactly gravity's ``-g dt`` between them (to 1e-6
-    of a step's kick: nothing else pushed). Returns the sample indices of each run."""
+    of a step's kick, plus ``noise`` m/s, the samples' own rounding: nothing else
+    pushed). Returns the sample indices of each run."""
     t, u, w = map(np.asarray, (t, u, w))
     dt = np.diff(t)
-    kick = np.abs(np.diff(w) + g * dt) <= 1e-6 * g * dt + 1e-12
+    kick = np.abs(np.diff(w) + g * dt) <= 1e-6 * g * dt + 1e-12 + noise
     free = kick & (u[:-1] > 0) & (u[1:] > 0)
     runs, k = [], 0
     while k < len(free):
@@ -641,12 +642,13 @@ def rk4_states(rhs, y0: np.ndarray, h: float, steps: int) -> np.ndarray:
 # -- contacts and flights read from the samples alone -------------------------------------------
 
 
-def arcs(t, u, w, g: float):
+def arcs(t, u, w, g: float, noise: float = 0.0):
     """The flights of a ball over a plane and the contacts between them, read from its
     samples: height ``u`` of its lowest point (m), normal velocity ``w`` (m/s), gravity
     ``g`` toward the plane.
 
-    Flights are the runs of :func:`flights` (free-fall kicks, above the plane). Returns
+    Flights are the runs of :func:`flights` (free-fall kicks, above the plane, to
+    ``noise`` m/s). Returns
     ``(drop, found)``: ``drop`` the highest sample before the first contact (m), and per
     contact after a flight a dict: ``before`` and ``after`` (the last flight sample
     before it, the first after it; ``after`` None when no flight follows), ``low`` (the
@@ -654,7 +656,7 @@ def arcs(t, u, w, g: float):
     when the run ends while that flight still rises).
     """
     t, u, w = map(np.asarray, (t, u, w))
-    runs = flights(t, u, w, g)
+    runs = flights(t, u, w, g, noise)
     if not runs:
         return float(np.max(u)), []
     drop = float(np.max(u[: runs[0][-1] + 1]))

@@ -63,15 +63,37 @@ def contact_intervals(
     """Which intervals between consecutive samples (shape (T-1,)) involve the plane.
 
     An interval is in contact if the plane pushed the ball during it (its normal velocity
-    rose above free flight's ``vn - g_n dt``, beyond round-off) or if either end is
-    within ``band`` of the plane. A bounce that completes inside one step is caught by
-    the first test, a soft contact spread over many steps by both.
+    rose above free flight's ``vn - g_n dt`` by more than the run's round-off:
+    :func:`flight_noise`, at least 1e-6 of the largest speed) or if either end is within
+    ``band`` of the plane. A bounce that completes inside one step is caught by the first
+    test, a soft contact spread over many steps by both.
     """
-    dt = np.diff(t)
+    rise = np.diff(vn) + g_n * np.diff(t)
     scale = float(np.max(np.abs(vn))) or 1.0
-    pushed = np.diff(vn) + g_n * dt > 1e-6 * scale
     near = h <= band
+    pushed = rise > max(1e-6 * scale, flight_noise(rise, near))
     return pushed | near[:-1] | near[1:]
+
+
+NOISE_FACTOR = 20.0
+"""How many times the median flight deviation a rise must exceed to count as a push."""
+
+
+def flight_noise(rise: np.ndarray, near: np.ndarray) -> float:
+    """The velocity change (m/s) round-off alone makes between samples in free flight:
+    :data:`NOISE_FACTOR` times the median ``|rise|`` over the intervals with both ends
+    beyond the band (0 if there are none).
+
+    ``rise`` (T-1,) is each interval's normal-velocity change above free flight's, ``near``
+    (T,) which samples lie within the band. In float64 this is some 1e-15 m/s and the
+    floor of 1e-6 of the largest speed decides; an engine whose float32 velocities are
+    position differences over a step (XPBD) varies by ``ulp(x) / dt``, some 1e-4 m/s at a
+    metre and 1 ms, which would otherwise read as a push at every step.
+    """
+    flight = ~near[:-1] & ~near[1:]
+    if not np.any(flight):
+        return 0.0
+    return NOISE_FACTOR * float(np.median(np.abs(rise[flight])))
 
 
 def bounces(

@@ -49,6 +49,9 @@ SERIES_COLOURS: dict[tuple[str, str], str] = {
     ("mujoco-warp", "implicit"): "#20b2aa",
     ("mujoco-warp", "implicitfast"): "#da70d6",
     ("mujoco-warp", "RK4"): "#e9967a",
+    ("newton", "semi-implicit"): "#e6194b",
+    ("newton", "xpbd"): "#00fa9a",
+    ("newton", "vbd"): "#87ceeb",
 }
 """A colour for each built-in engine/method series, distinct from every other's, in every
 figure. A series of another engine or method takes one of :data:`MORE_COLOURS`, chosen by
@@ -62,6 +65,7 @@ ENGINE_MARKERS = {
     "mujoco": "v",
     "drake": "h",
     "mujoco-warp": "P",
+    "newton": "X",
 }
 """A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`)."""
 MORE_MARKERS = ("P", "X", "*", "h", "p", "<", ">")
@@ -73,6 +77,7 @@ ENGINE_LINES: dict[str, str | tuple] = {
     "mujoco": (0, (6, 2, 1, 2, 1, 2)),
     "drake": (0, (1, 1)),
     "mujoco-warp": (0, (3, 1, 1, 1)),
+    "newton": (0, (5, 1)),
 }
 """A line style for each engine (another engine's is solid)."""
 LEGEND_FONT = 9

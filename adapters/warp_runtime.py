@@ -1,0 +1,40 @@
+"""Warp, started once for every engine built on it (MuJoCo Warp, Newton).
+
+Importing this module imports and initialises Warp the way truestep runs it: without
+its CUDA greeting on a machine with no GPU, at warning log level, and with its CPU
+kernels compiled for a generic target (:data:`GENERIC_CPU`) unless
+``TRUESTEP_NUMERICS=native``.
+"""
+
+from __future__ import annotations
+
+import os
+
+from truestep.adapters.quiet import without_banner
+from truestep.numerics import OPT_OUT
+
+BANNER = r"^Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
+"""Warp's greeting on a machine without a GPU (its version banner is off by log level)."""
+
+GENERIC_CPU = ""
+"""Warp's CPU compiler flags: a generic x86-64 (or aarch64) target, not Warp's default
+``-march=native``, so that the kernels round alike on every machine of one architecture
+(no FMA contraction or wider vectors chosen by the host). ``TRUESTEP_NUMERICS=native``
+keeps Warp's default."""
+
+DEVICE = "cpu"
+"""Warp's device unless one is asked: the CPU, so that every machine computes the same
+numbers (a GPU's float32 kernels need not round as the CPU's do)."""
+
+PRECISION = "float32"
+"""The floating-point type of the state of Warp's physics engines."""
+
+with without_banner(BANNER):
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    if os.environ.get(OPT_OUT, "").lower() != "native":
+        wp.config.cpu_compiler_flags = GENERIC_CPU
+    wp.init()
+
+__all__ = ["BANNER", "DEVICE", "GENERIC_CPU", "PRECISION", "wp"]
