@@ -170,3 +170,18 @@ def test_on_a_gpu_it_moves_as_on_the_cpu(case_named):
     gpu = MujocoWarpAdapter(device="cuda:0").simulate(case, "RK4", 1e-3)
     assert gpu.status == "ok" and "cuda:0" in gpu.message
     assert np.abs(gpu.x - cpu.x).max() <= FLOAT32 * 0.2
+
+
+def test_its_implicit_is_c_s_implicitfast_on_a_cloth(warp_mj, case_named):
+    """On the hanging cloth MuJoCo C's ``implicit`` and ``implicitfast`` part (their damping
+    derivatives differ on its tendons); MuJoCo Warp 4.0.0's ``implicit`` moves as C's
+    ``implicitfast`` does, to float32 rounding, and far from C's ``implicit``."""
+    case = _short(case_named("hanging-cloth"), 0.5)
+    mine = warp_mj.simulate(case, "implicit", 4e-3)
+    fast, full = (
+        MujocoAdapter().simulate(case, "implicitfast", 4e-3),
+        MujocoAdapter().simulate(case, "implicit", 4e-3),
+    )
+    size = float(np.ptp(fast.x, axis=(0, 1)).max())
+    assert np.abs(mine.x - fast.x).max() <= FLOAT32 * size
+    assert np.abs(mine.x - full.x).max() > 100 * FLOAT32 * size
