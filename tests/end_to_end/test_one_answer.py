@@ -245,13 +245,13 @@ def test_machine_columns_are_the_only_ones_left_out():
     assert {"error", "energy_drift", "nfev", "status", "steps", "t_fail"}.isdisjoint(MACHINE_COLUMNS)
 
 
-def test_a_gate_on_a_step_the_quick_sweep_never_runs_is_refused(tmp_path):
+def test_a_gate_on_a_step_the_sweep_never_runs_is_refused(tmp_path):
     from truestep.cases import CaseError, load_case
     from truestep.cases.loader import CASE_DIR
 
     text = (CASE_DIR / "triangle-impulse.toml").read_text()
-    assert "quick_dt = [0.01, 0.005, 0.0025]" in text
+    assert "dt = [0.01, 0.005, 0.0025" in text
     bad = tmp_path / "triangle-impulse.toml"
-    bad.write_text(text.replace("quick_dt = [0.01, 0.005, 0.0025]", "quick_dt = [0.01, 0.005]"))
-    with pytest.raises(CaseError, match=r"gates\[2\]\.dt: 0.0025 is not a step .* quick sweep"):
+    bad.write_text(text.replace("dt = [0.01, 0.005, 0.0025", "dt = [0.01, 0.005, 0.00125", 1))
+    with pytest.raises(CaseError, match=r"gates\[2\]\.dt: 0.0025 is not a step .* sweep"):
         load_case(bad)

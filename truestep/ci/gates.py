@@ -171,9 +171,12 @@ def check_gate(
         return _order(case, g, rows)
     if g.kind == "no-worse-than":
         return _no_worse(case, g, results, rows)
-    rows = _at_dt(rows, g.dt)
-    if not len(rows):
-        return GateResult(case.name, g, False, "no result row at this dt", "a row to read")
+    at_dt = _at_dt(rows, g.dt)
+    if not len(at_dt):
+        return quick_only(case, g, results[results["case"] == case.name]) or GateResult(
+            case.name, g, False, "no result row at this dt", "a row to read"
+        )
+    rows = at_dt
     row = rows.iloc[0]
     if row["status"] in BROKEN:
         return GateResult(case.name, g, False, _broken(rows) or str(row["status"]), "a measured row")
@@ -196,6 +199,29 @@ def check_gate(
     if g.kind == "speedup":
         return _speedup(case, g, results, row)
     raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
+
+
+def quick_only(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult | None:
+    """The verdict of a gate at a step that only the case's full sweep runs, read from a
+    ``--quick`` run (``rows``, the run's rows of the case, all at steps of its quick sweep):
+    not evaluated, saying so; ``None`` for any other gate. A full run evaluates it."""
+    quick = [float(s) for s in (*getattr(case, "quick_dts", ()), *getattr(case, "quick_tolerances", ()))]
+    if g.dt is None or not quick or not len(rows) or _in(g.dt, quick):
+        return None
+    if not all(_in(float(dt), quick) for dt in _num(rows["dt"]) if np.isfinite(dt)):
+        return None
+    return GateResult(
+        case.name,
+        g,
+        True,
+        f"not in this --quick run: dt={g.dt:g} is a step of the full sweep only",
+        f"a full run (the quick sweep runs {', '.join(f'{s:g}' for s in sorted(quick))})",
+        evaluated=False,
+    )
+
+
+def _in(dt: float, steps: list[float]) -> bool:
+    return any(abs(dt - s) <= 1e-9 * s for s in steps)
 
 
 def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
@@ -383,6 +409,9 @@ def _no_worse(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) ->
         & (results["engine"] == other_engine)
         & (results["method"] == other_method)
     ]
+    ran = results[results["case"] == case.name]
+    if g.dt is not None and not len(_at_dt(rows, g.dt)) and (skip := quick_only(case, g, ran)):
+        return skip
     rows, other = _at_dt(rows, g.dt), _at_dt(other, g.dt)
     if not len(other) or other["status"].isin(NOT_RUN).all():
         return GateResult(case.name, g, True, f"{other_engine}/{other_method} not run", need, evaluated=False)
@@ -431,8 +460,10 @@ def check_gates(
         else:
             pairs = _pairs(results, c.name, g)
         if not pairs:
+            ran = results[results["case"] == c.name] if "case" in results else results.iloc[:0]
             out.append(
-                GateResult(
+                quick_only(c, g, ran[~ran["status"].isin(NOT_RUN)])
+                or GateResult(
                     c.name,
                     g,
                     True,
