@@ -20,6 +20,10 @@ from truestep.reporting import scaling as report_scaling
 SIZES = (10, 100)
 TARGET_S = 0.02
 """Tiny runs: these tests check the table's bookkeeping, not this machine's speed."""
+AMPLE_S = 600.0
+"""A budget no tiny table reaches however loaded the machine: a verdict here never depends
+on the clock (that the budget bounds a table's wall time is timed in
+``benchmarks/test_bench_budget.py``)."""
 
 
 class CrashingAdapter:
@@ -56,7 +60,7 @@ def table() -> pd.DataFrame:
     compile_reference_loops()
     lines: list[str] = []
     out = bench.scaling_table(
-        ["reference", "pymunk"], sizes=SIZES, budget_s=6.0, target_s=TARGET_S, progress=lines.append
+        ["reference", "pymunk"], sizes=SIZES, budget_s=AMPLE_S, target_s=TARGET_S, progress=lines.append
     )
     out.attrs["lines"] = lines
     return out
@@ -125,15 +129,15 @@ def test_rows_not_run_say_why(table):
 
 @pytest.mark.engine
 def test_sizes_beyond_the_budget_are_skipped_with_the_numbers():
+    """n = 1e9 would take hours by any extrapolation from n = 10 and 100."""
     out = bench.scaling_table(
-        ["pymunk"], sizes=(10, 100, 1_000_000), budget_s=6.0, target_s=TARGET_S, progress=lambda line: None
+        ["pymunk"], sizes=(10, 100, 10**9), budget_s=AMPLE_S, target_s=TARGET_S, progress=lambda line: None
     )
-    assert list(out["n"]) == [10, 100, 1_000_000]
+    assert list(out["n"]) == [10, 100, 10**9]
     assert out["status"].iloc[0] == "ok"  # the first size runs while any budget is left
     big = out.iloc[-1]
-    assert big["status"] == "skipped" and big["note"].startswith("budget: the run at n=1,000,000")
-    assert "share of the 6 s budget" in big["note"]
-    assert out.attrs["elapsed_s"] <= 6.0 + 0.25
+    assert big["status"] == "skipped" and big["note"].startswith("budget: the run at n=1,000,000,000")
+    assert "share of the 600 s budget" in big["note"]
 
 
 @pytest.mark.engine
@@ -145,32 +149,12 @@ def test_a_budget_spent_before_a_pair_skips_its_rows_saying_so():
     assert out["note"].str.startswith("budget: the 0.001 s budget ended").all()
 
 
-@pytest.mark.engine
-def test_the_whole_table_keeps_within_its_budget():
-    compile_reference_loops()
-    budget = 10.0
-    out = bench.scaling_table(
-        ["reference", "pymunk"],
-        sizes=(10, 100, 1000, 10_000, 100_000),
-        budget_s=budget,
-        target_s=0.05,
-        progress=lambda line: None,
-    )
-    # the bandwidth measurement, compiling, the warm-ups and every child count: the table
-    # ends within the budget (and the few ms of assembling the table after the last child)
-    assert out.attrs["elapsed_s"] <= budget + 0.25
-    reference = out[(out["engine"] == "reference") & (out["method"] == "lecture")]
-    assert (reference["status"] == "ok").sum() >= 2  # more than one size of the reference
-    late = out[out["note"].str.contains("budget")]
-    assert (late["status"] == "skipped").all()
-
-
 def test_a_crash_a_raise_and_a_hang_are_rows(monkeypatch):
     monkeypatch.setattr(truestep.adapters, "_RESOLVED", dict(truestep.adapters._RESOLVED))
     monkeypatch.setattr(bench, "FIRST_TIMEOUT_S", 0.5)  # the hang is killed after 0.5 s
     name = resolve_engine("test_bench:CrashingAdapter")
     out = bench.scaling_table(
-        [name], sizes=SIZES, budget_s=6.0, target_s=TARGET_S, progress=lambda line: None
+        [name], sizes=SIZES, budget_s=AMPLE_S, target_s=TARGET_S, progress=lambda line: None
     ).set_index(["method", "n"])
     assert out.loc[("dies", 10), "status"] == "crashed"
     assert "exit code 3" in out.loc[("dies", 10), "note"]
