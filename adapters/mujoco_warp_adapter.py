@@ -51,6 +51,7 @@ import mujoco
 import numpy as np
 
 from truestep.adapters import mujoco_adapter as mj
+from truestep.adapters import warp_runtime
 from truestep.adapters.base import FactsSpec, FixedStepAdapter
 from truestep.adapters.quiet import without_banner
 from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, wp
@@ -167,6 +168,11 @@ class MujocoWarpAdapter(FixedStepAdapter):
 
     def build(self, case: Case, method: str, h: float) -> Scene:
         return build(case, method, h, device=self.device)
+
+    def prepare(self, case: Case, method: str) -> None:
+        """Before the sweep's process is forked: the scene built once here, so that the
+        process finds Warp's kernels loaded (:func:`truestep.adapters.warp_runtime.prepare`)."""
+        warp_runtime.prepare(self, case, method)
 
     def advance(self, scene: Scene, k: int, steps: int, h: float) -> None:
         """Launch the captured one-step graph ``steps`` times."""

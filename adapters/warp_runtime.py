@@ -9,6 +9,7 @@ kernels compiled for a generic target (:data:`GENERIC_CPU`) unless
 from __future__ import annotations
 
 import os
+from typing import Any
 
 from truestep.adapters.quiet import without_banner
 from truestep.numerics import OPT_OUT
@@ -37,4 +38,20 @@ with without_banner(BANNER):
         wp.config.cpu_compiler_flags = GENERIC_CPU
     wp.init()
 
-__all__ = ["BANNER", "DEVICE", "GENERIC_CPU", "PRECISION", "wp"]
+
+def prepare(adapter: Any, case: Any, method: str) -> None:
+    """Build ``case``'s scene for ``method`` once in this process (on the CPU device only),
+    before truestep forks the processes that run it: they find the solver's module
+    imported and every Warp kernel module the scene needs loaded, where each would
+    otherwise import and hash them afresh (0.5 to 1 s a process). Nothing is measured from
+    this build; a scene the adapter cannot or will not run is not built. On a GPU nothing
+    is done: CUDA is not started in a process that forks."""
+    if adapter.device != "cpu" or case.model is None or adapter.missing(case, method):
+        return
+    skip = getattr(adapter, "skip", None)
+    if skip is not None and skip(case, method):
+        return
+    adapter.build(case, method, case.sweep(adaptive=False, quick=True)[0])
+
+
+__all__ = ["BANNER", "DEVICE", "GENERIC_CPU", "PRECISION", "prepare", "wp"]

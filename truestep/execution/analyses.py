@@ -3,10 +3,11 @@ cost grows with the number of particles."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 import pandas as pd
@@ -114,6 +115,7 @@ def stability_table(
             f"{seconds:.1f} s"
         )
 
+    prepare_before_fork((engine, case, method) for _, (engine, case, method, _q), _t in calls)
     # Longest first, so that no long search starts last while the other cores idle.
     order = sorted(
         range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
@@ -121,6 +123,22 @@ def stability_table(
     with Progress(len(calls), "stability", say=progress) as bar:
         run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     return STABILITY.frame(rows)
+
+
+def prepare_before_fork(runs: Iterable[tuple[str, Case, str]]) -> None:
+    """Each adapter's optional ``prepare(case, method)`` (compile, load kernels), called
+    here once per engine, scene and method before the processes that run them are forked,
+    so that each process finds them ready instead of paying for them again. A prepare that
+    fails is left for the run itself to report."""
+    seen: set[tuple[str, str, str]] = set()
+    for engine, case, method in runs:
+        if (engine, case.name, method) in seen:
+            continue
+        seen.add((engine, case.name, method))
+        prepare = getattr(get_adapter(engine), "prepare", None)
+        if prepare is not None:
+            with contextlib.suppress(Exception):
+                prepare(case, method)
 
 
 def _exact_words(limit: object) -> str:
@@ -273,6 +291,8 @@ def restitution_table(
                 }
             )
 
+    first = {(engine, method): (e, dt) for _, engine, method, e, dt in reversed(slots)}
+    prepare_before_fork((engine, bounce_case(*first[engine, method]), method) for engine, method in first)
     with Progress(len(calls), "restitution", say=progress) as bar:
         run_untimed(calls, workers, done)
     return RESTITUTION.frame([r for g in groups for r in g])
