@@ -156,6 +156,12 @@ class MujocoWarpAdapter(FixedStepAdapter):
     def __init__(self, *, device: str = DEVICE) -> None:
         self.device = device
 
+    @property
+    def speed_claim(self) -> bool:
+        """On Warp's CPU device a row's wall time is no speed claim (:data:`CPU_NOTE`): its
+        rows run once, untimed (:func:`truestep.execution.runner.makes_speed_claim`)."""
+        return self.device != "cpu"
+
     def skip(self, case: Case, method: str) -> str | None:
         """Why a scene is left unrun: over :data:`MAX_CPU_PARTICLES` particles on the CPU."""
         n = case.particles.n if case.model is not None else 0

@@ -90,3 +90,52 @@ def test_compiled_loops_loaded_before_forking_still_run_in_the_children():
     )
     assert rows[0]["status"] == "ok", rows[0].get("message")
     assert rows[0]["path"] == "compiled"
+
+
+def _span(seconds: float) -> tuple[float, float]:
+    """Sleep ``seconds``; the (start, end) of the call, ``time.monotonic()``."""
+    start = time.monotonic()
+    time.sleep(seconds)
+    return start, time.monotonic()
+
+
+def _lanes(cores: int) -> tuple[dict, dict, list]:
+    """Three timed and four untimed calls of 0.2 s through ``run_lanes`` on ``cores``;
+    their spans, which lane each is in, and (call, whether a timed call was running) for
+    every ``done``."""
+    from truestep.execution.isolation import run_lanes
+
+    timed, untimed = [0, 1, 2], [3, 4, 5, 6]
+    spans: dict[int, tuple[float, float]] = {}
+    log: list[tuple[int, float]] = []
+
+    def done(j, outcome):
+        assert outcome.status == "ok", outcome.message
+        spans[j] = outcome.value
+        log.append((j, time.monotonic()))
+
+    run_lanes(timed, untimed, lambda j: (_span, (0.2,), 30.0), done, cores=cores)
+    return spans, {j: j in timed for j in spans}, log
+
+
+def _overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    return a[0] < b[1] and b[0] < a[1]
+
+
+def test_timed_calls_run_alone_and_untimed_ones_on_the_cores_left():
+    """On two cores: the timed calls one at a time, never beside more than one other call,
+    and no untimed call's outcome is handled (measured) while a timed call runs; on one
+    core no call overlaps a timed one. Every call is done once."""
+    for cores in (2, 1):
+        spans, is_timed, log = _lanes(cores)
+        assert sorted(spans) == list(range(7)) and len(log) == 7
+        timed = [spans[j] for j in spans if is_timed[j]]
+        assert not any(_overlap(a, b) for i, a in enumerate(timed) for b in timed[i + 1 :])
+        for a in timed:
+            beside = [s for j, s in spans.items() if not is_timed[j] and _overlap(a, s)]
+            assert len(beside) <= cores - 1
+            handled = [t for j, t in log if not is_timed[j]]
+            assert not any(a[0] < t < a[1] for t in handled)
+    spans, is_timed, _ = _lanes(2)
+    untimed = [spans[j] for j in spans if not is_timed[j]]
+    assert any(_overlap(a, b) for a in untimed for b in spans.values() if a is not b)  # cores shared

@@ -185,3 +185,18 @@ def test_its_implicit_is_c_s_implicitfast_on_a_cloth(warp_mj, case_named):
     size = float(np.ptp(fast.x, axis=(0, 1)).max())
     assert np.abs(mine.x - fast.x).max() <= FLOAT32 * size
     assert np.abs(mine.x - full.x).max() > 100 * FLOAT32 * size
+
+
+def test_on_the_cpu_its_rows_run_once_untimed_and_say_so(case_named):
+    """MuJoCo Warp on Warp's CPU device makes no speed claim: its sweep is the measured run
+    alone (repeats 0), its numbers those of a timed sweep; Newton's rows stay timed."""
+    from truestep.execution.runner import QUICK_TIMING, UNTIMED, makes_speed_claim, simulate_timed
+
+    assert not makes_speed_claim(get_adapter("mujoco-warp"))
+    assert makes_speed_claim(get_adapter("newton")) and makes_speed_claim(get_adapter("reference"))
+    case = case_named("harmonic-oscillator")
+    once = simulate_timed("mujoco-warp", case, "Euler", case.quick_dts[0], UNTIMED)
+    timed = simulate_timed("mujoco-warp", case, "Euler", case.quick_dts[0], QUICK_TIMING)
+    assert int(once.extra["repeats"]) == 0 and int(timed.extra["repeats"]) == 1
+    assert once.wall_s > 0 and np.array_equal(once.x, timed.x)
+    assert "no speed claim" in once.message

@@ -34,6 +34,21 @@ def test_the_cheapest_run_per_target_is_not_the_most_accurate(case_named):
     assert pick.loc[(1e-10, "wall_s"), "engine"] == "" and pick.loc[(1e-10, "wall_s"), "runs_reaching"] == 0
 
 
+def test_a_run_whose_wall_time_is_no_speed_claim_is_never_the_fastest(case_named):
+    """A row run once, untimed (``repeats`` 0: an engine with no speed claim on its device)
+    is picked by evaluations as any other, never by wall time, however small its time."""
+    case = case_named("earth-orbit")
+    s = case.error_scale
+    rows = [
+        (case.name, "scipy", "DOP853", 1e-6, "tolerance", "ok", 1e-5 * s, 0, 700, 0.03),
+        (case.name, "mujoco-warp", "RK4", 30.0, "step", "ok", 1e-5 * s, 0, 400, 0.001),
+    ]
+    frame = pd.DataFrame(rows, columns=COLUMNS).assign(repeats=[3, 0])
+    pick = cheapest(frame, [case], targets=(1e-2,)).set_index("by")
+    assert (pick.loc["wall_s", "engine"], pick.loc["nfev", "engine"]) == ("scipy", "mujoco-warp")
+    assert pick.loc["wall_s", "tied"] == ""
+
+
 def test_survival_needs_accuracy_and_a_physical_energy(case_named):
     """close-encounter at 1 ms: finishing ok with an error of 43 scales, or with the
     energy of a bound system gone positive (drift 222), is not surviving."""

@@ -289,6 +289,69 @@ def run_isolated_all(
     return outcomes  # type: ignore[return-value]
 
 
+def run_lanes(
+    timed: Sequence[int],
+    untimed: Sequence[int],
+    call: Callable[[int], Call],
+    done: Callable[[int, Outcome], None],
+    cores: int,
+) -> None:
+    """Run two lanes of isolated calls at once, each call made by ``call(j)`` just before
+    its child is forked and handed to ``done(j, outcome)`` when it ends.
+
+    The ``timed`` lane runs one call at a time, in order, and keeps a core to itself: it
+    starts only while at most ``cores - 1`` untimed children run, and while it runs this
+    process does nothing but wait (no ``call`` or ``done`` of the untimed lane: those wait
+    for the gap between two timed calls). The ``untimed`` lane keeps the other cores busy
+    (all of them once the timed lane is done); on one core it runs after the timed lane.
+    Never raises for what happens inside a child; the run's budget holds as in
+    :func:`run_isolated_all`."""
+    timed_left, untimed_left = list(timed)[::-1], list(untimed)[::-1]
+    running: dict[int, tuple[Running, bool]] = {}  # slot -> (run, timed)
+    held: list[tuple[int, Outcome]] = []  # untimed outcomes waiting for a gap
+    slots = iter(range(len(timed) + len(untimed)))
+
+    def start(j: int, is_timed: bool) -> None:
+        if _budget_left() <= 0:  # not started: this call's row says why
+            done(j, Outcome("timeout", message=BUDGET_SPENT))
+            return
+        run = _start(j, call(j))
+        running[next(slots)] = (run, is_timed)
+
+    try:
+        while timed_left or untimed_left or running or held:
+            if not any(is_timed for _, is_timed in running.values()):
+                for j, outcome in held:
+                    done(j, outcome)
+                held.clear()
+                room = max(0, cores - 1) if timed_left else max(1, cores)
+                while untimed_left and sum(1 for _, t in running.values() if not t) < room:
+                    start(untimed_left.pop(), False)
+                if timed_left and len(running) <= max(0, cores - 1):
+                    start(timed_left.pop(), True)
+            if not running:
+                continue
+            now = time.monotonic()
+            runs = [r for r, _ in running.values()]
+            ready = wait([r.conn for r in runs], timeout=max(0.0, min(r.deadline for r in runs) - now))
+            timed_busy = any(is_timed for _, is_timed in running.values())
+            for slot, (r, is_timed) in list(running.items()):
+                timed_out = r.conn not in ready and time.monotonic() >= r.deadline
+                if r.conn in ready or timed_out:
+                    del running[slot]
+                    finished = _finish(r, timed_out=timed_out)
+                    faults.child_finished()
+                    if not is_timed and timed_busy:
+                        held.append((r.index, finished))
+                    else:
+                        done(r.index, finished)
+    finally:
+        for r, _ in running.values():
+            _end(r.proc)
+            r.conn.close()
+            _LIVE.pop(r.proc.pid, None)
+
+
 _UNTIMED: list[Any] = [None]
 """The cluster untimed calls go to (:func:`set_untimed_runner`), if any."""
 

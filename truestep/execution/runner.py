@@ -19,7 +19,7 @@ from truestep.adapters import adapter_class, get_adapter
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
-from truestep.execution.isolation import Outcome, run_isolated
+from truestep.execution.isolation import Call, Outcome, run_isolated, run_lanes, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.time_limit import TimeLimitExceeded, time_limit
@@ -65,6 +65,9 @@ class Timing:
     max_repeats: int = 25
     long_run_s: float = 0.5
     warmup_fraction: float = 0.05
+    timed: bool = True
+    """``False``: the row's engine makes no speed claim on its device
+    (:func:`makes_speed_claim`): one run, the measured one, and nothing timed."""
 
     def runs_after(self, first_s: float) -> int:
         """How many timed runs in all, after a first one of ``first_s`` seconds."""
@@ -79,6 +82,20 @@ class Timing:
 QUICK_TIMING = Timing(min_total_s=0.0, min_repeats=1, max_repeats=1, long_run_s=0.0)
 """``--quick`` runs time each row once: a smoke run (its ties are read against the least
 noise, :data:`truestep.measures.picks.TIE_NOISE`, with no spread of its own)."""
+
+
+UNTIMED = Timing(timed=False)
+"""How the rows of an engine that makes no speed claim run: once, untimed, beside other
+work (their ``repeats`` is 0; the ``wall_s`` they carry is that run's, taken on a busy machine)."""
+
+
+def makes_speed_claim(adapter) -> bool:
+    """Whether an engine's wall times are a speed claim on the device it runs on: its
+    optional ``speed_claim`` attribute (default true). MuJoCo Warp on Warp's CPU device says
+    no: there it is a correctness peer of MuJoCo C, a GPU pipeline stepped one thread at a
+    time. Rows of an engine that makes none are run once, untimed, on the cores the timed
+    runs leave free (:func:`run_matrix`)."""
+    return bool(getattr(adapter, "speed_claim", True))
 
 
 def spread(walls: list[float]) -> float:
@@ -136,10 +153,17 @@ def simulate_timed(
     process has just run the same case and method). The timed runs follow
     (:meth:`Timing.runs_after`), and every one of them is checked to end where the
     measured run did, bit for bit; one that does not puts :data:`NOT_REPEATABLE` in the
-    row's message.
+    row's message. With an untimed ``timing`` (:data:`UNTIMED`) the measured run is the only
+    one, and its row's ``repeats`` is 0.
     """
     adapter = get_adapter(engine)
     monitor = watches_every_step(adapter)
+    if not timing.timed:  # no speed claim: the measured run, once
+        watched_once: Any = adapter.simulate
+        once = watched_once(case, method, dt, monitor=True) if monitor else adapter.simulate(case, method, dt)
+        once.extra["repeats"] = np.array(0)
+        once.extra["wall_s_spread"] = np.array(np.nan)
+        return once
     if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
         short = dataclasses.replace(
             case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
@@ -368,15 +392,35 @@ def run_sweep(
     process of its own, so that the row of the step that crashed or hung says so and the
     others are measured.
     """
+    outcome = run_isolated(*sweep_call(case, engine, method, dts, timing))
+    return sweep_rows(outcome, case, engine, method, dts, adaptive=adaptive, timing=timing, traces=traces)
+
+
+def sweep_call(case: Case, engine: str, method: str, dts: list[float], timing: Timing) -> Call:
+    """The isolated call of one sweep (:func:`simulate_sweep`), after the adapter's
+    optional ``prepare(case, method)`` here, before the fork (compiling, loading kernels:
+    every run of the sweep finds it ready)."""
     prepare = getattr(get_adapter(engine), "prepare", None)
-    if prepare is not None:  # compile here, before the fork: every run finds it ready
+    if prepare is not None:
         try:
             prepare(case, method)
         except Exception:  # the sweep's own process fails alike, and its rows say why
             pass
-    outcome = run_isolated(
-        simulate_sweep, (engine, case, method, dts, timing), SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
-    )
+    return simulate_sweep, (engine, case, method, dts, timing), SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
+
+
+def sweep_rows(
+    outcome: Outcome,
+    case: Case,
+    engine: str,
+    method: str,
+    dts: list[float],
+    *,
+    adaptive: bool,
+    timing: Timing,
+    traces: dict | None = None,
+) -> list[dict]:
+    """The rows of a sweep from its process's outcome (see :func:`run_sweep`)."""
     if outcome.status != "ok":
         return [
             run_one(case, engine, method, dt, adaptive=adaptive, timing=timing, traces=traces) for dt in dts
@@ -494,9 +538,9 @@ def run_matrix(
     total = sum(len(entries) for *_, entries in planned if not entries[0][3])
     if cluster is None:
         compile_ahead(planned)
-    here = host_name()
     parts: list[list[dict]] = [[] for _ in planned]
     jobs: list[SweepJob] = []
+    local: list[tuple[int, list[float], bool]] = []
     with Progress(total, "sweep", say=progress) as bar:
 
         def finished(k: int, done: list[dict], swept: dict) -> None:
@@ -545,23 +589,56 @@ def run_matrix(
             if cluster is not None:
                 jobs.append(SweepJob(k, case, engine, method, dts, adaptive, timing, traces is not None))
                 continue
-            swept: dict = {}
-            done = run_sweep(
-                case,
-                engine,
-                method,
-                dts,
-                adaptive=adaptive,
-                timing=timing,
-                traces=swept if traces is not None else None,
-            )
-            for row in done:
-                row["host"] = here
-            finished(k, done, swept)
+            local.append((k, dts, adaptive))
+        if local:
+            _run_here(planned, local, timing, traces is not None, finished)
         if jobs and cluster is not None:
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
     return tidy([row for part in parts for row in part], cases)
+
+
+def _run_here(
+    planned: list[tuple],
+    local: list[tuple[int, list[float], bool]],
+    timing: Timing,
+    keep_traces: bool,
+    finished: Callable[[int, list[dict], dict], None],
+) -> None:
+    """The sweeps ``local`` (planned index, steps, adaptive) on this machine: those of
+    engines that make a speed claim timed one at a time on a core of their own, the
+    others (:func:`makes_speed_claim`) run once, untimed, on the cores left
+    (:func:`~truestep.execution.isolation.run_lanes`). Each finished sweep's rows go to
+    ``finished(k, rows, traces)``."""
+    here = host_name()
+    timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
+
+    def call(j: int) -> Call:
+        k, dts, _ = local[j]
+        case, engine, method, _ = planned[k]
+        return sweep_call(case, engine, method, dts, timings[j])
+
+    def done(j: int, outcome: Outcome) -> None:
+        k, dts, adaptive = local[j]
+        case, engine, method, _ = planned[k]
+        swept: dict = {}
+        rows = sweep_rows(
+            outcome,
+            case,
+            engine,
+            method,
+            dts,
+            adaptive=adaptive,
+            timing=timings[j],
+            traces=swept if keep_traces else None,
+        )
+        for row in rows:
+            row["host"] = here
+        finished(k, rows, swept)
+
+    timed = [j for j, t in enumerate(timings) if t.timed]
+    untimed = [j for j, t in enumerate(timings) if not t.timed]
+    run_lanes(timed, untimed, call, done, cores=untimed_workers())
 
 
 def case_source(case: Case, lib: dict | None = None) -> str:

@@ -16,7 +16,7 @@ import pandas as pd
 from truestep.cases.case import Case
 from truestep.measures.metrics import fit_order, round_off_floor
 from truestep.measures.peers import PEER_COLUMNS, same_scheme
-from truestep.measures.picks import cheapest, restitution_fidelity, scorecard, survival
+from truestep.measures.picks import cheapest, restitution_fidelity, scorecard, speed_claims, survival
 
 
 @dataclass(frozen=True)
@@ -196,12 +196,13 @@ def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> 
 
     Columns: ``dt`` (s), ``engine``, ``method``, ``wall_s`` (s), ``particle_steps_per_s``
     (particles x steps / wall time), ``error`` and ``slower_by`` (that row's wall time over
-    ``engine/method``'s at the same step). Rows with status ok, fixed steps only.
+    ``engine/method``'s at the same step). Rows with status ok, fixed steps only, whose wall
+    time is a speed claim (:func:`truestep.measures.picks.speed_claims`).
     """
     n = case.bodies
-    d = results[
-        (results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")
-    ].dropna(subset=["wall_s"])
+    d = speed_claims(
+        results[(results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")]
+    ).dropna(subset=["wall_s"])
     rows = []
     for dt, g in d.groupby(d["dt"].astype(float)):
         base = g[(g["engine"] == engine) & (g["method"] == method)]

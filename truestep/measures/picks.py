@@ -49,6 +49,16 @@ def _num(frame: pd.DataFrame, column: str) -> np.ndarray:
     return pd.to_numeric(frame[column], errors="coerce").to_numpy(float)
 
 
+def speed_claims(frame: pd.DataFrame) -> pd.DataFrame:
+    """The rows whose wall time is a speed claim: all but those run once, untimed
+    (``repeats`` 0: an engine that makes no speed claim on its device,
+    :func:`truestep.execution.runner.makes_speed_claim`). A table without ``repeats``
+    (an earlier release's) is taken as all timed."""
+    if "repeats" not in frame:
+        return frame
+    return frame[pd.to_numeric(frame["repeats"], errors="coerce").fillna(1.0).to_numpy(float) != 0]
+
+
 def noise_band(wall: np.ndarray, spread: np.ndarray | None = None) -> np.ndarray:
     """Half-widths (s) of the intervals wall times (s) are known to: a row's own spread
     (``wall_s_spread``), at least :data:`TIE_NOISE` of the time and :data:`TIMER_FLOOR_S`."""
@@ -99,7 +109,8 @@ def cheapest(
     """For each case with measured errors and each target: the cheapest ``ok`` run whose
     error is at most ``target x scale``, by wall time (``by = wall_s``) and by derivative
     evaluations (``by = nfev``). A target no run reaches is a row with an empty engine
-    and ``runs_reaching`` 0. Columns :data:`PICK_COLUMNS`; ``error_needed`` in the
+    and ``runs_reaching`` 0; by wall time, only runs whose wall time is a speed claim
+    compete (:func:`speed_claims`). Columns :data:`PICK_COLUMNS`; ``error_needed`` in the
     case's error units. By wall time, runs within timing noise of the fastest are a tie
     (:func:`_pick_by_wall`): ``tied`` lists the others, ``engine / method (dt ...)``
     separated by ``;``."""
@@ -113,6 +124,7 @@ def cheapest(
             needed = target * case.error_scale
             reach = d[error <= needed]
             for by in ("wall_s", "nfev"):
+                among = speed_claims(reach) if by == "wall_s" else reach
                 base = {
                     "case": case.name,
                     "target": target,
@@ -121,14 +133,14 @@ def cheapest(
                     "runs_reaching": len(reach),
                     "tied": "",
                 }
-                cost = _num(reach, by)
+                cost = _num(among, by)
                 if not np.isfinite(cost).any():
                     rows.append({**base, "engine": "", "method": ""})
                     continue
                 if by == "wall_s":
-                    r, base["tied"] = _pick_by_wall(reach)
+                    r, base["tied"] = _pick_by_wall(among)
                 else:
-                    r = reach.iloc[int(np.nanargmin(cost))]
+                    r = among.iloc[int(np.nanargmin(cost))]
                 rows.append(
                     {
                         **base,
