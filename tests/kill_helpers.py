@@ -3,6 +3,7 @@ it, child processes still alive, and tables without their timing columns."""
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -13,8 +14,23 @@ from truestep.execution.runner import MACHINE_COLUMNS as TIMING_COLUMNS
 
 
 def snapshot(root: Path) -> dict[str, bytes]:
-    """Every file under ``root`` (hidden ones too) by relative path, with its bytes."""
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+    """Every file under ``root`` (hidden ones too) by relative path, with its bytes; of
+    ``run.json`` all but its ``seconds`` (each phase's wall time, which no two runs share)."""
+    return {
+        str(p.relative_to(root)): _timeless(p) if p.name == "run.json" else p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+def _timeless(path: Path) -> bytes:
+    try:
+        record = json.loads(path.read_text())
+    except ValueError:
+        return path.read_bytes()
+    if isinstance(record, dict):
+        record.pop("seconds", None)
+    return json.dumps(record, sort_keys=True).encode()
 
 
 def scratch_left(out: Path) -> list[str]:

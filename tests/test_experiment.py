@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -47,6 +48,9 @@ def test_the_public_run_writes_the_same_tables_and_leaves_no_journal(tmp_path):
     written = pd.read_csv(out / "results.csv")
     assert len(written) == len(tables.results) and seen  # each row's line went to progress
     assert written["error"].equals(tables.results["error"].astype(float))
+    record = json.loads((out / "run.json").read_text())
+    assert set(record["seconds"]) == {"sweep", "analyses", "sweep reference"}
+    assert 0 < record["seconds"]["sweep reference"] <= record["seconds"]["sweep"]
 
 
 def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypatch):

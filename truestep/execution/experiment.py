@@ -130,6 +130,7 @@ def run_experiment(exp: Experiment) -> Tables:
                 with_lecture_figures=exp.lecture_figures,
                 findings=found,
                 progress=exp.rows,
+                seconds={**laps.seconds, **results.attrs.get("sweep_seconds", {})},
             )
             laps.lap("report")
     finally:

@@ -6,6 +6,7 @@ import dataclasses
 import itertools
 import os
 import statistics
+import time
 import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -590,12 +591,15 @@ def run_matrix(
                 jobs.append(SweepJob(k, case, engine, method, dts, adaptive, timing, traces is not None))
                 continue
             local.append((k, dts, adaptive))
+        spent: dict[str, float] = {}
         if local:
-            _run_here(planned, local, timing, traces is not None, finished)
+            _run_here(planned, local, timing, traces is not None, finished, spent)
         if jobs and cluster is not None:
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
-    return tidy([row for part in parts for row in part], cases)
+    table = tidy([row for part in parts for row in part], cases)
+    table.attrs["sweep_seconds"] = {f"sweep {e}": round(s, 3) for e, s in spent.items()}
+    return table
 
 
 def _run_here(
@@ -604,18 +608,22 @@ def _run_here(
     timing: Timing,
     keep_traces: bool,
     finished: Callable[[int, list[dict], dict], None],
+    spent: dict[str, float],
 ) -> None:
     """The sweeps ``local`` (planned index, steps, adaptive) on this machine: those of
     engines that make a speed claim timed one at a time on a core of their own, the
     others (:func:`makes_speed_claim`) run once, untimed, on the cores left
     (:func:`~truestep.execution.isolation.run_lanes`). Each finished sweep's rows go to
-    ``finished(k, rows, traces)``."""
+    ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds, from a sweep's
+    start (its ``prepare`` included) to its rows."""
     here = host_name()
+    began: dict[int, float] = {}
     timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
 
     def call(j: int) -> Call:
         k, dts, _ = local[j]
         case, engine, method, _ = planned[k]
+        began[j] = time.perf_counter()
         return sweep_call(case, engine, method, dts, timings[j])
 
     def done(j: int, outcome: Outcome) -> None:
@@ -634,6 +642,7 @@ def _run_here(
         )
         for row in rows:
             row["host"] = here
+        spent[engine] = spent.get(engine, 0.0) + time.perf_counter() - began.get(j, time.perf_counter())
         finished(k, rows, swept)
 
     timed = [j for j, t in enumerate(timings) if t.timed]

@@ -370,11 +370,21 @@ def git_revision() -> str:
         return ""
 
 
-def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool, argv: list[str]) -> dict:
+def run_record(
+    cases: list[Case],
+    results: pd.DataFrame,
+    *,
+    quick: bool,
+    argv: list[str],
+    seconds: dict[str, float] | None = None,
+) -> dict:
     """``run.json``: the truestep version and revision, the command, whether it was quick,
-    the cases and engines the run was asked for (in order), and the floating-point
+    the cases and engines the run was asked for (in order), the floating-point
     environment (:func:`truestep.numerics.fingerprint`): with equal ``numerics`` and
-    revision, two runs' non-timing columns are equal bit for bit."""
+    revision, two runs' non-timing columns are equal bit for bit; and, where given, the
+    wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``,
+    and ``sweep <engine>``, the seconds each engine's sweep processes ran; they overlap
+    where sweeps share the cores)."""
     from truestep import __version__
     from truestep.numerics import fingerprint
 
@@ -386,6 +396,7 @@ def run_record(cases: list[Case], results: pd.DataFrame, *, quick: bool, argv: l
         "cases": [c.name for c in cases],
         "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
         "numerics": fingerprint(),
+        **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
     }
 
 
@@ -415,9 +426,11 @@ def write_report(
     with_lecture_figures: bool = True,
     findings: Findings | None = None,
     progress: Callable[[str], None] | None = None,
+    seconds: dict[str, float] | None = None,
 ) -> None:
     """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
-    the table), index.md, index.html, figures/; each of its steps is a line with done /
+    the table), index.md, index.html, figures/ and run.json (with the run's ``seconds``
+    per phase, :func:`run_record`); each of its steps is a line with done /
     total and the time left (:class:`~truestep.execution.progress.Progress`; ``progress``
     takes the lines instead).
 
@@ -454,7 +467,7 @@ def write_report(
         import json
 
         (stage / RUN_FILE).write_text(
-            json.dumps(run_record(cases, results, quick=quick, argv=argv), indent=1) + "\n"
+            json.dumps(run_record(cases, results, quick=quick, argv=argv, seconds=seconds), indent=1) + "\n"
         )
         faults.point("report-csv")
         bar.done("tables written")
