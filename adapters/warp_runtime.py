@@ -39,15 +39,21 @@ with without_banner(BANNER):
     wp.init()
 
 
+_PREPARED: set[tuple] = set()
+"""The scenes :func:`prepare` has built in this process: (engine, case file and name, method)."""
+
+
 def prepare(adapter: Any, case: Any, method: str) -> None:
     """Build ``case``'s scene for ``method`` once in this process (on the CPU device only),
     before truestep forks the processes that run it: they find the solver's module
     imported and every Warp kernel module the scene needs loaded, where each would
     otherwise import and hash them afresh (0.5 to 1 s a process). Nothing is measured from
     this build; a scene the adapter cannot or will not run is not built. On a GPU nothing
-    is done: CUDA is not started in a process that forks."""
-    if adapter.device != "cpu" or case.model is None or adapter.missing(case, method):
+    is done: CUDA is not started in a process that forks. A scene is built once a process."""
+    key = (adapter.name, case.file, case.name, method)
+    if adapter.device != "cpu" or case.model is None or key in _PREPARED or adapter.missing(case, method):
         return
+    _PREPARED.add(key)
     skip = getattr(adapter, "skip", None)
     if skip is not None and skip(case, method):
         return

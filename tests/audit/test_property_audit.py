@@ -269,7 +269,7 @@ ONE_TIMED_RUN = None
 def run(case, engine: str, method: str, dt: float) -> Run:
     """The row a full run publishes for one step: ``simulate_timed`` (the measured run
     watched at every step, then one timed run, checked to end alike) and ``row_from``."""
-    from truestep.execution import runner
+    from truestep.execution import runner, timing
 
     global ONE_TIMED_RUN
     if ONE_TIMED_RUN is None:
@@ -279,7 +279,7 @@ def run(case, engine: str, method: str, dt: float) -> Run:
         watched = Watched(adapter_of(engine))
         adaptive = method in watched.adaptive_methods
         with pytest.MonkeyPatch.context() as patch:
-            patch.setattr(runner, "get_adapter", lambda name: watched)
+            patch.setattr(timing, "get_adapter", lambda name: watched)
             traj = runner.simulate_timed(engine, case, method, dt, ONE_TIMED_RUN, warm_up=False)
         measured = [c for c in watched.calls if c.monitor]
         timed = [c for c in watched.calls if not c.monitor]

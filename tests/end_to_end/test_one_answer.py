@@ -135,9 +135,9 @@ class Jittery:
 
 
 def test_an_engine_that_is_not_repeatable_says_so(monkeypatch, case_named):
-    import truestep.execution.runner as runner
+    import truestep.execution.timing as timing
 
-    monkeypatch.setattr(runner, "get_adapter", lambda name: Jittery())
+    monkeypatch.setattr(timing, "get_adapter", lambda name: Jittery())
     traj = simulate_timed("jittery", case_named("free-fall"), "euler", 0.01, Timing())
     assert NOT_REPEATABLE in traj.message and int(traj.extra["repeats"]) > 1
 

@@ -381,7 +381,8 @@ def identical(
     numbers on any machine). Returns a ``differs`` finding per differing cell (and
     ``vanished``/``appeared`` rows) and the number of cells compared. Rows whose message
     says their engine is not repeatable are left out."""
-    from truestep.execution.runner import MACHINE_COLUMNS, NOT_REPEATABLE
+    from truestep.execution.runner import MACHINE_COLUMNS
+    from truestep.execution.timing import NOT_REPEATABLE
 
     findings: list[Finding] = []
     cells = 0

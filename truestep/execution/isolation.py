@@ -214,7 +214,26 @@ def _start(index: int, call: Call) -> Running:
     )
 
 
-def _finish(run: Running, *, timed_out: bool) -> Outcome:
+_EXITING: list[Any] = []
+"""Children whose result is in and who are exiting (:func:`_finish` with ``reap_later``):
+reaped by :func:`reap_exited` without waiting for them."""
+
+
+def reap_exited(*, wait: bool = False) -> None:
+    """Reap the children of :data:`_EXITING` that have exited (every one, waiting, with
+    ``wait``), and kill what is left in their process groups. A child's exit takes as long
+    as its fork (the kernel tears its copy of this process down, some ms for a process
+    holding every engine); the parent goes on meanwhile."""
+    for proc in list(_EXITING):
+        proc.join(None if wait else 0)
+        if proc.exitcode is None:
+            continue
+        _EXITING.remove(proc)
+        kill_group(proc.pid)
+        _LIVE.pop(proc.pid, None)
+
+
+def _finish(run: Running, *, timed_out: bool, reap_later: bool = False) -> Outcome:
     try:
         if timed_out:
             return Outcome(
@@ -234,9 +253,13 @@ def _finish(run: Running, *, timed_out: bool) -> Outcome:
         run.conn.close()
         if timed_out:
             _end(run.proc)
-        run.proc.join()
-        kill_group(run.proc.pid)
-        _LIVE.pop(run.proc.pid, None)
+        if reap_later and not timed_out:
+            _EXITING.append(run.proc)
+            reap_exited()
+        else:
+            run.proc.join()
+            kill_group(run.proc.pid)
+            _LIVE.pop(run.proc.pid, None)
 
 
 def kill_children() -> None:
@@ -246,6 +269,7 @@ def kill_children() -> None:
         if proc._parent_pid == os.getpid():  # not a copy inherited through a fork
             _end(proc)
         _LIVE.pop(pid, None)
+    _EXITING.clear()
 
 
 def run_isolated_all(
@@ -277,7 +301,7 @@ def run_isolated_all(
                 timed_out = r.conn not in ready and time.monotonic() >= r.deadline
                 if r.conn in ready or timed_out:
                     running.remove(r)
-                    finished = outcomes[r.index] = _finish(r, timed_out=timed_out)
+                    finished = outcomes[r.index] = _finish(r, timed_out=timed_out, reap_later=True)
                     if done is not None:
                         done(r.index, finished)
                     faults.child_finished()
@@ -286,6 +310,7 @@ def run_isolated_all(
             _end(r.proc)
             r.conn.close()
             _LIVE.pop(r.proc.pid, None)
+        reap_exited(wait=True)
     return outcomes  # type: ignore[return-value]
 
 
@@ -339,7 +364,7 @@ def run_lanes(
                 timed_out = r.conn not in ready and time.monotonic() >= r.deadline
                 if r.conn in ready or timed_out:
                     del running[slot]
-                    finished = _finish(r, timed_out=timed_out)
+                    finished = _finish(r, timed_out=timed_out, reap_later=True)
                     faults.child_finished()
                     if not is_timed and timed_busy:
                         held.append((r.index, finished))
@@ -350,6 +375,7 @@ def run_lanes(
             _end(r.proc)
             r.conn.close()
             _LIVE.pop(r.proc.pid, None)
+        reap_exited(wait=True)
 
 
 _UNTIMED: list[Any] = [None]

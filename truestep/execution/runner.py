@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import os
-import statistics
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -24,6 +21,24 @@ from truestep.execution.isolation import Call, Outcome, run_isolated, run_lanes,
 from truestep.execution.progress import Progress
 from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+from truestep.execution.timing import (
+    NOT_REPEATABLE as NOT_REPEATABLE,
+)
+from truestep.execution.timing import (
+    QUICK_TIMING,
+    UNTIMED,
+    TimedRuns,
+    Timing,
+    makes_speed_claim,
+    measured_run,
+    merged,
+    simulate_timed,
+    timed_runs,
+    watches_every_step,
+)
+from truestep.execution.timing import (
+    spread as spread,
+)
 from truestep.measures import metrics
 from truestep.measures.trust import checked
 from truestep.reference_impl.model import ParticleModel
@@ -42,153 +57,6 @@ host) or on where the case file lies (``case_source`` of a file outside the libr
 Every other column is the same, bit for bit, for the same revision and package versions on any
 machine (:mod:`truestep.numerics`), except the message of a row whose engine is not
 deterministic (:data:`NOT_REPEATABLE`)."""
-
-
-@dataclass(frozen=True)
-class Timing:
-    """How runs are timed: a short warm-up, a first timed run (whose trajectory is kept),
-    then more timed runs until the timing is stable.
-
-    The warm-up runs the same scene, engine and method for :attr:`warmup_fraction` of the
-    duration (JIT compilation, caches, lazy imports, first-call costs). A first run
-    shorter than :attr:`min_total_s` is repeated until the timed runs add up to
-    :attr:`min_total_s` and number at least :attr:`min_repeats` (at most
-    :attr:`max_repeats`): short runs are the ones scheduling and timer noise distort most.
-    A run up to :attr:`long_run_s` is timed twice, so that its spread is known; a longer
-    one once (one run of that length is not moved by noise beyond a few percent). The
-    reported wall time is the median of the timed runs, and ``wall_s_spread`` half their
-    interquartile range (:func:`spread`). Neither the warm-up nor scene building is
-    timed. How many runs are timed depends on the machine's speed; nothing else does.
-    """
-
-    min_total_s: float = 0.05
-    min_repeats: int = 3
-    max_repeats: int = 25
-    long_run_s: float = 0.5
-    warmup_fraction: float = 0.05
-    timed: bool = True
-    """``False``: the row's engine makes no speed claim on its device
-    (:func:`makes_speed_claim`): one run, the measured one, and nothing timed."""
-
-    def runs_after(self, first_s: float) -> int:
-        """How many timed runs in all, after a first one of ``first_s`` seconds."""
-        if first_s >= self.long_run_s:
-            return 1
-        if first_s >= self.min_total_s:
-            return 2
-        wanted = int(np.ceil(self.min_total_s / max(first_s, 1e-9)))
-        return int(np.clip(wanted, self.min_repeats, self.max_repeats))
-
-
-QUICK_TIMING = Timing(min_total_s=0.0, min_repeats=1, max_repeats=1, long_run_s=0.0)
-"""``--quick`` runs time each row once: a smoke run (its ties are read against the least
-noise, :data:`truestep.measures.picks.TIE_NOISE`, with no spread of its own)."""
-
-
-UNTIMED = Timing(timed=False)
-"""How the rows of an engine that makes no speed claim run: once, untimed, beside other
-work (their ``repeats`` is 0; the ``wall_s`` they carry is that run's, taken on a busy machine)."""
-
-
-def makes_speed_claim(adapter) -> bool:
-    """Whether an engine's wall times are a speed claim on the device it runs on: its
-    optional ``speed_claim`` attribute (default true). MuJoCo Warp on Warp's CPU device says
-    no: there it is a correctness peer of MuJoCo C, a GPU pipeline stepped one thread at a
-    time. Rows of an engine that makes none are run once, untimed, on the cores the timed
-    runs leave free (:func:`run_matrix`)."""
-    return bool(getattr(adapter, "speed_claim", True))
-
-
-def spread(walls: list[float]) -> float:
-    """Half the interquartile range of timed runs' wall times, s (half their range with
-    fewer than four runs; NaN for one run): how far the median may move with noise."""
-    if len(walls) < 2:
-        return float("nan")
-    if len(walls) < 4:
-        return (max(walls) - min(walls)) / 2
-    q25, q75 = np.percentile(walls, [25, 75])
-    return float(q75 - q25) / 2
-
-
-def _same_run(a: Trajectory, b: Trajectory) -> bool:
-    """Whether two runs of the same scene ended in the same state, bit for bit (runs that
-    did not finish are only checked to have failed alike: a run watched at every step
-    finds a blow-up earlier than one checked every few steps)."""
-    if a.status != b.status:
-        return False
-    if a.status != "ok":
-        return True
-    if (a.nfev, a.steps, len(a.t)) != (b.nfev, b.steps, len(b.t)):
-        return False
-    pairs = [(a.t[-1:], b.t[-1:]), (a.x[-1:], b.x[-1:])]
-    if a.v is not None and b.v is not None:
-        pairs.append((a.v[-1:], b.v[-1:]))
-    return all(np.array_equal(p, q, equal_nan=True) for p, q in pairs)
-
-
-NOT_REPEATABLE = "not repeatable: timed runs of the same scene ended in different states"
-"""The note of a row whose engine gave another end state when run again (an engine that is
-not deterministic): its numbers may differ from run to run and machine to machine."""
-
-
-def watches_every_step(adapter) -> bool:
-    """Whether ``adapter.simulate`` takes ``monitor=True`` (Adapter protocol, item 9)."""
-    import inspect
-
-    try:
-        return "monitor" in inspect.signature(adapter.simulate).parameters
-    except (TypeError, ValueError):
-        return False
-
-
-def simulate_timed(
-    engine: str, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool = True
-) -> Trajectory:
-    """Make the run the row is measured from, then time; runs inside the child process.
-
-    The measured run is watched at every step where the adapter can
-    (``simulate(..., monitor=True)``: the energy's extremes over every step) and is not
-    timed; it also warms the process up (compilation, caches, first-call costs) for the
-    timed runs. An adapter that cannot watch is warmed up instead by a short run
-    (:attr:`Timing.warmup_fraction` of the duration; unless ``warm_up`` is false: this
-    process has just run the same case and method). The timed runs follow
-    (:meth:`Timing.runs_after`), and every one of them is checked to end where the
-    measured run did, bit for bit; one that does not puts :data:`NOT_REPEATABLE` in the
-    row's message. With an untimed ``timing`` (:data:`UNTIMED`) the measured run is the only
-    one, and its row's ``repeats`` is 0.
-    """
-    adapter = get_adapter(engine)
-    monitor = watches_every_step(adapter)
-    if not timing.timed:  # no speed claim: the measured run, once
-        watched_once: Any = adapter.simulate
-        once = watched_once(case, method, dt, monitor=True) if monitor else adapter.simulate(case, method, dt)
-        once.extra["repeats"] = np.array(0)
-        once.extra["wall_s_spread"] = np.array(np.nan)
-        return once
-    if warm_up and not monitor:  # the measured run, untimed, warms the process up otherwise
-        short = dataclasses.replace(
-            case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
-        )
-        adapter.simulate(short, method, dt)
-    watched: Any = adapter.simulate  # takes monitor= where watches_every_step says so
-    traj = watched(case, method, dt, monitor=True) if monitor else None
-    timed = adapter.simulate(case, method, dt)
-    if traj is None:
-        traj = timed
-    walls = [timed.wall_s]
-    repeatable = traj is timed or _same_run(traj, timed)
-    if timed.status == "ok":
-        for _ in range(timing.runs_after(timed.wall_s) - 1):
-            again = adapter.simulate(case, method, dt)
-            walls.append(again.wall_s)
-            repeatable = repeatable and _same_run(traj, again)
-    traj.wall_s = statistics.median(walls)
-    traj.path = timed.path or traj.path
-    if not repeatable:
-        traj.message = "; ".join(m for m in (traj.message, NOT_REPEATABLE) if m)
-    traj.extra["repeats"] = np.array(len(walls))
-    traj.extra["wall_s_spread"] = np.array(spread(walls))
-    return traj
 
 
 def measure(case: Case, traj: Trajectory) -> dict[str, float]:
@@ -222,25 +90,38 @@ def energy_trace(traj: Trajectory) -> tuple[np.ndarray, np.ndarray] | None:
     return traj.t[keep], traj.energy[keep]
 
 
-def simulate_sweep(
-    engine: str, case: Case, method: str, dts: list[float], timing: Timing
-) -> list[Trajectory | Outcome | str]:
-    """:func:`simulate_timed` at every step of a sweep, in one child process.
+PARTS = ("both", "measured", "timed")
+"""What a sweep's process runs at each step: the whole row (:func:`simulate_timed`), or one
+of its halves when they run apart (:func:`split_sweep`): the measured run alone
+(:func:`measured_run`, a :class:`Trajectory`) or the timed runs alone (:func:`timed_runs`, a
+:class:`TimedRuns`)."""
 
-    Each entry is the step's Trajectory, the error message of an exception it raised, or
-    a ``timeout`` :class:`Outcome` for a step that ran past the case's ``timeout`` (the
-    other steps still run; a step stuck in compiled code that no signal interrupts is
-    left to the process's own timeout, :func:`run_sweep`). Runs of one case, engine and
-    method share a process: the engine's first-use costs are paid once, and no engine state outlives a run
-    (every adapter builds and tears down its scene per run). The first step that runs
-    warms the process up for all of them.
+
+def simulate_sweep(
+    engine: str, case: Case, method: str, dts: list[float], timing: Timing, part: str = "both"
+) -> list[Trajectory | TimedRuns | Outcome | str]:
+    """:func:`simulate_timed` at every step of a sweep, in one child process (or the
+    ``part`` of it named in :data:`PARTS`).
+
+    Each entry is the step's Trajectory (or TimedRuns), the error message of an exception
+    it raised, or a ``timeout`` :class:`Outcome` for a step that ran past the case's
+    ``timeout`` (the other steps still run; a step stuck in compiled code that no signal
+    interrupts is left to the process's own timeout, :func:`run_sweep`). Runs of one case,
+    engine and method share a process: the engine's first-use costs are paid once, and no
+    engine state outlives a run (every adapter builds and tears down its scene per run).
+    The first step that runs warms the process up for all of them.
     """
-    out: list[Trajectory | Outcome | str] = []
+    out: list[Trajectory | TimedRuns | Outcome | str] = []
     for dt in dts:
-        warm = any(isinstance(o, Trajectory) for o in out)
+        warm = any(isinstance(o, (Trajectory, TimedRuns)) for o in out)
         try:
             with time_limit(case.timeout_s, f"the run at {dt:g}"):
-                out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
+                if part == "measured":
+                    out.append(measured_run(get_adapter(engine), case, method, dt))
+                elif part == "timed":
+                    out.append(timed_runs(get_adapter(engine), case, method, dt, timing, warm_up=not warm)[1])
+                else:
+                    out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
         except TimeLimitExceeded as err:  # this step's timeout row; the sweep goes on
             out.append(Outcome("timeout", message=str(err)))
         except Exception as err:  # a row that says so; the sweep goes on
@@ -248,6 +129,32 @@ def simulate_sweep(
             where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
             out.append(f"{type(err).__name__}: {err}{where}")
     return out
+
+
+def split_sweep(engine: str, timing: Timing) -> bool:
+    """Whether a sweep's measured runs go apart from its timed runs (:data:`PARTS`): for an
+    engine that makes a speed claim and watches every step, whose measured run is a
+    second stepping of every row, where the timing allows it (:attr:`Timing.apart`).
+    Apart, it is untimed work on a core of its own while
+    the timed runs keep theirs, and the row's numbers are the same
+    (:func:`~truestep.execution.timing.merged`)."""
+    adapter = get_adapter(engine)
+    return timing.timed and timing.apart and makes_speed_claim(adapter) and watches_every_step(adapter)
+
+
+def joined(measured: Outcome, timed: Outcome) -> Outcome:
+    """The outcome of a whole sweep from those of its two halves (:func:`split_sweep`):
+    each step the measured run's failure, else the timed runs' failure, else the measured
+    run with the timed runs' timing. A half whose process did not end ``ok`` makes the
+    whole not ``ok`` (its steps are then run again one by one, :func:`sweep_rows`)."""
+    for half in (measured, timed):
+        if half.status != "ok":
+            return half
+    steps = []
+    for m, r in zip(measured.value, timed.value, strict=True):
+        fine = isinstance(m, Trajectory) and isinstance(r, TimedRuns)
+        steps.append(merged(m, r) if fine else m if not isinstance(m, Trajectory) else r)
+    return Outcome("ok", value=steps, output=(measured.output + timed.output).strip())
 
 
 def row_from(
@@ -397,8 +304,10 @@ def run_sweep(
     return sweep_rows(outcome, case, engine, method, dts, adaptive=adaptive, timing=timing, traces=traces)
 
 
-def sweep_call(case: Case, engine: str, method: str, dts: list[float], timing: Timing) -> Call:
-    """The isolated call of one sweep (:func:`simulate_sweep`), after the adapter's
+def sweep_call(
+    case: Case, engine: str, method: str, dts: list[float], timing: Timing, part: str = "both"
+) -> Call:
+    """The isolated call of one sweep (:func:`simulate_sweep`, its ``part``), after the adapter's
     optional ``prepare(case, method)`` here, before the fork (compiling, loading kernels:
     every run of the sweep finds it ready)."""
     prepare = getattr(get_adapter(engine), "prepare", None)
@@ -407,7 +316,8 @@ def sweep_call(case: Case, engine: str, method: str, dts: list[float], timing: T
             prepare(case, method)
         except Exception:  # the sweep's own process fails alike, and its rows say why
             pass
-    return simulate_sweep, (engine, case, method, dts, timing), SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
+    limit = SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
+    return simulate_sweep, (engine, case, method, dts, timing, part), limit
 
 
 def sweep_rows(
@@ -610,25 +520,40 @@ def _run_here(
     finished: Callable[[int, list[dict], dict], None],
     spent: dict[str, float],
 ) -> None:
-    """The sweeps ``local`` (planned index, steps, adaptive) on this machine: those of
-    engines that make a speed claim timed one at a time on a core of their own, the
-    others (:func:`makes_speed_claim`) run once, untimed, on the cores left
-    (:func:`~truestep.execution.isolation.run_lanes`). Each finished sweep's rows go to
-    ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds, from a sweep's
-    start (its ``prepare`` included) to its rows."""
+    """The sweeps ``local`` (planned index, steps, adaptive) on this machine
+    (:func:`~truestep.execution.isolation.run_lanes`): the timed runs of engines that make a
+    speed claim one sweep at a time on a core of their own; everything untimed on the
+    cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
+    and the measured runs of a split sweep (:func:`split_sweep`). Each finished sweep's
+    rows go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
+    processes, from a process's start (its ``prepare`` included) to its outcome."""
     here = host_name()
-    began: dict[int, float] = {}
     timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
+    halves = [
+        (j, part)
+        for j, t in enumerate(timings)
+        for part in (("measured", "timed") if split_sweep(planned[local[j][0]][1], t) else ("both",))
+    ]
+    began: dict[int, float] = {}
+    waiting: dict[int, dict[str, Outcome]] = {}
 
-    def call(j: int) -> Call:
+    def call(i: int) -> Call:
+        j, part = halves[i]
         k, dts, _ = local[j]
         case, engine, method, _ = planned[k]
-        began[j] = time.perf_counter()
-        return sweep_call(case, engine, method, dts, timings[j])
+        began[i] = time.perf_counter()
+        return sweep_call(case, engine, method, dts, timings[j], part)
 
-    def done(j: int, outcome: Outcome) -> None:
+    def done(i: int, outcome: Outcome) -> None:
+        j, part = halves[i]
         k, dts, adaptive = local[j]
         case, engine, method, _ = planned[k]
+        spent[engine] = spent.get(engine, 0.0) + time.perf_counter() - began.get(i, time.perf_counter())
+        if part != "both":
+            waiting.setdefault(j, {})[part] = outcome
+            if len(waiting[j]) < 2:
+                return
+            outcome = joined(waiting[j]["measured"], waiting.pop(j)["timed"])
         swept: dict = {}
         rows = sweep_rows(
             outcome,
@@ -642,11 +567,10 @@ def _run_here(
         )
         for row in rows:
             row["host"] = here
-        spent[engine] = spent.get(engine, 0.0) + time.perf_counter() - began.get(j, time.perf_counter())
         finished(k, rows, swept)
 
-    timed = [j for j, t in enumerate(timings) if t.timed]
-    untimed = [j for j, t in enumerate(timings) if not t.timed]
+    timed = [i for i, (j, part) in enumerate(halves) if timings[j].timed and part != "measured"]
+    untimed = [i for i, (j, part) in enumerate(halves) if not timings[j].timed or part == "measured"]
     run_lanes(timed, untimed, call, done, cores=untimed_workers())
 
 
