@@ -168,6 +168,12 @@ import numpy as np
 from mujoco import rollout
 
 from truestep.adapters.base import FactsSpec, FixedStepAdapter, Recording, resolve_facts
+from truestep.adapters.contact_law import (
+    CONTACT_STEPS,
+    contact_solref,
+    max_damping_ratio,
+    restitution_of,
+)
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
 from truestep.reference_impl.integrate import CHECK_EVERY, record_indices
@@ -225,9 +231,6 @@ SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 """Constant impedance d = 0.9999 (MuJoCo's maximum): the contact follows the reference
 spring-damper and only 1e-4 of the unconstrained acceleration leaks through."""
 
-CONTACT_STEPS = 10.0
-"""Default contact time t_c in time steps (the undamped half period of the contact spring)."""
-
 _BAD_STATE = (
     mujoco.mjtWarning.mjWARN_BADQPOS,
     mujoco.mjtWarning.mjWARN_BADQVEL,
@@ -235,66 +238,6 @@ _BAD_STATE = (
 )
 ROLLOUT_STEPS = 64
 """The most steps one ``mujoco.rollout`` call takes (it stores the state of every step)."""
-
-
-def restitution_of(zeta: float) -> float:
-    """Restitution of a unit-mass spring-dashpot contact that releases at zero force.
-
-    ``e = exp(-2 zeta arccos(zeta) / sqrt(1 - zeta^2))`` for ``zeta < 1``, its analytic
-    continuation with ``arccosh`` for ``zeta > 1``, and ``exp(-2)`` at ``zeta = 1``.
-    """
-    if zeta < 0:
-        raise ValueError(f"zeta: must be non-negative, got {zeta}")
-    if abs(zeta - 1.0) < 1e-9:
-        return float(np.exp(-2.0))
-    if zeta < 1.0:
-        return float(np.exp(-2.0 * zeta * np.arccos(zeta) / np.sqrt(1.0 - zeta**2)))
-    return float(np.exp(-2.0 * zeta * np.arccosh(zeta) / np.sqrt(zeta**2 - 1.0)))
-
-
-def damping_ratio(e: float) -> float:
-    """The contact damping ratio zeta that gives restitution ``e``; inverts :func:`restitution_of`.
-
-    ``e = 0`` needs infinite damping and returns ``inf``; :func:`contact_solref` caps it.
-    """
-    if not 0.0 <= e <= 1.0:
-        raise ValueError(f"e: restitution must lie in [0, 1], got {e}")
-    if e == 0.0:
-        return float("inf")
-    if e == 1.0:
-        return 0.0
-    lo, hi = 0.0, 1.0
-    while restitution_of(hi) > e:
-        lo, hi = hi, 2.0 * hi
-    for _ in range(200):  # bisection: restitution_of decreases monotonically in zeta
-        mid = 0.5 * (lo + hi)
-        if restitution_of(mid) > e:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def max_damping_ratio(t_c: float, h: float) -> float:
-    """The largest contact damping ratio at contact time ``t_c`` and step ``h``: ``h B = 1``.
-
-    An explicit damper with ``h B > 1`` reverses the normal velocity within a step (and
-    for ``h B > 2`` it diverges), so the contact would throw the particle out.
-    """
-    return t_c / (2.0 * np.pi * h)
-
-
-def contact_solref(e: float, t_c: float, h: float) -> tuple[float, float, bool]:
-    """Direct-form contact stiffness K (1/s^2) and damping B (1/s) for restitution ``e``.
-
-    ``omega = pi / t_c``, ``K = omega^2``, ``B = 2 zeta omega`` with ``zeta`` from
-    :func:`damping_ratio`, capped at :func:`max_damping_ratio`; the flag says whether the
-    cap applied. MJCF wants the numbers as ``solref="-K -B"``.
-    """
-    omega = np.pi / t_c
-    zeta = damping_ratio(e)
-    cap = max_damping_ratio(t_c, h)
-    return float(omega**2), float(2.0 * min(zeta, cap) * omega), zeta > cap
 
 
 @dataclass

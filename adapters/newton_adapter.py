@@ -35,7 +35,7 @@ What truestep sets
   approaches. truestep scales both to the particles' mass ``m`` and the asked restitution
   ``e`` (Newton's defaults, ke = 1000 N/m and kd = 10 N s/m for any mass, launch 10 g
   particles at some 20 m/s): ``ke = m (pi / t_c)^2`` with a contact time ``t_c`` of
-  :data:`~truestep.adapters.mujoco_adapter.CONTACT_STEPS` steps, as for MuJoCo, and
+  :data:`~truestep.adapters.contact_law.CONTACT_STEPS` steps, as for MuJoCo, and
   ``kd = 2 zeta m pi / t_c`` with ``zeta`` from :func:`damping_ratio` (capped where the
   explicit damper does not overshoot: :data:`EXPLICIT_DAMPING`, e >= 0.26). Damped only while
   compressed, the spring returns the energy stored at the deepest point undamped, so
@@ -71,8 +71,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from truestep.adapters import mujoco_adapter as mj
-from truestep.adapters import warp_runtime
+from truestep.adapters import contact_law, warp_runtime
 from truestep.adapters.base import FixedStepAdapter, Trajectory
 from truestep.adapters.quiet import without_banner
 from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, wp
@@ -155,14 +154,14 @@ def restitution_of(zeta: float) -> float:
     The damped half reaches its deepest point ``|r| = (v / omega) exp(-zeta arccos(zeta)
     / sqrt(1 - zeta^2))``, and the undamped release returns ``omega |r|``:
     ``e = exp(-zeta arccos(zeta) / sqrt(1 - zeta^2))``, the square root of
-    :func:`truestep.adapters.mujoco_adapter.restitution_of`.
+    :func:`truestep.adapters.contact_law.restitution_of`.
     """
-    return float(np.sqrt(mj.restitution_of(zeta)))
+    return float(np.sqrt(contact_law.restitution_of(zeta)))
 
 
 def damping_ratio(e: float) -> float:
     """The damping ratio that gives restitution ``e`` (inverts :func:`restitution_of`)."""
-    return mj.damping_ratio(e * e)
+    return contact_law.damping_ratio(e * e)
 
 
 EXPLICIT_DAMPING = 1.0
@@ -180,7 +179,7 @@ def contact_constants(model: ParticleModel, e: float, h: float) -> tuple[float, 
     particles weigh the same); the damping ratio is capped where an explicit damper would
     overshoot (:data:`EXPLICIT_DAMPING`)."""
     m = float(np.min(model.mass[~model.fixed])) if np.any(~model.fixed) else 1.0
-    omega = np.pi / (mj.CONTACT_STEPS * h)
+    omega = np.pi / (contact_law.CONTACT_STEPS * h)
     zeta = min(damping_ratio(e), EXPLICIT_DAMPING / (2.0 * omega * h))
     return m * omega**2, 2.0 * zeta * m * omega
 

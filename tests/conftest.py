@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
-import pytest
+from truestep import numerics
 
-from truestep.cases import load_case
-from truestep.cases.loader import CASE_DIR
+numerics.set_environment()  # the suite computes as the truestep command does: before numpy loads
+
+import pytest  # noqa: E402
+
+from truestep.cases import load_case  # noqa: E402
+from truestep.cases.loader import CASE_DIR  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -9,13 +9,8 @@ import numpy as np
 import pytest
 
 from truestep.adapters.base import Adapter
-from truestep.adapters.mujoco_adapter import (
-    MujocoAdapter,
-    build,
-    damping_ratio,
-    max_damping_ratio,
-    restitution_of,
-)
+from truestep.adapters.contact_law import damping_ratio, max_damping_ratio, restitution_of
+from truestep.adapters.mujoco_adapter import MujocoAdapter, build
 from truestep.cases.case import Case, OdeSpec
 from truestep.cases.loader import load_case
 from truestep.reference_impl.forces import spring_forces

@@ -232,3 +232,26 @@ def test_a_spring_that_underflows_float32_is_a_solver_failure_not_a_blow_up(newt
         assert traj.status == "solver-failed" and "float32" in traj.message
         finite = traj.x[np.isfinite(traj.x).all(axis=(1, 2))]
         assert np.abs(finite).max() <= 0.1 * (1 + 1e-7) and np.abs(finite[-1]).max() < 1e-18
+
+
+def test_newton_is_installed_without_mujoco():
+    """The Newton adapter takes its contact law from adapters/contact_law.py, not from the
+    MuJoCo adapter: with MuJoCo not importable, ``truestep list`` says Newton is installed."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = """
+        import sys
+        class NoMujoco:
+            def find_spec(self, name, path=None, target=None):
+                if name == "mujoco" or name.startswith("mujoco."):
+                    raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        sys.meta_path.insert(0, NoMujoco())
+        from truestep.adapters import engine_status
+        print(engine_status("newton"), "|", engine_status("mujoco"))
+    """
+    run = [sys.executable, "-c", textwrap.dedent(code)]
+    out = subprocess.run(run, capture_output=True, text=True, check=True)
+    newton, mujoco = (s.strip() for s in out.stdout.strip().split("|"))
+    assert newton == "installed" and mujoco.startswith("not installed")

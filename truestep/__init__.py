@@ -14,17 +14,14 @@ The public API (everything else is internal and may change)::
     class MyEngine(truestep.FixedStepAdapter): ...   # see README, "Writing an adapter"
 
 Names are imported on first use, so ``import truestep`` (and importing
-``truestep.reference_impl`` on its own) stays light.
+``truestep.reference_impl`` on its own) stays light, and it changes nothing in the process
+that imports it: no environment variable, no thread count (:mod:`truestep.numerics`).
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING, Any
-
-from truestep import numerics as _numerics
-
-_numerics.set_environment()  # before numpy loads: one thread, the same kernels everywhere
 
 __version__ = "0.2.0"
 

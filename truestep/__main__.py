@@ -2,6 +2,6 @@
 
 import sys
 
-from truestep.cli import main
+from truestep.command import main
 
 sys.exit(main())

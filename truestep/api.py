@@ -26,6 +26,7 @@ from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.ci.gates import GateResult, check_gates, verdict_table
 from truestep.execution.experiment import Tables
+from truestep.numerics import own_run
 from truestep.visible import visible
 
 
@@ -67,6 +68,7 @@ def _cases(cases: str | Iterable[str] | Iterable[Case]) -> list[Case]:
     return load_cases([str(c) for c in items])
 
 
+@own_run()
 def run(
     cases: str | Iterable[str] | Iterable[Case] = "*",
     engines: str | Iterable[str] | None = None,

@@ -23,20 +23,27 @@ numpy/scipy process depend on the machine instead:
 numba code is compiled for the host CPU, but without ``fastmath`` LLVM neither fuses
 multiply-adds nor reorders reductions, so its results do not depend on the vector width.
 
-The variables are set (where the user has not set them) when :mod:`truestep` is imported,
-which must happen before numpy is: ``truestep`` on the command line always does, and
-:func:`fingerprint` records what actually took effect, so a run whose environment
-differs says so (``run.json``, the report's footer, ``truestep gate --baseline``).
-``TRUESTEP_NUMERICS=native`` leaves the machine's own choices in place.
+The ``truestep`` command sets the variables (where the user has not set them) before it
+loads numpy (:func:`set_environment`, :mod:`truestep.command`). Importing :mod:`truestep`
+changes nothing in a process (nor does its pytest plugin): a library user's run
+(``truestep.run``, ``run_matrix``) holds every loaded BLAS and OpenMP runtime to one thread
+and sets the variables for the processes it starts only while it runs (:func:`own_run`),
+and computes with numpy's dispatch as the process found it unless the user called
+:func:`set_environment` before importing numpy. :func:`fingerprint` records what actually
+took effect, so a run whose environment differs says so (``run.json``, the report's footer,
+``truestep gate --baseline``). ``TRUESTEP_NUMERICS=native`` leaves the machine's own
+choices in place.
 
 This module imports nothing heavy at import time.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import platform
 import sys
+from collections.abc import Iterator
 from importlib import metadata
 from typing import Any
 
@@ -124,12 +131,36 @@ def set_environment() -> list[str]:
     return late
 
 
+@contextlib.contextmanager
+def own_run() -> Iterator[None]:
+    """truestep's own run in a process that is not truestep's (a library user's, a pytest
+    session's): while it lasts, the variables of :func:`environment` are set where unset
+    (for the processes the run starts) and every BLAS and OpenMP runtime loaded is held to
+    one thread (the run's forked children inherit it); both are put back as they were when
+    it ends. Nothing with ``TRUESTEP_NUMERICS=native``."""
+    if os.environ.get(OPT_OUT, "").lower() == "native":
+        yield
+        return
+    from threadpoolctl import threadpool_limits
+
+    unset = [key for key in environment() if key not in os.environ]
+    set_environment()
+    try:
+        with threadpool_limits(limits=1):
+            yield
+    finally:
+        for key in unset:
+            os.environ.pop(key, None)
+
+
 _PINNED: list[object] = []
 
 
 def pin_threads() -> None:
     """Limit every BLAS and OpenMP runtime loaded in this process to one thread (and keep
-    the limit for the process's life, and its forked children's). Safe to call again."""
+    the limit for the process's life, and its forked children's): for truestep's own
+    processes only (its command, its cluster workers; a library user's run uses
+    :func:`own_run`). Safe to call again."""
     if os.environ.get(OPT_OUT, "").lower() == "native":
         return
     from threadpoolctl import threadpool_limits

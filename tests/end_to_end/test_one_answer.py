@@ -34,47 +34,81 @@ def _python(code: str, **env: str) -> str:
     return out.stdout.strip()
 
 
-def test_importing_truestep_first_pins_threads_kernels_and_dispatch():
-    """What a process that imports truestep before numpy computes with: one BLAS thread
-    (the machine has more), the Haswell kernels, no AVX-512 dispatch in numpy."""
-    clean = {k: v for k, v in os.environ.items() if k not in numerics.environment() and k != numerics.OPT_OUT}
-    code = """
-        import json, truestep, numpy, scipy.linalg
-        from threadpoolctl import threadpool_info
-        from numpy._core._multiarray_umath import __cpu_features__ as f
-        print(json.dumps({"threads": sorted({p["num_threads"] for p in threadpool_info()}),
-                          "arch": sorted({p.get("architecture") for p in threadpool_info()}),
-                          "v4": bool(f.get("X86_V4"))}))
-    """
-    out = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)],
-        capture_output=True,
-        text=True,
-        env=clean,
-        check=True,
-        timeout=120,
-    )
-    seen = json.loads(out.stdout)
+NUMERICS_SEEN = """
+    import json, numpy, scipy.linalg
+    from threadpoolctl import threadpool_info
+    from numpy._core._multiarray_umath import __cpu_features__ as f
+    print(json.dumps({"threads": sorted({p["num_threads"] for p in threadpool_info()}),
+                      "arch": sorted({p.get("architecture") for p in threadpool_info()}),
+                      "v4": bool(f.get("X86_V4"))}))
+"""
+"""Prints what numpy and scipy's BLAS compute with in this process."""
+
+
+def _clean_env() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if k not in numerics.environment() and k != numerics.OPT_OUT}
+
+
+def test_the_command_pins_threads_kernels_and_dispatch():
+    """What the ``truestep`` command's process computes with (its entry point,
+    truestep.command.main, before the command loads numpy): one BLAS thread (the machine has
+    more), the Haswell kernels, no AVX-512 dispatch in numpy."""
+    code = "from truestep import command\ncommand.main(['env'])\n" + textwrap.dedent(NUMERICS_SEEN)
+    env = _clean_env()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
     assert seen["threads"] == [1]
     if {"avx2", "fma"} <= numerics._cpu_flags():
         assert seen["arch"] == [numerics.OPENBLAS_CORE]
     assert seen["v4"] is False
 
 
-def test_threads_are_pinned_even_when_numpy_came_first():
-    """A library user who imported numpy with two BLAS threads: a run still computes on one."""
-    out = _python(
-        """
+def test_importing_truestep_and_its_plugin_changes_nothing_in_the_process():
+    """A user's process (a pytest session with the plugin loaded): the same environment
+    variables, BLAS threads and numpy dispatch with truestep imported as without."""
+    probe = "import os, json; before = dict(os.environ)\nIMPORTS\n"
+    probe += "assert dict(os.environ) == before, set(os.environ) ^ set(before)\n"
+    probe += textwrap.dedent(NUMERICS_SEEN)
+
+    def seen(imports: str) -> subprocess.CompletedProcess:
+        code = probe.replace("IMPORTS", imports)
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_clean_env())
+
+    without = seen("")
+    with_it = seen("import truestep, truestep.pytest_plugin, truestep.api, truestep.cli, truestep.execution")
+    assert without.returncode == 0 and with_it.returncode == 0, with_it.stderr[-800:]
+    assert json.loads(with_it.stdout.splitlines()[0]) == json.loads(without.stdout.splitlines()[0])
+
+
+def test_the_suite_computes_as_the_command_does():
+    """tests/conftest.py sets the command's environment before numpy loads: the suite's
+    in-process runs compare bit for bit with the baselines the command wrote."""
+    from numpy._core._multiarray_umath import __cpu_features__
+
+    assert not __cpu_features__.get("X86_V4") and os.environ["OMP_NUM_THREADS"] == "1"
+
+
+def test_a_run_holds_threads_to_one_while_it_runs_and_gives_them_back():
+    """A library user who imported numpy with two BLAS threads: truestep's run computes on
+    one (numerics.own_run), and the user's process has its two again afterwards, with its
+    environment as it was."""
+    code = """
+        import os
         import numpy
         from threadpoolctl import threadpool_info
-        before = max(p["num_threads"] for p in threadpool_info())
-        from truestep.execution.runner import preload
-        preload()
-        print(before, max(p["num_threads"] for p in threadpool_info()))
-    """,
-        OPENBLAS_NUM_THREADS="2",
-    )
-    assert out.split() == ["2", "1"]
+        from truestep.numerics import own_run
+        before, env = max(p["num_threads"] for p in threadpool_info()), dict(os.environ)
+        with own_run():
+            during = max(p["num_threads"] for p in threadpool_info())
+            set_during = os.environ.get("OMP_NUM_THREADS")
+        after = max(p["num_threads"] for p in threadpool_info())
+        print(before, during, set_during, after, dict(os.environ) == env)
+    """
+    env = {**_clean_env(), "OPENBLAS_NUM_THREADS": "2"}
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, env=env, check=True
+    ).stdout
+    assert out.split() == ["2", "1", "1", "2", "True"]
 
 
 def test_radau_gives_the_same_bits_whatever_the_blas_threads_asked(tmp_path):

@@ -22,6 +22,7 @@ from truestep.execution.progress import Progress
 from truestep.execution.runner import duplicate_of, preload
 from truestep.measures.restitution import bounces, heights
 from truestep.measures.stability import SearchTimeout, search_case
+from truestep.numerics import own_run
 from truestep.tables.spec import RESTITUTION, SCALING, STABILITY
 
 STABILITY_COLUMNS = STABILITY.names
@@ -298,6 +299,7 @@ def restitution_table(
     return RESTITUTION.frame([r for g in groups for r in g])
 
 
+@own_run()
 def run_analyses(
     cases: list[Case],
     engines: list[str],

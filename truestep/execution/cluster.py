@@ -78,13 +78,11 @@ def sweep_task(job: SweepJob) -> tuple[int, list[dict], dict, str]:
     """
     from distributed import Semaphore
 
-    from truestep.execution.runner import preload, run_sweep
+    from truestep.execution.runner import run_sweep
 
     _allow_children()
     _maybe_die(job)
-    if not _PRELOADED[0]:
-        preload()
-        _PRELOADED[0] = True
+    _prepare_worker()
     host = host_name()
     traces: dict = {}
     with Semaphore(max_leases=1, name=SEMAPHORE_PREFIX + host):
@@ -128,13 +126,23 @@ def worker_numerics() -> dict:
 def untimed_task(call: Call) -> Outcome:
     """One untimed isolated call (a stability search, a bounce drop) on this worker."""
     from truestep.execution.isolation import run_isolated_all
-    from truestep.execution.runner import preload
 
     _allow_children()
+    _prepare_worker()
+    return run_isolated_all([call])[0]
+
+
+def _prepare_worker() -> None:
+    """Once a worker: every BLAS and OpenMP runtime held to one thread for the worker's
+    life (it runs truestep's tasks; :func:`truestep.numerics.pin_threads`) and what every
+    forked run needs loaded (:func:`truestep.execution.runner.preload`)."""
+    from truestep.execution.runner import preload
+    from truestep.numerics import pin_threads
+
     if not _PRELOADED[0]:
+        pin_threads()
         preload()
         _PRELOADED[0] = True
-    return run_isolated_all([call])[0]
 
 
 class Cluster:

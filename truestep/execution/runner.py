@@ -41,6 +41,7 @@ from truestep.execution.timing import (
 )
 from truestep.measures import metrics
 from truestep.measures.trust import checked
+from truestep.numerics import own_run
 from truestep.reference_impl.model import ParticleModel
 from truestep.tables.spec import RESULTS
 
@@ -347,14 +348,12 @@ def sweep_rows(
 
 
 def preload() -> None:
-    """Prepare this process for runs, once for every forked run: one thread for every BLAS
-    and OpenMP runtime (:func:`truestep.numerics.pin_threads`) and the compiled spring loop
-    of the reference implementation (the engine modules are imported by :func:`plan`; the
-    reference's stepping loops are compiled by :func:`compile_ahead`)."""
-    from truestep.numerics import pin_threads
+    """Prepare this process for runs, once for every forked run: the compiled spring loop of
+    the reference implementation (the engine modules are imported by :func:`plan`; the
+    reference's stepping loops are compiled by :func:`compile_ahead`; threads are held to
+    one by the run, :func:`truestep.numerics.own_run`)."""
     from truestep.reference_impl.forces import compile_springs
 
-    pin_threads()
     compile_springs()
 
 
@@ -415,6 +414,7 @@ def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float |
             yield method, dt, adaptive, ""
 
 
+@own_run()
 def run_matrix(
     cases: list[Case],
     engines: list[str],
