@@ -345,8 +345,14 @@ def reference_path(case: Case) -> tuple[Exact, np.ndarray | None]:
     """The reference run of a ``reference-run`` case at up to :data:`PATH_RECORDS` + 1
     evenly spread times (an ODE's states as ``x``), and which particles are alive at each
     (``None`` without emitters)."""
+    return reference_path_at(case, np.linspace(0.0, case.duration, PATH_RECORDS + 1))
+
+
+def reference_path_at(case: Case, t: np.ndarray) -> tuple[Exact, np.ndarray | None]:
+    """The reference run of a ``reference-run`` case at times ``t`` (s), and which particles
+    are alive at each (``None`` without emitters)."""
     path = _reference(case)
-    t = np.linspace(0.0, case.duration, PATH_RECORDS + 1)
+    t = np.asarray(t, float)
     return path.at(t), path.alive_at(t)
 
 

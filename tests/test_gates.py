@@ -379,3 +379,30 @@ def test_identical_names_a_changed_cell_of_a_row_that_did_not_run():
     findings, cells = identical({"restitution": old}, {"restitution": new})
     assert cells > 0 and [(f.change, f.quantity) for f in findings] == [("differs", "note")]
     assert "scipy RK45" in findings[0].key and "nan" not in findings[0].key
+
+
+def test_a_gate_the_baseline_evaluated_cannot_go_unevaluated(run_dir, copy, capsys):
+    """A planted bug that makes rk4 converge to the wrong motion (its error stuck at one
+    value at every step, as a 1 % rest-length error leaves it): alone, the declared-order
+    gate cannot fit an order and is not evaluated; against a baseline that evaluated it,
+    the gate fails and says what the baseline measured (issue 35: gates cannot skip a bug)."""
+    d, results = copy
+    rk4 = (results["method"] == "rk4") & (results["dt_kind"] == "step")
+    results.loc[rk4, "error"] = results.loc[rk4, "error"].max()
+    results.to_csv(d / "results.csv", index=False)
+    main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-v"])
+    alone = [line for line in capsys.readouterr().out.splitlines() if "declared" in line and "/rk4" in line]
+    assert alone and all(line.startswith("SKIP") for line in alone), alone
+    code = main(
+        ["gate", "--results", str(d / "results.csv"), "--declared-orders", "--baseline", str(run_dir)]
+    )
+    out = capsys.readouterr().out
+    assert code == 1
+    failed = [line for line in out.splitlines() if "declared" in line and "/rk4" in line]
+    assert failed and all(
+        line.startswith("FAIL") and "where the baseline measured order" in line for line in failed
+    )
+    code = main(
+        ["gate", "--results", str(run_dir / "results.csv"), "--declared-orders", "--baseline", str(run_dir)]
+    )
+    assert code == 0, capsys.readouterr().out

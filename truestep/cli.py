@@ -350,7 +350,9 @@ def cmd_gate(args: argparse.Namespace) -> int:
     if asked_engines is not None:
         tables = _narrowed(tables, None, asked_engines)
     cases, verdicts = _gate_verdicts(args, tables, results_path)
-    comparison = _gate_comparison(args, tables, results_path, cases)
+    comparison, baseline = _gate_comparison(args, tables, results_path, cases)
+    if baseline is not None:
+        verdicts = _kept_since_baseline(args, verdicts, cases, baseline)
     held = [v for v in verdicts if v.verdict == "pass"]
     failed = [v for v in verdicts if v.verdict == "fail"]
     skipped = [v for v in verdicts if v.verdict == "skip"]
@@ -382,13 +384,32 @@ def cmd_gate(args: argparse.Namespace) -> int:
     return 0 if passed else 1
 
 
+def _kept_since_baseline(args: argparse.Namespace, verdicts: list, cases: list, baseline: dict) -> list:
+    """``verdicts`` with every gate the baseline's tables evaluate and this run cannot
+    failed (:func:`truestep.ci.gates.lost_since`)."""
+    from truestep.ci.gates import lost_since
+
+    return lost_since(verdicts, _verdicts_on(args, baseline, cases))
+
+
+def _verdicts_on(args: argparse.Namespace, tables: dict, cases: list) -> list:
+    """Every gate's verdict on ``tables`` (the cases' own, the ``--gates`` files' and, with
+    ``--declared-orders``, the methods' declared orders)."""
+    from truestep.cases.loader import load_gates_file
+    from truestep.ci.gates import check_gates
+
+    extra = [item for f in args.gates for item in load_gates_file(f)]
+    if args.declared_orders:
+        extra += declared_gates(cases, tables["results"])
+    return check_gates(cases, tables["results"], tables["stability"], tables["restitution"], extra=extra)
+
+
 def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -> tuple[list, list]:
     """The cases a ``truestep gate`` checks and every gate's verdict (the cases' own, the
     ``--gates`` files' and, with ``--declared-orders``, the methods' declared orders)."""
     from truestep.adapters import registered
     from truestep.cases import CaseError, load_cases
     from truestep.cases.loader import load_gates_file
-    from truestep.ci.gates import check_gates
 
     results = tables["results"]
     engines = set(registered()) | set(results["engine"].astype(str))
@@ -403,14 +424,12 @@ def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -
                 f"{g.where}.engine",
                 f"unknown engine {_quoted(g.engine)} (not registered, not in {results_path})",
             )
-    if args.declared_orders:
-        extra += declared_gates(cases, results)
-    verdicts = check_gates(cases, results, tables["stability"], tables["restitution"], extra=extra)
-    return cases, verdicts
+    return cases, _verdicts_on(args, tables, cases)
 
 
-def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path, cases: list):
-    """The comparison with ``--baseline`` (:func:`truestep.ci.baseline.compare`), or ``None``."""
+def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path, cases: list) -> tuple:
+    """The comparison with ``--baseline`` (:func:`truestep.ci.baseline.compare`) and the
+    baseline's tables in the run's scope, or ``(None, None)``."""
     from truestep.ci.baseline import compare
 
     if not args.baseline:
@@ -418,7 +437,7 @@ def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path,
             raise UsageError(
                 "--tolerance, --time-against and --identical compare against a baseline: add --baseline DIR"
             )
-        return None
+        return None, None
     base_dir = Path(args.baseline)
     if not os.path.lexists(base_dir / "results.csv"):
         raise UsageError(f"--baseline: {base_dir}/results.csv: no such file")
@@ -437,7 +456,7 @@ def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path,
     )
     if args.identical:
         _check_identical(comparison, baseline, current, base_dir, results_path.parent)
-    return comparison
+    return comparison, baseline
 
 
 def _print_gate_lines(args: argparse.Namespace, verdicts: list, comparison) -> None:

@@ -76,7 +76,11 @@ ROUNDOFF_REL, for numbers that are round-off themselves (the lecture's free-flig
 a conserved momentum): double precision at metre scale is 1e-16 per operation."""
 SCALE_GRID = 2001
 """The energy scale is read along the exact (or reference) motion at this many evenly
-spread times of the run (README, "Energy drift"; ``truestep/measures/energy_scale.py``)."""
+spread times of the run, then each of its extremes where it lies (README, "Energy drift";
+``truestep/measures/energy_scale.py``): here by bounded Brent search between the grid
+neighbours of the largest local extremes (:func:`_peak`), a route of its own."""
+PEAKS = 8
+"""How many of the largest local extremes on the grid this file refines."""
 
 
 FLOAT32_REL = 1e-5
@@ -690,9 +694,47 @@ def _energy_of(case, traj) -> np.ndarray | None:
 _SCALES: dict[int, float] = {}
 
 
-def _exchanged_along(case, x, v) -> float:
-    kinetic = ar.kinetic_energy(case.model, v)
-    return ar.exchanged(kinetic, ar.energy(case.model, x, v) - kinetic)
+def _peak(f, t: np.ndarray) -> float:
+    """The largest value of ``f`` (times (k,) -> values (k,)) over the run: read at the grid
+    ``t``, then refined by scipy's bounded Brent search between the neighbours of each of
+    the :data:`PEAKS` largest local maxima of the grid."""
+    from scipy.optimize import minimize_scalar
+
+    g = np.asarray(f(t), float)
+    g = np.where(np.isfinite(g), g, -np.inf)
+    inner = (g[1:-1] >= g[:-2]) & (g[1:-1] >= g[2:])
+    local = np.concatenate(([0], np.flatnonzero(inner) + 1, [len(g) - 1]))
+    best = float(np.max(g))
+    for i in local[np.argsort(-g[local], kind="stable")][:PEAKS]:
+        lo, hi = t[max(i - 1, 0)], t[min(i + 1, len(t) - 1)]
+        found = minimize_scalar(
+            lambda s: -float(np.asarray(f(np.array([s])), float)[0]),
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 1e-13 * (t[-1] - t[0])},
+        )
+        if np.isfinite(found.fun):
+            best = max(best, -float(found.fun))
+    return best
+
+
+def _exchanged(kinetic, potential, t: np.ndarray) -> float:
+    """``max(KE_max, PE_max - PE_min)`` with each extreme read where it lies (:func:`_peak`);
+    ``kinetic`` and ``potential``: times -> energies (J)."""
+    return max(_peak(kinetic, t), _peak(potential, t) + _peak(lambda s: -np.asarray(potential(s)), t))
+
+
+def _exchanged_along(case, motion, t: np.ndarray) -> float:
+    """The scale along a particle motion ``t -> (x, v)``."""
+
+    def kinetic(s):
+        return ar.kinetic_energy(case.model, motion(s)[1])
+
+    def potential(s):
+        x, v = motion(s)
+        return ar.energy(case.model, x, v) - ar.kinetic_energy(case.model, v)
+
+    return _exchanged(kinetic, potential, t)
 
 
 def my_scale(case) -> float:
@@ -709,15 +751,22 @@ def my_scale(case) -> float:
             if case.name != "kepler-orbit" and case.name != "circle-field":
                 scale = math.nan
             else:
-                states = EXACT[case.name](case, t)[0][:, 0]
-                e = _ode_energy(case, states)
+
+                def states(s):
+                    return EXACT[case.name](case, np.asarray(s, float))[0][:, 0]
+
+                def ode_kinetic(s):
+                    return 0.5 * np.sum(states(s)[:, 2:] ** 2, axis=1)
+
+                def ode_potential(s):
+                    return _ode_energy(case, states(s)) - ode_kinetic(s)
+
                 if ODE_HALVES[case.name]:
-                    kinetic = 0.5 * np.sum(states[:, 2:] ** 2, axis=1)
-                    scale = ar.exchanged(kinetic, e - kinetic)
+                    scale = _exchanged(ode_kinetic, ode_potential, t)
                 else:
-                    scale = float(np.max(np.abs(e)))
+                    scale = _peak(lambda s: np.abs(_ode_energy(case, states(s))), t)
         elif case.name in EXACT:
-            scale = _exchanged_along(case, *EXACT[case.name](case, t))
+            scale = _exchanged_along(case, lambda s: EXACT[case.name](case, np.asarray(s, float)), t)
         elif ar.energy_behaviour(m) == "source":
             scale = math.nan
         elif not (np.any(m.gravity) or len(m.springs.i) or len(m.anchors.i) or m.gravitation):
@@ -737,7 +786,7 @@ def scale_slack(case) -> float:
     if case.exact != "reference-run":
         return 0.0
     t = np.linspace(0.0, case.duration, SCALE_GRID)
-    documented = _exchanged_along(case, *_documented_reference(case)(t))
+    documented = _exchanged_along(case, _documented_reference(case), t)
     return 2.0 * abs(documented - my_scale(case)) / my_scale(case)
 
 
@@ -1100,8 +1149,9 @@ def test_a_scene_without_reference_is_judged_wherever_it_lies(lift):
         # this file's scale needs a motion to read: the same cloth's DOP853 run (lifted
         # or not, the exchange is the same)
         t = np.linspace(0.0, base.duration, SCALE_GRID)
-        motion = ar.particle_reference(model, base.duration, 1e-9)(t)
-        _SCALES[id(_CASES[key])] = _exchanged_along(_CASES[key], *motion)
+        x, v = ar.particle_reference(model, base.duration, 1e-9)(t)
+        kinetic = ar.kinetic_energy(model, v)
+        _SCALES[id(_CASES[key])] = ar.exchanged(kinetic, ar.energy(model, x, v) - kinetic)
     case = _CASES[key]
     r = run(case, "reference", "heun", 4e-3)
     mine, when = my_verdict(r)

@@ -201,6 +201,10 @@ def check_gate(
     raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
 
 
+QUICK_ONLY = "not in this --quick run"
+"""How the verdict of a gate that only a full run can evaluate begins (:func:`quick_only`)."""
+
+
 def quick_only(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult | None:
     """The verdict of a gate at a step that only the case's full sweep runs, read from a
     ``--quick`` run (``rows``, the run's rows of the case, all at steps of its quick sweep):
@@ -214,7 +218,7 @@ def quick_only(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult | None:
         case.name,
         g,
         True,
-        f"not in this --quick run: dt={g.dt:g} is a step of the full sweep only",
+        f"{QUICK_ONLY}: dt={g.dt:g} is a step of the full sweep only",
         f"a full run (the quick sweep runs {', '.join(f'{s:g}' for s in sorted(quick))})",
         evaluated=False,
     )
@@ -481,6 +485,28 @@ def check_gates(
         base = gate_id(v.case, v.gate)
         seen[base] = seen.get(base, 0) + 1
         v.id = base if seen[base] == 1 else f"{base}#{seen[base]}"
+    return out
+
+
+def lost_since(verdicts: list[GateResult], before: list[GateResult]) -> list[GateResult]:
+    """``verdicts`` with every gate that ``before`` (the same gates on the baseline's tables)
+    evaluated and this run cannot turned into a failure that says so: a change that makes
+    runs go unstable or stop converging must not pass by leaving its gates unevaluated. A
+    gate that only a full run evaluates, read from a ``--quick`` run (:func:`quick_only`),
+    stays not evaluated."""
+    evaluated = {v.id: v for v in before if v.evaluated}
+    out = []
+    for v in verdicts:
+        was = evaluated.get(v.id)
+        if was is not None and not v.evaluated and not v.measured.startswith(QUICK_ONLY):
+            v = dataclasses.replace(
+                v,
+                passed=False,
+                evaluated=True,
+                measured=f"{v.measured}, where the baseline measured {was.measured}",
+                required=f"{v.required}; evaluated, as in the baseline",
+            )
+        out.append(v)
     return out
 
 

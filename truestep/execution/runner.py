@@ -60,12 +60,17 @@ machine (:mod:`truestep.numerics`), except the message of a row whose engine is 
 deterministic (:data:`NOT_REPEATABLE`)."""
 
 
+MEASURED = ("ok", "stalled")
+"""The statuses of a run that finished, whose error and properties are measured (a
+``stalled`` row's are those of its frozen particles: :mod:`truestep.measures.stalled`)."""
+
+
 def measure(case: Case, traj: Trajectory) -> dict[str, float]:
     """Every metric of one run, from its trajectory and the case's reference."""
     from truestep.measures.properties import PROPERTIES
 
     out: dict[str, float] = {}
-    exact = metrics.exact_for(case, traj.t) if traj.status == "ok" else None
+    exact = metrics.exact_for(case, traj.t) if traj.status in MEASURED else None
     if exact is not None:
         out["error"] = metrics.position_error(case, traj, exact)
         out["error_final"] = metrics.position_error(case, traj, exact, norm="final")
@@ -75,7 +80,7 @@ def measure(case: Case, traj: Trajectory) -> dict[str, float]:
     drift, drift_end = metrics.energy_drift(case, traj, exact)
     out["energy_drift"], out["energy_drift_final"] = drift, drift_end
     for name in case.properties:
-        out[name] = PROPERTIES[name](case, traj) if traj.status == "ok" else np.nan
+        out[name] = PROPERTIES[name](case, traj) if traj.status in MEASURED else np.nan
     return out
 
 
@@ -209,6 +214,9 @@ def row_from(
             if traj.status == "ok" and (failed := _motion_failure(case, traj)) is not None:
                 traj.status, traj.t_fail = "unstable", failed.t
                 traj.message = "; ".join(m for m in (traj.message, failed.reason) if m)
+            if traj.status == "ok" and (frozen := _stalled(case, engine, traj)) is not None:
+                traj.status = "stalled"
+                traj.message = "; ".join(m for m in (traj.message, frozen) if m)
             row.update(status=traj.status, t_fail=traj.t_fail, message=str(traj.message)[:MESSAGE_CHARS])
             row.update(measure(case, traj))
     except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
@@ -223,6 +231,15 @@ def row_from(
         if trace is not None:
             traces[(case.name, engine, method, row["dt_kind"], dt)] = trace
     return row
+
+
+def _stalled(case: Case, engine: str, traj: Trajectory) -> str | None:
+    """:func:`truestep.measures.stalled.stalled` against the case's exact motion at the
+    run's records, in the precision the engine declares."""
+    from truestep.measures.stalled import stalled
+
+    exact = metrics.exact_for(case, traj.t)
+    return stalled(case, traj, exact, metrics.precision_of(engine))
 
 
 def _motion_failure(case: Case, traj: Trajectory):

@@ -15,9 +15,16 @@ translated or its potential shifted. A plain first-order ODE (no kinetic part) k
 ``max |E|`` along the path, the energy of its own definition. A particle scene without
 an exact solution or reference run is read along a run of the reference (RK4 at its finest
 step).
+
+Each extreme is read where it is, not where a grid happens to fall: the path is read at
+:data:`GRID` times, and the largest local extremes found there (:data:`REFINED` of each)
+are refined between their grid neighbours on the path itself (:func:`peak`): a close
+encounter's kinetic-energy peak is far narrower than the grid's spacing.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -25,8 +32,20 @@ from truestep.cases.case import Case, OdeSpec, ode_states
 from truestep.reference_impl.model import ParticleModel
 
 GRID = 2001
-"""Times along the reference path (evenly over the run) at which the scale is read."""
+"""Times along the reference path (evenly over the run) at which the scale is first read."""
+REFINED = 8
+"""How many of the largest local extremes of each energy on the grid are refined."""
+ZOOM_POINTS = 33
+ZOOMS = 6
+"""A refinement reads :data:`ZOOM_POINTS` times across the two grid intervals about an
+extreme, then across the two about the best of those, :data:`ZOOMS` times: the extreme's
+time to ``(2 / 32)^6`` of the grid's spacing, its value to round-off where it is smooth."""
 _CACHE: dict[int, tuple[Case, float]] = {}
+
+Energies = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None, np.ndarray]]
+"""Times (T,) s -> the times (K,) among them where the path is known (all of them, but for
+an exact solution known only at some times: a periodic one at whole periods), and the
+kinetic and potential energy (K,) J there (a first-order ODE: ``None`` and ``|E|``)."""
 
 
 def energy_scale(case: Case) -> float:
@@ -43,18 +62,111 @@ def energy_scale(case: Case) -> float:
 
 
 def _scale(case: Case) -> float:
-    path = reference_path(case)
-    if path is None:
+    if case.exact is None:
         return _run_scale(case)
-    t, x, v, alive = path
+    energies = path_energies(case)
+    if energies is None:
+        return float("nan")
+    t, kinetic, potential = energies(np.linspace(0.0, case.duration, GRID))
+    if not np.isfinite(potential).any():
+        return float("nan")
+
+    def part(k: int, sign: float = 1.0) -> Callable[[np.ndarray], np.ndarray]:
+        def at(s: np.ndarray) -> np.ndarray:
+            known = energies(s)
+            values = known[k]
+            if values is None or len(known[0]) != len(s):
+                return np.full(len(s), np.nan)
+            return sign * np.asarray(values, dtype=float)
+
+        return at
+
+    if kinetic is None:  # a plain first-order ODE: the largest |E|
+        return _positive(peak(part(2), t, potential))
+    ke_max = peak(part(1), t, kinetic)
+    pe_max = peak(part(2), t, potential)
+    pe_min = -peak(part(2, -1.0), t, -potential)
+    return _positive(max(ke_max, pe_max - pe_min))
+
+
+def _positive(scale: float) -> float:
+    return scale if np.isfinite(scale) and scale > 0 else float("nan")
+
+
+def peak(f: Callable[[np.ndarray], np.ndarray], t: np.ndarray, values: np.ndarray) -> float:
+    """The largest value of ``f`` (times (k,) -> values (k,)) over ``[t[0], t[-1]]``, from
+    its ``values`` (T,) at the grid ``t`` (T,): the :data:`REFINED` largest local maxima of
+    the grid, each zoomed into between its neighbours (:data:`ZOOMS` rounds of
+    :data:`ZOOM_POINTS` evenly spread times, each round about the best of the last, every
+    candidate at once); NaN where no value is finite."""
+    g = np.where(np.isfinite(values), values, -np.inf)
+    if not np.isfinite(g).any():
+        return float("nan")
+    left = np.concatenate(([-np.inf], g[:-1]))
+    right = np.concatenate((g[1:], [-np.inf]))
+    local = np.flatnonzero((g >= left) & (g >= right) & np.isfinite(g))
+    top = local[np.argsort(-g[local], kind="stable")][:REFINED]
+    lo, hi = t[np.maximum(top - 1, 0)], t[np.minimum(top + 1, len(t) - 1)]
+    best = float(np.max(g))
+    steps = np.linspace(0.0, 1.0, ZOOM_POINTS)
+    for _ in range(ZOOMS):
+        times = lo[:, None] + (hi - lo)[:, None] * steps[None, :]  # (k, ZOOM_POINTS)
+        found = np.asarray(f(times.ravel()), dtype=float).reshape(times.shape)
+        found = np.where(np.isfinite(found), found, -np.inf)
+        if not np.isfinite(found).any():
+            break
+        best = max(best, float(np.max(found)))
+        j = np.argmax(found, axis=1)
+        rows = np.arange(len(lo))
+        lo = times[rows, np.maximum(j - 1, 0)]
+        hi = times[rows, np.minimum(j + 1, ZOOM_POINTS - 1)]
+    return best
+
+
+def path_energies(case: Case) -> Energies | None:
+    """Kinetic and potential energy along the case's reference path at any times
+    (:func:`path_at`), or ``None`` without an exact solution, or for a particle scene whose
+    path has no velocities."""
+    at = path_at(case)
+    if at is None:
+        return None
     match case.scene:
         case OdeSpec():
-            return _ode_scale(case, t, x)
+            from truestep.adapters.reference import build_system
+            from truestep.reference_impl.system import SecondOrderSystem
+
+            system = build_system(case)
+            half = system.half if isinstance(system, SecondOrderSystem) else None
+
+            def ode(t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+                ex, _ = at(t)
+                states = ode_states(ex)
+                e = np.array([system.energy(s, ti) for s, ti in zip(states, ex.t, strict=True)])
+                if e.dtype == object:  # a system without an energy
+                    e = np.full(len(ex.t), np.nan)
+                e = e.astype(float)
+                if half is None:
+                    return ex.t, None, np.abs(e)
+                kinetic = 0.5 * np.sum(np.asarray(states)[:, half:] ** 2, axis=1)
+                return ex.t, kinetic, e - kinetic
+
+            return ode
         case ParticleModel():
-            return float("nan") if v is None else _particle_scale(case, x, v, alive)
+            if at(np.zeros(1))[0].v is None:
+                return None
+
+            def particles(t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+                ex, alive = at(t)
+                return (ex.t, *_particle_energies(case, ex.x, ex.v, alive))
+
+            return particles
+    return None
 
 
-def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None) -> float:
+def _particle_energies(
+    case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kinetic and potential energy (T,) J of particle states ``x``, ``v`` (T, n, 3)."""
     from truestep.reference_impl.particles import total_energy
 
     m = np.where(case.particles.fixed, 0.0, case.particles.mass)
@@ -64,33 +176,7 @@ def _particle_scale(case: Case, x: np.ndarray, v: np.ndarray, alive: np.ndarray 
         v0 = np.nan_to_num(v)
         kinetic = 0.5 * np.sum(mass * np.sum(v0 * v0, axis=-1), axis=-1)
         potential = total_energy(case.particles, x0, v0, alive) - kinetic
-    return _combine(kinetic, potential)
-
-
-def _combine(kinetic: np.ndarray, potential: np.ndarray) -> float:
-    ok = np.isfinite(kinetic) & np.isfinite(potential)
-    if not ok.any():
-        return float("nan")
-    kinetic, potential = kinetic[ok], potential[ok]
-    scale = max(float(np.max(kinetic)), float(np.max(potential) - np.min(potential)))
-    return scale if scale > 0 else float("nan")
-
-
-def _ode_scale(case: Case, t: np.ndarray, states: np.ndarray) -> float:
-    from truestep.adapters.reference import build_system
-    from truestep.reference_impl.system import SecondOrderSystem
-
-    system = build_system(case)
-    energy = np.array([system.energy(s, ti) for s, ti in zip(states, t, strict=True)])
-    if energy.dtype == object or not np.isfinite(energy.astype(float)).any():
-        return float("nan")
-    energy = energy.astype(float)
-    if isinstance(system, SecondOrderSystem):
-        half = system.half
-        kinetic = 0.5 * np.sum(states[:, half:] ** 2, axis=1)
-        return _combine(kinetic, energy - kinetic)
-    scale = float(np.max(np.abs(energy[np.isfinite(energy)])))
-    return scale if scale > 0 else float("nan")
+    return kinetic, potential
 
 
 RUN_METHOD = "rk4"
@@ -99,8 +185,8 @@ RUN_METHOD = "rk4"
 
 def _run_scale(case: Case) -> float:
     """Without an exact solution or reference run: the scale along a run of the reference
-    implementation (:data:`RUN_METHOD` at the case's finest step), NaN if that run fails or
-    the scene is an ODE without one."""
+    implementation (:data:`RUN_METHOD` at the case's finest step, read at its records), NaN
+    if that run fails or the scene is an ODE without one."""
     if not isinstance(case.scene, ParticleModel):
         return float("nan")
     from truestep.adapters.reference import ReferenceAdapter
@@ -110,26 +196,37 @@ def _run_scale(case: Case) -> float:
     run = ReferenceAdapter().simulate(case, RUN_METHOD, min(case.dts))
     if run.status != "ok" or run.v is None:
         return float("nan")
-    return _particle_scale(case, run.x, run.v, run.alive)
+    kinetic, potential = _particle_energies(case, run.x, run.v, run.alive)
+    ok = np.isfinite(kinetic) & np.isfinite(potential)
+    if not ok.any():
+        return float("nan")
+    kinetic, potential = kinetic[ok], potential[ok]
+    return _positive(max(float(np.max(kinetic)), float(np.max(potential) - np.min(potential))))
+
+
+def path_at(case: Case) -> Callable[[np.ndarray], tuple] | None:
+    """The case's reference path at times (k,) s: ``(Exact, alive (k, n) or None)``; ``None``
+    without an exact solution."""
+    if case.exact is None:
+        return None
+    from truestep.cases.exact import exact_named, reference_path_at
+
+    if case.exact == "reference-run":
+        return lambda t: reference_path_at(case, t)
+    solution = exact_named(case.exact)
+    if solution is None:
+        raise ValueError(f"{case.name}: no exact solution named {case.exact!r}")
+    return lambda t: (solution(case, t), None)
 
 
 def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
     """The case's motion as truestep knows it best, at :data:`GRID` times or the reference
     run's records: ``(t, x, v, alive)`` with ``x``, ``v`` of shape (T, n, 3) (an ODE's
     states as ``x`` of shape (T, dim), ``v`` None); ``None`` without an exact solution."""
-    if case.exact is None:
+    at = path_at(case)
+    if at is None:
         return None
-    from truestep.cases.exact import exact_named
-    from truestep.cases.exact import reference_path as run_path
-
-    if case.exact == "reference-run":
-        ex, alive = run_path(case)
-    else:
-        solution = exact_named(case.exact) if case.exact is not None else None
-        if solution is None:
-            raise ValueError(f"{case.name}: no exact solution named {case.exact!r}")
-        ex = solution(case, np.linspace(0.0, case.duration, GRID))
-        alive = None
+    ex, alive = at(np.linspace(0.0, case.duration, GRID))
     if isinstance(case.scene, OdeSpec):
         return ex.t, ode_states(ex), None, None
     if ex.v is None or len(ex.t) < 2:

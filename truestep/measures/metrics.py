@@ -174,17 +174,22 @@ spring-chain (8000 steps of a chain) however small the step; a floor 5 times the
 keeps the stall out of the fit (at 1e-5 spring-chain's plateau was fitted as order 0.32)."""
 
 
+def precision_of(engine: str) -> str:
+    """The precision of ``engine``'s state: its adapter's ``precision`` (``"float32"`` or
+    ``"float64"``, the default, also for an engine not installed or not known here)."""
+    from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
+
+    try:
+        return str(getattr(adapter_class(engine), "precision", "float64"))
+    except (EngineNotInstalled, UnknownEngine):
+        return "float64"
+
+
 def round_off_floor(engine: str) -> float:
     """The round-off floor (a fraction of a case's scale) of ``engine``'s errors:
     :data:`ROUND_OFF_FLOAT32` for an adapter that declares ``precision = "float32"``,
     else :data:`ROUND_OFF` (also for an engine not installed here)."""
-    from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
-
-    try:
-        precision = getattr(adapter_class(engine), "precision", "float64")
-    except (EngineNotInstalled, UnknownEngine):
-        return ROUND_OFF
-    return ROUND_OFF_FLOAT32 if precision == "float32" else ROUND_OFF
+    return ROUND_OFF_FLOAT32 if precision_of(engine) == "float32" else ROUND_OFF
 
 
 AGREE = 0.3

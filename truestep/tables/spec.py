@@ -142,8 +142,10 @@ _STATUS = Column(
     "status",
     "name",
     "",
-    "ok, unstable (blew up; t_fail says when), solver-failed, crashed, timeout, unsupported "
-    "(missing says which features) or skipped (the note or message says why)",
+    "ok, unstable (blew up; t_fail says when), stalled (finished, but a particle never moved "
+    "where the scene moves it: its updates were below the precision of its state; the message "
+    "says which), solver-failed, crashed, timeout, unsupported (missing says which features) "
+    "or skipped (the note or message says why)",
     required=True,
 )
 _NOTE = Column("note", "text", "", "why a row is not ok, or what to know about it")
