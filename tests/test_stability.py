@@ -95,3 +95,23 @@ def test_an_explosion_keeps_growing_however_fast():
     so far, or the fastest blow-ups read as not growing."""
     t = np.arange(22.0)
     assert energy_keeps_growing(t, 50.0 * 10.0**t)
+
+
+def test_a_limit_is_confirmed_over_a_longer_run(case_named):
+    """spring-chain with Drake's RK3 (issue 35, finding 2): over the search's 2000 steps its
+    top mode has not grown at 0.045214 s, the limit published before; Drake's own run of
+    20 000 steps there blows the energy up (checked here, raw), and the search now confirms
+    its limit over a run 5 times as long, searches again, and ends within its 1e-3 of the
+    exact limit of Kutta's RK3 (|R(z)| = 1 on the chain's fastest mode)."""
+    from truestep.adapters.base import facts_of
+    from truestep.cases.exact import stability_limit
+    from truestep.measures.stability import CONFIRM, search_case
+
+    case = case_named("spring-chain")
+    drake = get_adapter("drake")
+    exact = stability_limit(case, facts_of(drake, "runge_kutta3"))
+    long = drake.simulate(dataclasses.replace(case, duration=20_000 * 0.045214), "runge_kutta3", 0.045214)
+    assert long.status == "unstable" or not np.isfinite(long.energy[-1]) or long.energy[-1] > 1e6
+    found = search_case(case, lambda c, dt: drake.simulate(c, "runge_kutta3", dt))
+    assert f"{CONFIRM} times as long" in found.note
+    assert found.dt_limit <= exact * (1 + case.stability.rel_tol) and found.dt_unstable > exact
