@@ -115,3 +115,48 @@ def test_a_limit_is_confirmed_over_a_longer_run(case_named):
     found = search_case(case, lambda c, dt: drake.simulate(c, "runge_kutta3", dt))
     assert f"{CONFIRM} times as long" in found.note
     assert found.dt_limit <= exact * (1 + case.stability.rel_tol) and found.dt_unstable > exact
+
+
+def _stretch_peaks(case, traj, windows: int = 30) -> np.ndarray:
+    """The largest kinetic energy (J) of each of ``windows`` equal stretches of a run,
+    summed here from its velocities."""
+    mass = np.where(case.particles.fixed, 0.0, case.particles.mass)
+    kinetic = 0.5 * np.sum(mass * np.sum(traj.v**2, axis=-1), axis=-1)
+    return np.array([k.max() for k in np.array_split(kinetic, windows)])
+
+
+def test_a_cloth_that_settles_and_then_flaps_is_unstable(case_named):
+    """Newton's VBD on the hanging cloth (issue 35, finding 1), 30 s: at 0.02 s the raw run's
+    kinetic energy falls below 1e-3 of its first peak by 3 s, then grows over 100-fold into
+    a flapping that lasts, with its total energy still far below its start; the motion test
+    calls it self-excited. At 0.014 s the cloth settles for good, and is stable."""
+    from truestep.measures.stability import motion_failure
+
+    case = case_named("hanging-cloth")
+    newton = get_adapter("newton")
+    scale = energy_scale(case)
+    verdicts = {}
+    for dt in (0.02, 0.014):
+        n = round(30.0 / dt)
+        traj = newton.simulate(dataclasses.replace(case, duration=n * dt, max_records=n), "vbd", dt)
+        peaks = _stretch_peaks(case, traj)
+        verdicts[dt] = (peaks, motion_failure(case, traj, scale), traj)
+    peaks, failed, traj = verdicts[0.02]
+    settled = int(np.argmax(peaks < 1e-3 * peaks[0]))
+    assert settled > 0 and peaks[settled:].max() > 100 * peaks[settled] and traj.energy[-1] < traj.energy[0]
+    assert failed is not None and failed.reason.startswith("self-excited")
+    peaks, failed, _ = verdicts[0.014]
+    assert peaks[-1] < 1e-6 * peaks[0] and failed is None
+
+
+def test_a_ball_that_falls_again_from_its_apex_is_not_self_excited(case_named):
+    """The bouncing ball's kinetic energy comes back from its height after every apex: no
+    energy is put in, and the motion test says nothing (the reference's rk4 over 20 s)."""
+    from truestep.measures.stability import self_excited
+
+    case = case_named("bouncing-ball")
+    n = round(20.0 / 1e-3)
+    traj = get_adapter("reference").simulate(
+        dataclasses.replace(case, duration=n * 1e-3, max_records=n), "rk4", 1e-3
+    )
+    assert traj.status == "ok" and self_excited(case, traj, energy_scale(case)) is None

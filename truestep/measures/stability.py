@@ -17,7 +17,15 @@ lies), over every step where the run was watched at every step:
   (a jump to another energy that then stays, as an orbit taken with too large a step
   through its pericentre does);
 - **growth**: the energy of a passive scene keeps growing through every quarter of the
-  run (:func:`energy_keeps_growing`) once it has moved by more than ``S``.
+  run (:func:`energy_keeps_growing`) once it has moved by more than ``S``;
+- **self-excited**: a dissipative scene that came near rest (its kinetic energy, the
+  largest over a stretch of :data:`WINDOWS`-th of the run, fallen below :data:`SETTLED` of
+  its earlier largest) and then moves again, its kinetic energy :data:`REGROWN` times that
+  and more, with energy put in to do it (the total energy above its lowest before by at
+  least :data:`PUT_IN` of that kinetic energy): a flapping that a scene which only loses energy cannot
+  start (Newton's VBD on the hanging cloth at 0.02 s, settled by 2.5 s, flapping from 5 s
+  on with its total energy still far below its start). Kinetic energy that merely comes
+  back from potential energy (a ball falling again from its apex) puts no energy in.
 
 A bounded oscillation of energy (a symplectic method below its limit) comes back to its
 start in every period and is none of these; a damped run's energy falls.
@@ -58,6 +66,16 @@ ROUNDOFF = 1e-9
 MIN_STEPS = 5000  # the default of StabilitySpec.min_steps
 """The default least number of steps of a search run (``[stability] min_steps``): slow
 growth near a limit needs them."""
+WINDOWS = 30
+SETTLED = 1e-2
+REGROWN = 100.0
+MOVES = 1e-4
+PUT_IN = 0.25
+"""How a self-excited run is told (see the module docstring): the run cut into
+:data:`WINDOWS` stretches of equal time, each read by its largest kinetic energy; settled
+below :data:`SETTLED` of the largest before, moving again at :data:`REGROWN` times the settled
+stretch's and at least :data:`MOVES` of the energy scale, the total energy then above its
+lowest before by :data:`PUT_IN` of that kinetic energy or more."""
 QUICK_MIN_STEPS = 2000
 """Steps per run in ``--quick`` searches, which stop at 1% of the limit."""
 
@@ -182,6 +200,8 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
         )
     half = max(int(np.searchsorted(t, t[0] + 0.5 * (t[-1] - t[0]))), 1)
     late = rise[half:]
+    if behaviour == "dissipative" and (excited := self_excited(case, traj, scale)) is not None:
+        return excited
     if behaviour == "dissipative":
         if len(late) and float(np.median(late)) > RISE_TOL * scale:
             first = int(np.argmax(rise > RISE_TOL * scale))
@@ -201,6 +221,42 @@ def motion_failure(case: Case, traj: Trajectory, scale: float) -> Failure | None
                 f"{rise[first] / scale:.3g} of its scale ({scale:.4g} J) above it "
                 "and never back in the late half",
             )
+    return None
+
+
+def self_excited(case: Case, traj: Trajectory, scale: float) -> Failure | None:
+    """A dissipative scene's run that settled and then moves again with energy put in
+    (the module docstring's **self-excited**), read from its records' velocities and
+    energies; ``None`` otherwise."""
+    model = case.particles if case.kind == "particles" else None
+    if model is None or traj.v is None or traj.energy is None or len(traj.t) < 2 * WINDOWS:
+        return None
+    t, e = np.asarray(traj.t, float), np.asarray(traj.energy, float)
+    mass = np.where(model.fixed, 0.0, model.mass)
+    with np.errstate(invalid="ignore", over="ignore"):
+        kinetic = 0.5 * np.sum(mass * np.sum(np.nan_to_num(traj.v) ** 2, axis=-1), axis=-1)
+    edges = np.searchsorted(t, np.linspace(t[0], t[-1], WINDOWS + 1)[1:-1])
+    stretches = np.split(np.arange(len(t)), edges)
+    peak = np.array([kinetic[i].max(initial=0.0) for i in stretches])
+    before = np.maximum.accumulate(peak)
+    for w in range(1, WINDOWS - 1):
+        if not peak[w] < SETTLED * before[w - 1]:
+            continue
+        settled_at = stretches[w][np.argmax(kinetic[stretches[w]])]
+        lowest = float(np.min(e[: stretches[w][-1] + 1]))
+        for v in range(w + 1, WINDOWS):
+            moving = peak[v] >= REGROWN * peak[w] and peak[v] >= MOVES * scale
+            put_in = float(np.max(e[stretches[v]])) - lowest >= PUT_IN * (peak[v] - peak[w])
+            if moving and put_in:
+                k = int(stretches[v][np.argmax(kinetic[stretches[v]])])
+                return Failure(
+                    float(t[stretches[v][0]]),
+                    f"self-excited: a scene that only loses energy came near rest (kinetic "
+                    f"energy {peak[w]:.3g} J by t={t[settled_at]:.4g} s, under {SETTLED:g} of its "
+                    f"earlier {before[w - 1]:.3g} J), then moved again: {kinetic[k]:.3g} J at "
+                    f"t={t[k]:.4g} s, with its energy {float(np.max(e[stretches[v]])) - lowest:.3g} J "
+                    "above its lowest before",
+                )
     return None
 
 
