@@ -160,3 +160,12 @@ def test_a_ball_that_falls_again_from_its_apex_is_not_self_excited(case_named):
         dataclasses.replace(case, duration=n * 1e-3, max_records=n), "rk4", 1e-3
     )
     assert traj.status == "ok" and self_excited(case, traj, energy_scale(case)) is None
+
+
+def test_an_adaptive_run_with_empty_stretches_is_judged(case_named):
+    """scipy's Radau on the hanging cloth at tol 1e-4 records where its steps fall, leaving
+    some thirtieths of the run without a record: the self-excitation test reads the
+    stretches it has (its row once crashed on an empty one)."""
+    case = case_named("hanging-cloth")
+    row = run_one(case, "scipy", "Radau", 1e-4, adaptive=True, timing=Timing(min_total_s=0.0, max_repeats=1))
+    assert row["status"] == "ok", row.get("message")

@@ -4,6 +4,7 @@ scene moves it is ``stalled``, not ``ok``; checked against the raw engine and th
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -49,3 +50,25 @@ def test_a_particle_at_rest_in_the_scene_is_not_stalled(case_named, precision):
     at_rest = type("Exact", (), {"x": np.repeat(exact.x[:1], 11, axis=0)})()
     frozen.x = at_rest.x.copy()
     assert stalled(case, frozen, at_rest, precision) is None
+
+
+def test_a_stalled_row_is_read_back_and_is_a_regression_against_ok(tmp_path):
+    """``stalled`` is a status a results table holds (the reader refused it once), and a row
+    that was ``ok`` in the baseline and is ``stalled`` now is worse."""
+    import shutil
+
+    import pandas as pd
+
+    from truestep.ci.baseline import compare
+    from truestep.tables.io import read_run_tables
+
+    base = Path(__file__).parent / "baselines" / "quick"
+    now = tmp_path / "now"
+    shutil.copytree(base, now)
+    results = pd.read_csv(now / "results.csv")
+    hit = results.index[results["status"] == "ok"][0]
+    results.loc[hit, "status"] = "stalled"
+    results.to_csv(now / "results.csv", index=False)
+    found = compare(read_run_tables(base), read_run_tables(now))
+    worse = [f for f in found.findings if f.change == "worse" and f.table == "results"]
+    assert len(worse) == 1 and "ok -> stalled" in worse[0].line()

@@ -38,7 +38,7 @@ RESULT_KEYS = list(RESULTS.keys)
 STABILITY_KEYS = list(STABILITY.keys)
 RESTITUTION_KEYS = list(RESTITUTION.keys)
 ORDER_KEYS = ["case", "engine", "method"]
-STATUS_RANK = {"ok": 0, "unstable": 1, "solver-failed": 1, "timeout": 2, "crashed": 2}
+STATUS_RANK = {"ok": 0, "stalled": 1, "unstable": 1, "solver-failed": 1, "timeout": 2, "crashed": 2}
 """Higher is worse: ok -> unstable is a regression, as is anything -> crashed."""
 POSITION_ERRORS = frozenset({"error", "error_final"})
 """Quantities in a case's error units: a float32 engine's differ by its round-off,

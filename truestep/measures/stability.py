@@ -236,15 +236,15 @@ def self_excited(case: Case, traj: Trajectory, scale: float) -> Failure | None:
     with np.errstate(invalid="ignore", over="ignore"):
         kinetic = 0.5 * np.sum(mass * np.sum(np.nan_to_num(traj.v) ** 2, axis=-1), axis=-1)
     edges = np.searchsorted(t, np.linspace(t[0], t[-1], WINDOWS + 1)[1:-1])
-    stretches = np.split(np.arange(len(t)), edges)
-    peak = np.array([kinetic[i].max(initial=0.0) for i in stretches])
+    stretches = [i for i in np.split(np.arange(len(t)), edges) if len(i)]  # an adaptive run's may be empty
+    peak = np.array([kinetic[i].max() for i in stretches])
     before = np.maximum.accumulate(peak)
-    for w in range(1, WINDOWS - 1):
+    for w in range(1, len(stretches) - 1):
         if not peak[w] < SETTLED * before[w - 1]:
             continue
         settled_at = stretches[w][np.argmax(kinetic[stretches[w]])]
         lowest = float(np.min(e[: stretches[w][-1] + 1]))
-        for v in range(w + 1, WINDOWS):
+        for v in range(w + 1, len(stretches)):
             moving = peak[v] >= REGROWN * peak[w] and peak[v] >= MOVES * scale
             put_in = float(np.max(e[stretches[v]])) - lowest >= PUT_IN * (peak[v] - peak[w])
             if moving and put_in:

@@ -14,7 +14,9 @@ import pandas as pd
 
 from truestep.tables.spec import TABLES
 
-STATUSES = frozenset({"ok", "unstable", "solver-failed", "crashed", "timeout", "unsupported", "skipped"})
+STATUSES = frozenset(
+    {"ok", "unstable", "stalled", "solver-failed", "crashed", "timeout", "unsupported", "skipped"}
+)
 """Values of a ``status`` column."""
 
 READ = ("results", "stability", "restitution")
@@ -65,7 +67,7 @@ NA_VALUES = [
 ]
 """What reads as a missing value, in every column but the names of :data:`TEXT` (where
 ``nan`` is a method's name like any other)."""
-RAN = ("ok", "unstable", "crashed", "timeout")
+RAN = ("ok", "unstable", "stalled", "crashed", "timeout")
 """Statuses of rows that were run, so have a step (or tolerance)."""
 
 
