@@ -1817,10 +1817,10 @@ SEARCH_PARAMS = [
 ]
 
 
-def my_stable(case, engine: str, method: str, dt: float, min_steps: int) -> bool:
+def my_stable(case, engine: str, method: str, dt: float, min_steps: int, longer: int = 1) -> bool:
     """Whether a stability search's run at ``dt`` is stable, judged here: the engine's
     documented step (``ar.step_matrix``) iterated on the case's oscillator from its start
-    for ``max(min_steps, ceil(horizon / dt))`` steps, every step recorded (as a search
+    for ``longer * max(min_steps, ceil(horizon / dt))`` steps, every step recorded (as a search
     records them); stable when it stays finite (below 1e12), its energy's late half does
     not rise above the early half's band by a quarter of its width
     (``ar.rises_past_its_band``, README "Stability limits") and its motion passes
@@ -1830,7 +1830,7 @@ def my_stable(case, engine: str, method: str, dt: float, min_steps: int) -> bool
     d0 = m.x0[0] - a.point[0]
     length = float(np.linalg.norm(d0))
     u0, w0 = length - float(a.rest[0]), float(m.v0[0] @ (d0 / length))
-    n = max(min_steps, math.ceil(case.stability.horizon / dt))
+    n = longer * max(min_steps, math.ceil(case.stability.horizon / dt))
     u, w = ar.oscillator_run(SCHEME[(engine, method)], mass, k, c, dt, u0, w0, n)
     if not np.all(np.isfinite(u)):
         return False
@@ -1847,11 +1847,24 @@ def _check_search(row, case, engine, method, *, min_steps: int, rel_tol: float) 
     it unstable, the bracket ``rel_tol`` wide, the probes at 0.9 and 0.5 of the limit
     stable (or the note says the boundary is not monotone, at a probe found unstable
     here), and no limit above a step at which the engine's step matrix grows."""
+    import re
+
     spec = case.stability
     label = f"{engine}/{method}"
+    note = row.note if isinstance(row.note, str) else ""
+    # README "Stability limits": the limit is confirmed over a run CONFIRM times as long;
+    # one that failed it was searched again over that horizon (the note says so)
+    confirm = 5
+    again = re.search(r"over a run (\d+) times as long", note)
+    longer = int(again.group(1)) if again else 1
 
-    def stable(dt):
-        return my_stable(case, engine, method, dt, min_steps)
+    def stable(dt, times=None):
+        return my_stable(case, engine, method, dt, min_steps, longer if times is None else times)
+
+    if row.dt_limit > spec.dt_lo:
+        assert stable(row.dt_limit, confirm), (
+            f"{label}: dt_limit {row.dt_limit:.6g} s is unstable over {confirm}x"
+        )
 
     if row.dt_limit == 0.0:
         assert not stable(spec.dt_lo), (
@@ -1866,10 +1879,7 @@ def _check_search(row, case, engine, method, *, min_steps: int, rel_tol: float) 
         assert row.dt_limit < row.dt_unstable <= row.dt_limit * (1 + rel_tol) * (1 + 1e-9), (
             f"{label}: bracket {row.dt_limit:.6g} .. {row.dt_unstable:.6g} s wider than {rel_tol:g}"
         )
-    note = row.note if isinstance(row.note, str) else ""
     if "not monotone" in note:
-        import re
-
         probe = float(re.search(r"unstable at ([0-9.eE+-]+) s", note).group(1))
         assert not stable(probe), f"{label}: the note's unstable probe {probe} s is stable here"
     else:
