@@ -302,6 +302,7 @@ def bisect_limit(
     rel_tol: float = 1e-3,
     max_runs: int = 30,
     budget_s: float = math.inf,
+    bracketed: bool = False,
 ) -> SearchResult:
     """Bisect (geometrically) for the boundary between stable and unstable steps.
 
@@ -310,6 +311,8 @@ def bisect_limit(
     ``stable_at``, so the same code gives the same bracket on every machine. ``budget_s``
     is a safety valve, not a bound: a search whose calls have taken longer raises
     :class:`SearchTimeout` instead of reporting the bracket it happened to reach.
+    ``bracketed`` says ``dt_lo`` is already known stable and ``dt_hi`` unstable: neither
+    is run again (``runs`` counts only the bisection's own runs).
     """
     start = time.perf_counter()
 
@@ -321,12 +324,14 @@ def bisect_limit(
             )
         return stable_at(dt)
 
-    runs = 1
-    if not stable(dt_lo):
-        return SearchResult(0.0, dt_lo, runs, f"unstable at every step tried (even {dt_lo:g} s)")
-    runs += 1
-    if stable(dt_hi):
-        return SearchResult(dt_hi, math.inf, runs, f"stable at every step tried (up to {dt_hi:g} s)")
+    runs = 0
+    if not bracketed:
+        runs += 1
+        if not stable(dt_lo):
+            return SearchResult(0.0, dt_lo, runs, f"unstable at every step tried (even {dt_lo:g} s)")
+        runs += 1
+        if stable(dt_hi):
+            return SearchResult(dt_hi, math.inf, runs, f"stable at every step tried (up to {dt_hi:g} s)")
     lo, hi = dt_lo, dt_hi
     while hi / lo - 1 > rel_tol and runs < max_runs:
         mid = math.sqrt(lo * hi)
@@ -344,7 +349,15 @@ CONFIRM = 5
 runs: a mode that grows too slowly to show over the search's horizon (spring-chain's top
 mode under RK3 at 0.2 % above the exact limit, unseen over 2000 steps, 1e23-fold over
 20 000) shows there. A limit that fails it is searched again over that longer horizon,
-and its note says so."""
+and its note says so: from the first of :data:`RESEARCH_FROM` of the failed limit that is
+stable over the longer horizon (the failed limit is the bracket's unstable end), or from
+the search's own low end where none is."""
+
+RESEARCH_FROM = (0.9, 0.5)
+"""Fractions of a limit that failed its confirmation tried, largest first, as the stable
+end of the bracket searched again over the longer horizon: the boundary usually lies
+just below the failed limit (spring-chain's RK3: 0.2 %), and a run at the search's low
+end over that horizon costs as many steps as all the bisection's runs together."""
 
 MONOTONE_PROBES = (0.9, 0.5)
 """After the bisection, steps at these fractions of the limit found are run too: a step
@@ -356,24 +369,38 @@ def _confirmed(
     result: SearchResult,
     stable_at: Callable[[float], bool],
     longer: list[int],
-    search: Callable[[float, float, int], SearchResult],
+    search: Callable[..., SearchResult],
     dt_lo: float,
 ) -> SearchResult:
     """``result`` confirmed by a run at its limit :data:`CONFIRM` times as long, or, where
-    that run is not stable, the search made again over the longer horizon below it."""
+    that run is not stable, the search made again over the longer horizon below it
+    (bracketed from :data:`RESEARCH_FROM`)."""
     limit = result.dt_limit
     if not limit > dt_lo:
         return result
     longer[0] = CONFIRM
+    runs = result.runs + 1
     if stable_at(limit):
-        return dataclasses.replace(result, runs=result.runs + 1)
-    again = search(dt_lo, limit, 0)
+        return dataclasses.replace(result, runs=runs)
+    unstable = limit
+    again = None
+    for fraction in RESEARCH_FROM:
+        trial = fraction * limit
+        if trial <= dt_lo:
+            break
+        runs += 1
+        if stable_at(trial):
+            again = search(trial, unstable, 0, bracketed=True)
+            break
+        unstable = trial
+    if again is None:
+        again = search(dt_lo, unstable, 0)
     words = (
         f"unstable at {limit:.6g} s over a run {CONFIRM} times as long as the search's: "
         "searched again over that horizon"
     )
     note = "; ".join(n for n in (again.note, words) if n)
-    return dataclasses.replace(again, runs=result.runs + 1 + again.runs, note=note)
+    return dataclasses.replace(again, runs=runs + again.runs, note=note)
 
 
 class _SolverFailedAt(Exception):
@@ -420,10 +447,16 @@ def search_case(
 
     start = time.perf_counter()
 
-    def search(lo: float, hi: float, runs_before: int) -> SearchResult:
+    def search(lo: float, hi: float, runs_before: int, *, bracketed: bool = False) -> SearchResult:
         left = spec.budget_s - (time.perf_counter() - start)
         r = bisect_limit(
-            stable_at, lo, hi, rel_tol=rel_tol, max_runs=max(spec.max_runs - runs_before, 2), budget_s=left
+            stable_at,
+            lo,
+            hi,
+            rel_tol=rel_tol,
+            max_runs=max(spec.max_runs - runs_before, 2),
+            budget_s=left,
+            bracketed=bracketed,
         )
         return dataclasses.replace(r, runs=r.runs + runs_before)
 
