@@ -406,3 +406,75 @@ def test_a_gate_the_baseline_evaluated_cannot_go_unevaluated(run_dir, copy, caps
         ["gate", "--results", str(run_dir / "results.csv"), "--declared-orders", "--baseline", str(run_dir)]
     )
     assert code == 0, capsys.readouterr().out
+
+
+def _with_engine_of_mine(d: Path, results: pd.DataFrame) -> pd.DataFrame:
+    """The run's rows, and the same rows again as engine ``mine`` (a user's engine), as
+    if the run had been asked for both."""
+    mine = results.assign(engine="mine")
+    both = pd.concat([results, mine], ignore_index=True)
+    both.to_csv(d / "results.csv", index=False)
+    record = json.loads((d / "run.json").read_text())
+    record["engines"] = [*record["engines"], "mine"]
+    (d / "run.json").write_text(json.dumps(record))
+    return both
+
+
+NO_WORSE_MINE = """
+[[gates]]
+cases = "harmonic-oscillator"
+kind = "no-worse-than"
+engine = "mine"
+method = "verlet"
+than = "reference/symplectic-euler"
+factor = 1.0
+"""
+
+
+def test_engines_keeps_the_rows_its_gates_compare_with(copy, tmp_path, capsys):
+    """``--engines mine`` (issue 36, item 2): the verdicts are mine's, and a no-worse-than
+    gate of mine still reads the reference rows it compares with (it was "not run" and
+    exit 0, comparing nothing)."""
+    d, results = copy
+    _with_engine_of_mine(d, results)
+    gates = _gates_file(tmp_path, NO_WORSE_MINE)
+    code = main(["gate", "--results", str(d / "results.csv"), "--gates", gates, "--engines", "mine", "-v"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "ok   harmonic-oscillator gates[0] no-worse-than mine/verlet" in out
+    assert "not run" not in out
+    # the reference's own gates are not this scope's verdicts
+    assert " reference/" not in out.replace("than reference/", "").replace("x reference/", "")
+
+
+def test_time_against_an_engine_outside_engines_still_reads_its_rows(copy, run_dir, capsys):
+    """``--time-against reference/rk4 --engines mine``: mine's wall times are divided by
+    the reference's rk4 of the same case and step, in both runs (it compared 0 rows and
+    said nothing); a time-against comparison that compares no ratio fails, saying so."""
+    d, results = copy
+    both = _with_engine_of_mine(d, results)
+    base = d.parent / "base"
+    shutil.copytree(d, base)
+    args = ["gate", "--results", str(d / "results.csv"), "--baseline", str(base), "--engines", "mine", "-v"]
+    assert main([*args, "--time-against", "reference/rk4"]) == 0  # A/A
+    capsys.readouterr()
+    slower = (both["engine"] == "mine") & (both["method"] == "euler")
+    both.loc[slower, "wall_s"] *= 3.0
+    both.to_csv(d / "results.csv", index=False)
+    assert main([*args, "--time-against", "reference/rk4"]) == 1
+    assert "WORSE  timing harmonic-oscillator mine euler" in capsys.readouterr().out
+    assert main([*args, "--time-against", "nobody/rk4"]) == 1
+    assert "--time-against nobody/rk4: no wall-time ratio compared" in capsys.readouterr().out
+
+
+def test_a_baseline_comparison_that_compares_nothing_fails(copy, run_dir, capsys):
+    """A baseline none of whose rows are in this run's scope (another engine's) compared
+    nothing: exit 1, saying so, even though the cases' gates held."""
+    d, _ = copy
+    for name in ("results", "stability", "restitution"):
+        table = pd.read_csv(d / f"{name}.csv")
+        table.assign(engine="other").to_csv(d / f"{name}.csv", index=False)
+    code = main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(d), "-q"])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert "FAIL the baseline comparison compared nothing" in out

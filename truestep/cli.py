@@ -346,13 +346,15 @@ def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path, 
 def cmd_gate(args: argparse.Namespace) -> int:
     results_path = Path(args.results)
     tables = _run_tables(results_path)
-    asked_engines = {e.strip() for e in args.engines.split(",") if e.strip()} if args.engines else None
-    if asked_engines is not None:
-        tables = _narrowed(tables, None, asked_engines)
+    asked = _asked_engines(args)
+    # every row stays for the gates to read (a no-worse-than gate's other run, the rows a
+    # --time-against ratio divides by); --engines chooses whose verdicts count
     cases, verdicts = _gate_verdicts(args, tables, results_path)
     comparison, baseline = _gate_comparison(args, tables, results_path, cases)
     if baseline is not None:
         verdicts = _kept_since_baseline(args, verdicts, cases, baseline)
+    if asked is not None:
+        verdicts = [v for v in verdicts if v.gate.engine in asked or v.gate.engine == "*"]
     held = [v for v in verdicts if v.verdict == "pass"]
     failed = [v for v in verdicts if v.verdict == "fail"]
     skipped = [v for v in verdicts if v.verdict == "skip"]
@@ -362,6 +364,15 @@ def cmd_gate(args: argparse.Namespace) -> int:
             "nothing was checked: no gate was evaluated"
             + ("" if comparison is None else " and no baseline row matched")
             + f" ({len(skipped)} gates name cases or engines this run left out)"
+        )
+    elif comparison is not None and not comparison.compared:
+        reasons.append(
+            "the baseline comparison compared nothing: no row of the baseline matches one of this run"
+        )
+    if comparison is not None and comparison.time_against and not comparison.timed:
+        reasons.append(
+            f"--time-against {comparison.time_against}: no wall-time ratio compared (no row of "
+            "this run and the baseline ran beside it at the same case and step)"
         )
     _print_gate_lines(args, verdicts, comparison)
     worse = comparison.worse() if comparison is not None else []
@@ -382,6 +393,11 @@ def cmd_gate(args: argparse.Namespace) -> int:
     print(summary)
     _write_ci_outputs(args, verdicts, comparison, reasons, passed)
     return 0 if passed else 1
+
+
+def _asked_engines(args: argparse.Namespace) -> set[str] | None:
+    """The engines ``--engines`` names, or ``None`` (every engine)."""
+    return {e.strip() for e in args.engines.split(",") if e.strip()} if args.engines else None
 
 
 def _kept_since_baseline(args: argparse.Namespace, verdicts: list, cases: list, baseline: dict) -> list:
@@ -445,18 +461,26 @@ def _gate_comparison(args: argparse.Namespace, tables: dict, results_path: Path,
     if args.time_against and "/" not in args.time_against:
         raise UsageError(f"--time-against: expected ENGINE/METHOD, got {_quoted(args.time_against)}")
     scope_cases, scope_engines = _baseline_scope(results_path.parent, tables["results"], args, cases)
-    baseline = _narrowed(baseline, scope_cases, scope_engines)
-    current = _narrowed(tables, scope_cases, scope_engines)
+    whole = baseline
+    baseline = _narrowed(baseline, scope_cases, None)
+    current = _narrowed(tables, scope_cases, None)
     comparison = compare(
         baseline,
         current,
         tolerances=_tolerances(args.tolerance, args.gates),
         time_against=args.time_against,
         scales={c.name: c.error_scale for c in cases},
+        engines=scope_engines,
     )
     if args.identical:
-        _check_identical(comparison, baseline, current, base_dir, results_path.parent)
-    return comparison, baseline
+        _check_identical(
+            comparison,
+            _narrowed(baseline, None, scope_engines),
+            _narrowed(current, None, scope_engines),
+            base_dir,
+            results_path.parent,
+        )
+    return comparison, whole
 
 
 def _print_gate_lines(args: argparse.Namespace, verdicts: list, comparison) -> None:
@@ -769,7 +793,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--engines",
         default=None,
         metavar="NAMES",
-        help="only the rows of these engines (comma-separated), for the gates and the baseline",
+        help="only the verdicts and baseline rows of these engines (comma-separated); the rows "
+        "a gate or --time-against compares with are read whatever their engine",
     )
     gate.add_argument(
         "--identical",

@@ -87,6 +87,8 @@ class Comparison:
     compared: int
     tolerances: dict[str, float]
     time_against: str | None = None
+    timed: int = 0
+    """Rows whose wall-time ratio was compared (``time_against``)."""
 
     def worse(self) -> list[Finding]:
         return [f for f in self.findings if f.change in ("worse", "vanished", "differs")]
@@ -261,13 +263,19 @@ def compare(
     tolerances: Mapping[str, float] | None = None,
     time_against: str | None = None,
     scales: Mapping[str, float] | None = None,
+    engines: set[str] | None = None,
 ) -> Comparison:
     """Compare ``current`` tables (``results``, ``stability``, ``restitution``; any may be
     ``None``) with ``baseline``'s. ``tolerances`` override :data:`TOLERANCES`;
-    ``time_against`` (``engine/method``) turns on the wall-time comparison."""
+    ``time_against`` (``engine/method``) turns on the wall-time comparison. ``engines``
+    (``None``: all) are the engines whose rows are compared: the ``time_against`` rows
+    are read for the ratios whether or not their engine is among them."""
     tol = {**TOLERANCES, **(tolerances or {})}
     findings: list[Finding] = []
+    whole_old, whole_new = baseline.get("results"), current.get("results")
+    baseline, current = narrow(baseline, engines=engines), narrow(current, engines=engines)
     old_r, new_r = baseline.get("results"), current.get("results")
+    timed = 0
     compared = _compare_rows(
         "results",
         old_r,
@@ -288,17 +296,18 @@ def compare(
             tol,
             findings,
         )
-        if time_against:
+        if time_against and whole_old is not None and whole_new is not None:
             e, _, m = time_against.partition("/")
-            compared += _compare_rows(
+            timed = _compare_rows(
                 "timing",
-                _wall_ratios(old_r, (e, m)),
-                _wall_ratios(new_r, (e, m)),
+                _in_engines(_wall_ratios(whole_old, (e, m)), engines),
+                _in_engines(_wall_ratios(whole_new, (e, m)), engines),
                 RESULT_KEYS,
                 [_quantity("wall_ratio", DERIVED["wall_ratio"])],
                 tol,
                 findings,
             )
+            compared += timed
     compared += _compare_rows(
         "stability",
         baseline.get("stability"),
@@ -321,7 +330,12 @@ def compare(
         tol,
         findings,
     )
-    return Comparison(findings, compared, tol, time_against)
+    return Comparison(findings, compared, tol, time_against, timed)
+
+
+def _in_engines(table: pd.DataFrame, engines: set[str] | None) -> pd.DataFrame:
+    """The rows of ``table`` of ``engines`` (``None``: all)."""
+    return table if engines is None else table[table["engine"].astype(str).isin(engines)]
 
 
 def _quantity(name: str, c: Compared) -> tuple[str, bool, bool]:
