@@ -686,7 +686,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the matrix and the analyses, write the tables and the report",
         description="Run every case with every engine and method that can model "
         "it, the stability searches and the restitution sweep; write results.csv, "
-        "stability.csv, restitution.csv, index.md, index.html and figures/. The "
+        "stability.csv, restitution.csv, scorecard.csv, index.md, index.html and figures/. The "
         "report is put in place as a whole: a run that fails or is killed leaves "
         "the previous one as it was. SIGTERM or SIGINT stops the run (exit 128 + "
         "the signal); its finished sweeps are kept for --resume.",

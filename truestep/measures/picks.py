@@ -212,6 +212,30 @@ SCORECARD_COLUMNS = [
 ]
 
 
+def scorecard_table(
+    card: pd.DataFrame, fidelity: pd.DataFrame, *, target: float = SCORECARD_TARGET
+) -> pd.DataFrame:
+    """The scorecard (:func:`scorecard`) with each engine and method's restitution
+    (:func:`restitution_fidelity`) beside it: ``scorecard.csv``
+    (:data:`truestep.tables.spec.SCORECARD`), in the scorecard's order."""
+    from truestep.tables.spec import SCORECARD
+
+    gaps = {(r["engine"], r["method"]): r for r in fidelity.to_dict("records")}
+    rows = []
+    for r in card.to_dict("records"):
+        gap = gaps.get((r["engine"], r["method"]))
+        rows.append(
+            {
+                **{k: r[k] for k in SCORECARD_COLUMNS},
+                "target": target,
+                "restitution_bounces": 0 if gap is None else int(gap["bounces"]),
+                "restitution_gap": np.nan if gap is None else float(gap["median"]),
+                "restitution_gap_worst": np.nan if gap is None else float(gap["worst"]),
+            }
+        )
+    return SCORECARD.frame(rows)
+
+
 def _limit_reference(stability: pd.DataFrame) -> pd.Series:
     """Per stability row: the exact limit where one exists (finite, positive), else the
     best limit any engine/method reached on that case."""
@@ -236,8 +260,10 @@ def scorecard(
     none. ``cases_run`` / ``cases_measured`` / ``cases_reached``: the family's cases it
     ran / ran that have an error measure (an exact solution or reference run) / reached
     the target on. ``stability_ratio``: over the family's cases with a stability search
-    whose exact limit is not 0, the median of its largest stable step over the exact limit
-    (or, with no exact one, the best any method reached); NaN without such searches.
+    whose exact limit is not 0 (whether or not the sweep ran the method there: a search of
+    a case whose sweep skips it still tells its largest stable step), the median of its
+    largest stable step over the exact limit (or, with no exact one, the best any method
+    reached); NaN without such searches.
     ``stability_zero``: the searches whose exact limit is 0 (the method is unstable at
     every step there, as theory says: no ratio to take).
     """
@@ -273,8 +299,9 @@ def scorecard(
                     top = fastest[case]
                     tied = mine_best["wall_s"] - mine_best["band"] <= top["wall_s"] + top["band"]
                     ratios.append(1.0 if tied else float(mine_best["wall_s"] / top["wall_s"]))
+            searched = [c for c in family if family[c] == fam]  # a search counts, run in the sweep or not
             s = (
-                stab[(stab["engine"] == engine) & (stab["method"] == method) & stab["case"].isin(names)]
+                stab[(stab["engine"] == engine) & (stab["method"] == method) & stab["case"].isin(searched)]
                 if stab is not None
                 else pd.DataFrame()
             )

@@ -35,6 +35,7 @@ REPORT_FILES = (
     "stability.csv",
     "restitution.csv",
     "scaling.csv",
+    "scorecard.csv",
     "index.md",
     "index.html",
     "run.json",

@@ -25,7 +25,7 @@ from truestep.execution.isolation import (
     untimed_workers,
 )
 from truestep.measures.findings import Findings, find, speed_table, speed_tables
-from truestep.measures.picks import survival
+from truestep.measures.picks import scorecard_table, survival
 from truestep.reporting import plots
 from truestep.reporting.html import markdown_to_html
 from truestep.reporting.markdown import folded, link, md_table, text, with_units
@@ -429,7 +429,7 @@ def write_report(
     seconds: dict[str, float] | None = None,
 ) -> None:
     """Write results.csv, stability.csv, restitution.csv, scaling.csv (when the run made
-    the table), index.md, index.html, figures/ and run.json (with the run's ``seconds``
+    the table), scorecard.csv, index.md, index.html, figures/ and run.json (with the run's ``seconds``
     per phase, :func:`run_record`); each of its steps is a line with done /
     total and the time left (:class:`~truestep.execution.progress.Progress`; ``progress``
     takes the lines instead).
@@ -469,6 +469,8 @@ def write_report(
         (stage / RUN_FILE).write_text(
             json.dumps(run_record(cases, results, quick=quick, argv=argv, seconds=seconds), indent=1) + "\n"
         )
+        findings = findings if findings is not None else find(cases, results, tables)
+        scorecard_table(findings.scorecard, findings.fidelity).to_csv(stage / "scorecard.csv", index=False)
         faults.point("report-csv")
         bar.done("tables written")
         lecture = start_lecture_figures(stage / "figures") if with_lecture_figures else None

@@ -1,8 +1,9 @@
-"""The columns of truestep's four tables, each declared once.
+"""The columns of truestep's tables, each declared once.
 
 ``results.csv`` (one row per case, engine, method and step), ``stability.csv`` (one row per
 stability search), ``restitution.csv`` (one row per bounce of a dropped ball) and
-``scaling.csv`` (``truestep bench``: one row per engine, method and particle count). Each
+``scaling.csv`` (``truestep bench``: one row per engine, method and particle count) and
+``scorecard.csv`` (the report's scorecard: one row per engine, method and family). Each
 :class:`Column` says its type, unit, meaning, the label the report shows, whether it names
 the row, whether every reader needs it, whether it depends on the machine, the values a
 run can write, and how a baseline compares it. The runner, the analyses, the table
@@ -391,7 +392,95 @@ SCALING = Table(
 )
 """``scaling.csv``."""
 
-TABLES = {t.name: t for t in (RESULTS, STABILITY, RESTITUTION, SCALING)}
+SCORECARD = Table(
+    "scorecard",
+    "an engine and method on a family of scenes: the report's scorecard as numbers",
+    ("engine", "method", "family"),
+    (
+        _ENGINE,
+        _METHOD,
+        _name("family", "the family of scenes (the scorecard's column)"),
+        Column(
+            "target",
+            "number",
+            "1",
+            "the error asked for, as a fraction of each case's error scale",
+            required=True,
+        ),
+        Column("cases_run", "count", "cases", "the family's cases it ran", least=0.0, whole=True),
+        Column(
+            "cases_measured",
+            "count",
+            "cases",
+            "of those, the cases with an error measure (an exact solution or a reference run)",
+            least=0.0,
+            whole=True,
+        ),
+        Column(
+            "cases_reached",
+            "count",
+            "cases",
+            "of those, the cases it reached the target error on",
+            least=0.0,
+            whole=True,
+        ),
+        Column(
+            "cost_ratio",
+            "number",
+            "1",
+            "the median over the cases it reached of its cheapest wall time there over the "
+            "cheapest of every run that reached it (1: the fastest, or tied with it); empty if it "
+            "reached none",
+            machine=True,
+        ),
+        Column(
+            "stability_cases",
+            "count",
+            "cases",
+            "the family's stability searches whose exact limit is not 0",
+            least=0.0,
+            whole=True,
+        ),
+        Column(
+            "stability_ratio",
+            "number",
+            "1",
+            "the median of its largest stable step over the exact limit (or, with none known, over "
+            "the best any method reached)",
+        ),
+        Column(
+            "stability_zero",
+            "count",
+            "cases",
+            "the searches whose exact limit is 0 (unstable at every step, as theory says)",
+            least=0.0,
+            whole=True,
+        ),
+        Column(
+            "restitution_bounces",
+            "count",
+            "bounces",
+            "the bounces of the restitution sweep it was measured on (the same in every family)",
+            least=0.0,
+            whole=True,
+        ),
+        Column(
+            "restitution_gap",
+            "number",
+            "1",
+            "the median over those bounces of the distance of e_measured from e_set",
+        ),
+        Column(
+            "restitution_gap_worst",
+            "number",
+            "1",
+            "the largest distance of e_measured from e_set over those bounces",
+        ),
+    ),
+)
+"""``scorecard.csv``: the report's scorecard figure as a table a tool reads."""
+
+TABLES = {t.name: t for t in (RESULTS, STABILITY, RESTITUTION, SCALING, SCORECARD)}
 """Every table, by name."""
 
 DERIVED: dict[str, Compared] = {

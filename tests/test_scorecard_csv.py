@@ -1,0 +1,87 @@
+"""``scorecard.csv`` (issue 36, item 9): the report's scorecard as a table a tool reads,
+each count and ratio recomputed here from the published tables by their own route."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from truestep.cases import load_cases
+from truestep.reporting.folder import REPORT_FILES
+
+REPORTS = Path(__file__).resolve().parents[1] / "reports"
+
+
+def _read(name: str) -> pd.DataFrame:
+    return pd.read_csv(REPORTS / f"{name}.csv", keep_default_na=False, na_values=[""])
+
+
+@pytest.fixture(scope="module")
+def published():
+    card = _read("scorecard")
+    cases = {c.name: c for c in load_cases("*")}
+    return card, _read("results"), _read("stability"), _read("restitution"), cases
+
+
+def test_the_report_writes_its_scorecard_as_a_table():
+    assert "scorecard.csv" in REPORT_FILES
+    assert (REPORTS / "scorecard.csv").is_file()
+
+
+def test_counts_of_cases_run_and_reached(published):
+    """``cases_run``: the family's cases with a row that ran; ``cases_reached``: those where
+    some ok row's error is within ``target`` of the case's error scale."""
+    card, results, _, _, cases = published
+    ran = results[~results["status"].isin(["unsupported", "skipped"])]
+    for r in card.itertuples():
+        mine = ran[(ran["engine"] == r.engine) & (ran["method"] == r.method)]
+        names = {c for c in mine["case"] if cases[c].family == r.family}
+        assert r.cases_run == len(names), (r.engine, r.method, r.family)
+        assert r.cases_measured == sum(cases[c].exact is not None for c in names)
+        reached = 0
+        for c in names:
+            ok = mine[(mine["case"] == c) & (mine["status"] == "ok")]
+            errors = pd.to_numeric(ok["error"], errors="coerce").dropna()
+            reached += bool(len(errors)) and errors.min() <= r.target * cases[c].error_scale
+        assert r.cases_reached == reached, (r.engine, r.method, r.family)
+        assert np.isnan(r.cost_ratio) == (reached == 0)
+
+
+def test_stability_ratio_over_the_exact_limit_or_the_best(published):
+    card, _, stability, _, cases = published
+    ok = stability[stability["status"] == "ok"]
+    family = ok["case"].map({name: c.family for name, c in cases.items()})
+    for r in card.itertuples():
+        mine = ok[(ok["engine"] == r.engine) & (ok["method"] == r.method) & (family == r.family)]
+        ratios, zero = [], 0
+        for row in mine.itertuples():
+            if row.dt_limit_exact == 0:
+                zero += 1
+                continue
+            known = np.isfinite(row.dt_limit_exact) and row.dt_limit_exact > 0
+            best = ok[ok["case"] == row.case]["dt_limit"].max()
+            ratio = row.dt_limit / (row.dt_limit_exact if known else best)
+            if np.isfinite(ratio):
+                ratios.append(ratio)
+        assert r.stability_zero == zero and r.stability_cases == len(ratios), (r.engine, r.method)
+        if ratios:
+            assert r.stability_ratio == pytest.approx(np.median(ratios), rel=1e-12)
+        else:
+            assert np.isnan(r.stability_ratio)
+
+
+def test_restitution_gap_from_the_bounces(published):
+    card, _, _, restitution, _ = published
+    ok = restitution[restitution["status"] == "ok"].dropna(subset=["e_measured"])
+    for r in card.itertuples():
+        mine = ok[(ok["engine"] == r.engine) & (ok["method"] == r.method)]
+        gaps = (mine["e_measured"] - mine["e_set"]).abs()
+        assert r.restitution_bounces == len(gaps)
+        if len(gaps):
+            assert r.restitution_gap == pytest.approx(gaps.median(), rel=1e-12)
+            assert r.restitution_gap_worst == pytest.approx(gaps.max(), rel=1e-12)
+        else:
+            assert np.isnan(r.restitution_gap)
