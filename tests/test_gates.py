@@ -89,13 +89,16 @@ def test_gates_file_for_any_engine_with_wildcards(run_dir, tmp_path, capsys):
     code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates", _gates_file(tmp_path), "-v"])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert "ok   harmonic-oscillator gates[0] order reference/rk4" in out
+    assert "ok   harmonic-oscillator/order/reference/rk4#2 (gates[0] of gates.toml)" in out
     # `method = "*"` with a dt: every method that ran that step (adaptive ones did not)
-    expanded = [line for line in out.splitlines() if " gates[1] error reference/" in line]
+    expanded = [line for line in out.splitlines() if "/error/reference/" in line and "(gates[1]" in line]
     assert len(expanded) == 8 and not any("dopri5" in line for line in expanded)
     assert "FAIL" not in out
-    assert "gates[2] no-worse-than reference/verlet" in out
-    assert "restitution-sweep gates[4] restitution reference/rk4" in out
+    assert (
+        "harmonic-oscillator/no-worse-than/reference/verlet/error-vs-reference/symplectic-euler (gates[2]"
+        in out
+    )
+    assert "restitution-sweep/restitution/reference/rk4/e_apex (gates[4]" in out
 
 
 def test_strict_nothing_evaluated_fails(copy, capsys):
@@ -119,8 +122,11 @@ def test_a_gated_row_that_crashed_fails_the_gate(copy, capsys):
     code = main(["gate", "--results", str(d / "results.csv")])
     out = capsys.readouterr().out
     assert code == 1
-    assert "FAIL harmonic-oscillator gates[5] order reference/verlet: measured row dt=0.001 crashed" in out
-    assert "FAIL harmonic-oscillator gates[8] energy_drift reference/verlet dt=0.001" in out
+    assert (
+        "FAIL harmonic-oscillator/order/reference/verlet (gates[5] of harmonic-oscillator.toml): "
+        "measured row dt=0.001 crashed" in out
+    )
+    assert "FAIL harmonic-oscillator/energy_drift/reference/verlet@0.001 (gates[8]" in out
 
 
 def test_a_cases_item_that_matches_nothing_exits_2(run_dir, capsys):
@@ -219,7 +225,7 @@ def test_a_gate_may_name_its_own_id(run_dir, tmp_path, monkeypatch, capsys):
     named = GATES.replace('method = "rk4"\nexpect = 4.0', 'method = "rk4"\nid = "rk4-order"\nexpect = 4.0', 1)
     gates = _json_gates(run_dir, _gates_file(tmp_path, named), tmp_path / "n.json", tmp_path, monkeypatch)
     capsys.readouterr()
-    assert "harmonic-oscillator/rk4-order" in {g["id"] for g in gates}
+    assert "harmonic-oscillator/rk4-order/reference/rk4" in {g["id"] for g in gates}
     bad = named.replace('id = "rk4-order"', 'id = "rk4 order!"')
     code = main(["gate", "--results", str(run_dir / "results.csv"), "--gates", _gates_file(tmp_path, bad)])
     assert code == 2 and "gates[0].id" in capsys.readouterr().err
@@ -355,13 +361,13 @@ def test_declared_orders_are_gated_on_request(run_dir, monkeypatch, capsys):
     args = ["gate", "--results", str(run_dir / "results.csv"), "--declared-orders", "-v", "-q"]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "ok   harmonic-oscillator declared order reference/rk4" in out
+    assert "ok   harmonic-oscillator/order/reference/rk4/declared (declared" in out
     from truestep.reference_impl.solvers import RK4
 
     monkeypatch.setattr(RK4, "facts", dataclasses.replace(RK4.facts, order=5))
     assert main(args) == 1
     assert (
-        "FAIL harmonic-oscillator declared order reference/rk4: measured order 3.99"
+        "FAIL harmonic-oscillator/order/reference/rk4/declared (declared): measured order 3.99"
         in capsys.readouterr().out
     )
     monkeypatch.setattr(RK4, "facts", dataclasses.replace(RK4.facts, order=3))
@@ -441,7 +447,7 @@ def test_engines_keeps_the_rows_its_gates_compare_with(copy, tmp_path, capsys):
     code = main(["gate", "--results", str(d / "results.csv"), "--gates", gates, "--engines", "mine", "-v"])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert "ok   harmonic-oscillator gates[0] no-worse-than mine/verlet" in out
+    assert "ok   harmonic-oscillator/no-worse-than/mine/verlet/" in out
     assert "not run" not in out
     # the reference's own gates are not this scope's verdicts
     assert " reference/" not in out.replace("than reference/", "").replace("x reference/", "")
@@ -478,3 +484,82 @@ def test_a_baseline_comparison_that_compares_nothing_fails(copy, run_dir, capsys
     out = capsys.readouterr().out
     assert code == 1, out
     assert "FAIL the baseline comparison compared nothing" in out
+
+
+ID_STAR = """
+[[gates]]
+cases = "harmonic-oscillator"
+id = "too-high"
+kind = "order"
+engine = "reference"
+method = "*"
+expect = 9.0
+tol = 0.1
+"""
+
+
+def test_one_id_per_verdict_in_every_output_and_the_same_bytes_twice(run_dir, tmp_path, monkeypatch, capsys):
+    """A gate with an ``id`` and ``method = "*"`` (issue 36, item 3): each verdict is
+    ``case/id/engine/method``, the same on the console, in markdown, JUnit and JSON (it
+    was ``case/id#2`` in JUnit and ``gates[0]`` on the console); two calls write the same
+    bytes."""
+    monkeypatch.chdir(tmp_path)
+    gates = _gates_file(tmp_path, ID_STAR)
+    outputs = []
+    for k in (1, 2):
+        args = [
+            "gate",
+            "--results",
+            str(run_dir / "results.csv"),
+            "--gates",
+            gates,
+            "--baseline",
+            str(run_dir),
+        ]
+        args += ["--junit", f"j{k}.xml", "--json", f"g{k}.json", "--markdown", f"m{k}.md"]
+        assert main(args) == 1
+        outputs.append(capsys.readouterr().out)
+    assert outputs[0] == outputs[1]
+    for name in ("j", "g", "m"):
+        ext = {"j": "xml", "g": "json", "m": "md"}[name]
+        assert (tmp_path / f"{name}1.{ext}").read_bytes() == (tmp_path / f"{name}2.{ext}").read_bytes()
+    mine = {
+        g["id"] for g in json.loads((tmp_path / "g1.json").read_text())["gates"] if "/too-high/" in g["id"]
+    }
+    assert "harmonic-oscillator/too-high/reference/rk4" in mine and len(mine) >= 8
+    junit = {c.get("name") for c in ET.parse(tmp_path / "j1.xml").iter("testcase")}
+    console = {line.split()[1] for line in outputs[0].splitlines() if line.startswith("FAIL harmonic")}
+    markdown = {
+        line.split("|")[1].strip().replace("\\", "")
+        for line in (tmp_path / "m1.md").read_text().splitlines()
+        if "/too-high/" in line
+    }
+    assert mine <= junit and mine == {i for i in console if "/too-high/" in i} == markdown
+    assert "hostname" not in (tmp_path / "j1.xml").read_text()
+
+
+def test_two_gate_processes_write_the_same_bytes_whatever_the_hash_seed(run_dir, copy, tmp_path):
+    """Rows gone since the baseline were listed in the order of a set of strings, which
+    moves with Python's hash seed: two identical ``gate`` calls wrote 4 different JSON
+    files (issue 36, item 3). Now the tables' order decides."""
+    import os
+    import subprocess
+    import sys
+
+    d, results = copy
+    results.iloc[::2].to_csv(d / "results.csv", index=False)  # half the rows vanish
+    texts = []
+    for seed in ("1", "2"):
+        out = tmp_path / f"g{seed}.json"
+        more = ["-q", "--baseline", str(run_dir), "--json"]
+        done = subprocess.run(
+            [sys.executable, "-m", "truestep", "gate", "--results", str(d / "results.csv"), *more, str(out)],
+            env={**os.environ, "PYTHONHASHSEED": seed},
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert done.returncode == 1, done.stderr
+        texts.append((done.stdout, out.read_bytes()))
+    assert texts[0] == texts[1]
+    assert texts[0][0].count("GONE") >= 5

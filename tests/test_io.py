@@ -194,4 +194,4 @@ def test_a_method_named_nan_is_a_name(run_dir, tmp_path, capsys):
         ]
     )
     out = capsys.readouterr().out
-    assert code == 0 and "ok   free-fall gates[0] status reference/nan" in out, out
+    assert code == 0 and "ok   free-fall/status/reference/nan@" in out and "(gates[0]" in out, out

@@ -94,13 +94,16 @@ class GateCheck:
     selection: Selection
     case: Any
     gate: Any
+    copy: int = 1
+    """Which gate of this id it is, in file order (a second one's id ends ``#2``)."""
 
     @property
     def id(self) -> str:
         """The gate's id, as every CI output names it (:func:`truestep.ci.gates.gate_id`)."""
         from truestep.ci.gates import gate_id
 
-        return gate_id(self.case.name, self.gate)
+        base = gate_id(self.case.name, self.gate)
+        return base if self.copy == 1 else f"{base}#{self.copy}"
 
     def result(self):
         """The :class:`~truestep.ci.gates.GateResult` (runs the selection on first use)."""
@@ -151,6 +154,10 @@ def _plan(sel: Selection) -> list[GateCheck]:
                 else [g.method]
             )
             checks += [GateCheck(sel, case, dataclasses.replace(g, engine=engine, method=m)) for m in methods]
+    seen: dict[str, int] = {}
+    for c in checks:
+        seen[c.id] = seen.get(c.id, 0) + 1
+        c.copy = seen[c.id]
     return checks
 
 

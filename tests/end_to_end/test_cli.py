@@ -60,7 +60,7 @@ def test_gate_fails_naming_measured_and_required(quick_report, tmp_path, capsys)
     results.to_csv(path, index=False)
     assert main(["gate", "--results", str(path), "--cases", "circle-field"]) == 1
     out = capsys.readouterr().out
-    assert "FAIL circle-field gates[2] order reference/rk4" in out
+    assert "FAIL circle-field/order/reference/rk4 (gates[2]" in out
     assert "measured order 2.0" in out and "required 4 +- 0.2" in out
 
 

@@ -170,12 +170,33 @@ PLUGIN_MUTANT = "half-dropped"
 plugin session is a quick run of its own)."""
 
 
-def test_the_plugin_fails_a_mutant(runs):
+def test_the_plugin_fails_a_mutant(runs, tmp_path):
     """The example's own pytest test, run on a mutant: it fails, naming the engine. (On the
-    example itself the same test is ``.ci/run``'s last step: the project's own suite.)"""
+    example itself the same test is ``.ci/run``'s last step: the project's own suite.) Each
+    failed test's id is the verdict's id as ``truestep gate`` names it in its JSON and JUnit
+    (issue 36, item 3: one name per verdict)."""
+    import json
+
     procs = {label: _pytest_example(runs[f"{label}-src"]) for label in [PLUGIN_MUTANT]}
     outcomes = {label: (p.communicate(timeout=600)[0], p.returncode) for label, p in procs.items()}
     for mutant, (out, code) in outcomes.items():
         assert code == 1, f"{mutant}: {out[-3000:]}"
         failed = [line for line in out.splitlines() if line.startswith("FAILED")]
         assert failed and all("leapfrog/leapfrog" in line for line in failed), out[-3000:]
+        ids = {line.split("[", 1)[1].split("]", 1)[0] for line in failed}
+        named = {}
+        for label in ("good", mutant):  # every case the plugin runs; the mutant's own cases
+            doc = tmp_path / f"{label}.json"
+            _truestep(
+                "gate",
+                "--results",
+                str(runs[label] / "results.csv"),
+                "--gates",
+                str(GATES),
+                "--json",
+                str(doc),
+                path=runs[f"{label}-src"],
+            )
+            named[label] = {g["id"]: g["verdict"] for g in json.loads(doc.read_text())["gates"]}
+        assert ids <= set(named["good"]), sorted(ids - set(named["good"]))
+        assert {i for i, v in named[mutant].items() if v == "fail" and "/leapfrog/leapfrog" in i} <= ids

@@ -280,8 +280,8 @@ def test_installed_engine_case_exact_and_system_run_and_gate(fake_site, tmp_path
     assert "engine ghost left out" not in done.stderr  # named engines only
     gate = _cli("gate", "--results", str(out / "results.csv"), "-v", path=fake_site)
     assert gate.returncode == 0, gate.stdout + gate.stderr
-    assert "ok   drifting-pair gates[0] error drift/straight dt=0.05" in gate.stdout
-    assert "ok   decay gates[0] order reference/rk4" in gate.stdout
+    assert "ok   drifting-pair/error/drift/straight@0.05 (gates[0]" in gate.stdout
+    assert "ok   decay/order/reference/rk4 (gates[0]" in gate.stdout
     default = _cli(
         "run", "--quick", "--cases", "drifting-pair", "--out", str(tmp_path / "all"), path=fake_site
     )

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import fnmatch
 from dataclasses import dataclass
+from pathlib import PurePath
 
 import numpy as np
 import pandas as pd
@@ -70,10 +71,11 @@ class GateResult:
 
     @property
     def label(self) -> str:
-        """``case gates[i] kind engine/method [dt=...]``: the gate's id in every output."""
+        """``<id> (gates[i] of <file name>)``: the verdict's id (:func:`gate_id`, as JUnit,
+        JSON and the pytest plugin name it), then where it is declared."""
         g = self.gate
-        dt = f" dt={g.dt:g}" if g.dt is not None else ""
-        return f"{self.case} {g.where} {g.kind} {g.engine}/{g.method}{dt}"
+        of = f" of {PurePath(g.file).name}" if g.file and not g.file.startswith("<") else ""
+        return f"{self.id or gate_id(self.case, g)} ({g.where}{of})"
 
     def row(self) -> dict:
         """This verdict as a row of the verdict table (:data:`GATE_COLUMNS`, in order)."""
@@ -511,13 +513,16 @@ def lost_since(verdicts: list[GateResult], before: list[GateResult]) -> list[Gat
 
 
 def gate_id(case: str, g: Gate) -> str:
-    """A gate verdict's id, the same from run to run and whatever the order of the gates:
-    ``case/id`` when the gate file gives it an ``id``, else ``case/kind/engine/method`` with the
-    step (``@dt``) and what else tells the gate apart (a property's name, the run a
-    ``no-worse-than`` compares with, a restitution gate's quantity). A second gate with
+    """A gate verdict's id, the same from run to run, whatever the order of the gates, on
+    the console, in markdown, JUnit, JSON and the pytest plugin's test ids:
+    ``case/id/engine/method@dt`` when the gate file gives it an ``id``, else
+    ``case/kind/engine/method`` with what else tells the gate apart (a property's name, the
+    run a ``no-worse-than`` compares with, a restitution gate's quantity) and the step
+    (``@dt``); ``engine`` and ``method`` are those a ``*`` stood for. A second gate with
     the same id in one run gets ``#2`` (in file order)."""
+    dt = f"@{g.dt:g}" if g.dt is not None else ""
     if g.id:
-        return f"{case}/{g.id}"
+        return f"{case}/{g.id}/{g.engine}/{g.method}{dt}"
     parts = [case, g.kind, g.engine, g.method]
     p = g.params
     if g.kind == "property":
@@ -528,7 +533,6 @@ def gate_id(case: str, g: Gate) -> str:
         parts.append(str(p.get("quantity", "")))
     if g.where == DECLARED:
         parts.append(DECLARED)
-    dt = f"@{g.dt:g}" if g.dt is not None else ""
     return "/".join(parts) + dt
 
 

@@ -16,7 +16,6 @@ import errno
 import json
 import math
 import os
-import platform
 import stat
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -58,7 +57,6 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
         failures=str(counts["fail"]),
         skipped=str(counts["skip"]),
         errors="0",
-        hostname=platform.node(),
     )
     for v in verdicts:
         case = ET.SubElement(
@@ -129,13 +127,11 @@ def markdown(
     if failed:
         lines += [
             "",
-            "| case | gate | engine/method | dt | measured | required |",
-            "|---|---|---|---|---|---|",
+            "| gate | where | measured | required |",
+            "|---|---|---|---|",
         ]
         lines += [
-            f"| {_cell(v.case)} | {_cell(v.gate.where)} {_cell(v.gate.kind)} | {_cell(v.gate.engine)}/"
-            f"{_cell(v.gate.method)} | {'' if v.gate.dt is None else f'{v.gate.dt:g}'} | "
-            f"{_cell(v.measured)} | {_cell(v.required)} |"
+            f"| {_cell(v.row()['id'])} | {_cell(v.gate.where)} | {_cell(v.measured)} | {_cell(v.required)} |"
             for v in failed
         ]
     if comparison is not None:
