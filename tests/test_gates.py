@@ -268,9 +268,13 @@ def test_baseline_lists_worse_better_appeared_and_vanished(run_dir, copy, capsys
 
 def test_baseline_wall_time_only_as_a_ratio_in_the_same_run(run_dir, copy, capsys):
     d, results = copy
+    base = d.parent / "base"
+    shutil.copytree(d, base)
+    results["wall_s"] = 0.001 * (1 + np.arange(len(results)) % 7)  # timings well above the timer's noise
+    results.to_csv(base / "results.csv", index=False)
     results["wall_s"] *= 10.0  # a slower machine: every ratio is unchanged
     results.to_csv(d / "results.csv", index=False)
-    args = ["gate", "--results", str(d / "results.csv"), "--baseline", str(run_dir), "-q"]
+    args = ["gate", "--results", str(d / "results.csv"), "--baseline", str(base), "-q"]
     assert main([*args, "--time-against", "reference/rk4"]) == 0
     capsys.readouterr()
     euler = results["method"] == "euler"
@@ -458,6 +462,7 @@ def test_time_against_an_engine_outside_engines_still_reads_its_rows(copy, run_d
     the reference's rk4 of the same case and step, in both runs (it compared 0 rows and
     said nothing); a time-against comparison that compares no ratio fails, saying so."""
     d, results = copy
+    results["wall_s"] = 0.001 * (1 + np.arange(len(results)) % 7)  # timings well above the timer's noise
     both = _with_engine_of_mine(d, results)
     base = d.parent / "base"
     shutil.copytree(d, base)
@@ -563,3 +568,30 @@ def test_two_gate_processes_write_the_same_bytes_whatever_the_hash_seed(run_dir,
         texts.append((done.stdout, out.read_bytes()))
     assert texts[0] == texts[1]
     assert texts[0][0].count("GONE") >= 5
+
+
+def test_timing_against_a_baseline_reads_both_runs_noise(run_dir, copy, capsys):
+    """``--time-against`` (issue 36, item 6): the same solver run twice moved microsecond
+    timings two-fold, and the ratios of a whole case with them (the named run timed at 5 us,
+    then 2 us): a tie within both runs' noise (at least 15% and 1 us a timing), not
+    "slower". A row three times slower at 10 ms is worse."""
+    d, results = copy
+    base = d.parent / "base"
+    shutil.copytree(d, base)
+    old = results.copy()
+    old["wall_s"], old["wall_s_spread"] = 5e-6, np.nan
+    old.to_csv(base / "results.csv", index=False)
+    new = old.copy()
+    new.loc[new["method"] == "rk4", "wall_s"] = 2e-6  # the named run alone got faster
+    new.to_csv(d / "results.csv", index=False)
+    args = ["gate", "--results", str(d / "results.csv"), "--baseline", str(base), "-q"]
+    assert main([*args, "--time-against", "reference/rk4"]) == 0, capsys.readouterr().out
+    old["wall_s"] = 0.01
+    old.to_csv(base / "results.csv", index=False)
+    new = old.copy()
+    slower = (new["method"] == "euler") & (new["dt"] == new["dt"].max())
+    new.loc[slower, "wall_s"] = 0.03
+    new.to_csv(d / "results.csv", index=False)
+    assert main([*args, "--time-against", "reference/rk4"]) == 1
+    out = capsys.readouterr().out
+    assert out.count("WORSE  timing") == 1 and "reference euler" in out

@@ -50,7 +50,7 @@ def test_the_row_takes_the_timed_runs_median_and_says_when_they_ended_elsewhere(
     assert same.wall_s == 0.2 and int(same.extra["repeats"]) == 3 and NOT_REPEATABLE not in same.message
     moved = merged(_traj(1.0), TimedRuns([0.1, 0.1], [end_of(_traj(1.0)), end_of(_traj(1.0 + 1e-15))]))
     assert NOT_REPEATABLE in moved.message
-    failed_alike = End("unstable", (1, 1, 1), ())
+    failed_alike = End("unstable", (1, 1), ())
     assert NOT_REPEATABLE not in merged(_traj(1.0, "unstable"), TimedRuns([0.1], [failed_alike])).message
 
 

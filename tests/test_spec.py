@@ -70,7 +70,7 @@ def test_the_baseline_compares_what_the_spec_says():
         "dt_limit": 0.01,
         "order": 0.05,
         "e_error": 0.005,
-        "wall_ratio": 1.0,
+        "wall_ratio": 0.5,
     }
     assert baseline.FLOORS == {"error": 1e-12, "energy_drift": 1e-12}
     assert set(compared()) == set(baseline.TOLERANCES) and set(DERIVED) <= set(compared())

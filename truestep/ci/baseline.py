@@ -237,22 +237,59 @@ def orders(results: pd.DataFrame, scales: Mapping[str, float] | None = None) -> 
     return pd.DataFrame(rows, columns=[*ORDER_KEYS, "order"])
 
 
+def _relative_noise(rows: pd.DataFrame) -> np.ndarray:
+    """Each row's wall-time noise over its wall time: its measured spread, at least
+    :data:`~truestep.measures.picks.TIE_NOISE` and the timer's floor
+    (:func:`~truestep.measures.picks.noise_band`)."""
+    from truestep.measures.picks import noise_band
+
+    wall = pd.to_numeric(rows["wall_s"], errors="coerce").to_numpy(float)
+    spread = (
+        pd.to_numeric(rows["wall_s_spread"], errors="coerce").to_numpy(float)
+        if "wall_s_spread" in rows
+        else None
+    )
+    return noise_band(wall, spread) / wall
+
+
 def _wall_ratios(results: pd.DataFrame, against: tuple[str, str]) -> pd.DataFrame:
-    """Each ok row's wall time over the named engine/method's at the same case and dt."""
+    """Each ok row's wall time over the named engine/method's at the same case and dt
+    (``wall_ratio``), and how far noise may move that ratio, relative (``ratio_noise``:
+    the row's and the named run's relative noise, :func:`_relative_noise`, added)."""
     e, m = against
-    ref = results[(results["engine"] == e) & (results["method"] == m) & (results["status"] == "ok")]
+    ok = results[results["status"] == "ok"].copy()
+    ok["noise"] = _relative_noise(ok) if len(ok) else np.zeros(0)
+    ref = ok[(ok["engine"] == e) & (ok["method"] == m)]
     ref = {
-        (r["case"], r["dt_kind"], _key_value("dt", r["dt"])): float(r["wall_s"])
+        (r["case"], r["dt_kind"], _key_value("dt", r["dt"])): (float(r["wall_s"]), float(r["noise"]))
         for r in ref.to_dict("records")
     }
-    out = results[results["status"] == "ok"].copy()
-    out["wall_ratio"] = [
-        float(r["wall_s"]) / ref[k]
-        if (k := (r["case"], r["dt_kind"], _key_value("dt", r["dt"]))) in ref and ref[k] > 0
-        else np.nan
-        for r in out.to_dict("records")
-    ]
-    return out[np.isfinite(out["wall_ratio"].to_numpy(float))]
+    ratios, noise = [], []
+    for r in ok.to_dict("records"):
+        k = (r["case"], r["dt_kind"], _key_value("dt", r["dt"]))
+        wall, band = ref.get(k, (np.nan, np.nan))
+        ratios.append(float(r["wall_s"]) / wall if wall > 0 else np.nan)
+        noise.append(float(r["noise"]) + band)
+    ok["wall_ratio"], ok["ratio_noise"] = ratios, noise
+    return ok[np.isfinite(ok["wall_ratio"].to_numpy(float))]
+
+
+def _compare_timing(old: pd.DataFrame, new: pd.DataFrame, tol: float, findings: list[Finding]) -> int:
+    """Wall-time ratios (:func:`_wall_ratios`) row by row: ``worse`` only where the new
+    ratio, less its noise, exceeds the old one, plus its noise, by more than ``tol``
+    (relative), ``better`` the other way; ratios whose noise bands leave no such gap are
+    a tie. An unchanged solver run twice (A/A) passes: single timings of a few
+    microseconds move two-fold from run to run."""
+    a, b = _index(old, RESULT_KEYS), _index(new, RESULT_KEYS)
+    for k in sorted(a.keys() & b.keys(), key=str):
+        ra, rb = a[k], b[k]
+        r0, r1 = float(ra["wall_ratio"]), float(rb["wall_ratio"])
+        n0, n1 = float(ra["ratio_noise"]), float(rb["ratio_noise"])
+        if r1 * (1 - n1) > r0 * (1 + n0) * (1 + tol):
+            findings.append(Finding("worse", "timing", _key(rb, RESULT_KEYS), "wall_ratio", r0, r1))
+        elif r1 * (1 + n1) * (1 + tol) < r0 * (1 - n0):
+            findings.append(Finding("better", "timing", _key(rb, RESULT_KEYS), "wall_ratio", r0, r1))
+    return len(a.keys() & b.keys())
 
 
 def compare(
@@ -297,13 +334,10 @@ def compare(
         )
         if time_against and whole_old is not None and whole_new is not None:
             e, _, m = time_against.partition("/")
-            timed = _compare_rows(
-                "timing",
+            timed = _compare_timing(
                 _in_engines(_wall_ratios(whole_old, (e, m)), engines),
                 _in_engines(_wall_ratios(whole_new, (e, m)), engines),
-                RESULT_KEYS,
-                [_quantity("wall_ratio", DERIVED["wall_ratio"])],
-                tol,
+                tol["wall_ratio"],
                 findings,
             )
             compared += timed

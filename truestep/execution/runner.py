@@ -125,7 +125,11 @@ def simulate_sweep(
                 if part == "measured":
                     out.append(measured_run(get_adapter(engine), case, method, dt))
                 elif part == "timed":
-                    out.append(timed_runs(get_adapter(engine), case, method, dt, timing, warm_up=not warm)[1])
+                    out.append(
+                        timed_runs(
+                            get_adapter(engine), case, method, dt, timing, warm_up=not warm, lean=True
+                        )[1]
+                    )
                 else:
                     out.append(simulate_timed(engine, case, method, dt, timing, warm_up=not warm))
         except TimeLimitExceeded as err:  # this step's timeout row; the sweep goes on

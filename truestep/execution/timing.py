@@ -58,10 +58,11 @@ class Timing:
         return int(np.clip(wanted, self.min_repeats, self.max_repeats))
 
 
-QUICK_TIMING = Timing(min_total_s=0.0, min_repeats=1, max_repeats=1, long_run_s=0.0, apart=False)
-"""``--quick`` runs time each row once: a smoke run (its ties are read against the least
-noise, :data:`truestep.measures.picks.TIE_NOISE`, with no spread of its own), its short rows
-measured and timed in one process."""
+QUICK_TIMING = Timing(min_total_s=0.002, min_repeats=3, max_repeats=5, long_run_s=0.002, apart=False)
+"""``--quick`` runs time a row of 2 ms or more once, a shorter one 3 to 5 times (a single
+timing of a few microseconds moves two-fold from run to run: a CI's ``--time-against``
+needs the median and the spread there, at a cost of some milliseconds a row); its rows
+are measured and timed in one process."""
 
 
 UNTIMED = Timing(timed=False)
@@ -95,14 +96,15 @@ class End:
     its status, work counts and last record (time, positions, velocities)."""
 
     status: str
-    counts: tuple[int, int, int]
+    counts: tuple[int, int]
+    """Evaluations and steps (how many records a run kept is not where it ended)."""
     last: tuple[np.ndarray, ...]
 
 
 def end_of(traj: Trajectory) -> End:
-    """The :class:`End` of a run: status, ``(nfev, steps, records)`` and the last record."""
+    """The :class:`End` of a run: status, ``(nfev, steps)`` and the last record."""
     last = [traj.t[-1:], traj.x[-1:]] + ([traj.v[-1:]] if traj.v is not None else [])
-    return End(traj.status, (traj.nfev, traj.steps, len(traj.t)), tuple(np.array(a) for a in last))
+    return End(traj.status, (traj.nfev, traj.steps), tuple(np.array(a) for a in last))
 
 
 def same_end(a: End, b: End) -> bool:
@@ -143,13 +145,34 @@ class TimedRuns:
     path: Any = None
 
 
+TIMED_RECORDS = 2
+"""The records a timed run of a fixed-step method keeps when the row is measured from
+another run (its start, middle and end: :func:`~truestep.reference_impl.integrate.record_indices`):
+the time of a speed claim is the engine's stepping, not the harness reading its state back
+at every record (an engine stepped from Python paid a call per record, 15x its stepping
+on a 9-particle net recorded at every step). An error-controlled method keeps the
+case's records: where it records may decide where it stops."""
+
+
+def timed_case(adapter, case: Case, method: str) -> Case:
+    """The case a timed run runs when the row is measured from another run: the case with
+    :data:`TIMED_RECORDS` records for a fixed-step method, the case itself for an
+    error-controlled one."""
+    if method in getattr(adapter, "adaptive_methods", ()):
+        return case
+    return dataclasses.replace(case, max_records=min(case.max_records, TIMED_RECORDS))
+
+
 def timed_runs(
-    adapter, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool
+    adapter, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool, lean: bool = False
 ) -> tuple[Trajectory, TimedRuns]:
     """The timed runs of one row (:meth:`Timing.runs_after`), none of them watched, after a
     short warm-up when ``warm_up`` (:attr:`Timing.warmup_fraction` of the duration: JIT
     compilation, caches, first-call costs); the first run's trajectory and all of them.
-    A run that did not finish is not repeated."""
+    A run that did not finish is not repeated. ``lean``: the row is measured from another
+    run, and the timed runs keep few records (:func:`timed_case`)."""
+    if lean:
+        case = timed_case(adapter, case, method)
     if warm_up:
         short = dataclasses.replace(
             case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
@@ -210,5 +233,5 @@ def simulate_timed(
         return once
     monitor = watches_every_step(adapter)
     traj = measured_run(adapter, case, method, dt) if monitor else None
-    first, runs = timed_runs(adapter, case, method, dt, timing, warm_up=warm_up and not monitor)
+    first, runs = timed_runs(adapter, case, method, dt, timing, warm_up=warm_up and not monitor, lean=monitor)
     return merged(first if traj is None else traj, runs)
