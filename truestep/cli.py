@@ -522,6 +522,29 @@ def _write_ci_outputs(
         ) from None
 
 
+def cmd_baseline(args: argparse.Namespace) -> int:
+    """``truestep baseline save DIR``: a run's tables kept as a baseline
+    (:func:`truestep.ci.saved.save`)."""
+    from truestep.ci.saved import BaselineRefused, save
+
+    try:
+        provenance = save(Path(args.results), Path(args.dir))
+    except BaselineRefused as err:
+        raise UsageError(str(err)) from None
+    except OSError as err:
+        raise UsageError(
+            f"cannot save the baseline: {visible(err.filename or '')} {err.strerror or err}"
+        ) from None
+    project = provenance["project"]
+    where = (
+        f"project revision {project['revision'][:12]}" + (" (with changes)" if project["dirty"] else "")
+        if project
+        else "no git revision (not a checkout)"
+    )
+    print(f"saved {args.results} as baseline {args.dir} ({provenance['ran_with']}, {where})")
+    return 0
+
+
 def cmd_list(args: argparse.Namespace) -> int:
     from truestep.adapters import engine_status, get_adapter, registered
 
@@ -833,6 +856,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     gate.add_argument("-q", "--quiet", action="store_true", help="do not print gates not evaluated")
     gate.set_defaults(func=cmd_gate)
+
+    base = sub.add_parser(
+        "baseline",
+        help="keep a run as a baseline, with its provenance",
+        description="Keep a run's tables as a baseline for `truestep gate --baseline DIR`.",
+    )
+    actions = base.add_subparsers(dest="action", required=True, metavar="ACTION")
+    save = actions.add_parser(
+        "save",
+        help="save a run's tables and their provenance into DIR",
+        description="Copy a run's results.csv, stability.csv, restitution.csv and "
+        "run.json into DIR cell for cell, without the host name or absolute paths "
+        "(made relative to the working directory, the project's root), beside a "
+        "provenance.json: the truestep that ran them, every engine's distribution "
+        "version and the project's git revision. DIR must be new, empty, or a "
+        "baseline saved before (replaced as a whole); anything else is exit 2.",
+    )
+    save.add_argument("dir", metavar="DIR", help="the baseline's folder")
+    save.add_argument(
+        "--results",
+        default="reports/results.csv",
+        metavar="FILE",
+        help="the run's results.csv; its other tables and run.json beside it (default: reports/results.csv)",
+    )
+    save.set_defaults(func=cmd_baseline)
 
     lst = sub.add_parser(
         "list",

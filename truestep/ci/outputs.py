@@ -2,9 +2,10 @@
 
 JUnit: one test case per gate verdict (suite ``truestep.ci.gates``, class name the case,
 name the verdict's id, :func:`truestep.ci.gates.gate_id`; file relative to the working
-directory) and, with a baseline, one per compared table (suite
-``truestep.ci.baseline``) failing with every row that got worse. Markdown: the counts,
-then tables of the failed gates and of what got worse, for a pull request page (and
+directory) and, with a baseline (suite ``truestep.ci.baseline``), one failing case per
+row that got worse or vanished (class name ``baseline.<table>``) and one passing case per
+compared table where none did. Markdown: the counts, then tables of the failed gates and
+of what got worse (with the change in percent), for a pull request page (and
 ``$GITHUB_STEP_SUMMARY``). JSON: everything, for other tools: numbers as JSON numbers
 (``null`` for one that is not finite or not measured), each gate with its ``id``, its
 measured ``value`` and its ``limits`` (the gate's own numbers).
@@ -86,22 +87,23 @@ def junit(verdicts: list[GateResult], comparison: Comparison | None, reasons: li
             ["timing"] if comparison.time_against else []
         )
         worse = comparison.worse()
-        base = ET.SubElement(
-            suites,
-            "testsuite",
-            name="truestep.ci.baseline",
-            tests=str(len(tables)),
-            failures=str(len({f.table for f in worse})),
-            skipped="0",
-            errors="0",
-        )
+        base = ET.SubElement(suites, "testsuite", name="truestep.ci.baseline", skipped="0", errors="0")
         for table in tables:
-            case = ET.SubElement(base, "testcase", classname="baseline", name=table)
             bad = [f for f in worse if f.table == table]
-            if bad:
-                ET.SubElement(
-                    case, "failure", message=f"{len(bad)} row(s) worse or gone", type="Regression"
-                ).text = "\n".join(visible(f.line()) for f in bad)
+            if not bad:  # the table held: one passing case
+                ET.SubElement(base, "testcase", classname="baseline", name=table)
+            for f in bad:  # one failing case per row that got worse or vanished
+                case = ET.SubElement(
+                    base,
+                    "testcase",
+                    classname=f"baseline.{table}",
+                    name=visible(f"{f.key} {f.quantity}".strip()),
+                )
+                ET.SubElement(case, "failure", message=visible(f.line()), type="Regression").text = visible(
+                    f.line()
+                )
+        base.set("tests", str(sum(1 for _ in base.iter("testcase"))))
+        base.set("failures", str(len(worse)))
     ET.indent(suites)
     return ET.tostring(suites, encoding="unicode", xml_declaration=True) + "\n"
 
@@ -146,15 +148,29 @@ def markdown(
         ]
         worse = comparison.worse()
         if worse:
-            lines += ["", "| change | table | row | quantity | baseline | now |", "|---|---|---|---|---|---|"]
+            lines += [
+                "",
+                "| change | table | row | quantity | baseline | now | change % |",
+                "|---|---|---|---|---|---|---|",
+            ]
             lines += [
                 f"| {f.change} | {f.table} | {_cell(f.key)} | {_cell(f.quantity)} | "
-                f"{_cell(_fmt(f.baseline))} | {_cell(_fmt(f.current))} |"
+                f"{_cell(_fmt(f.baseline))} | {_cell(_fmt(f.current))} | {_percent(f.baseline, f.current)} |"
                 for f in worse[:200]
             ]
             if len(worse) > 200:
                 lines.append(f"\n... and {len(worse) - 200} more (see the JSON output).")
     return "\n".join(lines) + "\n"
+
+
+def _percent(old: object, new: object) -> str:
+    """How far a number moved, in percent of the baseline's (``+12.5%``); empty where either
+    is not a finite number or the baseline's is 0 (a status, a row gone)."""
+    if not isinstance(old, int | float) or not isinstance(new, int | float) or isinstance(old, bool):
+        return ""
+    if not (math.isfinite(old) and math.isfinite(new)) or old == 0:
+        return ""
+    return f"{(new - old) / abs(old) * 100:+.3g}%"
 
 
 def _fmt(x: object) -> str:

@@ -1,0 +1,113 @@
+"""``truestep baseline save DIR`` (issue 36, item 4): a run kept as a baseline, cell for
+cell, with no host name or absolute path in it, and a provenance record: the truestep
+that ran it, every engine's version, the project's git revision."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import truestep
+from truestep.cli import main
+
+
+@pytest.fixture(scope="module")
+def project(tmp_path_factory) -> tuple[Path, Path]:
+    """A git checkout with one commit, and a quick run made from it: (root, run folder)."""
+    root = tmp_path_factory.mktemp("project")
+    for args in (["init", "-q"], ["config", "user.email", "t@t"], ["config", "user.name", "t"]):
+        subprocess.run(["git", *args], cwd=root, check=True)
+    (root / "solver.py").write_text("STEP = 1\n")
+    subprocess.run(["git", "add", "solver.py"], cwd=root, check=True)
+    subprocess.run(["git", "commit", "-q", "-m", "one"], cwd=root, check=True)
+    out = root / "reports"
+    args = ["run", "--quick", "--cases", "harmonic-oscillator", "--engines", "reference", "--out", str(out)]
+    assert main(args) == 0
+    return root, out
+
+
+def test_a_saved_baseline_is_the_run_without_host_or_absolute_paths(project, monkeypatch, capsys):
+    root, out = project
+    monkeypatch.chdir(root)
+    assert main(["baseline", "save", "baselines/main", "--results", str(out / "results.csv")]) == 0
+    head = subprocess.run(
+        ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True
+    ).stdout.strip()
+    assert f"project revision {head[:12]}" in capsys.readouterr().out
+    saved = root / "baselines" / "main"
+    provenance = json.loads((saved / "provenance.json").read_text())
+    assert provenance["project"] == {"revision": head, "dirty": False}
+    assert provenance["ran_with"] == f"truestep {truestep.__version__}"
+    assert provenance["engines"] == {"reference": f"truestep {truestep.__version__}"}
+    assert provenance["packages"]["numpy"]
+    for path in saved.iterdir():
+        text = path.read_text()
+        assert str(root) not in text and str(Path.home()) + "/" not in text, path.name
+        assert socket.gethostname() not in text.split(","), path.name
+    for name in ("results", "stability", "restitution"):
+        before = pd.read_csv(out / f"{name}.csv", dtype=str, keep_default_na=False)
+        after = pd.read_csv(saved / f"{name}.csv", dtype=str, keep_default_na=False)
+        kept = [c for c in before if c not in ("host", "case_source")]
+        pd.testing.assert_frame_equal(before[kept], after[kept])
+    # the baseline is what a gate compares with, bit for bit
+    args = ["gate", "--results", str(out / "results.csv"), "--baseline", str(saved), "--identical", "-q"]
+    assert main(args) == 0
+    assert ", 0 differ" in capsys.readouterr().out
+
+
+def test_a_change_since_the_commit_is_recorded_and_a_folder_of_other_files_is_refused(
+    project, monkeypatch, capsys
+):
+    root, out = project
+    monkeypatch.chdir(root)
+    (root / "solver.py").write_text("STEP = 2\n")
+    try:
+        assert main(["baseline", "save", "b2", "--results", str(out / "results.csv")]) == 0
+        assert json.loads((root / "b2" / "provenance.json").read_text())["project"]["dirty"] is True
+        assert "(with changes)" in capsys.readouterr().out
+        # saved again over itself: replaced as a whole
+        assert main(["baseline", "save", "b2", "--results", str(out / "results.csv")]) == 0
+    finally:
+        subprocess.run(["git", "checkout", "-q", "solver.py"], cwd=root, check=True)
+    other = root / "notes"
+    other.mkdir()
+    (other / "todo.txt").write_text("keep me")
+    capsys.readouterr()
+    assert main(["baseline", "save", "notes", "--results", str(out / "results.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "not a baseline truestep saved" in err and "Traceback" not in err
+    assert sorted(p.name for p in other.iterdir()) == ["todo.txt"]
+
+
+def test_each_regressed_row_is_a_junit_case_and_a_markdown_row_with_its_change(project, tmp_path, capsys):
+    """Against a baseline, a row that got worse is a failing JUnit case of its own, and the
+    markdown shows by how much, in percent (issue 36, item 4)."""
+    import xml.etree.ElementTree as ET
+
+    _, out = project
+    worse = tmp_path / "worse"
+    worse.mkdir()
+    for name in ("stability.csv", "restitution.csv", "run.json"):
+        (worse / name).write_bytes((out / name).read_bytes())
+    results = pd.read_csv(out / "results.csv")
+    hit = (results["method"] == "rk4") & (results["dt"] == results["dt"].max())
+    results.loc[hit, "error"] *= 1.25
+    results.to_csv(worse / "results.csv", index=False)
+    junit, md = tmp_path / "j.xml", tmp_path / "s.md"
+    args = ["gate", "--results", str(worse / "results.csv"), "--baseline", str(out), "-q"]
+    assert main([*args, "--junit", str(junit), "--markdown", str(md)]) == 1
+    capsys.readouterr()
+    suite = next(
+        s for s in ET.parse(junit).getroot().iter("testsuite") if s.get("name") == "truestep.ci.baseline"
+    )
+    failing = [c for c in suite.iter("testcase") if c.find("failure") is not None]
+    assert [c.get("classname") for c in failing] == ["baseline.results"]
+    assert failing[0].get("name").startswith("harmonic-oscillator reference rk4 dt=")
+    assert suite.get("failures") == "1" and int(suite.get("tests")) == len(list(suite.iter("testcase")))
+    row = next(line for line in md.read_text().splitlines() if "reference rk4" in line)
+    assert row.rstrip(" |").endswith("+25%")
