@@ -111,3 +111,70 @@ def test_each_regressed_row_is_a_junit_case_and_a_markdown_row_with_its_change(p
     assert suite.get("failures") == "1" and int(suite.get("tests")) == len(list(suite.iter("testcase")))
     row = next(line for line in md.read_text().splitlines() if "reference rk4" in line)
     assert row.rstrip(" |").endswith("+25%")
+
+
+PLUGIN_TEST = """
+import pytest
+
+
+@pytest.mark.truestep(
+    engines="reference",
+    cases="harmonic-oscillator",
+    quick=True,
+    results="{results}",
+    baseline="{baseline}",
+)
+def test_physics(truestep_gate):
+    truestep_gate.check()
+"""
+
+
+def _pytest(folder: Path, results: Path, baseline: Path) -> subprocess.CompletedProcess:
+    import sys
+
+    (folder / "test_physics.py").write_text(PLUGIN_TEST.format(results=results, baseline=baseline))
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-rA",
+            "-p",
+            "no:cacheprovider",
+            "-p",
+            "no:randomly",
+            str(folder),
+        ],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def test_the_pytest_mark_reads_results_and_compares_with_a_baseline(project, tmp_path):
+    """``@pytest.mark.truestep(results=..., baseline=...)`` (issue 36, item 4): the gates
+    read the run CI has already made (a doctored error shows: nothing ran again), and each
+    baseline table is a test of its own, failing with the row that got worse."""
+    _, out = project
+    saved = tmp_path / "saved"
+    assert main(["baseline", "save", str(saved), "--results", str(out / "results.csv")]) == 0
+    same = _pytest(tmp_path, out / "results.csv", saved)
+    assert same.returncode == 0, same.stdout[-3000:]
+    for table in ("results", "orders", "stability", "restitution"):
+        assert f"PASSED test_physics.py::test_physics[baseline/{table}]" in same.stdout
+    assert "test_physics[harmonic-oscillator/order/reference/rk4]" in same.stdout
+    worse = tmp_path / "worse"
+    worse.mkdir()
+    for name in ("stability.csv", "restitution.csv", "run.json"):
+        (worse / name).write_bytes((out / name).read_bytes())
+    results = pd.read_csv(out / "results.csv")
+    hit = (results["method"] == "rk4") & (results["dt"] == results["dt"].max())
+    results.loc[hit, "error"] *= 4.0
+    results.to_csv(worse / "results.csv", index=False)
+    bad = _pytest(tmp_path, worse / "results.csv", saved)
+    assert bad.returncode == 1, bad.stdout[-3000:]
+    failed = [line for line in bad.stdout.splitlines() if line.startswith("FAILED")]
+    assert any("test_physics[baseline/results]" in line for line in failed), bad.stdout[-3000:]
+    assert "WORSE  results harmonic-oscillator reference rk4 dt=" in bad.stdout

@@ -13,10 +13,15 @@ the gate's measured and required values::
 
 Marker arguments: ``engines`` and ``cases`` as ``truestep run`` takes them (relative
 paths are read from the test file's directory first), ``gates`` (a gates file or a
-list of them, same), ``quick`` (default false) and ``case_gates`` (also check the gates
-written in the case files; default true). The cases run once per session for each
-distinct marker; a gate the run cannot evaluate (its engine did not run the case) is a
-skipped test, and a marker whose gates name nothing fails.
+list of them, same), ``quick`` (default false), ``case_gates`` (also check the gates
+written in the case files; default true), ``results`` (a run's ``results.csv``, with its
+other tables beside it: the gates read it instead of running the cases again, as a CI
+that has just run ``truestep run`` wants) and ``baseline`` (a baseline's folder,
+``truestep baseline save``: one more test per table, ``baseline/results``,
+``baseline/orders``, ``baseline/stability``, ``baseline/restitution``, failing with every
+row of the marker's cases and engines that got worse or vanished). The cases run once
+per session for each distinct marker; a gate the run cannot evaluate (its engine did not
+run the case) is a skipped test, and a marker whose gates name nothing fails.
 
 The ``truestep_run`` fixture runs a selection directly: ``truestep_run(cases, engines,
 quick=True)`` returns :class:`truestep.api.Tables`.
@@ -39,8 +44,9 @@ _RUNS: dict[tuple, Any] = {}
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
-        f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True): "
-        "run truestep cases on these engines; the test takes `truestep_gate`, once per gate",
+        f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True, results=None, "
+        "baseline=None): run truestep cases on these engines (or read results=), and compare "
+        "with baseline=; the test takes `truestep_gate`, once per gate and baseline table",
     )
 
 
@@ -53,6 +59,8 @@ class Selection:
     gates: tuple[str, ...]
     quick: bool
     case_gates: bool
+    results: str | None = None
+    baseline: str | None = None
 
 
 def _paths(value: Any, base: Path) -> tuple[str, ...]:
@@ -68,7 +76,7 @@ def _paths(value: Any, base: Path) -> tuple[str, ...]:
 
 def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
     kw = dict(mark.kwargs)
-    unknown = set(kw) - {"engines", "cases", "gates", "quick", "case_gates"}
+    unknown = set(kw) - {"engines", "cases", "gates", "quick", "case_gates", "results", "baseline"}
     if unknown:
         raise pytest.UsageError(f"@pytest.mark.{MARKER}: unknown argument {sorted(unknown)[0]!r}")
     if "engines" not in kw or "cases" not in kw:
@@ -84,7 +92,21 @@ def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
         gates=_paths(kw.get("gates"), base),
         quick=bool(kw.get("quick", False)),
         case_gates=bool(kw.get("case_gates", True)),
+        results=_one_path(kw.get("results"), base, "results"),
+        baseline=_one_path(kw.get("baseline"), base, "baseline"),
     )
+
+
+def _one_path(value: Any, base: Path, name: str) -> str | None:
+    """A marker's file or folder argument: relative to the test file's directory, else as
+    given; one that does not exist is a usage error (a CI must not pass by reading nothing)."""
+    if value is None:
+        return None
+    path = Path(str(value))
+    for candidate in (base / path, path):
+        if candidate.exists():
+            return str(candidate)
+    raise pytest.UsageError(f"@pytest.mark.{MARKER}: {name}={str(value)!r}: no such file or folder")
 
 
 @dataclass
@@ -134,14 +156,14 @@ def _gates(sel: Selection) -> tuple[list, list]:
     return cases, gates_to_check(own, [item for f in sel.gates for item in load_gates_file(f)])
 
 
-def _plan(sel: Selection) -> list[GateCheck]:
+def _plan(sel: Selection) -> list[GateCheck | BaselineCheck]:
     """Every gate of the selection, ``*`` expanded to the engine/method pairs that can
-    model the case (what the run will simulate)."""
+    model the case (what the run will simulate), then each baseline table to compare."""
     from truestep.adapters import get_adapter
     from truestep.api import select_engines
 
     engines = select_engines(list(sel.engines))
-    checks = []
+    checks: list[GateCheck] = []
     for case, g in _gates(sel)[1]:
         for engine in engines if g.engine == "*" else [g.engine]:
             if engine not in engines:
@@ -158,15 +180,78 @@ def _plan(sel: Selection) -> list[GateCheck]:
     for c in checks:
         seen[c.id] = seen.get(c.id, 0) + 1
         c.copy = seen[c.id]
-    return checks
+    return [*checks, *(BaselineCheck(sel, t) for t in BASELINE_TABLES if sel.baseline is not None)]
+
+
+BASELINE_TABLES = ("results", "orders", "stability", "restitution")
+"""What a marker's ``baseline=`` compares, one test each (:func:`truestep.ci.baseline.compare`)."""
+
+
+@dataclass
+class BaselineCheck:
+    """One table of the marker's run compared with its ``baseline=``, in the marker's
+    cases and engines: fails with every row that got worse or vanished."""
+
+    selection: Selection
+    table: str
+
+    @property
+    def id(self) -> str:
+        return f"baseline/{self.table}"
+
+    def check(self) -> None:
+        comparison = _comparison(self.selection)
+        if self.table == "results" and not comparison.compared:
+            pytest.fail(
+                f"baseline {self.selection.baseline}: no row of the marker's cases and engines to compare",
+                pytrace=False,
+            )
+        bad = [f for f in comparison.worse() if f.table == self.table]
+        if bad:
+            pytest.fail("\n".join(f.line() for f in bad), pytrace=False)
+
+
+def _comparison(sel: Selection):
+    """The marker's run compared with its baseline, in its cases and engines (made once)."""
+    from truestep.adapters import resolve_engine
+    from truestep.ci.baseline import compare, narrow, read_tables
+
+    key = ("baseline", *dataclasses.astuple(sel))
+    if key not in _RUNS:
+        tables = _tables(sel)
+        current = {
+            "results": tables.results,
+            "stability": tables.stability,
+            "restitution": tables.restitution,
+        }
+        current = {k: v if v is None or len(v.columns) else None for k, v in current.items()}
+        cases = {c.name for c in _gates(sel)[0]}
+        engines = {resolve_engine(e) for e in sel.engines}
+        before = narrow(read_tables(Path(str(sel.baseline))), cases=cases, engines=engines)
+        _RUNS[key] = compare(before, narrow(current, cases=cases, engines=engines))
+    return _RUNS[key]
+
+
+@dataclass
+class _Read:
+    """A run's tables read from its folder (the marker's ``results=``)."""
+
+    results: Any
+    stability: Any
+    restitution: Any
 
 
 def _tables(sel: Selection):
-    """The selection's run, made once per session; the stability searches and the
-    restitution sweep only when a gate reads them."""
+    """The selection's run, made once per session (the stability searches and the
+    restitution sweep only when a gate reads them), or read from ``results=``."""
     from truestep.api import run
 
     key = dataclasses.astuple(sel)
+    if key not in _RUNS and sel.results is not None:
+        from truestep.ci.baseline import read_tables
+
+        read = read_tables(Path(sel.results).parent)
+        _RUNS[key] = _Read(read["results"], read["stability"], read["restitution"])
     if key not in _RUNS:
         cases, todo = _gates(sel)
         analyses = any(g.kind in ("stability-limit", "restitution") for _, g in todo)
@@ -200,7 +285,7 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
 
 
 @pytest.fixture
-def truestep_gate(request: pytest.FixtureRequest) -> GateCheck:
+def truestep_gate(request: pytest.FixtureRequest) -> GateCheck | BaselineCheck:
     """One gate of the test's ``@pytest.mark.truestep`` selection (call ``.check()``)."""
     check = getattr(request, "param", None)
     if check is None:
