@@ -16,7 +16,14 @@ import pandas as pd
 from truestep.cases.case import Case
 from truestep.measures.metrics import fit_order, round_off_floor
 from truestep.measures.peers import PEER_COLUMNS, same_scheme
-from truestep.measures.picks import cheapest, restitution_fidelity, scorecard, speed_claims, survival
+from truestep.measures.picks import (
+    cheapest,
+    restitution_fidelity,
+    scene_set_error,
+    scorecard,
+    speed_claims,
+    survival,
+)
 
 
 @dataclass(frozen=True)
@@ -45,6 +52,9 @@ class Findings:
     conclusions: dict[str, Conclusion] = dataclasses.field(default_factory=dict)
     notes: dict[tuple[str, str], str] = dataclasses.field(default_factory=dict)
     peers: pd.DataFrame = dataclasses.field(default_factory=lambda: pd.DataFrame(columns=list(PEER_COLUMNS)))
+    scene_set: dict[str, str] = dataclasses.field(default_factory=dict)
+    """case name -> why the reference's integrators do not set its error
+    (:func:`truestep.measures.picks.scene_set_error`)."""
 
 
 Run = tuple[str, str, float, str, float]
@@ -115,6 +125,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         conclusions={c.name: conclude(c, results) for c in cases},
         notes=method_notes(results),
         peers=same_scheme(results, cases),
+        scene_set={c.name: why for c in cases if (why := scene_set_error(c, results)) is not None},
     )
 
 

@@ -68,6 +68,14 @@ def summary(cases: list[Case], found: Findings, tables: dict[str, pd.DataFrame])
             "fewer derivative evaluations it is named too:\n"
         )
         lines.append(md_table(table))
+    shared = [
+        f"- {text(name)}: {text(why)}; there the reference's methods are interchangeable, and "
+        "its picks compare the engines' handling of events (contacts, spawns), not integrators."
+        for name, why in found.scene_set.items()
+    ]
+    if shared:
+        lines.append("Where no integrator sets the error:\n")
+        lines += [*shared, ""]
     rest = tables.get("restitution")
     if rest is not None and len(rest):
         r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
