@@ -596,9 +596,14 @@ def cmd_list(args: argparse.Namespace) -> int:
     from truestep.adapters import engine_status, get_adapter, registered
 
     cases = _load(args.cases)
-    print("cases:")
+    if args.quick and args.cases == "*":
+        cases = [c for c in cases if c.in_quick] or cases  # as `truestep run --quick` chooses
+    print("cases" + (" of a --quick run:" if args.quick else ":"))
     for c in cases:
         print(f"  {c.name:24s} {c.kind:9s} features: {', '.join(sorted(c.features))}")
+        steps = ", ".join(f"{h:.4g}" for h in c.sweep(adaptive=False, quick=args.quick))
+        tols = ", ".join(f"{t:g}" for t in c.sweep(adaptive=True, quick=args.quick))
+        print(f"  {'':24s} {'':9s} steps (s): {steps or '-'}; tolerances: {tols or '-'}")
     print("engines:")
     names = list(registered()) if not args.engines else [e.strip() for e in args.engines.split(",")]
     for name in names:
@@ -980,6 +985,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     lst.add_argument("--cases", default="*", metavar="ITEMS", help=CASES_HELP)
     lst.add_argument("--engines", default=None, metavar="NAMES", help="engine names, comma-separated")
+    lst.add_argument(
+        "--quick",
+        action="store_true",
+        help="the cases a `truestep run --quick` runs (without --cases: those marked for it) "
+        "and the steps and tolerances of their quick sweeps",
+    )
     lst.set_defaults(func=cmd_list)
 
     fig = sub.add_parser(
