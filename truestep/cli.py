@@ -88,6 +88,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     """
     from truestep.execution.interrupts import Interrupted, handled
     from truestep.execution.isolation import set_run_budget
+
+    if args.out is not None and not args.out.strip():  # `--out "$OUTDIR"`, unset: not reports/
+        raise UsageError("--out: an empty path (an unset variable?): name the folder")
     from truestep.execution.journal import Journal
 
     with handled():

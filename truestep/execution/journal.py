@@ -348,10 +348,17 @@ class Journal:
 
     def remove(self) -> None:
         """Delete the journal (once the report is published, or to start afresh); a
-        symbolic link or file in its place is removed, never followed."""
+        symbolic link or file in its place is removed, never followed. A folder of that
+        name that truestep did not make (files in it, no journal among them) is the user's:
+        :class:`JournalError`, and it is left as it is."""
         if os.path.islink(self.dir) or (os.path.lexists(self.dir) and not self.dir.is_dir()):
             self.dir.unlink(missing_ok=True)
-        else:
+        elif self.dir.is_dir():
+            if not (self.dir / JOURNAL_FILE).exists() and any(self.dir.iterdir()):
+                raise JournalError(
+                    f"{self.dir} is a folder truestep did not make (no {JOURNAL_FILE} in it), where a "
+                    "run keeps its checkpoints: rename or remove it; nothing was deleted"
+                )
             shutil.rmtree(self.dir, ignore_errors=True)
 
 

@@ -16,6 +16,7 @@ import errno
 import fcntl
 import json
 import os
+import stat
 import sys
 import time
 from pathlib import Path
@@ -69,6 +70,11 @@ class RunLock:
                         f"{self.path} is a symbolic link, not truestep's lock file; remove it"
                     ) from None
                 raise
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1:
+                os.close(fd)
+                what = "a hard link to another file" if stat.S_ISREG(st.st_mode) else "not a regular file"
+                raise LockBusy(f"{self.path} is {what}, not truestep's lock file; remove it")
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:

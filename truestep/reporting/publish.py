@@ -94,6 +94,9 @@ def recover(out: Path) -> list[str]:
             continue
         if _ours(path):
             shutil.rmtree(path, ignore_errors=True)
+        elif os.path.isdir(path) and not os.path.islink(path):  # the user's folder: left alone
+            done.append(f"left {path.name}: a folder truestep did not make")
+            continue
         else:  # a link or a file under a scratch folder's name: removed, never followed
             with contextlib.suppress(OSError):
                 path.unlink()
@@ -102,13 +105,19 @@ def recover(out: Path) -> list[str]:
 
 
 def _ours(path: Path) -> bool:
-    """Whether ``path`` is a directory (not a link) of this process's user, as the
-    scratch folders a run makes are."""
+    """Whether ``path`` is a scratch folder a run made: a directory (not a link) of this
+    process's user that holds a report's marker (a staging folder writes it first) or
+    nothing at all. A user's own folder under a scratch name is never this, and never
+    deleted."""
+    from truestep.reporting.folder import MARKER
+
     try:
         st = os.lstat(path)
+        if not (stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid()):
+            return False
+        return os.path.isfile(path / MARKER) or not any(os.scandir(path))
     except OSError:
         return False
-    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid()
 
 
 def new_stage(out: Path) -> Path:
