@@ -69,14 +69,37 @@ class EngineNotInstalled(ImportError):
         super().__init__(f"engine {engine!r} is not installed ({missing} is missing): {pip}")
 
 
+SHADOWING: dict[str, str] = {}
+"""Built-in engine name -> another package's registration of that name (``module:Class``
+and its distribution), which is ignored: a second package cannot replace a built-in
+engine by registering its name (:func:`shadowed` says so wherever engines are chosen)."""
+
+
 @functools.cache
 def _entry_points() -> dict[str, str]:
-    found = {ep.name: ep.value for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+    found: dict[str, str] = {}
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in BUILTIN and ep.value != BUILTIN[ep.name]:
+            owner = ep.dist.name if ep.dist is not None else "an unknown package"
+            SHADOWING[ep.name] = f"{ep.value} (registered by {owner})"
+            continue
+        found[ep.name] = ep.value
     try:
         metadata.distribution("truestep")
     except metadata.PackageNotFoundError:
         found = {**BUILTIN, **found}
     return found
+
+
+def shadowed() -> list[str]:
+    """One line per built-in engine name another package also registers: that
+    registration is ignored (name the class by ``module:Class`` to run it)."""
+    _entry_points()
+    return [
+        f"engine {name}: another package registers this built-in name as {what}; ignored "
+        f"(run it as --engines {what.split(' ')[0]})"
+        for name, what in SHADOWING.items()
+    ]
 
 
 def registered() -> dict[str, str]:

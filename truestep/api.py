@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from truestep.adapters import adapter_class, engine_status, registered, resolve_engine
+from truestep.adapters import adapter_class, engine_status, registered, resolve_engine, shadowed
 from truestep.cases import Case, CaseError, load_cases
 from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
@@ -41,6 +41,9 @@ def select_engines(
     :class:`~truestep.adapters.EngineNotInstalled` for a named engine whose library is
     missing.
     """
+    if say is not None:
+        for line in shadowed():
+            say(line)
     if engines is None or (isinstance(engines, str) and not engines.strip()):
         chosen = []
         for name in registered():

@@ -596,7 +596,7 @@ def cmd_history(args: argparse.Namespace) -> int:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from truestep.adapters import engine_status, get_adapter, registered
+    from truestep.adapters import engine_status, get_adapter, registered, shadowed
 
     cases = _load(args.cases)
     if args.quick and args.cases == "*":
@@ -608,6 +608,8 @@ def cmd_list(args: argparse.Namespace) -> int:
         tols = ", ".join(f"{t:g}" for t in c.sweep(adaptive=True, quick=args.quick))
         print(f"  {'':24s} {'':9s} steps (s): {steps or '-'}; tolerances: {tols or '-'}")
     print("engines:")
+    for line in shadowed():
+        print(visible(f"  {line}"))
     names = list(registered()) if not args.engines else [e.strip() for e in args.engines.split(",")]
     for name in names:
         status = engine_status(name) if name in registered() else "unknown engine"

@@ -386,6 +386,7 @@ def run_record(
     and ``sweep <engine>``, the seconds each engine's sweep processes ran; they overlap
     where sweeps share the cores)."""
     from truestep import __version__
+    from truestep.adapters import shadowed
     from truestep.numerics import fingerprint
 
     return {
@@ -396,6 +397,7 @@ def run_record(
         "cases": [c.name for c in cases],
         "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
         "numerics": fingerprint(),
+        **({"shadowed": shadowed()} if shadowed() else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
     }
 
