@@ -595,3 +595,29 @@ def test_timing_against_a_baseline_reads_both_runs_noise(run_dir, copy, capsys):
     assert main([*args, "--time-against", "reference/rk4"]) == 1
     out = capsys.readouterr().out
     assert out.count("WORSE  timing") == 1 and "reference euler" in out
+
+
+def test_a_gates_file_gate_that_matches_no_case_shows_and_a_missing_property_is_refused(
+    run_dir, tmp_path, capsys
+):
+    """Issue 37, item 10: a gates-file gate whose ``cases`` match no case of the run was
+    dropped without a word (exit 0, "0 not evaluated"): it is now a verdict not evaluated,
+    and alone it fails the strict check. A property gate on a case named outright that
+    does not measure that property is refused (exit 2), not judged."""
+    typo = _gates_file(
+        tmp_path,
+        '[[gates]]\ncases = "harmonic-osc"\nkind = "error"\nengine = "reference"\nmethod = "rk4"\n'
+        "dt = 1e-3\nmax = 1.0\n",
+    )
+    args = ["gate", "--results", str(run_dir / "results.csv"), "--gates", typo]
+    assert main([*args, "--cases", "harmonic-oscillator"]) == 0  # the case's own gates held
+    out = capsys.readouterr().out
+    assert "SKIP harmonic-osc/error/reference/rk4@0.001" in out and "no case of this run matches" in out
+    lacking = _gates_file(
+        tmp_path,
+        '[[gates]]\ncases = "harmonic-oscillator"\nkind = "property"\nname = "max_penetration"\n'
+        'engine = "reference"\nmethod = "rk4"\ndt = 1e-3\nmax = 1.0\n',
+    )
+    assert main(["gate", "--results", str(run_dir / "results.csv"), "--gates", lacking]) == 2
+    err = capsys.readouterr().err
+    assert "gates[0].name" in err and "not a property of harmonic-oscillator" in err

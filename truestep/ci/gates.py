@@ -460,7 +460,9 @@ def check_gates(
     :data:`SWEEP`). ``*`` engines and methods are expanded to the pairs the run
     simulated; such a gate with nothing to expand to is not evaluated."""
     out: list[GateResult] = []
-    for c, g in gates_to_check(cases, extra):
+    todo = gates_to_check(cases, extra)
+    check_properties_exist(todo)
+    for c, g in todo:
         if g.kind in ("stability-limit", "restitution") and "*" in (g.engine, g.method):
             pairs = _table_pairs(c, g, stability if g.kind == "stability-limit" else restitution)
         else:
@@ -482,6 +484,7 @@ def check_gates(
             out.append(
                 check_gate(c, dataclasses.replace(g, engine=e, method=m), results, stability, restitution)
             )
+    out += unmatched(cases, extra)
     seen: dict[str, int] = {}
     for v in out:
         base = gate_id(v.case, v.gate)
@@ -546,8 +549,56 @@ def gates_to_check(
         if g.kind == "restitution":
             todo.append((_SWEEP_CASE, g))
             continue
-        todo += [(c, g) for c in cases if any(fnmatch.fnmatchcase(c.name, p) for p in patterns)]
+        todo += [(c, g) for c in cases if _matches(c, g, patterns)]
     return todo
+
+
+def _matches(case: Case, g: Gate, patterns: list[str]) -> bool:
+    """Whether a gates-file gate applies to ``case``: a pattern matches its name; a
+    property gate matched only by a glob applies where the case measures that property
+    (a case named outright that does not is refused: :func:`check_properties_exist`)."""
+    hits = [p for p in patterns if fnmatch.fnmatchcase(case.name, p)]
+    if not hits or g.kind != "property" or g.params["name"] in case.properties:
+        return bool(hits)
+    return any(p == case.name for p in hits)
+
+
+def unmatched(cases: list[Case], extra: list[tuple[list[str], Gate]] | None) -> list[GateResult]:
+    """A verdict, not evaluated, for each gates-file gate whose ``cases`` match no case of
+    the run (it was dropped without a word): ``cases = "harmonic-osc"`` with a typo, or a
+    run of other cases, shows."""
+    out = []
+    for patterns, g in extra or []:
+        if g.kind == "restitution" or any(_matches(c, g, patterns) for c in cases):
+            continue
+        shown = ", ".join(patterns)
+        out.append(
+            GateResult(
+                shown,
+                g,
+                True,
+                f"no case of this run matches cases = {shown}",
+                "a case it names",
+                evaluated=False,
+            )
+        )
+    return out
+
+
+def check_properties_exist(todo: list[tuple[Case, Gate]]) -> None:
+    """A gates-file property gate on a case that does not measure that property can never be
+    judged: :class:`~truestep.cases.errors.CaseError` (exit 2), naming the gate's file and
+    field, as a case file's own is refused when it loads."""
+    from truestep.cases.errors import CaseError
+
+    for case, g in todo:
+        if g.kind == "property" and case is not _SWEEP_CASE and g.params["name"] not in case.properties:
+            raise CaseError(
+                g.file or case.file,
+                f"{g.where}.name",
+                f"{g.params['name']!r} is not a property of {case.name} "
+                f"(its properties: {', '.join(case.properties) or 'none'})",
+            )
 
 
 SWEEP = "restitution-sweep"
