@@ -789,7 +789,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="continue the interrupted run whose --out was DIR (default: --out): "
         "take its finished sweeps (and analyses) from .DIR.partial beside it and "
-        "run the rest; the cases, engines, --quick and truestep version must be "
+        "run the rest; the cases, engines, their code, --quick and truestep version must be "
         "the same (else exit 2). Without --resume a run starts afresh",
     )
     run.add_argument(

@@ -84,12 +84,51 @@ def _case_digest(case: Case) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def code_digest(engines: list[str]) -> dict[str, str]:
+    """Per engine, a digest of the code its rows come from: the source of its adapter's
+    module, the version of the distribution that holds it, and, for truestep's own
+    engines, every source file of truestep (the reference's kernels, the harness that
+    measures). A fix to an adapter changes it, so ``--resume`` never reuses sweeps the
+    buggy code made."""
+    import inspect
+    from importlib import metadata
+
+    from truestep.adapters import adapter_class
+
+    own = hashlib.sha256()
+    package = Path(__file__).resolve().parents[1]
+    for path in sorted(package.rglob("*.py")):
+        own.update(path.relative_to(package).as_posix().encode())
+        own.update(path.read_bytes())
+    owners = metadata.packages_distributions()
+    out = {}
+    for engine in engines:
+        h = hashlib.sha256()
+        try:
+            module = inspect.getmodule(adapter_class(engine))
+            source = inspect.getsourcefile(module) if module is not None else None
+        except Exception:  # an engine that cannot be imported here: its name alone
+            module, source = None, None
+        if source is not None:
+            h.update(Path(source).read_bytes())
+            if Path(source).resolve().is_relative_to(package):
+                h.update(own.digest())
+        top = module.__name__.split(".")[0] if module is not None else ""
+        for dist in owners.get(top, []):
+            h.update(f"{dist} {metadata.version(dist)}".encode())
+        out[engine] = h.hexdigest()[:16]
+    return out
+
+
 def fingerprint(cases: list[Case], engines: list[str], quick: bool) -> dict[str, Any]:
-    """What a resumed run must share with the interrupted one."""
+    """What a resumed run must share with the interrupted one: truestep's version,
+    ``--quick``, the engines and the code they run (:func:`code_digest`), the cases'
+    files."""
     return {
         "truestep": __version__,
         "quick": bool(quick),
         "engines": list(engines),
+        "code": code_digest(list(engines)),
         "cases": [[c.name, _case_digest(c)] for c in cases],
     }
 
@@ -223,6 +262,7 @@ class Journal:
             ("truestep", "truestep version"),
             ("quick", "--quick"),
             ("engines", "engines"),
+            ("code", "engine code (an adapter, its package or truestep changed since)"),
             ("cases", "cases"),
         ):
             if kept.get(key) != fp[key]:
