@@ -43,7 +43,7 @@ from truestep.measures import metrics
 from truestep.measures.trust import checked
 from truestep.numerics import own_run
 from truestep.reference_impl.model import ParticleModel
-from truestep.tables.spec import RESULTS
+from truestep.tables.spec import RESULTS, writable
 
 if TYPE_CHECKING:
     from truestep.execution.cluster import Cluster
@@ -623,4 +623,4 @@ def tidy(rows: list[dict], cases: list[Case]) -> pd.DataFrame:
     for col in RESULT_COLUMNS + props:
         if col not in df:
             df[col] = np.nan
-    return df[RESULT_COLUMNS + props]
+    return writable(df[RESULT_COLUMNS + props].copy())

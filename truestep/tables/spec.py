@@ -129,7 +129,27 @@ class Table:
             unknown = set(row) - known
             if unknown:
                 raise KeyError(f"{self.name}.csv has no column {sorted(unknown)[0]!r}")
-        return pd.DataFrame(rows, columns=[*self.names, *extra])
+        return writable(pd.DataFrame(rows, columns=[*self.names, *extra]))
+
+
+def clean_text(value: object) -> object:
+    """A cell as UTF-8 can hold it: a string's lone surrogates (an adapter's message made
+    from undecodable bytes) become their ``\\udcxx`` escapes; anything else as it is."""
+    if isinstance(value, str):
+        return value.encode("utf-8", "backslashreplace").decode("utf-8")
+    return value
+
+
+def writable(frame: pd.DataFrame) -> pd.DataFrame:
+    """``frame`` with every text cell :func:`clean_text`: a table truestep writes is one
+    its CSV writer can write and its readers read (a lone surrogate in a message stopped
+    the report, and every ``--resume``, at the CSV writer)."""
+    from pandas.api.types import is_object_dtype, is_string_dtype
+
+    for column in frame.columns:
+        if is_object_dtype(frame[column]) or is_string_dtype(frame[column]):
+            frame[column] = frame[column].map(clean_text)
+    return frame
 
 
 def _name(name: str, meaning: str) -> Column:
