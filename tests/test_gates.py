@@ -621,3 +621,23 @@ def test_a_gates_file_gate_that_matches_no_case_shows_and_a_missing_property_is_
     assert main(["gate", "--results", str(run_dir / "results.csv"), "--gates", lacking]) == 2
     err = capsys.readouterr().err
     assert "gates[0].name" in err and "not a property of harmonic-oscillator" in err
+
+
+def test_an_energy_drift_gate_on_a_case_that_never_measures_it_says_so(tmp_path, capsys):
+    """Issue 36, item 2: an ``energy_drift`` gate on bouncing-ball (dissipative contact, no
+    exact energy curve) failed every run with "measured nan"; it fails saying the case never
+    measures it. (Refusing it when the case loads would break gates files that loaded
+    before: that comes with a deprecation first.)"""
+    from pathlib import Path
+
+    published = Path(__file__).resolve().parents[1] / "reports" / "results.csv"
+    gates = _gates_file(
+        tmp_path,
+        '[[gates]]\ncases = "bouncing-ball"\nkind = "energy_drift"\nengine = "reference"\n'
+        'method = "rk4"\ndt = 0.002\nmax = 1e-3\n',
+    )
+    assert (
+        main(["gate", "--results", str(published), "--cases", "bouncing-ball", "--gates", gates, "-q"]) == 1
+    )
+    out = capsys.readouterr().out
+    assert "measured nothing: energy_drift is never measured on this case" in out
