@@ -55,7 +55,7 @@ from pathlib import Path
 from typing import Any
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "fuzz"))  # fuzz_strategies lives beside the fuzz tests
 
 import fuzz_strategies as fs  # noqa: E402
 

@@ -13,29 +13,30 @@ import math
 
 from truestep import numerics
 
-numerics.set_environment()
-
-import newton  # noqa: E402
-
-from truestep.execution.analyses import _bounce_rows  # noqa: E402
-
-ORIGINAL = newton.CollisionPipeline
-
-
-def _with_default_gap(*args, **kwargs):
-    kwargs.pop("soft_contact_gap", None)
-    return ORIGINAL(*args, **kwargs)
-
 
 def main() -> None:
-    for label, pipeline in (("truestep's 1e4", ORIGINAL), ("Newton's default", _with_default_gap)):
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
+    numerics.set_environment()
+    import newton
+
+    from truestep.execution.analyses import _bounce_rows
+
+    original = newton.CollisionPipeline
+
+    def with_default_gap(*args, **kwargs):
+        kwargs.pop("soft_contact_gap", None)
+        return original(*args, **kwargs)
+
+    for label, pipeline in (("truestep's 1e4", original), ("Newton's default", with_default_gap)):
         newton.CollisionPipeline = pipeline
         for method in ("semi-implicit", "xpbd", "vbd"):
             for dt in (1 / 240, 1 / 1000):
                 e = [r.get("e_measured", math.nan) for r in _bounce_rows("newton", method, 0.8, dt)]
                 shown = ", ".join("-" if not math.isfinite(x) else f"{x:.3f}" for x in e)
                 print(f"{label:17s} {method:13s} dt {dt:.5f}: e measured {shown}")
-    newton.CollisionPipeline = ORIGINAL
+    newton.CollisionPipeline = original
 
 
 if __name__ == "__main__":

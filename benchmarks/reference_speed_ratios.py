@@ -83,9 +83,14 @@ def shared(name: str) -> None:
 
 
 if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0] if __doc__ else None)
+    parser.add_argument("cases", nargs="*", metavar="CASE", help="cases to compare against every engine too")
     began = time.perf_counter()
+    cases = parser.parse_args().cases
     per_step()
     rain()
-    for case_name in sys.argv[1:]:
+    for case_name in cases:
         shared(case_name)
     print(f"took {time.perf_counter() - began:.0f} s")

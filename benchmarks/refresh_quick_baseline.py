@@ -22,6 +22,9 @@ KEPT = ("results.csv", "stability.csv", "restitution.csv", "run.json")
 
 
 def main() -> None:
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()  # --help does nothing else
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "quick"
         subprocess.run(
