@@ -94,3 +94,13 @@ def test_every_built_in_series_has_its_own_colour_and_each_engine_its_marker():
     assert plots.series_colour("my-euler", "semi-implicit") == plots.series_colour(
         "my-euler", "semi-implicit"
     )
+
+
+def test_every_built_in_series_has_a_colour_of_its_own():
+    """Issue 38, item 3: reference/euler and newton/semi-implicit shared #e6194b, though the
+    table's docstring says every colour is distinct."""
+    from truestep.reporting.plots import MORE_COLOURS, SERIES_COLOURS
+
+    colours = [c.lower() for c in SERIES_COLOURS.values()]
+    assert len(set(colours)) == len(colours)
+    assert not set(colours) & {c.lower() for c in MORE_COLOURS}

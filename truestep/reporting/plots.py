@@ -49,7 +49,7 @@ SERIES_COLOURS: dict[tuple[str, str], str] = {
     ("mujoco-warp", "implicit"): "#20b2aa",
     ("mujoco-warp", "implicitfast"): "#da70d6",
     ("mujoco-warp", "RK4"): "#e9967a",
-    ("newton", "semi-implicit"): "#e6194b",
+    ("newton", "semi-implicit"): "#b03060",
     ("newton", "xpbd"): "#00fa9a",
     ("newton", "vbd"): "#87ceeb",
 }
