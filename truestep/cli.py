@@ -347,8 +347,14 @@ def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path, 
 
 
 def cmd_gate(args: argparse.Namespace) -> int:
+    from truestep.measures.metrics import recorded_precision
+    from truestep.reporting.report import read_run_record
+
     results_path = Path(args.results)
     tables = _run_tables(results_path)
+    if args.baseline:  # the facts each run was made with, this run's last (they win)
+        recorded_precision(read_run_record(Path(args.baseline)))
+    recorded_precision(read_run_record(results_path.parent))
     asked = _asked_engines(args)
     # every row stays for the gates to read (a no-worse-than gate's other run, the rows a
     # --time-against ratio divides by); --engines chooses whose verdicts count

@@ -174,11 +174,28 @@ spring-chain (8000 steps of a chain) however small the step; a floor 5 times the
 keeps the stall out of the fit (at 1e-5 spring-chain's plateau was fitted as order 0.32)."""
 
 
+RECORDED_PRECISION: dict[str, str] = {}
+"""Engine -> the precision its run recorded (``run.json`` ``precision``, set by
+:func:`recorded_precision` where a run's tables are judged): a verdict reads the facts
+the run was made with, not the adapters installed where it is judged."""
+
+
+def recorded_precision(record: dict | None) -> None:
+    """Take the engines' precisions a run recorded (its ``run.json``), over what the
+    adapters installed here say."""
+    for engine, precision in ((record or {}).get("precision") or {}).items():
+        if precision in ("float32", "float64"):
+            RECORDED_PRECISION[str(engine)] = precision
+
+
 def precision_of(engine: str) -> str:
-    """The precision of ``engine``'s state: its adapter's ``precision`` (``"float32"`` or
+    """The precision of ``engine``'s state: as its run recorded it
+    (:data:`RECORDED_PRECISION`), else its adapter's ``precision`` (``"float32"`` or
     ``"float64"``, the default, also for an engine not installed or not known here)."""
     from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
 
+    if engine in RECORDED_PRECISION:
+        return RECORDED_PRECISION[engine]
     try:
         return str(getattr(adapter_class(engine), "precision", "float64"))
     except (EngineNotInstalled, UnknownEngine):

@@ -382,11 +382,14 @@ def run_record(
     the cases and engines the run was asked for (in order), the floating-point
     environment (:func:`truestep.numerics.fingerprint`): with equal ``numerics`` and
     revision, two runs' non-timing columns are equal bit for bit; and, where given, the
+    ``precision`` of each engine's state (the facts a verdict on these tables reads, also
+    where that engine is not installed: :func:`truestep.measures.metrics.recorded_precision`);
     wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``,
     and ``sweep <engine>``, the seconds each engine's sweep processes ran; they overlap
     where sweeps share the cores)."""
     from truestep import __version__
     from truestep.adapters import shadowed
+    from truestep.measures.metrics import precision_of
     from truestep.numerics import fingerprint
 
     return {
@@ -397,6 +400,9 @@ def run_record(
         "cases": [c.name for c in cases],
         "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
         "numerics": fingerprint(),
+        "precision": {e: precision_of(e) for e in dict.fromkeys(results["engine"].astype(str))}
+        if len(results)
+        else {},
         **({"shadowed": shadowed()} if shadowed() else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
     }
