@@ -61,17 +61,13 @@ def git_state(root: Path) -> dict[str, object] | None:
     return {"revision": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())}
 
 
-LIBRARIES = {
-    "reference": "truestep",
-    "scipy": "scipy",
-    "pymunk": "pymunk",
-    "pybullet": "pybullet",
-    "mujoco": "mujoco",
-    "drake": "drake",
-    "mujoco-warp": "mujoco-warp",
-    "newton": "newton",
-}
-"""The distribution that does the stepping of each engine truestep ships an adapter for."""
+def _libraries() -> dict[str, str]:
+    """The distribution that does the stepping of each engine truestep ships an adapter
+    for: the reference is truestep's own, scipy is scipy, and each other's extra is named
+    after its library (:data:`truestep.adapters.EXTRAS`)."""
+    from truestep.adapters import EXTRAS
+
+    return {"reference": "truestep", "scipy": "scipy", **EXTRAS}
 
 
 def engine_versions(engines: list[str], packages: dict[str, str]) -> dict[str, str]:
@@ -83,10 +79,12 @@ def engine_versions(engines: list[str], packages: dict[str, str]) -> dict[str, s
 
     targets = registered()
     owners = metadata.packages_distributions()
+    libraries = _libraries()
     out = {}
     for engine in engines:
-        if engine in LIBRARIES and LIBRARIES[engine] in packages:
-            out[engine] = f"{LIBRARIES[engine]} {packages[LIBRARIES[engine]]}"
+        library = libraries.get(engine)
+        if library is not None and library in packages:
+            out[engine] = f"{library} {packages[library]}"
             continue
         target = targets.get(engine, engine if ":" in engine else "")
         dists = owners.get(target.partition(":")[0].split(".")[0], [])
