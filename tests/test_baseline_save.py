@@ -84,20 +84,26 @@ def test_a_change_since_the_commit_is_recorded_and_a_folder_of_other_files_is_re
     assert sorted(p.name for p in other.iterdir()) == ["todo.txt"]
 
 
+def _worse_rk4(out: Path, dest: Path, factor: float) -> Path:
+    """A copy of the run in ``out`` whose rk4 error at its largest step is ``factor`` times
+    as large (a regression of one row), in ``dest``."""
+    dest.mkdir()
+    for name in ("stability.csv", "restitution.csv", "run.json"):
+        (dest / name).write_bytes((out / name).read_bytes())
+    results = pd.read_csv(out / "results.csv")
+    hit = (results["method"] == "rk4") & (results["dt"] == results["dt"].max())
+    results.loc[hit, "error"] *= factor
+    results.to_csv(dest / "results.csv", index=False)
+    return dest
+
+
 def test_each_regressed_row_is_a_junit_case_and_a_markdown_row_with_its_change(project, tmp_path, capsys):
     """Against a baseline, a row that got worse is a failing JUnit case of its own, and the
     markdown shows by how much, in percent (issue 36, item 4)."""
     import xml.etree.ElementTree as ET
 
     _, out = project
-    worse = tmp_path / "worse"
-    worse.mkdir()
-    for name in ("stability.csv", "restitution.csv", "run.json"):
-        (worse / name).write_bytes((out / name).read_bytes())
-    results = pd.read_csv(out / "results.csv")
-    hit = (results["method"] == "rk4") & (results["dt"] == results["dt"].max())
-    results.loc[hit, "error"] *= 1.25
-    results.to_csv(worse / "results.csv", index=False)
+    worse = _worse_rk4(out, tmp_path / "worse", 1.25)
     junit, md = tmp_path / "j.xml", tmp_path / "s.md"
     args = ["gate", "--results", str(worse / "results.csv"), "--baseline", str(out), "-q"]
     assert main([*args, "--junit", str(junit), "--markdown", str(md)]) == 1
@@ -165,14 +171,7 @@ def test_the_pytest_mark_reads_results_and_compares_with_a_baseline(project, tmp
     for table in ("results", "orders", "stability", "restitution"):
         assert f"PASSED test_physics.py::test_physics[baseline/{table}]" in same.stdout
     assert "test_physics[harmonic-oscillator/order/reference/rk4]" in same.stdout
-    worse = tmp_path / "worse"
-    worse.mkdir()
-    for name in ("stability.csv", "restitution.csv", "run.json"):
-        (worse / name).write_bytes((out / name).read_bytes())
-    results = pd.read_csv(out / "results.csv")
-    hit = (results["method"] == "rk4") & (results["dt"] == results["dt"].max())
-    results.loc[hit, "error"] *= 4.0
-    results.to_csv(worse / "results.csv", index=False)
+    worse = _worse_rk4(out, tmp_path / "worse", 4.0)
     bad = _pytest(tmp_path, worse / "results.csv", saved)
     assert bad.returncode == 1, bad.stdout[-3000:]
     failed = [line for line in bad.stdout.splitlines() if line.startswith("FAILED")]
