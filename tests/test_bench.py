@@ -205,7 +205,20 @@ def test_the_command_writes_the_table_and_the_figure(tmp_path, capsys):
         assert img.format == "PNG"
 
 
-@pytest.mark.parametrize("argv", [["--sizes", "ten"], ["--sizes", "0,100"], ["--budget", "0"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--sizes", "ten"],
+        ["--sizes", "0,100"],
+        ["--budget", "0"],
+        # issue 37, item 11: these gave a traceback (NaN or infinity made a step count)
+        ["--sizes", "nan"],
+        ["--sizes", "10,inf"],
+        ["--budget", "inf"],
+        ["--budget", "1e308"],
+        ["--budget", "nan"],
+    ],
+)
 def test_the_command_rejects_bad_input_and_writes_nothing(tmp_path, capsys, argv):
     out = tmp_path / "bench"
     assert main(["bench", "--engines", "pymunk", "--out", str(out), *argv]) == 2

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import os
 import shutil
 import signal
@@ -651,12 +652,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
         sizes = [float(s) for s in args.sizes.split(",") if s.strip()]
     except ValueError:
         sizes = []
-    if not sizes or min(sizes) < 1:
+    if not sizes or not all(math.isfinite(n) and n >= 1 for n in sizes):
         raise UsageError(
             f"--sizes: expected particle counts of 1 or more, comma-separated, got {args.sizes!r}"
         )
-    if not args.budget > 0:
-        raise UsageError(f"--budget: expected seconds > 0, got {args.budget:g}")
+    if not 0 < args.budget <= BENCH_BUDGET_MAX_S:
+        raise UsageError(
+            f"--budget: expected seconds above 0 and at most {BENCH_BUDGET_MAX_S:g}, got {args.budget:g}"
+        )
     engines = select_engines(args.engines, say=_say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
@@ -700,6 +703,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
         f"(compiling and warm-ups {warm:.1f} s of it)"
     )
     return 0
+
+
+BENCH_BUDGET_MAX_S = 86400.0
+"""The longest ``truestep bench --budget`` (a day): a budget of ``inf`` or ``1e308``
+overflowed the step counts it sizes, with a traceback."""
 
 
 def cmd_env(args: argparse.Namespace) -> int:
