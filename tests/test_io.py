@@ -195,3 +195,19 @@ def test_a_method_named_nan_is_a_name(run_dir, tmp_path, capsys):
     )
     out = capsys.readouterr().out
     assert code == 0 and "ok   free-fall/status/reference/nan@" in out and "(gates[0]" in out, out
+
+
+def test_a_table_cut_short_is_refused(tmp_path, capsys):
+    """Issue 37, item 10: a results table cut off inside its last row (a full disk, a
+    copy interrupted) was read and gated, exit 0; a table truestep writes ends with a
+    newline, so one that does not was cut short: exit 2, one line."""
+    from pathlib import Path
+
+    from truestep.cli import main
+
+    published = Path(__file__).resolve().parents[1] / "reports" / "results.csv"
+    cut = tmp_path / "results.csv"
+    cut.write_bytes(published.read_bytes()[: len(published.read_bytes()) // 2])
+    assert main(["gate", "--results", str(cut), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "truncated: its last line has no end" in err and "Traceback" not in err

@@ -46,6 +46,15 @@ def test_a_breach_of_the_contract_is_that_row_crashed(good, change):
     assert len(row["message"]) < 200
 
 
+def test_complex_positions_are_a_crashed_row_not_ok(good):
+    """Issue 37, item 10: complex positions were cast to their real part and measured
+    (``ok``); the imaginary part is a breach, whatever its size."""
+    case, traj = good
+    for name in ("x", "v"):
+        row = _row(case, dataclasses.replace(traj, **{name: getattr(traj, name) + 1e-30j}))
+        assert row["status"] == "crashed" and f"complex {name}" in row["message"]
+
+
 def test_one_record_is_not_ok(good):
     case, traj = good
     one = dataclasses.replace(

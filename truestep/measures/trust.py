@@ -30,6 +30,16 @@ END_SLACK = 0.01
 engine's last step may overshoot by part of a step; never by a whole run)."""
 
 
+def _complex_field(traj: Trajectory) -> str | None:
+    """The first of a run's arrays that holds complex numbers (a cast to float would drop
+    their imaginary part, and measure the rest), or ``None``."""
+    for name in ("t", "x", "y", "v", "energy"):
+        value = getattr(traj, name, None)
+        if value is not None and np.iscomplexobj(value):
+            return name
+    return None
+
+
 def contract_breach(traj: object, n: int | None = None, *, duration: float | None = None) -> str | None:
     """Why ``traj`` breaks the adapter contract, in one short line, or ``None``.
 
@@ -45,6 +55,9 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
         return f"adapter returned {type(traj).__name__}, not a Trajectory"
     if traj.status not in STATUSES:
         return f"adapter returned status {str(traj.status)[:40]!r} (known: {', '.join(STATUSES)})"
+    complex_part = _complex_field(traj)
+    if complex_part is not None:
+        return f"adapter returned complex {complex_part} (states, times and energies are real numbers)"
     try:
         t = np.asarray(traj.t, dtype=float)
         x = np.asarray(traj.x if n is not None or traj.y is None else traj.y[:, None], dtype=float)

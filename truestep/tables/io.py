@@ -146,10 +146,15 @@ def read_table(path: Path, kind: str, needs: set[str], *, rows: bool = True) -> 
     a method named ``nan`` is that name), known statuses, no two rows with the same key
     (:data:`KEYS`), and numbers that a run can write (:func:`check_rows`). ``rows=False``:
     a header without rows is a table of no rows (a run without stability searches or
-    bounces writes one). Only a regular file of at most :data:`MAX_TABLE_BYTES` is read.
-    Raises :class:`TableError`."""
+    bounces writes one). Only a regular file of at most :data:`MAX_TABLE_BYTES` is read, and
+    only a whole one: a file whose last line has no end was cut short. Raises
+    :class:`TableError`."""
     path = Path(path)
     text = _text_of(path)
+    if text and not text.endswith(("\n", "\r")):
+        raise TableError(
+            f"{path}: truncated: its last line has no end (a table truestep writes ends with a newline)"
+        )
     header = [c.strip() for c in _lines(path, text, rows=rows)[0]]
     names = [c for c in header if c in TEXT]
     try:
