@@ -765,6 +765,17 @@ ENGINES_HELP = (
 )
 
 
+def _results_argument(parser: argparse.ArgumentParser) -> None:
+    """``--results FILE`` of a command that reads a run's folder (``baseline save``,
+    ``history add`` and ``export``)."""
+    parser.add_argument(
+        "--results",
+        default="reports/results.csv",
+        metavar="FILE",
+        help="the run's results.csv; its other tables and run.json beside it (default: reports/results.csv)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="truestep",
@@ -945,12 +956,7 @@ def build_parser() -> argparse.ArgumentParser:
         "baseline saved before (replaced as a whole); anything else is exit 2.",
     )
     save.add_argument("dir", metavar="DIR", help="the baseline's folder")
-    save.add_argument(
-        "--results",
-        default="reports/results.csv",
-        metavar="FILE",
-        help="the run's results.csv; its other tables and run.json beside it (default: reports/results.csv)",
-    )
+    _results_argument(save)
     save.set_defaults(func=cmd_baseline)
 
     hist = sub.add_parser(
@@ -975,9 +981,7 @@ def build_parser() -> argparse.ArgumentParser:
             help="the history's folder (default: .truestep-history)",
         )
     for p in (h_add, h_export):
-        p.add_argument(
-            "--results", default="reports/results.csv", metavar="FILE", help="the run's results.csv"
-        )
+        _results_argument(p)
     h_show.add_argument(
         "quantity", metavar="QUANTITY", help="a numeric column of results.csv (error, wall_s, nfev ...)"
     )
