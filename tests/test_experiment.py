@@ -49,8 +49,11 @@ def test_the_public_run_writes_the_same_tables_and_leaves_no_journal(tmp_path):
     assert len(written) == len(tables.results) and seen  # each row's line went to progress
     assert written["error"].equals(tables.results["error"].astype(float))
     record = json.loads((out / "run.json").read_text())
-    assert set(record["seconds"]) == {"sweep", "analyses", "sweep reference"}
-    assert 0 < record["seconds"]["sweep reference"] <= record["seconds"]["sweep"]
+    kinds = {"analyses stability", "analyses restitution", "analyses scaling"}
+    assert set(record["seconds"]) == {"sweep", "analyses", "compile", "sweep reference", *kinds}
+    spent = record["seconds"]
+    assert 0 < spent["sweep reference"] <= spent["sweep"] and 0 <= spent["compile"] <= spent["sweep"]
+    assert sum(spent[k] for k in kinds) <= spent["analyses"]  # the parts of the analyses
 
 
 def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypatch):

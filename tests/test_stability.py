@@ -97,12 +97,17 @@ def test_an_explosion_keeps_growing_however_fast():
     assert energy_keeps_growing(t, 50.0 * 10.0**t)
 
 
-def test_a_limit_is_confirmed_over_a_longer_run(case_named):
+def test_a_limit_is_confirmed_over_a_longer_run_and_is_never_above_the_exact_one(case_named):
     """spring-chain with Drake's RK3 (issue 35, finding 2): over the search's 2000 steps its
     top mode has not grown at 0.045214 s, the limit published before; Drake's own run of
-    20 000 steps there blows the energy up (checked here, raw), and the search now confirms
-    its limit over a run 5 times as long, searches again, and ends within its 1e-3 of the
-    exact limit of Kutta's RK3 (|R(z)| = 1 on the chain's fastest mode)."""
+    20 000 steps there blows the energy up (checked here, raw). The search confirms its
+    limit over a run 5 times as long, searches again, and lands at 0.0451393 s, still
+    2.2e-4 above the exact limit, where the top mode grows 1.7e-4 a step: given the exact
+    limit, it runs that step over 20 / 2.2e-4 steps, sees the growth, and publishes a
+    bracket around the exact limit. Checked against the closed form: Kutta's RK3 has
+    ``R(z) = 1 + z + z^2/2 + z^3/6``, and on the chain's fastest mode (omega_max =
+    40 sin(9 pi / 22), the case file's) ``|R(i omega dt)|`` is at most 1 at the published
+    limit and above 1 at its unstable end."""
     from truestep.adapters.base import facts_of
     from truestep.cases.exact import stability_limit
     from truestep.measures.stability import CONFIRM, search_case
@@ -112,9 +117,44 @@ def test_a_limit_is_confirmed_over_a_longer_run(case_named):
     exact = stability_limit(case, facts_of(drake, "runge_kutta3"))
     long = drake.simulate(dataclasses.replace(case, duration=20_000 * 0.045214), "runge_kutta3", 0.045214)
     assert long.status == "unstable" or not np.isfinite(long.energy[-1]) or long.energy[-1] > 1e6
-    found = search_case(case, lambda c, dt: drake.simulate(c, "runge_kutta3", dt))
-    assert f"{CONFIRM} times as long" in found.note
-    assert found.dt_limit <= exact * (1 + case.stability.rel_tol) and found.dt_unstable > exact
+    found = search_case(case, lambda c, dt: drake.simulate(c, "runge_kutta3", dt), exact=exact)
+    assert f"{CONFIRM} times as long" in found.note and "above the exact limit" in found.note
+    assert found.dt_limit <= exact < found.dt_unstable
+    assert found.dt_unstable / found.dt_limit - 1 <= 2 * case.stability.rel_tol
+
+    def gain(dt: float) -> float:
+        z = 1j * 40 * np.sin(9 * np.pi / 22) * dt
+        return abs(1 + z + z**2 / 2 + z**3 / 6)
+
+    assert gain(found.dt_limit) <= 1 < gain(found.dt_unstable)
+
+
+def test_a_limit_above_the_exact_one_is_run_long_enough_to_show_its_growth():
+    """The rule of :func:`truestep.measures.stability._not_above_exact` on a system whose
+    answer is known by hand: a mode multiplied by ``1 + excess`` each step above the exact
+    limit ``E`` (and by 1 below it) holds 1e-6 of the energy. A run of the search's 2000
+    steps cannot see a 2e-4 excess; the long run of 20 / 2e-4 = 100 000 steps does, and
+    ``E (1 - 1e-3)`` is stable, so the bracket holds ``E``. A limit below ``E`` is kept
+    as it is, with no extra run."""
+    from truestep.measures.stability import SearchResult, _not_above_exact
+
+    exact = 0.05
+    runs = []
+
+    def run_steps(dt: float, n: int) -> bool:
+        runs.append((dt, n))
+        growth = max(dt / exact - 1, 0.0)
+        return 1e-6 * (1 + growth) ** (2 * n) < 1e-3  # the mode's energy stays small
+
+    found = SearchResult(exact * 1.0002, exact * 1.0012, 20, "")
+    assert run_steps(found.dt_limit, 2000)
+    out = _not_above_exact(found, exact, 1e-3, run_steps, lambda dt: 2000, lambda hi, n: None)
+    (at, steps), (below_at, below_steps) = runs[1:]
+    assert at == found.dt_limit and abs(steps - 100_000) <= 1  # 20 / 2e-4, to its rounding
+    assert below_at == exact * 0.999 and abs(below_steps - 20_000) <= 1
+    assert out.dt_limit == exact * 0.999 and out.dt_unstable == found.dt_limit and out.runs == 22
+    below = SearchResult(exact * 0.9995, exact * 1.0005, 20, "")
+    assert _not_above_exact(below, exact, 1e-3, run_steps, lambda dt: 2000, lambda hi, n: None) is below
 
 
 def _stretch_peaks(case, traj, windows: int = 30) -> np.ndarray:

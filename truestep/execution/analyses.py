@@ -46,12 +46,13 @@ SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
 """Particle counts of a full run's scaling table."""
 
 
-def _search(engine: str, case: Case, method: str, quick: bool):
-    """``(SearchResult or the safety valve's message, seconds)`` of one search."""
+def _search(engine: str, case: Case, method: str, quick: bool, exact: float | None = None):
+    """``(SearchResult or the safety valve's message, seconds)`` of one search; ``exact``
+    is the method's exact limit on the case (s) where one is known."""
     adapter = get_adapter(engine)
     start = time.perf_counter()
     try:
-        result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick)
+        result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick, exact=exact)
     except SearchTimeout as err:
         return str(err), time.perf_counter() - start
     return result, time.perf_counter() - start
@@ -95,7 +96,11 @@ def stability_table(
                     rows.append(row)
                     slots.append(row)
                     calls.append(
-                        (_search, (engine, case, method, quick), case.timeout_s * case.stability.max_runs)
+                        (
+                            _search,
+                            (engine, case, method, quick, exact),
+                            case.timeout_s * case.stability.max_runs,
+                        )
                     )
 
     def done(k: int, out) -> None:
@@ -116,7 +121,7 @@ def stability_table(
             f"{seconds:.1f} s"
         )
 
-    prepare_before_fork((engine, case, method) for _, (engine, case, method, _q), _t in calls)
+    prepare_before_fork((engine, case, method) for _, (engine, case, method, *_), _t in calls)
     # Longest first, so that no long search starts last while the other cores idle.
     order = sorted(
         range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
@@ -307,6 +312,7 @@ def run_analyses(
     *,
     quick: bool,
     progress: Callable[[str], None] | None = None,
+    seconds: dict[str, float] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """Every table besides ``results``: ``stability`` (for the cases with a search),
     ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
@@ -317,23 +323,34 @@ def run_analyses(
     The first two are not timed: their runs share the machine's cores
     (:func:`untimed_workers`). The scaling table is timed, so it runs after them, one run
     at a time. Each phase shows done / total and the time left (``progress`` takes the
-    lines instead).
+    lines instead); ``seconds`` receives each one's wall time (``analyses stability``,
+    ``analyses restitution``, ``analyses scaling``, s).
     """
     from truestep.execution.bench import RAIN_CASE, scaling_table
 
     preload()
     workers = untimed_workers()
     bouncing = any("restitution" in c.tags for c in cases)
-    tables = {
-        "stability": stability_table(cases, engines, quick=quick, workers=workers, progress=progress),
-        "restitution": restitution_table(engines, quick=quick, workers=workers, progress=progress)
-        if bouncing
-        else RESTITUTION.frame([]),
-    }
     rain = next((c for c in cases if c.name == RAIN_CASE), None)
-    tables["scaling"] = (
-        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress)
-        if rain is not None and not quick
-        else SCALING.frame([])
-    )
+    makers = {
+        "stability": lambda: stability_table(cases, engines, quick=quick, workers=workers, progress=progress),
+        "restitution": lambda: (
+            restitution_table(engines, quick=quick, workers=workers, progress=progress)
+            if bouncing
+            else RESTITUTION.frame([])
+        ),
+        "scaling": lambda: (
+            scaling_table(
+                engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress
+            )
+            if rain is not None and not quick
+            else SCALING.frame([])
+        ),
+    }
+    tables = {}
+    for kind, make in makers.items():
+        start = time.perf_counter()
+        tables[kind] = make()
+        if seconds is not None:
+            seconds[f"analyses {kind}"] = round(time.perf_counter() - start, 3)
     return tables

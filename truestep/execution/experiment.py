@@ -101,6 +101,7 @@ def run_experiment(exp: Experiment) -> Tables:
     set_run_budget(exp.budget)
     laps = _Laps()
     traces: dict = {}
+    kinds: dict[str, float] = {}  # the analyses' seconds, per kind
     try:
         with _cluster(exp.scheduler, journal) as cluster:
             results = run_matrix(
@@ -113,7 +114,7 @@ def run_experiment(exp: Experiment) -> Tables:
                 cluster=cluster,
             )
             laps.lap("sweep")
-            tables = _analyses(exp, results, journal)
+            tables = _analyses(exp, results, journal, kinds)
             found = find(exp.cases, results, tables) if exp.analyses else None
             laps.lap("analyses")
         if exp.out is not None:
@@ -130,7 +131,7 @@ def run_experiment(exp: Experiment) -> Tables:
                 with_lecture_figures=exp.lecture_figures,
                 findings=found,
                 progress=exp.rows,
-                seconds={**laps.seconds, **results.attrs.get("sweep_seconds", {})},
+                seconds={**laps.seconds, **results.attrs.get("sweep_seconds", {}), **kinds},
             )
             laps.lap("report")
     finally:
@@ -165,9 +166,9 @@ def _journal(exp: Experiment):
     return journal
 
 
-def _analyses(exp: Experiment, results: pd.DataFrame, journal) -> dict:
+def _analyses(exp: Experiment, results: pd.DataFrame, journal, seconds: dict[str, float]) -> dict:
     """The analyses' tables: from the journal of a resumed run that finished them, else run
-    (and kept in the journal)."""
+    (and kept in the journal; ``seconds`` receives each kind's wall time)."""
     from truestep.execution import faults
     from truestep.execution.analyses import run_analyses
 
@@ -176,7 +177,9 @@ def _analyses(exp: Experiment, results: pd.DataFrame, journal) -> dict:
     tables = journal.analyses() if journal is not None and exp.resume is not None else None
     if tables is None:
         with faults.phase("analyses"):
-            tables = run_analyses(exp.cases, exp.engines, results, quick=exp.quick, progress=exp.rows)
+            tables = run_analyses(
+                exp.cases, exp.engines, results, quick=exp.quick, progress=exp.rows, seconds=seconds
+            )
         if journal is not None:
             journal.put_analyses(tables)
     return tables

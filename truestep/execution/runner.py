@@ -468,8 +468,10 @@ def run_matrix(
         for method, entries in itertools.groupby(plan(case, engine, quick=quick), key=lambda e: e[0])
     ]
     total = sum(len(entries) for *_, entries in planned if not entries[0][3])
+    compiling = time.perf_counter()
     if cluster is None:
         compile_ahead(planned)
+    compiling = time.perf_counter() - compiling
     parts: list[list[dict]] = [[] for _ in planned]
     jobs: list[SweepJob] = []
     local: list[tuple[int, list[float], bool]] = []
@@ -529,7 +531,10 @@ def run_matrix(
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
     table = tidy([row for part in parts for row in part], cases)
-    table.attrs["sweep_seconds"] = {f"sweep {e}": round(s, 3) for e, s in spent.items()}
+    table.attrs["sweep_seconds"] = {
+        "compile": round(compiling, 3),
+        **{f"sweep {e}": round(s, 3) for e, s in spent.items()},
+    }
     return table
 
 

@@ -403,6 +403,68 @@ def _confirmed(
     return dataclasses.replace(again, runs=runs + again.runs, note=note)
 
 
+EXCESS_EFOLDS = 20.0
+"""A limit found above a known exact one, by a fraction ``d`` of it, is run again over
+``EXCESS_EFOLDS / d`` steps: near an exact limit a mode grows by ``|R| - 1 ~ c d`` a step
+(``c`` about 0.75 for RK3 on the imaginary axis, 0.5 for explicit Euler's
+``|1 + z| - 1`` on the real axis), so over that run it grows by e^(c x 20): past 10^6 in
+energy from a mode that holds 10^-6 of it. Spring-chain's top mode under Drake's RK3 at
+0.02 % above its exact limit grows 1.7e-4 a step, unseen over 10 000 steps."""
+EXCESS_MAX_STEPS = 400_000
+"""The most steps of the run above: a limit within ``EXCESS_EFOLDS / EXCESS_MAX_STEPS``
+(5e-5) of the exact one is closer than any search's tolerance, and is said so."""
+
+
+def _excess_steps(excess: float, horizon_steps: int) -> int:
+    """Steps of the run that shows growth ``excess`` (a fraction) above an exact limit:
+    :data:`EXCESS_EFOLDS` / ``excess``, at least ``horizon_steps``, at most
+    :data:`EXCESS_MAX_STEPS`."""
+    return int(min(max(math.ceil(EXCESS_EFOLDS / excess), horizon_steps), EXCESS_MAX_STEPS))
+
+
+def _not_above_exact(
+    result: SearchResult,
+    exact: float | None,
+    rel_tol: float,
+    run_steps: Callable[[float, int], bool],
+    horizon_steps: Callable[[float], int],
+    research: Callable[[float, int], SearchResult],
+) -> SearchResult:
+    """``result`` where its limit is not above the ``exact`` one; else the growth its
+    horizon was too short to see, looked for over a run as long as the excess needs
+    (:func:`_excess_steps`). Where that run grows, the limit becomes ``exact (1 -
+    rel_tol)`` if a run there over :func:`_excess_steps` of ``rel_tol`` is stable (the
+    bracket then holds the exact limit), or is searched again below that step
+    (``research(unstable, runs)``, an engine less stable than its method's theory); a
+    limit stable over the longer run stays, and its note says it is above the exact one."""
+    limit = result.dt_limit
+    if (
+        exact is None
+        or not (math.isfinite(exact) and exact > 0)
+        or not (math.isfinite(limit) and limit > exact)
+    ):
+        return result
+    excess = limit / exact - 1
+    steps = _excess_steps(excess, horizon_steps(limit))
+    runs = result.runs + 1
+    if run_steps(limit, steps):
+        note = f"{excess:.2g} above the exact limit {exact:.6g} s, and stable there over {steps} steps"
+        return dataclasses.replace(result, runs=runs, note="; ".join(n for n in (result.note, note) if n))
+    below = exact * (1 - rel_tol)
+    below_steps = _excess_steps(rel_tol, horizon_steps(below))
+    runs += 1
+    grew = (
+        f"unstable at {limit:.6g} s over {steps} steps ({excess:.2g} above the exact limit "
+        f"{exact:.6g} s, a growth too slow for the search's runs)"
+    )
+    if run_steps(below, below_steps):
+        note = f"{grew}; stable at {below:.6g} s over {below_steps} steps"
+        return SearchResult(below, limit, runs, "; ".join(n for n in (result.note, note) if n))
+    again = research(below, runs)
+    note = f"{grew}; unstable at {below:.6g} s too, over {below_steps} steps: searched again below it"
+    return dataclasses.replace(again, note="; ".join(n for n in (again.note, note) if n))
+
+
 class _SolverFailedAt(Exception):
     def __init__(self, dt: float, message: str) -> None:
         super().__init__(message)
@@ -410,7 +472,11 @@ class _SolverFailedAt(Exception):
 
 
 def search_case(
-    case: Case, simulate: Callable[[Case, float], Trajectory], *, quick: bool = False
+    case: Case,
+    simulate: Callable[[Case, float], Trajectory],
+    *,
+    quick: bool = False,
+    exact: float | None = None,
 ) -> SearchResult:
     """Bisect ``case.stability``'s bracket; ``simulate(case, dt)`` runs one engine and method.
 
@@ -419,7 +485,9 @@ def search_case(
     stops at 1% instead of the case's ``rel_tol`` and runs at least
     :data:`QUICK_MIN_STEPS` steps. The limit found is checked at
     :data:`MONOTONE_PROBES` of itself; an unstable probe starts the bisection again below
-    it, and the note says the boundary is not monotone. A run whose solver fails ends the
+    it, and the note says the boundary is not monotone. A limit above the ``exact`` one
+    (s, where the method's is known) is run again long enough to show the growth
+    (:func:`_not_above_exact`). A run whose solver fails ends the
     search with status ``solver-failed`` and no limit. A search still running after
     ``budget_s`` seconds raises :class:`SearchTimeout` (a safety valve: it never shortens
     a search).
@@ -436,8 +504,13 @@ def search_case(
     made = [0]
     longer = [1]  # how many times the search's horizon its runs cover
 
+    def horizon_steps(dt: float) -> int:
+        return longer[0] * max(min_steps, math.ceil(spec.horizon / dt))
+
     def stable_at(dt: float) -> bool:
-        n = longer[0] * max(min_steps, math.ceil(spec.horizon / dt))
+        return run_steps(dt, horizon_steps(dt))
+
+    def run_steps(dt: float, n: int) -> bool:
         trial = dataclasses.replace(case, duration=n * dt, max_records=n)
         made[0] += 1
         traj = simulate(trial, dt)
@@ -485,6 +558,14 @@ def search_case(
                 )
                 break
         result = _confirmed(result, stable_at, longer, search, spec.dt_lo)
+        result = _not_above_exact(
+            result,
+            exact,
+            rel_tol,
+            run_steps,
+            horizon_steps,
+            lambda unstable, runs: search(spec.dt_lo, unstable, runs),
+        )
     except _SolverFailedAt as err:
         return SearchResult(
             float("nan"),

@@ -384,9 +384,12 @@ def run_record(
     revision, two runs' non-timing columns are equal bit for bit; and, where given, the
     ``precision`` of each engine's state (the facts a verdict on these tables reads, also
     where that engine is not installed: :func:`truestep.measures.metrics.recorded_precision`);
-    wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``,
-    and ``sweep <engine>``, the seconds each engine's sweep processes ran; they overlap
-    where sweeps share the cores)."""
+    wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``;
+    ``compile``, the part of the sweep spent compiling ahead of the first timed run;
+    ``sweep <engine>``, the seconds each engine's sweep processes ran, which overlap where
+    sweeps share the cores; ``analyses stability``, ``analyses restitution`` and ``analyses
+    scaling``, the parts of the analyses; the report's own time is not in it, it is
+    being written)."""
     from truestep import __version__
     from truestep.adapters import shadowed
     from truestep.measures.metrics import precision_of
