@@ -76,6 +76,14 @@ to rounding:
 - ``btRigidBody`` bodies with split impulse (``clean``): ``v_out = e |v_n|``, the push
   moving the position only.
 
+So ``default``'s rebound depends on how deep (or, within the contact margin, how far
+above the plane) the ball is at the start of its contact step, that is on where in a
+step it arrives: the restitution sweep's impact-phase drops (16 balls whose contacts
+begin at evenly spaced points of a step), asked 0.5 at 1 ms, read 0.16 to 0.55 with
+``default`` and 0.498 to 0.501 with ``clean`` (``restitution.csv``, ``e_phase_min`` and
+``e_phase_max``; a raw pybullet script of the same drops agrees, in
+``tests/test_restitution_phases.py``).
+
 What each ``setPhysicsEngineParameter`` setting does (the pybullet quickstart guide's
 descriptions, checked against Bullet's ``btSequentialImpulseConstraintSolver::
 setupContactConstraint`` and pybullet's ``PhysicsServerCommandProcessor``, which sets

@@ -56,7 +56,7 @@ def test_stability_ratio_over_the_exact_limit_or_the_best(published):
     family = ok["case"].map({name: c.family for name, c in cases.items()})
     for r in card.itertuples():
         mine = ok[(ok["engine"] == r.engine) & (ok["method"] == r.method) & (family == r.family)]
-        ratios, zero = [], 0
+        ratios, highs, zero = [], [], 0
         for row in mine.itertuples():
             if row.dt_limit_exact == 0:
                 zero += 1
@@ -64,13 +64,18 @@ def test_stability_ratio_over_the_exact_limit_or_the_best(published):
             known = np.isfinite(row.dt_limit_exact) and row.dt_limit_exact > 0
             best = ok[ok["case"] == row.case]["dt_limit"].max()
             ratio = row.dt_limit / (row.dt_limit_exact if known else best)
+            # the interval's top: the smallest unstable step (the limit where none was found)
+            top = row.dt_unstable if np.isfinite(row.dt_unstable) else row.dt_limit
             if np.isfinite(ratio):
                 ratios.append(ratio)
+                highs.append(top / (row.dt_limit_exact if known else best))
         assert r.stability_zero == zero and r.stability_cases == len(ratios), (r.engine, r.method)
         if ratios:
             assert r.stability_ratio == pytest.approx(np.median(ratios), rel=1e-12)
+            assert r.stability_ratio_high == pytest.approx(np.median(highs), rel=1e-12)
+            assert r.stability_ratio_high >= r.stability_ratio
         else:
-            assert np.isnan(r.stability_ratio)
+            assert np.isnan(r.stability_ratio) and np.isnan(r.stability_ratio_high)
 
 
 def test_restitution_gap_from_the_bounces(published):

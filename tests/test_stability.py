@@ -209,3 +209,50 @@ def test_an_adaptive_run_with_empty_stretches_is_judged(case_named):
     case = case_named("hanging-cloth")
     row = run_one(case, "scipy", "Radau", 1e-4, adaptive=True, timing=Timing(min_total_s=0.0, max_repeats=1))
     assert row["status"] == "ok", row.get("message")
+
+
+def test_a_limit_round_off_decides_is_published_as_the_interval_it_lies_in():
+    """:func:`truestep.measures.stability._roundoff_interval` on verdicts known by hand:
+    stable below 1.0, unstable above 1.2, and between them a verdict set by the start, as
+    chaotic motion gives (the run as it is: stable up to 1.1; nudged: stable above it).
+    The search stopped at 1.1 (stable) / 1.11 (unstable); nudging flips both, and the
+    interval becomes the largest probe below 1.0 at which the run and its nudged copy are
+    stable up to the smallest probe above 1.2 at which both are unstable. Verdicts that no
+    nudge changes leave the result as it was, two runs more."""
+    from truestep.measures.stability import DOWN_PROBES, UP_PROBES, SearchResult, _roundoff_interval
+
+    def chaotic(dt: float, ulps: int) -> bool:
+        return dt < 1.0 or (dt <= 1.2 and (ulps == 0) == (dt <= 1.1))
+
+    found = SearchResult(1.1, 1.11, 20, "")
+    out = _roundoff_interval(found, chaotic, 0.1, 5.0)
+    lo = next(f * 1.1 for f in DOWN_PROBES if f * 1.1 < 1.0)
+    hi = next(f * 1.11 for f in UP_PROBES if f * 1.11 > 1.2)
+    assert (out.dt_limit, out.dt_unstable) == (lo, hi) and out.note.startswith("chaotic: ")
+    steady = _roundoff_interval(found, lambda dt, ulps: dt <= 1.1, 0.1, 5.0)
+    assert (steady.dt_limit, steady.dt_unstable, steady.runs, steady.note) == (1.1, 1.11, 22, "")
+
+
+def test_the_rope_s_limit_is_an_interval_because_its_motion_is_chaotic(case_named):
+    """rope-pendulum (issue 35, finding 3): two starts 4.8e-7 apart (4 float32 ulps of
+    each position), stepped by the reference's symplectic Euler at 3.5 ms, part by more
+    than a centimetre within the search's 60 s: the motion is chaotic, so whether a step
+    near the limit is stable is a matter of round-off. The search says so, and publishes
+    an interval that holds the published limits of the other engines running the same
+    scheme (Drake's semi-explicit Euler 0.00414 s, pymunk 0.00414 s: 0.00353 s alone
+    before)."""
+    from truestep.measures.stability import nudged, search_case
+
+    case = case_named("rope-pendulum")
+    reference = get_adapter("reference")
+    dt = 0.0035
+    n = round(60.0 / dt)
+    runs = [
+        reference.simulate(dataclasses.replace(c, duration=n * dt, max_records=600), "symplectic-euler", dt)
+        for c in (case, nudged(case, 4))
+    ]
+    apart = np.max(np.abs(runs[0].x - runs[1].x), axis=(1, 2))
+    assert apart[0] < 1e-6 and apart.max() > 1e-2
+    found = search_case(case, lambda c, h: reference.simulate(c, "symplectic-euler", h))
+    assert "chaotic" in found.note
+    assert found.dt_limit <= 0.00414 <= found.dt_unstable

@@ -20,7 +20,7 @@ from truestep.cases.loader import CASE_DIR, load_case
 from truestep.execution.isolation import run_untimed, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.runner import duplicate_of, preload
-from truestep.measures.restitution import bounces, heights
+from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
 from truestep.measures.stability import SearchTimeout, search_case
 from truestep.numerics import own_run
 from truestep.tables.spec import RESTITUTION, SCALING, STABILITY
@@ -212,7 +212,83 @@ def bounce_case(e: float, dt: float) -> Case:
     )
 
 
+PHASE_SPACING = 0.25
+"""m between the phase drops' balls along the plane (radius 0.05 m: they never touch)."""
+
+
+def phase_case(e: float, dt: float, phases: int = PHASES) -> Case:
+    """The drop of :data:`DROP_CASE` as ``phases`` balls side by side, ball ``k`` raised so
+    that its first contact begins ``k / phases`` of a step after the single drop's
+    (``h_k = g t_k^2 / 2``, ``t_k = t_1 + k dt / phases``), with restitution ``e`` at
+    step ``dt`` (s), run in whole steps to past the apex of the last ball's first bounce."""
+    drop = _drop()
+    model = drop.particles
+    plane = model.planes[0]
+    radius, height, g = drop_geometry()
+    along = np.array([1.0, 0.0, 0.0])
+    assert abs(float(along @ plane.normal)) < 1e-12, "the drop's plane is not y = const"
+    t_k = np.sqrt(2 * height / g) + dt * np.arange(phases) / phases
+    rise = 0.5 * g * t_k**2 - height
+    x0 = model.x0[0] + rise[:, None] * plane.normal + PHASE_SPACING * np.arange(phases)[:, None] * along
+    steps = int(np.ceil((t_k[-1] * (1 + e) + 0.1) / dt)) + 20  # to the apex, with room
+    scene = dataclasses.replace(
+        model,
+        mass=np.full(phases, model.mass[0]),
+        x0=x0,
+        v0=np.zeros((phases, 3)),
+        radius=np.full(phases, radius),
+        fixed=np.zeros(phases, bool),
+        planes=[dataclasses.replace(plane, restitution=e)],
+    )
+    return dataclasses.replace(
+        drop,
+        name=f"bounce-phases-e{e:g}",
+        scene=scene,
+        duration=steps * dt,
+        dts=[dt],
+        quick_dts=[dt],
+        max_records=steps + 1,
+    )
+
+
+def _phase_values(engine: str, method: str, e: float, dt: float) -> tuple[dict, str]:
+    """The impact-phase drops' columns of a bounce-1 row (``phases``, ``e_phase_median``,
+    ``_min``, ``_max``) and a note: why they are missing, or that the asked ``e`` is not
+    delivered within :data:`PHASE_BAND` over every phase."""
+    case = phase_case(e, dt)
+    traj = get_adapter(engine).simulate(case, method, dt)
+    if traj.status != "ok" or traj.v is None:
+        return {"phases": 0}, f"the impact-phase drops: {traj.status} {traj.message}".strip()
+    plane = case.particles.planes[0]
+    radius, _, g = drop_geometry()
+    measured = []
+    for k in range(case.particles.n):
+        h, vn = heights(traj.x[:, k], traj.v[:, k], plane.point, plane.normal, radius)
+        found = bounces(traj.t, h, vn, g)
+        if found and np.isfinite(found[0].e_velocity):
+            measured.append(found[0].e_velocity)
+    if not measured:
+        return {"phases": 0}, "the impact-phase drops: no first bounce measured"
+    values = np.array(measured)
+    lo, hi = float(values.min()), float(values.max())
+    out = {
+        "phases": len(values),
+        "e_phase_median": float(np.median(values)),
+        "e_phase_min": lo,
+        "e_phase_max": hi,
+    }
+    if lo < e - PHASE_BAND or hi > e + PHASE_BAND:
+        return out, (
+            f"asked e = {e:g} is not delivered across impact phases: {lo:.3g} to {hi:.3g} "
+            f"(median {out['e_phase_median']:.3g}) over {len(values)} drops whose contact begins "
+            f"at evenly spaced points of a step, beyond the band of {PHASE_BAND:g}"
+        )
+    return out, ""
+
+
 def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
+    """The rows of one drop (:func:`bounce_case`), bounce by bounce; the first with the
+    impact-phase drops' values (:func:`_phase_values`)."""
     case = bounce_case(e, dt)
     traj = get_adapter(engine).simulate(case, method, dt)
     base = {"engine": engine, "method": method, "dt": dt, "e_set": e}
@@ -244,6 +320,9 @@ def _bounce_rows(engine: str, method: str, e: float, dt: float) -> list[dict]:
         else:
             why = "ball at rest after the previous contact" if found else "no contact found"
             rows.append({**base, "bounce": k, "status": "ok", "note": why})
+    values, note = _phase_values(engine, method, e, dt)
+    rows[0].update(values)
+    rows[0]["note"] = "; ".join(n for n in (str(rows[0]["note"]), note) if n)
     return rows
 
 

@@ -24,6 +24,7 @@ from truestep.measures.picks import (
     speed_claims,
     survival,
 )
+from truestep.measures.restitution import phase_contact
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,9 @@ class Findings:
     scene_set: dict[str, str] = dataclasses.field(default_factory=dict)
     """case name -> why the reference's integrators do not set its error
     (:func:`truestep.measures.picks.scene_set_error`)."""
+    phase_contact: pd.DataFrame = dataclasses.field(default_factory=pd.DataFrame)
+    """The restitution sweep's rows whose restitution depends on where in a step the ball
+    arrives beyond the band (:func:`truestep.measures.restitution.phase_contact`)."""
 
 
 Run = tuple[str, str, float, str, float]
@@ -126,6 +130,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         notes=method_notes(results),
         peers=same_scheme(results, cases),
         scene_set={c.name: why for c in cases if (why := scene_set_error(c, results)) is not None},
+        phase_contact=phase_contact(tables.get("restitution")),
     )
 
 

@@ -264,6 +264,7 @@ SCORECARD_COLUMNS = [
     "stability_ratio",
     "cases_measured",
     "stability_zero",
+    "stability_ratio_high",
 ]
 
 
@@ -319,7 +320,9 @@ def scorecard(
     limit is not 0 (whether or not the sweep ran the method there: a search of a case
     whose sweep skips it still tells its largest stable step), the median of its largest
     stable step over the exact limit (or, with no exact one, the best any method
-    reached); NaN without such searches.
+    reached); NaN without such searches. ``stability_ratio_high``: the same median over
+    the searches' smallest unstable steps (a search's limit where it found none): the
+    median's interval, wide where round-off decides limits.
     ``stability_zero``: the searches whose exact limit is 0 (the method is unstable at
     every step there, as theory says: no ratio to take).
     """
@@ -338,9 +341,11 @@ def scorecard(
     if stability is not None and len(stability):
         stab = stability[stability["status"] == "ok"].copy()
         stab["zero"] = pd.to_numeric(stab["dt_limit_exact"], errors="coerce").to_numpy(float) == 0
-        stab["ratio"] = (pd.to_numeric(stab["dt_limit"], errors="coerce") / _limit_reference(stab)).where(
-            ~stab["zero"]
-        )
+        reference = _limit_reference(stab)
+        limit = pd.to_numeric(stab["dt_limit"], errors="coerce")
+        unstable = pd.to_numeric(stab["dt_unstable"], errors="coerce") if "dt_unstable" in stab else limit
+        stab["ratio"] = (limit / reference).where(~stab["zero"])
+        stab["ratio_high"] = (unstable.where(np.isfinite(unstable), limit) / reference).where(~stab["zero"])
     rows = []
     for (engine, method), mine in ran.groupby(["engine", "method"], sort=False):
         for fam in dict.fromkeys(family[c] for c in mine["case"]):
@@ -362,7 +367,8 @@ def scorecard(
                 else pd.DataFrame()
             )
             s_ratio = _num(s, "ratio") if len(s) else np.array([])
-            s_ratio = s_ratio[np.isfinite(s_ratio)]
+            s_high = _num(s, "ratio_high") if len(s) else np.array([])
+            s_high, s_ratio = s_high[np.isfinite(s_ratio)], s_ratio[np.isfinite(s_ratio)]
             zero = int(s["zero"].sum()) if len(s) else 0
             rows.append(
                 {
@@ -376,6 +382,7 @@ def scorecard(
                     "stability_ratio": float(np.median(s_ratio)) if len(s_ratio) else np.nan,
                     "cases_measured": sum(c in measured for c in names),
                     "stability_zero": zero,
+                    "stability_ratio_high": float(np.median(s_high)) if len(s_high) else np.nan,
                 }
             )
     order = {

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from truestep.adapters.base import Trajectory
-from truestep.cases.case import Case
+from truestep.cases.case import Case, OdeSpec
 
 GROWTH_TOL = 0.25
 """Rise of the late half's energy peak above the early half's band, as a fraction of the
@@ -465,6 +465,78 @@ def _not_above_exact(
     return dataclasses.replace(again, note="; ".join(n for n in (again.note, note) if n))
 
 
+NUDGE = 4
+"""float32 ulps by which a search's start is nudged (positions, or an ODE's state, times
+``1 + 4 eps32``, 4.8e-7 of each: a float32 engine's start moves by a few of its ulps, a
+float64 one's far below any length of the scene), one run at the limit found and one at
+the smallest unstable step, over the horizon of the search's last runs: where the nudged
+run is unstable at the limit, or stable at the unstable step, round-off decides the
+verdict there (rope-pendulum: the reference's symplectic Euler and Drake's semi-explicit
+Euler, one scheme, agree to 2e-15 at 1 s and differ by 0.19 m at 10 s, and their limits
+0.0035 and 0.0041 s were each other's noise). Cases with an exact limit (linear scenes)
+are not nudged."""
+DOWN_PROBES = (0.97, 0.9, 0.8, 0.65, 0.5, 0.35, 0.25)
+"""Fractions of a limit that round-off decides, tried largest first: the first at which
+the run and its nudged copy are both stable is the limit published, the low end of the
+interval the boundary lies in."""
+UP_PROBES = (1.03, 1.1, 1.2, 1.35, 1.5, 2.0)
+"""Multiples of an unstable step that round-off decides, tried smallest first (below the
+search's high end): the first at which the run and its nudged copy are both unstable is
+the unstable end published."""
+
+
+def nudged(case: Case, ulps: int) -> Case:
+    """``case`` with its initial positions (an ODE's initial state) times ``1 + ulps eps32``
+    (float32's ``eps``): the same start to a few float32 ulps."""
+    factor = 1.0 + ulps * float(np.finfo(np.float32).eps)
+    scene = case.scene
+    if isinstance(scene, OdeSpec):
+        return dataclasses.replace(case, scene=dataclasses.replace(scene, y0=scene.y0 * factor))
+    return dataclasses.replace(case, scene=dataclasses.replace(scene, x0=scene.x0 * factor))
+
+
+def _roundoff_interval(
+    result: SearchResult, stable_with: Callable[[float, int], bool], dt_lo: float, dt_hi: float
+) -> SearchResult:
+    """``result`` where the start nudged by :data:`NUDGE` ulps keeps the run stable at its
+    limit and unstable at its unstable end (two runs); else the interval round-off decides
+    in: from the first of :data:`DOWN_PROBES` of the limit at which the run
+    (``stable_with(dt, 0)``) and its nudged copy (``stable_with(dt, NUDGE)``) are both
+    stable, to the first of :data:`UP_PROBES` of the unstable end (below ``dt_hi``, else
+    ``dt_hi``) at which both are unstable; the note calls the motion chaotic there."""
+    limit, unstable = result.dt_limit, result.dt_unstable
+    if not (limit > dt_lo and math.isfinite(unstable)):
+        return result
+    runs = result.runs + 2
+    low_flip, high_flip = not stable_with(limit, NUDGE), stable_with(unstable, NUDGE)
+    if not (low_flip or high_flip):
+        return dataclasses.replace(result, runs=runs)
+
+    def both(dt: float, stable: bool) -> bool:
+        nonlocal runs
+        for ulps in (0, NUDGE):
+            runs += 1
+            if stable_with(dt, ulps) != stable:
+                return False
+        return True
+
+    said = []
+    lo, hi = limit, unstable
+    if low_flip:
+        said.append(f"unstable at {limit:.6g} s")
+        lo = next((t for f in DOWN_PROBES if (t := f * limit) > dt_lo and both(t, True)), dt_lo)
+    if high_flip:
+        said.append(f"stable at {unstable:.6g} s")
+        hi = next((t for f in UP_PROBES if (t := f * unstable) < dt_hi and both(t, False)), dt_hi)
+    note = (
+        f"chaotic: its start nudged by {NUDGE} float32 ulps is {' and '.join(said)}; round-off "
+        f"decides the verdict between {lo:.6g} and {hi:.6g} s: the limit is the largest step "
+        "tried at which the run and its nudged copy are both stable, the unstable end the "
+        "smallest at which both are unstable"
+    )
+    return SearchResult(lo, hi, runs, "; ".join(n for n in (result.note, note) if n))
+
+
 class _SolverFailedAt(Exception):
     def __init__(self, dt: float, message: str) -> None:
         super().__init__(message)
@@ -487,7 +559,9 @@ def search_case(
     :data:`MONOTONE_PROBES` of itself; an unstable probe starts the bisection again below
     it, and the note says the boundary is not monotone. A limit above the ``exact`` one
     (s, where the method's is known) is run again long enough to show the growth
-    (:func:`_not_above_exact`). A run whose solver fails ends the
+    (:func:`_not_above_exact`). Without an exact limit, the start is nudged by a few ulps
+    at the limit and at the unstable end, and where that flips a verdict the bracket widens
+    to where it does not (:func:`_roundoff_interval`). A run whose solver fails ends the
     search with status ``solver-failed`` and no limit. A search still running after
     ``budget_s`` seconds raises :class:`SearchTimeout` (a safety valve: it never shortens
     a search).
@@ -510,8 +584,9 @@ def search_case(
     def stable_at(dt: float) -> bool:
         return run_steps(dt, horizon_steps(dt))
 
-    def run_steps(dt: float, n: int) -> bool:
-        trial = dataclasses.replace(case, duration=n * dt, max_records=n)
+    def run_steps(dt: float, n: int, ulps: int = 0) -> bool:
+        start = nudged(case, ulps) if ulps else case
+        trial = dataclasses.replace(start, duration=n * dt, max_records=n)
         made[0] += 1
         traj = simulate(trial, dt)
         if traj.status == "solver-failed":
@@ -566,6 +641,10 @@ def search_case(
             horizon_steps,
             lambda unstable, runs: search(spec.dt_lo, unstable, runs),
         )
+        if exact is None:  # a linear scene's limit is not decided by round-off
+            result = _roundoff_interval(
+                result, lambda dt, ulps: run_steps(dt, horizon_steps(dt), ulps), spec.dt_lo, spec.dt_hi
+            )
     except _SolverFailedAt as err:
         return SearchResult(
             float("nan"),

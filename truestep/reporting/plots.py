@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from truestep.measures.restitution import PHASES
 from truestep.visible import visible
 
 SERIES_COLOURS: dict[tuple[str, str], str] = {
@@ -210,7 +211,9 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
 
     A method stable at every step tried has a hatched bar ending at the largest step tried
     (a lower bound); one whose search found no limit (:data:`SEARCH_FAILED`) has a row
-    that says so instead of a bar."""
+    that says so instead of a bar; one whose limit round-off decides (its note says
+    ``chaotic:``) has a whisker from its limit to its unstable end, where the boundary
+    lies."""
     s = stab[(stab["case"] == case) & stab["status"].isin(["ok", *SEARCH_FAILED])]
     if s.empty or not (s["status"] == "ok").any():
         return None
@@ -232,6 +235,18 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     for yi, ex in zip(y, exact, strict=True):
         if np.isfinite(ex) and ex > 0:
             ax.plot([ex, ex], [yi - 0.4, yi + 0.4], color="black", linewidth=2)
+    unstable = pd.to_numeric(s["dt_unstable"], errors="coerce").to_numpy(float)
+    chaotic = ok & s["note"].fillna("").astype(str).str.contains("chaotic:", regex=False).to_numpy()
+    for yi, lo, hi in zip(y[chaotic], limits[chaotic], unstable[chaotic], strict=True):
+        ax.errorbar(
+            [np.sqrt(lo * hi)],
+            [yi],
+            xerr=[[np.sqrt(lo * hi) - lo], [hi - np.sqrt(lo * hi)]],
+            fmt="none",
+            ecolor="black",
+            elinewidth=1.2,
+            capsize=4,
+        )
     for yi, status in zip(y, s["status"], strict=True):
         if status in SEARCH_FAILED:
             ax.text(
@@ -248,7 +263,8 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel(
         "largest stable step (s); black tick: exact limit; hatched: stable at every\n"
-        "step tried (a lower bound); a stub at the left edge: unstable at every step tried"
+        "step tried (a lower bound); a stub at the left edge: unstable at every step tried;\n"
+        "whisker: where round-off decides the verdict (chaotic motion: the boundary lies in it)"
     )
     ax.set_title(f"{case}: largest stable step")
     ax.invert_yaxis()
@@ -259,7 +275,9 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
 def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
     """The restitution each engine and method gives on the first bounce, as its deviation
     from the one requested (``e_measured - e_set``) against the one requested: a method
-    that keeps what it is asked lies on zero, and the scale shows how far the others miss."""
+    that keeps what it is asked lies on zero, and the scale shows how far the others miss.
+    A bar through each point spans the impact-phase drops' range (``e_phase_min`` to
+    ``e_phase_max``), each series shifted a little along the axis so the bars stay apart."""
     r = rest[(rest["status"] == "ok") & (rest["bounce"] == 1)].dropna(subset=["e_measured"])
     if r.empty:
         return None
@@ -274,13 +292,32 @@ def restitution_plot(rest: pd.DataFrame, path: Path) -> Path | None:
     )
     for ax, dt in zip(axes[0], dts, strict=True):
         d = r[np.isclose(r["dt"].astype(float), dt)]
-        for (engine, method), g in d.groupby(["engine", "method"], sort=False):
+        for k, ((engine, method), g) in enumerate(d.groupby(["engine", "method"], sort=False)):
             g = g.sort_values("e_set")
-            deviation = g["e_measured"].astype(float) - g["e_set"].astype(float)
-            ax.plot(g["e_set"], deviation, label=_pair(engine, method), **series_style(engine, method))
+            e_set = g["e_set"].astype(float).to_numpy()
+            deviation = g["e_measured"].astype(float).to_numpy() - e_set
+            style = series_style(engine, method)
+            (line,) = ax.plot(e_set, deviation, label=_pair(engine, method), **style)
+            if {"e_phase_min", "e_phase_max"} <= set(g.columns):
+                lo = pd.to_numeric(g["e_phase_min"], errors="coerce").to_numpy() - e_set
+                hi = pd.to_numeric(g["e_phase_max"], errors="coerce").to_numpy() - e_set
+                seen = np.isfinite(lo) & np.isfinite(hi)
+                if seen.any():
+                    shift = 0.004 * (k - 0.5 * series)
+                    mid = 0.5 * (lo + hi)
+                    ax.errorbar(
+                        e_set[seen] + shift,
+                        mid[seen],
+                        yerr=0.5 * (hi - lo)[seen],
+                        fmt="none",
+                        ecolor=line.get_color(),
+                        elinewidth=1.0,
+                        capsize=2,
+                        alpha=0.7,
+                    )
         ax.axhline(0.0, color="black", linewidth=0.8, label="measured = requested")
         ax.set_xlabel("requested restitution e_set (rebound / impact normal speed)")
-        ax.set_title(f"dt = 1/{1 / dt:.0f} s")
+        ax.set_title(f"dt = 1/{1 / dt:.0f} s; bars: the range over {PHASES} impact phases")
         ax.grid(True, alpha=0.3)
     axes[0][0].set_ylabel("measured - requested restitution (bounce 1)")
     axes[0][-1].legend(fontsize=LEGEND_FONT, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)

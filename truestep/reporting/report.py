@@ -34,6 +34,7 @@ from truestep.reporting.sections import (
     conclusion_sentence,
     hard_case_line,
     methods_section,
+    phase_sentence,
     same_scheme_section,
     scorecard_section,
     speed_section,
@@ -270,6 +271,8 @@ def render_markdown(
         parts.append(folded(f"{len(shown)} runs of {case.name}", md_table(with_units(shown[cols]))))
         if case.name in found.conclusions:
             parts.append(conclusion_sentence(case, found.conclusions[case.name]))
+        if contact := phase_sentence(case, shown, found.phase_contact):
+            parts.append(contact)
     stab = tables.get("stability")
     parts.append("## Stability limits\n")
     if stab is not None and len(stab):

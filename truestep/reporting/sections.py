@@ -17,6 +17,7 @@ from truestep.measures.picks import (
     SURVIVAL_ENERGY,
     SURVIVAL_ERROR,
 )
+from truestep.measures.restitution import PHASE_BAND, PHASES
 from truestep.reporting.markdown import fmt, folded, md_table, text, with_units
 
 _fmt = fmt
@@ -89,6 +90,7 @@ def summary(cases: list[Case], found: Findings, tables: dict[str, pd.DataFrame])
                     f"{w.e_measured:.3f} at dt {_fmt(float(w.dt))} s."
                 )
             lines.append("")
+    lines += phase_lines(found.phase_contact)
     hard = [c for c in cases if c.hard]
     if hard:
         lines.append(
@@ -101,6 +103,57 @@ def summary(cases: list[Case], found: Findings, tables: dict[str, pd.DataFrame])
             lines.append(hard_case_line(c, found.survival[c.name]))
         lines.append("")
     return lines
+
+
+def _phase_range(w: pd.Series) -> str:
+    return (
+        f"asked {w['e_set']:g}, {w['e_phase_min']:.3f} to {w['e_phase_max']:.3f} (median "
+        f"{w['e_phase_median']:.3f}) over the impact phases at dt {_fmt(float(w['dt']))} s"
+    )
+
+
+def phase_lines(phase: pd.DataFrame) -> list[str]:
+    """The summary's list of engines and methods that do not give the asked restitution at
+    every impact phase, within the band (``phase``:
+    :func:`truestep.measures.restitution.phase_contact`), each with its farthest range."""
+    if phase is None or not len(phase):
+        return []
+    lines = [
+        f"Where the asked restitution is not what every impact phase gets (the restitution "
+        f"sweep drops {PHASES} balls per row, their first contacts spread evenly over a step; "
+        f"first bounce, farther than {PHASE_BAND:g} from the asked e at some phase), the "
+        "farthest row of each:\n"
+    ]
+    for (engine, method), g in phase.groupby(["engine", "method"], sort=False):
+        w = g.iloc[0]
+        lines.append(
+            f"- {text(engine)} / {text(method)}: {_phase_range(w)} (a spread of "
+            f"{w['e_phase_max'] - w['e_phase_min']:.3f} with the phase); {len(g)} "
+            f"{'row' if len(g) == 1 else 'rows'} of its sweep leave the band, and its errors on the "
+            "contact cases are partly its contact law's."
+        )
+    return [*lines, ""]
+
+
+def phase_sentence(case: Case, shown: pd.DataFrame, phase: pd.DataFrame) -> str:
+    """A contact case's line naming the engines and methods among its rows (``shown``)
+    that do not give the asked restitution at every impact phase (``phase``: as
+    :func:`phase_lines`), or ``""``."""
+    if phase is None or not len(phase) or not getattr(case.scene, "planes", None):
+        return ""
+    ran = set(zip(shown["engine"].astype(str), shown["method"].astype(str), strict=True))
+    named = [
+        f"{text(e)} / {text(m)}"
+        for (e, m), _ in phase.groupby(["engine", "method"], sort=False)
+        if (str(e), str(m)) in ran
+    ]
+    if not named:
+        return ""
+    return (
+        "**Contact law:** the restitution sweep's drops do not get the asked restitution at "
+        f"every impact phase from {', '.join(named)} (the summary gives each one's range): their "
+        "errors here are partly their contact law's, not their integrators'.\n"
+    )
 
 
 def hard_case_line(case: Case, s: pd.DataFrame) -> str:
@@ -247,8 +300,20 @@ def family_sentence(
     steady = mine[np.isfinite(mine["stability_ratio"].to_numpy(float))]
     if len(steady):
         best = float(steady["stability_ratio"].max())
-        tops = steady[np.isclose(steady["stability_ratio"], best, rtol=5e-3)]
-        tops = tops.sort_values(["stability_zero", "stability_cases"], ascending=[True, False], kind="stable")
+        high = (
+            steady["stability_ratio_high"].to_numpy(float)
+            if "stability_ratio_high" in steady
+            else steady["stability_ratio"].to_numpy(float)
+        )
+        # tied with the best: within 0.5 %, or an interval that reaches the best's low end
+        close = np.isclose(steady["stability_ratio"], best, rtol=5e-3)
+        tops = steady[close | (high >= best)]
+        tops = tops.sort_values(
+            ["stability_ratio", "stability_zero", "stability_cases"],
+            ascending=[False, True, False],
+            kind="stable",
+        )
+        overlap = bool(np.any((high >= best) & ~close))
         named = ", ".join(
             f"{_pair(r)} ({r.stability_cases} search(es)"
             + (
@@ -260,7 +325,10 @@ def family_sentence(
             for r in tops.head(3).itertuples(index=False)
         )
         more = f" and {len(tops) - 3} more" if len(tops) > 3 else ""
-        parts.append(f"for the largest stable step, {named}{more}: {best:.2f} of the exact or best limit")
+        parts.append(
+            f"for the largest stable step, {named}{more}: {best:.2f} of the exact or best limit"
+            + (" (tied: where round-off decides a limit, their intervals overlap)" if overlap else "")
+        )
     if family in ("contact", "particles") and len(fidelity):
         true = fidelity.sort_values("median").iloc[0]
         parts.append(

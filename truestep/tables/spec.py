@@ -368,6 +368,36 @@ RESTITUTION = Table(
         Column("penetration", "number", "m", "how deep the ball went into the plane"),
         _STATUS,
         _NOTE,
+        Column(
+            "phases",
+            "count",
+            "",
+            "first bounces of the impact-phase drops measured (bounce 1 only): balls dropped "
+            "from heights whose contact begins at evenly spaced points within a step",
+            whole=True,
+            least=0.0,
+        ),
+        Column(
+            "e_phase_median",
+            "number",
+            "1",
+            "the median restitution (from speeds) over the impact-phase drops (bounce 1 only)",
+            label="e median over phases",
+        ),
+        Column(
+            "e_phase_min",
+            "number",
+            "1",
+            "the smallest restitution over the impact-phase drops (bounce 1 only)",
+            label="e min over phases",
+        ),
+        Column(
+            "e_phase_max",
+            "number",
+            "1",
+            "the largest restitution over the impact-phase drops (bounce 1 only)",
+            label="e max over phases",
+        ),
     ),
 )
 """``restitution.csv``."""
@@ -495,6 +525,14 @@ SCORECARD = Table(
             "number",
             "1",
             "the largest distance of e_measured from e_set over those bounces",
+        ),
+        Column(
+            "stability_ratio_high",
+            "number",
+            "1",
+            "the same median over the searches' smallest unstable steps (their limits where none "
+            "was found): the boundary lies between stability_ratio and this; wide where round-off "
+            "decides it (chaotic motion), and rankings tie overlapping intervals",
         ),
     ),
 )
