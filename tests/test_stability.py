@@ -228,7 +228,12 @@ def test_a_limit_round_off_decides_is_published_as_the_interval_it_lies_in():
     out = _roundoff_interval(found, chaotic, 0.1, 5.0)
     lo = next(f * 1.1 for f in DOWN_PROBES if f * 1.1 < 1.0)
     hi = next(f * 1.11 for f in UP_PROBES if f * 1.11 > 1.2)
-    assert (out.dt_limit, out.dt_unstable) == (lo, hi) and out.note.startswith("chaotic: ")
+    assert (out.dt_limit, out.dt_unstable) == (lo, hi) and out.note.startswith("round-off decides: ")
+    assert "the limit is the largest step tried" in out.note and "smallest step tried" in out.note
+    edge = _roundoff_interval(
+        found, lambda dt, ulps: dt < 1.0 or (dt <= 6 and (ulps == 0) == (dt <= 1.1)), 0.1, 5.0
+    )
+    assert edge.dt_unstable == 5.0 and "the unstable end is that high end" in edge.note
     steady = _roundoff_interval(found, lambda dt, ulps: dt <= 1.1, 0.1, 5.0)
     assert (steady.dt_limit, steady.dt_unstable, steady.runs, steady.note) == (1.1, 1.11, 22, "")
 
@@ -254,5 +259,5 @@ def test_the_rope_s_limit_is_an_interval_because_its_motion_is_chaotic(case_name
     apart = np.max(np.abs(runs[0].x - runs[1].x), axis=(1, 2))
     assert apart[0] < 1e-6 and apart.max() > 1e-2
     found = search_case(case, lambda c, h: reference.simulate(c, "symplectic-euler", h))
-    assert "chaotic" in found.note
+    assert "round-off decides" in found.note
     assert found.dt_limit <= 0.00414 <= found.dt_unstable

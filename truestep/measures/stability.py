@@ -475,6 +475,9 @@ verdict there (rope-pendulum: the reference's symplectic Euler and Drake's semi-
 Euler, one scheme, agree to 2e-15 at 1 s and differ by 0.19 m at 10 s, and their limits
 0.0035 and 0.0041 s were each other's noise). Cases with an exact limit (linear scenes)
 are not nudged."""
+ROUNDOFF_DECIDES = "round-off decides:"
+"""How the note of a search whose limit round-off decides begins (the report's figure
+draws those rows' intervals)."""
 DOWN_PROBES = (0.97, 0.9, 0.8, 0.65, 0.5, 0.35, 0.25)
 """Fractions of a limit that round-off decides, tried largest first: the first at which
 the run and its nudged copy are both stable is the limit published, the low end of the
@@ -503,7 +506,7 @@ def _roundoff_interval(
     in: from the first of :data:`DOWN_PROBES` of the limit at which the run
     (``stable_with(dt, 0)``) and its nudged copy (``stable_with(dt, NUDGE)``) are both
     stable, to the first of :data:`UP_PROBES` of the unstable end (below ``dt_hi``, else
-    ``dt_hi``) at which both are unstable; the note calls the motion chaotic there."""
+    ``dt_hi``) at which both are unstable; the note begins with :data:`ROUNDOFF_DECIDES`."""
     limit, unstable = result.dt_limit, result.dt_unstable
     if not (limit > dt_lo and math.isfinite(unstable)):
         return result
@@ -520,19 +523,29 @@ def _roundoff_interval(
                 return False
         return True
 
-    said = []
+    said, ends = [], []
     lo, hi = limit, unstable
     if low_flip:
         said.append(f"unstable at {limit:.6g} s")
         lo = next((t for f in DOWN_PROBES if (t := f * limit) > dt_lo and both(t, True)), dt_lo)
+        ends.append(
+            "the limit is the largest step tried at which the run and its nudged copy are both stable"
+            if lo > dt_lo
+            else "no step tried above the search's low end was stable in both: the limit is that low end"
+        )
     if high_flip:
         said.append(f"stable at {unstable:.6g} s")
         hi = next((t for f in UP_PROBES if (t := f * unstable) < dt_hi and both(t, False)), dt_hi)
+        ends.append(
+            "the unstable end is the smallest step tried at which both are unstable"
+            if hi < dt_hi
+            else "no step tried below the search's high end was unstable in both: the unstable end "
+            "is that high end"
+        )
     note = (
-        f"chaotic: its start nudged by {NUDGE} float32 ulps is {' and '.join(said)}; round-off "
-        f"decides the verdict between {lo:.6g} and {hi:.6g} s: the limit is the largest step "
-        "tried at which the run and its nudged copy are both stable, the unstable end the "
-        "smallest at which both are unstable"
+        f"{ROUNDOFF_DECIDES} its start nudged by {NUDGE} float32 ulps is {' and '.join(said)}, so the "
+        f"verdict there depends on the start's last bits (chaotic motion, or a run on the edge of a "
+        f"test); the boundary lies between {lo:.6g} and {hi:.6g} s: {'; '.join(ends)}"
     )
     return SearchResult(lo, hi, runs, "; ".join(n for n in (result.note, note) if n))
 

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.measures.restitution import PHASES
+from truestep.measures.stability import ROUNDOFF_DECIDES
 from truestep.visible import visible
 
 SERIES_COLOURS: dict[tuple[str, str], str] = {
@@ -211,9 +212,9 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
 
     A method stable at every step tried has a hatched bar ending at the largest step tried
     (a lower bound); one whose search found no limit (:data:`SEARCH_FAILED`) has a row
-    that says so instead of a bar; one whose limit round-off decides (its note says
-    ``chaotic:``) has a whisker from its limit to its unstable end, where the boundary
-    lies."""
+    that says so instead of a bar; one whose limit round-off decides (its note says so:
+    :data:`~truestep.measures.stability.ROUNDOFF_DECIDES`) has a whisker from its limit to
+    its unstable end, where the boundary lies."""
     s = stab[(stab["case"] == case) & stab["status"].isin(["ok", *SEARCH_FAILED])]
     if s.empty or not (s["status"] == "ok").any():
         return None
@@ -236,8 +237,9 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
         if np.isfinite(ex) and ex > 0:
             ax.plot([ex, ex], [yi - 0.4, yi + 0.4], color="black", linewidth=2)
     unstable = pd.to_numeric(s["dt_unstable"], errors="coerce").to_numpy(float)
-    chaotic = ok & s["note"].fillna("").astype(str).str.contains("chaotic:", regex=False).to_numpy()
-    for yi, lo, hi in zip(y[chaotic], limits[chaotic], unstable[chaotic], strict=True):
+    notes = s["note"].fillna("").astype(str)
+    decided = ok & notes.str.contains(ROUNDOFF_DECIDES, regex=False).to_numpy()
+    for yi, lo, hi in zip(y[decided], limits[decided], unstable[decided], strict=True):
         ax.errorbar(
             [np.sqrt(lo * hi)],
             [yi],
@@ -264,7 +266,7 @@ def stability_bars(stab: pd.DataFrame, case: str, path: Path) -> Path | None:
     ax.set_xlabel(
         "largest stable step (s); black tick: exact limit; hatched: stable at every\n"
         "step tried (a lower bound); a stub at the left edge: unstable at every step tried;\n"
-        "whisker: where round-off decides the verdict (chaotic motion: the boundary lies in it)"
+        "whisker: where round-off decides the verdict (the boundary lies in it)"
     )
     ax.set_title(f"{case}: largest stable step")
     ax.invert_yaxis()

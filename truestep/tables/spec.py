@@ -532,7 +532,8 @@ SCORECARD = Table(
             "1",
             "the same median over the searches' smallest unstable steps (their limits where none "
             "was found): the boundary lies between stability_ratio and this; wide where round-off "
-            "decides it (chaotic motion), and rankings tie overlapping intervals",
+            "decides it (chaotic motion, a run on the edge of a test), and rankings tie overlapping "
+            "intervals",
         ),
     ),
 )
