@@ -8,7 +8,12 @@ engine truestep runs. This adapter measures those integrators. The scene is a Dr
 ``LeafSystem`` whose continuous state is the case's flat state (a particle scene's
 positions then velocities, (6 n,); an ODE's state, (dim,)) and whose time derivative
 is the reference system's (:func:`truestep.adapters.reference.build_system`), as for
-scipy: the comparison is of integrators alone, on the same forces. A second-order
+scipy: the comparison is of integrators alone, on the same forces. A particle scene's
+derivative is the reference's compiled one
+(:func:`truestep.reference_impl.compiled.derivative_for`, the numpy system's bits in
+under a microsecond: Drake calls it back from C++ at every evaluation, and the numpy
+one took 5 to 20 µs of each); an ODE's, and a scene with force fields, are the
+reference system's Python. A second-order
 scene declares its state as Drake's generalized positions ``q`` and velocities ``v``
 (``q' = v``), which ``semi_explicit_euler`` needs; a first-order ODE is Drake's
 "miscellaneous" state ``z``. Drake's ``MultibodyPlant`` is not used: its contact is
@@ -48,7 +53,7 @@ state has already run away. An error-controlled run may make at most
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
 
@@ -59,7 +64,9 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from truestep.adapters.base import EnergyExtremes, FactsSpec, Trajectory, finite_until, thin_records
 from truestep.adapters.reference import build_system, trajectory_of_states
 from truestep.cases.case import Case
+from truestep.reference_impl.compiled import derivative_for
 from truestep.reference_impl.integrate import BLOWUP, record_indices
+from truestep.reference_impl.precompile import DERIVATIVE, compile_all
 from truestep.reference_impl.solvers.explicit_rk import tableau_stability
 from truestep.reference_impl.solvers.facts import MethodFacts, Stability
 from truestep.reference_impl.system import SecondOrderSystem, System
@@ -191,9 +198,10 @@ class _Derivative(LeafSystem):
     ``calls`` counts the evaluations (every one Drake asks for, Jacobian columns
     included)."""
 
-    def __init__(self, system: System) -> None:
+    def __init__(self, system: System, derivative: Callable[[np.ndarray, float], np.ndarray]) -> None:
         super().__init__()
         self.system = system
+        self.derivative = derivative
         self.calls = 0
         start: Any = system.get_state()
         x0 = BasicVector(start)
@@ -205,13 +213,13 @@ class _Derivative(LeafSystem):
     def DoCalcTimeDerivatives(self, context: Any, derivatives: Any) -> None:
         self.calls += 1
         y = context.get_continuous_state_vector().CopyToVector()
-        derivatives.get_mutable_vector().SetFromVector(self.system.derivative(y, context.get_time()))
+        derivatives.get_mutable_vector().SetFromVector(self.derivative(y, context.get_time()))
 
 
 def _bad(y: np.ndarray) -> bool:
-    """Whether a state (dim,) is non-finite or beyond :data:`BLOWUP` (NaN compares false)."""
-    with np.errstate(invalid="ignore"):
-        return not bool(np.abs(y).max(initial=0.0) < BLOWUP)
+    """Whether a state (dim,) is non-finite or beyond :data:`BLOWUP` (NaN compares false,
+    and warns of nothing)."""
+    return not bool(np.abs(y).max(initial=0.0) < BLOWUP)
 
 
 class DrakeAdapter:
@@ -246,6 +254,23 @@ class DrakeAdapter:
         }
     )
 
+    def __init__(self, *, compiled: bool = True) -> None:
+        self.compiled = compiled
+        """Whether a particle scene's derivative is the reference's compiled one (its
+        numpy one with ``compiled=False``: the same bits, slower)."""
+
+    def prepare(self, case: Case, method: str) -> None:
+        """Before a run's process is forked: the scene's compiled derivative made (or
+        loaded from numba's cache) here, so that the process finds it ready."""
+        if self.compiled:
+            derivative_for(case.model)
+
+    def prepare_all(self, pairs: list[tuple[Case, str]], *, workers: int = 1) -> None:
+        """The compiled derivatives of every case of ``pairs`` (case, method), on
+        ``workers`` cores at once (:func:`~truestep.reference_impl.precompile.compile_all`)."""
+        if self.compiled:
+            compile_all(pairs=[(case.model, DERIVATIVE) for case, _ in pairs], workers=workers)
+
     def missing(self, case: Case, method: str) -> set[str]:
         """Features of ``case`` beyond :attr:`capabilities`; ``semi_explicit_euler`` also
         needs a second-order scene (Drake's ``q`` and ``v``)."""
@@ -263,7 +288,7 @@ class DrakeAdapter:
         lacking = self.missing(case, method)
         if lacking:
             raise ValueError(f"drake cannot model {case.name}: needs {', '.join(sorted(lacking))}")
-        run = _Run(case, method, dt)
+        run = _Run(case, method, dt, compiled=self.compiled)
         n_steps = run.n_steps
         marks = record_indices(n_steps, n_steps if monitor else case.max_records) if run.fixed else None
         t, y, wall = run.advance(marks)
@@ -301,10 +326,11 @@ class _Run:
     """One run's Drake objects, built outside the timed region: the system, its
     Simulator and integrator set up for ``method`` at ``dt``, and the monitor."""
 
-    def __init__(self, case: Case, method: str, dt: float) -> None:
+    def __init__(self, case: Case, method: str, dt: float, *, compiled: bool = True) -> None:
         self.case, self.method = case, method
         self.system = build_system(case)
-        self.leaf = _Derivative(self.system)
+        fast = derivative_for(case.model) if compiled else None
+        self.leaf = _Derivative(self.system, fast or self.system.derivative)
         self.simulator = Simulator(self.leaf)
         self.context = self.simulator.get_mutable_context()
         self.fixed = method in FIXED

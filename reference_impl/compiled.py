@@ -51,7 +51,7 @@ from truestep.reference_impl.particles_kernels import Particles, Scene
 from truestep.reference_impl.solvers.any_method import AnyMethod, fused_kinds, pattern
 from truestep.reference_impl.solvers.explicit_rk_kernels import Tableau
 from truestep.reference_impl.solvers.splitting_kernels import KickDrift, KickDriftKick
-from truestep.reference_impl.step_slots import loop_for
+from truestep.reference_impl.step_slots import derivative_loop, loop_for
 from truestep.reference_impl.tiles import BLOCK, Fused, Passes
 
 CompiledRun = DrivenRun
@@ -317,6 +317,71 @@ def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], Non
             loop.compile(sig)
     _PREPARED[key] = loop.get_overload(sig)
     return _PREPARED[key], kind, layout, scene
+
+
+def derivative_reason(model: ParticleModel | None) -> str | None:
+    """Why the compiled path cannot make ``model``'s derivative (:func:`derivative_for`),
+    or ``None`` if it can."""
+    if model is None:
+        return "an ODE case (its system is Python code)"
+    if model.fields:
+        return "force fields"
+    if model.emitters:
+        return "emitters"
+    if model.planes:
+        return "planes (a collision pass sets their contact between steps)"
+    return None
+
+
+def _derivative_args(model: ParticleModel) -> tuple:
+    """The arguments of :func:`particles_kernels.flat_derivative` for ``model`` (the state,
+    time and output placeholders) and their numba types: (args, signature)."""
+    scene = pack(model)
+    n = model.n
+    scratch = tuple(np.zeros((3, n)) for _ in range(4))
+    args = (scene, np.zeros(6 * n), 0.0, np.zeros(6 * n), *scratch, np.zeros((0, n), dtype=np.bool_))
+    return args, tuple(typeof(a) for a in args)
+
+
+def derivative_key(model: ParticleModel) -> tuple:
+    """What a compiled derivative depends on: the types of its arguments."""
+    return ("derivative", _derivative_args(model)[1])
+
+
+def derivative_for(
+    model: ParticleModel | None, *, progress: Callable[[str], None] | None = None
+) -> Callable[[np.ndarray, float], np.ndarray] | None:
+    """The derivative of ``model``'s particle system compiled (or loaded from numba's
+    cache, shown through ``progress`` when slow): a function of a flat state ``y`` (6 n,:
+    positions (n, 3) then velocities, m and m/s) and a time ``t`` (s) that returns
+    ``dy/dt`` (6 n,), bit for bit :meth:`ParticleSystem.derivative` (tested on every case
+    it compiles), for an integrator outside truestep that calls a derivative (Drake's).
+    ``None`` where :func:`derivative_reason` says the compiled path cannot make it."""
+    if derivative_reason(model) is not None:
+        return None
+    assert model is not None
+    args, sig = _derivative_args(model)
+    key = ("derivative", sig)
+    if key not in _PREPARED:
+        scene = args[0]
+        loop = derivative_loop(scene)
+        if hasattr(loop, "overloads"):  # else NUMBA_DISABLE_JIT: the composition runs as Python
+            if sig not in loop.overloads:
+                kinds = ", ".join(type(k).__name__.lower() for k in scene.forces) or "no forces"
+                with _shown_if_slow(f"the derivative of {kinds}", progress or _stderr):
+                    loop.compile(sig)
+            loop = loop.get_overload(sig)
+        _PREPARED[key] = loop
+    entry = _PREPARED[key]
+    scene, _, _, _, X, V, F, A, contact = args
+    dim = 6 * model.n
+
+    def derivative(y: np.ndarray, t: float) -> np.ndarray:
+        out = np.empty(dim)
+        entry(scene, np.ascontiguousarray(y, dtype=np.float64), float(t), out, X, V, F, A, contact)
+        return out
+
+    return derivative
 
 
 def run_compiled(

@@ -15,8 +15,9 @@ with ``inline='always'`` before it types them). A part the scene lacks is no cod
 nothing is tested at run time to skip it.
 
 numba caches the compiled loop on disk under a name made from its fillings and the source
-of the kernels (:data:`FINGERPRINT`), so a changed kernel is compiled afresh, never taken
-stale from the cache. With ``NUMBA_DISABLE_JIT=1`` the same composition runs as Python.
+of every module of the reference implementation (:data:`FINGERPRINT`), so a changed kernel
+is compiled afresh, never taken stale from the cache. With ``NUMBA_DISABLE_JIT=1`` the
+same composition runs as Python.
 """
 
 from __future__ import annotations
@@ -44,27 +45,21 @@ LOOP: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
 (its arrays all come from Python, which holds them while it runs; it allocates none), so
 that passing arrays between the functions it is made of costs nothing."""
 
-KERNEL_MODULES = (
-    "forces_kernels",
-    "collisions_kernels",
-    "particles_kernels",
-    "tiles",
-    "solvers/explicit_rk_kernels",
-    "solvers/splitting_kernels",
-    "solvers/any_method",
-    "integrate_kernels",
-    "compose",
-    "step_slots",
-    "collisions",
-    "integrate",
-)
-"""The modules whose source a compiled loop is made of (beside this one's folder)."""
 
-FINGERPRINT = hashlib.sha256(
-    b"".join((Path(__file__).parent / f"{name}.py").read_bytes() for name in KERNEL_MODULES)
-).hexdigest()[:12]
-"""A hash of the source of every module in :data:`KERNEL_MODULES`: part of the name under
-which a compiled loop is cached."""
+def source_fingerprint(folder: Path) -> str:
+    """A hash of the name and source of every Python module under ``folder`` (its
+    subfolders too), in the order of their paths."""
+    digest = hashlib.sha256()
+    for path in sorted(folder.rglob("*.py")):
+        digest.update(path.relative_to(folder).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:12]
+
+
+FINGERPRINT = source_fingerprint(Path(__file__).parent)
+"""A hash of the source of every module of the reference implementation (this module's
+folder): part of the name under which a compiled loop is cached, so that a change to any
+of them, whatever a loop is made of, compiles the loops afresh (numba's own cache checks
+only the file of the function it compiles)."""
 
 
 class Slot:

@@ -134,6 +134,26 @@ def accelerations(scene, A, F, X, V, t, contact, any_contact):
         A[2, p] = F[2, p] * w[p]
 
 
+def flat_derivative(scene, y, t, out, X, V, F, A, contact):
+    """``dy/dt`` of a flat state ``y`` (6 m,: the positions (m, 3) then the velocities,
+    each particle's three components together, as :class:`ParticleSystem` keeps them) at
+    time ``t`` into ``out`` (6 m,): the velocities, then :func:`accelerations` (no
+    particle in contact: a scene without planes). ``X``, ``V``, ``F``, ``A`` ((3, m)) and
+    ``contact`` are scratch. :meth:`SecondOrderSystem.derivative` of a
+    :class:`ParticleSystem`, bit for bit; compiled for a scene by
+    :func:`compiled.derivative_for`."""
+    m = X.shape[1]
+    for p in range(m):
+        for c in range(3):
+            X[c, p] = y[3 * p + c]
+            V[c, p] = y[3 * m + 3 * p + c]
+            out[3 * p + c] = y[3 * m + 3 * p + c]
+    accelerations(scene, A, F, X, V, t, contact, False)
+    for p in range(m):
+        for c in range(3):
+            out[3 * m + 3 * p + c] = A[c, p]
+
+
 @njit(**KERNEL)
 def particle_force(scene, x, v, t, p):
     """The applied force on particle ``p`` alone, its impulses last, for scenes whose

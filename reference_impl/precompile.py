@@ -18,12 +18,24 @@ import numba
 from truestep.reference_impl import compiled
 from truestep.reference_impl.model import ParticleModel
 
+DERIVATIVE = None
+"""The "method" of a pair whose compiled derivative (:func:`compiled.derivative_for`, what
+Drake's integrators call) is wanted rather than a loop."""
 
-def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type]]) -> list[tuple]:
+
+def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type | None]]) -> list[tuple]:
     """One (model, method) of ``pairs`` for each loop they need that this process has not
-    prepared, in order of first need (pairs the compiled path cannot run are left out)."""
+    prepared, in order of first need (pairs the compiled path cannot run are left out); a
+    pair whose method is :data:`DERIVATIVE` needs the model's compiled derivative."""
     seen, needed = set(compiled._PREPARED), []
     for model, method in pairs:
+        if method is DERIVATIVE:
+            if compiled.derivative_reason(model) is not None:
+                continue
+            if (key := compiled.derivative_key(model)) not in seen:
+                seen.add(key)
+                needed.append((model, method))
+            continue
         if compiled.compiled_reason(model, method) is not None:
             continue
         scene = compiled.pack(model)
@@ -43,7 +55,11 @@ def _prepare_each(pairs: list[tuple], progress: Callable[[str], None] | None) ->
     say = progress or _stderr
     began = time.perf_counter()
     for i, (model, method) in enumerate(pairs):
-        compiled.prepared(model, method, progress=_counted(say, i, len(pairs), began))
+        counted = _counted(say, i, len(pairs), began)
+        if method is DERIVATIVE:
+            compiled.derivative_for(model, progress=counted)
+        else:
+            compiled.prepared(model, method, progress=counted)
 
 
 def _counted(say: Callable[[str], None], done: int, total: int, began: float) -> Callable[[str], None]:
@@ -71,8 +87,9 @@ def compile_all(
     progress: Callable[[str], None] | None = None,
 ) -> None:
     """Compile (or load from numba's cache) the loops that ``methods`` (default: every
-    fixed-step method) need on ``models``, and those of ``pairs`` (model, method), so that
-    forked runs find them ready.
+    fixed-step method, and the compiled derivative, :data:`DERIVATIVE`) need on
+    ``models``, and those of ``pairs`` (model, method), so that forked runs find them
+    ready.
 
     ``workers`` > 1 compiles them in that many processes at once (this one and forked
     ones, each a share of the loops, into numba's cache), then loads the others' from the
@@ -81,7 +98,7 @@ def compile_all(
     themselves, such as a test session's workers)."""
     from truestep.reference_impl.solvers import METHODS
 
-    names = list(methods) if methods is not None else list(METHODS)
+    names = list(methods) if methods is not None else [*METHODS, DERIVATIVE]
     wanted = [(model, method) for model in models for method in names] + list(pairs)
     needed = loops_needed(wanted)[share[0] :: share[1]]
     workers = max(1, min(workers, len(needed)))

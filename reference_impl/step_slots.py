@@ -192,6 +192,16 @@ _LOOPS: dict[str, object] = {}
 """The loops composed in this process, by :func:`compose.cache_name`."""
 
 
+def derivative_loop(scene: Scene):
+    """:func:`particles_kernels.flat_derivative` composed for ``scene`` (a scene without
+    planes; not yet compiled)."""
+    slots = {**force_slots(scene), **plane_slots(None, scene)}
+    name = cache_name("derivative", slots)
+    if name not in _LOOPS:
+        _LOOPS[name] = instantiate(particles_kernels.flat_derivative, slots, name=name, options=compose.LOOP)
+    return _LOOPS[name]
+
+
 def loop_for(kind, layout, scene: Scene):
     """The driver composed for ``scene`` and ``kind`` in ``layout`` (not yet compiled:
     numba compiles it, or loads it from its cache, when it is first called)."""

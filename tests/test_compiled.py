@@ -18,6 +18,7 @@ methods known by their facts alone, and the composition itself.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -233,6 +234,24 @@ def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named
     assert compose.cache_name("drive", slots) != before
 
 
+def test_the_fingerprint_reads_every_module_of_the_reference_implementation(tmp_path):
+    """No list of modules to keep: a change to any module under the folder, a new one or
+    a renamed one, changes it (a loop compiled before is then compiled afresh)."""
+    (tmp_path / "solvers").mkdir()
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "solvers" / "b.py").write_text("y = 2\n")
+    first = compose.source_fingerprint(tmp_path)
+    assert compose.source_fingerprint(tmp_path) == first
+    (tmp_path / "solvers" / "b.py").write_text("y = 3\n")
+    second = compose.source_fingerprint(tmp_path)
+    (tmp_path / "solvers" / "b.py").rename(tmp_path / "solvers" / "c.py")
+    third = compose.source_fingerprint(tmp_path)
+    (tmp_path / "d.py").write_text("")
+    assert len({first, second, third, compose.source_fingerprint(tmp_path)}) == 4
+    package = Path(compose.__file__).parent
+    assert compose.FINGERPRINT == compose.source_fingerprint(package)
+
+
 TWO_FILLINGS = '''
 import sys
 import numpy as np
@@ -305,9 +324,10 @@ def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_na
     precompile.compile_all([case_named("free-fall").model], progress=lambda line: None)
     # one loop: euler, midpoint and heun, rk4 (three patterns of a tableau), a kick and
     # drift and velocity Verlet (in one tile: it carries state from step to step), fused;
-    # the adaptive and implicit methods run on the numpy path
-    assert len(compiled._PREPARED) == 1
+    # the adaptive and implicit methods run on the numpy path; and the compiled derivative
+    assert len(compiled._PREPARED) == 2
     model = case_named("free-fall").model
+    assert compiled.derivative_key(model) in compiled._PREPARED
     assert {compiled.prepared(model, m)[2] for m in ("euler", "rk4", "verlet")} == {
         tiles.Fused(tiles.BLOCK),
         tiles.Fused(len(model.mass)),
@@ -486,3 +506,28 @@ def test_a_blow_up_seen_between_records_is_recorded_as_integrate_does(method):
     assert len(slow.t) == 2 and len(fast.t) == 2
     n_ = model.n
     np.testing.assert_array_equal(fast.x, slow.x[:, : 3 * n_].reshape(-1, n_, 3))
+
+
+DERIVED = [c for c in load_cases("*") if compiled.derivative_reason(c.model) is None]
+
+
+def test_the_compiled_derivative_covers_the_particle_cases_without_planes_fields_or_emitters():
+    names = {c.name for c in DERIVED}
+    assert {"earth-orbit", "stiff-cloth", "spring-chain", "triangle-impulse", "rope-pendulum"} <= names
+    assert not names & {"bouncing-ball", "particle-fountain", "hair-strands", "kepler-orbit"}
+    assert compiled.derivative_for(None) is None
+
+
+@pytest.mark.parametrize("case", DERIVED, ids=[c.name for c in DERIVED])
+def test_the_compiled_derivative_is_the_numpy_system_s_bit_for_bit(case):
+    """At states around the start and far from it (stretched springs, particles close
+    together, impulses on and off): ``derivative_for`` against ``ParticleSystem.derivative``."""
+    fast = compiled.derivative_for(case.model)
+    system = ParticleSystem(case.model, passes_for(case.model))
+    y0 = system.get_state()
+    rng = np.random.default_rng(7)
+    for k in range(12):
+        y = y0 * (1 + 0.2 * rng.standard_normal(y0.shape)) + 0.05 * rng.standard_normal(y0.shape)
+        t = float(rng.uniform(0.0, case.duration))
+        np.testing.assert_array_equal(fast(y, t), system.derivative(y, t), err_msg=f"{case.name} at {k}")
+    np.testing.assert_array_equal(fast(y0, 0.0), system.derivative(y0, 0.0))
