@@ -8,12 +8,11 @@ engine truestep runs. This adapter measures those integrators. The scene is a Dr
 ``LeafSystem`` whose continuous state is the case's flat state (a particle scene's
 positions then velocities, (6 n,); an ODE's state, (dim,)) and whose time derivative
 is the reference system's (:func:`truestep.adapters.reference.build_system`), as for
-scipy: the comparison is of integrators alone, on the same forces. A particle scene's
-derivative is the reference's compiled one
-(:func:`truestep.reference_impl.compiled.derivative_for`, the numpy system's bits in
-under a microsecond: Drake calls it back from C++ at every evaluation, and the numpy
-one took 5 to 20 µs of each); an ODE's, and a scene with force fields, are the
-reference system's Python. A second-order
+scipy: the comparison is of integrators alone, on the same forces. Where the system has
+a compiled twin of its derivative (:meth:`~truestep.reference_impl.system.System.compiled_derivative`:
+a particle scene without fields, the lecture's ODEs), Drake calls that: the same bits in
+under a microsecond, where the Python one took 2 to 20 µs of each evaluation Drake calls
+back from C++. A second-order
 scene declares its state as Drake's generalized positions ``q`` and velocities ``v``
 (``q' = v``), which ``semi_explicit_euler`` needs; a first-order ODE is Drake's
 "miscellaneous" state ``z``. Drake's ``MultibodyPlant`` is not used: its contact is
@@ -64,7 +63,6 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from truestep.adapters.base import EnergyExtremes, FactsSpec, Trajectory, finite_until, thin_records
 from truestep.adapters.reference import build_system, trajectory_of_states
 from truestep.cases.case import Case
-from truestep.reference_impl.compiled import derivative_for
 from truestep.reference_impl.integrate import BLOWUP, record_indices
 from truestep.reference_impl.precompile import DERIVATIVE, compile_all
 from truestep.reference_impl.solvers.explicit_rk import tableau_stability
@@ -263,7 +261,7 @@ class DrakeAdapter:
         """Before a run's process is forked: the scene's compiled derivative made (or
         loaded from numba's cache) here, so that the process finds it ready."""
         if self.compiled:
-            derivative_for(case.model)
+            build_system(case).compiled_derivative()
 
     def prepare_all(self, pairs: list[tuple[Case, str]], *, workers: int = 1) -> None:
         """The compiled derivatives of every case of ``pairs`` (case, method), on
@@ -329,7 +327,7 @@ class _Run:
     def __init__(self, case: Case, method: str, dt: float, *, compiled: bool = True) -> None:
         self.case, self.method = case, method
         self.system = build_system(case)
-        fast = derivative_for(case.model) if compiled else None
+        fast = self.system.compiled_derivative() if compiled else None
         self.leaf = _Derivative(self.system, fast or self.system.derivative)
         self.simulator = Simulator(self.leaf)
         self.context = self.simulator.get_mutable_context()

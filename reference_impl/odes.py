@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
+from truestep.reference_impl import odes_kernels
 from truestep.reference_impl.system import SecondOrderSystem, System
 
 
@@ -23,6 +25,10 @@ class CircleField(System):
 
     def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
         return self._J
+
+    def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray]:
+        kernel = odes_kernels.circle_field
+        return lambda x, t: kernel(x, t, np.empty(2))
 
     def energy(self, x: np.ndarray, t: float) -> float:
         """Half the squared radius: conserved along the exact flow."""
@@ -43,6 +49,10 @@ class KeplerProblem(SecondOrderSystem):
     def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         r2 = float(q @ q)
         return q * (-self.mu / (r2 * math.sqrt(r2)))
+
+    def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray]:
+        kernel, mu = odes_kernels.kepler, float(self.mu)
+        return lambda x, t: kernel(x, t, np.empty(4), mu)
 
     def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
         """``d[v, a]/d[q, v]``; ``da/dq = -mu (I / r^3 - 3 q q^T / r^5)``."""
@@ -81,6 +91,10 @@ class Arenstorf(SecondOrderSystem):
         ax = x + 2 * float(v[1]) - nu * (x + mu) / d1 - mu * (x - nu) / d2
         ay = y - 2 * float(v[0]) - nu * y / d1 - mu * y / d2
         return np.array([ax, ay])
+
+    def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray]:
+        kernel, mu = odes_kernels.arenstorf, float(self.mu)
+        return lambda x, t: kernel(x, t, np.empty(4), mu, 2.0)
 
     def jacobian(self, x: np.ndarray, t: float) -> np.ndarray:
         """``d[v, a]/d[q, v]``: the two point-mass pulls, the centrifugal and Coriolis terms."""

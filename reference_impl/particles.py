@@ -96,6 +96,14 @@ class ParticleSystem(SecondOrderSystem):
             a[~self.alive] = 0.0
         return a.ravel()
 
+    def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray] | None:
+        """:meth:`derivative` compiled (:func:`~truestep.reference_impl.compiled.derivative_for`),
+        or ``None`` for a scene with planes, fields or emitters, whose derivative reads what
+        the passes between steps set."""
+        from truestep.reference_impl.compiled import derivative_for
+
+        return derivative_for(self.model)
+
     def jacobian(self, x: np.ndarray, t: float) -> sp.csr_matrix | np.ndarray | None:
         """Sparse ``d[v, a]/d[x, v]`` (dim, dim): gravity, drag, springs, anchors, gravitation.
 

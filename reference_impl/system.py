@@ -25,7 +25,8 @@ class System(ABC):
     3. implement :meth:`derivative` as a pure function of its arguments: it returns a new
        array of shape ``(dim,)`` and never changes the stored state;
     4. optionally implement :meth:`jacobian` (``(dim, dim)``), used by implicit solvers;
-       returning ``None`` makes them fall back to finite differences;
+       returning ``None`` makes them fall back to finite differences; and
+       :meth:`compiled_derivative`, the same derivative compiled;
     5. optionally implement :meth:`energy` (total energy in joules, or ``None``) and
        :meth:`between_steps`, the place for collisions, emitters and lifetimes, which the
        lecture applies between solver steps, never inside one; and :meth:`observe`, extra
@@ -61,6 +62,12 @@ class System(ABC):
 
     def jacobian(self, x: np.ndarray, t: float) -> np.ndarray | None:
         """Return ``df/dx`` at ``(x, t)``, shape ``(dim, dim)``, or ``None`` if unknown."""
+        return None
+
+    def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray] | None:
+        """A compiled function of ``(x, t)`` that returns :meth:`derivative`'s value bit for
+        bit, faster, for integrators that call it at every evaluation (Drake's, scipy's);
+        ``None`` (default) where there is none. Its parameters are those the system has now."""
         return None
 
     def energy(self, x: np.ndarray, t: float) -> float | None:

@@ -196,6 +196,8 @@ def test_a_watched_run_has_the_energy_extremes_of_every_step(drake, case_named):
         ("spring-chain", "implicit_euler", 0.01),
         ("hanging-cloth", "runge_kutta2", 0.002),
         ("earth-orbit", "bogacki_shampine3", 1e-6),
+        ("arenstorf-orbit", "radau3", 0.002),
+        ("long-orbit", "runge_kutta3", 0.05),
     ],
 )
 def test_the_compiled_derivative_gives_drake_the_numpy_runs_bits(drake, case_named, name, method, dt):
