@@ -115,11 +115,23 @@ def _counting(fn, what="calls"):
     return wrapper
 
 
+def _counted_twin(method):
+    """``compiled_derivative`` whose twin is counted as the derivative is: Drake and
+    scipy call it in place of the Python one."""
+
+    def twin(self):
+        fast = method(self)
+        return None if fast is None else _counting(fast)
+
+    return twin
+
+
 @pytest.fixture(scope="module", autouse=True)
 def counted_evaluations():
     """Wrap what does the work, to count it: the reference's derivative (every solver and
     scipy's RHS reach a particle system through ``acceleration``, ODE systems through
-    their own right-hand side), pymunk's ``Space.step``, pybullet's ``stepSimulation``,
+    their own right-hand side; Drake and scipy call its compiled twin where it has one,
+    counted too), pymunk's ``Space.step``, pybullet's ``stepSimulation``,
     the MuJoCo adapter's applied-force callback (called at every force evaluation); and
     the accepted steps of the adaptive solvers (the reference's Dormand-Prince ``step``
     takes one accepted step a call, scipy's ``OdeSolver.step`` likewise)."""
@@ -134,6 +146,8 @@ def counted_evaluations():
     patch.setattr(odes.KeplerProblem, "acceleration", _counting(odes.KeplerProblem.acceleration))
     patch.setattr(odes.Arenstorf, "acceleration", _counting(odes.Arenstorf.acceleration))
     patch.setattr(odes.CircleField, "derivative", _counting(odes.CircleField.derivative))
+    for system in (ParticleSystem, odes.KeplerProblem, odes.Arenstorf, odes.CircleField):
+        patch.setattr(system, "compiled_derivative", _counted_twin(system.compiled_derivative))
     patch.setattr(DormandPrince54, "step", _counting(DormandPrince54.step, "steps"))
     patch.setattr(OdeSolver, "step", _counting(OdeSolver.step, "steps"))
     try:
