@@ -418,6 +418,57 @@ def test_a_gate_the_baseline_evaluated_cannot_go_unevaluated(run_dir, copy, caps
     assert code == 0, capsys.readouterr().out
 
 
+def test_a_run_unstable_where_its_facts_say_stable_fails_its_declared_order(copy, capsys):
+    """A planted bug that makes symplectic Euler blow up on the harmonic oscillator (a
+    damper's sign flipped pumps energy in): its sweep has no order to fit, and where a run
+    is unstable at a step its facts make stable on this linear scene (2 / omega = 0.2 s:
+    k = 100 N/m on 1 kg) the declared-order gate fails, saying so,
+    without a baseline. Unstable only above that limit, the gate stays not evaluated."""
+    from truestep.cases import load_case
+    from truestep.cases.exact import stability_limit
+
+    d, results = copy
+    case = load_case(CASE_DIR / "harmonic-oscillator.toml")
+    exact = stability_limit(case, "symplectic-euler")
+    omega = np.sqrt(float(case.model.anchors.stiffness[0]) / float(case.model.mass[0]))
+    assert omega == 10.0 and exact == pytest.approx(2 / omega, rel=1e-12)
+    steps = results[(results["method"] == "symplectic-euler") & (results["dt_kind"] == "step")]
+    assert len(steps) >= 2 and steps["dt"].max() < exact
+    results.loc[steps.index, ["status", "error"]] = ["unstable", np.nan]
+    results.to_csv(d / "results.csv", index=False)
+    code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-v"])
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if "order/reference/symplectic-euler/declared" in x)
+    assert code == 1 and line.startswith("FAIL"), out
+    assert f"unstable at dt {steps['dt'].min():.6g} s, where its facts say it is stable" in line
+    assert f"steps up to {exact:.6g} s" in line
+    results.loc[steps.index, "dt"] = steps["dt"] * 1000  # every run above the exact limit
+    results.to_csv(d / "results.csv", index=False)
+    main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-v"])
+    line = next(x for x in capsys.readouterr().out.splitlines() if "reference/symplectic-euler/decl" in x)
+    assert line.startswith("SKIP"), line
+
+
+def test_declared_orders_of_an_engine_that_cannot_be_read_here_fail_and_module_class_reads_them(copy, capsys):
+    """``--declared-orders`` on a run of an engine not registered here (an adapter run by
+    ``module:Class``) used to make no gate for it, silently; it now fails, naming the
+    engine and what to do, and ``--engines module:Class`` reads its facts."""
+    d, results = copy
+    results.assign(engine="mystery").to_csv(d / "results.csv", index=False)
+    code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-q"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "FAIL --declared-orders: engine mystery ran, but its declared orders cannot be read" in out
+    assert "--engines module:Class" in out
+    results.to_csv(d / "results.csv", index=False)
+    spec = "truestep.adapters.reference:ReferenceAdapter"
+    code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "--engines", spec, "-v"])
+    out = capsys.readouterr().out
+    assert code == 0 and "ok   harmonic-oscillator/order/reference/rk4/declared" in out, out
+    assert main(["gate", "--results", str(d / "results.csv"), "--engines", "nowhere.mod:Cls"]) == 2
+    assert "--engines: engine 'nowhere.mod:Cls'" in capsys.readouterr().err
+
+
 def _with_engine_of_mine(d: Path, results: pd.DataFrame) -> pd.DataFrame:
     """The run's rows, and the same rows again as engine ``mine`` (a user's engine), as
     if the run had been asked for both."""

@@ -250,16 +250,31 @@ def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Cas
 
 def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
     """The declared-order gates (:mod:`truestep.measures.declared`) of the installed engines that
-    ran, each on its own case."""
-    from truestep.adapters import engine_status, registered
+    ran, each on its own case (:func:`unreadable_facts` names the others)."""
     from truestep.measures.declared import declared_order_pairs
 
-    ran = [
-        e
-        for e in dict.fromkeys(results["engine"].astype(str))
-        if e in registered() and engine_status(e) == "installed"
-    ]
+    unreadable = unreadable_facts(results)
+    ran = [e for e in dict.fromkeys(results["engine"].astype(str)) if e not in unreadable]
     return declared_order_pairs(cases, ran)
+
+
+def unreadable_facts(results: pd.DataFrame) -> dict[str, str]:
+    """The engines that ran (``results``) whose declared facts this process cannot read, each
+    with why: not registered here (an adapter run by ``module:Class``, which ``--engines``
+    can name again) or not installed. ``--declared-orders`` fails naming them: their order
+    gates would otherwise be missing without a word."""
+    from truestep.adapters import engine_status, registered
+
+    out = {}
+    for engine in dict.fromkeys(results["engine"].astype(str)):
+        if engine not in registered():
+            out[engine] = (
+                "it is not registered here: name its adapter with --engines module:Class, or "
+                "install the package that registers it"
+            )
+        elif (status := engine_status(engine)) != "installed":
+            out[engine] = status
+    return out
 
 
 def _tolerances(items: list[str], files: list[str]) -> dict[str, float]:
@@ -353,6 +368,7 @@ def cmd_gate(args: argparse.Namespace) -> int:
 
     results_path = Path(args.results)
     tables = _run_tables(results_path)
+    args.engines = _engine_names(args.engines)
     if args.baseline:  # the facts each run was made with, this run's last (they win)
         recorded_precision(read_run_record(Path(args.baseline)))
     recorded_precision(read_run_record(results_path.parent))
@@ -379,6 +395,12 @@ def cmd_gate(args: argparse.Namespace) -> int:
         reasons.append(
             "the baseline comparison compared nothing: no row of the baseline matches one of this run"
         )
+    if args.declared_orders:
+        for engine, why in unreadable_facts(tables["results"]).items():
+            if asked is None or engine in asked:
+                reasons.append(
+                    f"--declared-orders: engine {engine} ran, but its declared orders cannot be read: {why}"
+                )
     if comparison is not None and comparison.time_against and not comparison.timed:
         reasons.append(
             f"--time-against {comparison.time_against}: no wall-time ratio compared (no row of "
@@ -403,6 +425,26 @@ def cmd_gate(args: argparse.Namespace) -> int:
     print(summary)
     _write_ci_outputs(args, verdicts, comparison, reasons, passed)
     return 0 if passed else 1
+
+
+def _engine_names(engines: str | None) -> str | None:
+    """``--engines`` of ``truestep gate`` as engine names: a ``module:Class`` item is the
+    name its adapter declares, registered in this process (so that its declared facts are
+    read); an adapter that cannot be loaded is a usage error."""
+    if not engines:
+        return engines
+    from truestep.adapters import EngineNotInstalled, UnknownEngine, resolve_engine
+
+    names = []
+    for item in (e.strip() for e in engines.split(",")):
+        if ":" not in item:
+            names.append(item)
+            continue
+        try:
+            names.append(resolve_engine(item))
+        except (UnknownEngine, EngineNotInstalled) as err:
+            raise UsageError(f"--engines: {err}") from None
+    return ",".join(names)
 
 
 def _asked_engines(args: argparse.Namespace) -> set[str] | None:
@@ -898,7 +940,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--engines",
         default=None,
         metavar="NAMES",
-        help="only the verdicts and baseline rows of these engines (comma-separated); the rows "
+        help="only the verdicts and baseline rows of these engines (comma-separated names, or "
+        "module:Class of an adapter, whose declared facts --declared-orders then reads); the rows "
         "a gate or --time-against compares with are read whatever their engine",
     )
     gate.add_argument(

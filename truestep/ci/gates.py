@@ -249,7 +249,7 @@ def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
     floor = round_off_floor(str(rows["engine"].iloc[0])) if len(rows) else ROUND_OFF
     order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale, floor=floor)
     if g.where == DECLARED:
-        return _declared_order(case, g, ok, order)
+        return _unstable_where_stable(case, g, rows) or _declared_order(case, g, ok, order)
     return GateResult(
         case.name,
         g,
@@ -337,6 +337,47 @@ CONVERGING = 0.5
 sweep that shows a method converging: every consistent method's error falls at least as
 ``dt^1`` once it converges, so a slower fall means the sweep has not reached that regime
 (implicit Euler damping a stiff cloth's motion away at every swept step)."""
+
+
+STABLE_MARGIN = 0.99
+"""A run is held to its method's exact stability limit at steps up to this fraction of it
+(a step a hair below the limit grows too slowly to matter; one 1 % below does not grow)."""
+
+
+def _unstable_where_stable(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult | None:
+    """A declared-order gate's verdict where its sweep has a run ``unstable`` at a step its
+    method's facts say is stable on this linear scene (at or below :data:`STABLE_MARGIN` of
+    the exact limit, :func:`truestep.cases.exact.stability_limit`): failed, naming the step
+    and the limit. Such a sweep shows no order, and saying "not evaluated" would let the
+    bug that made it unstable through (a damper's sign flipped). ``None`` otherwise: no
+    such run, or no exact limit known (a nonlinear scene, an engine not installed here)."""
+    unstable = rows[(rows["status"] == "unstable") & (rows["dt_kind"] == "step")]
+    if not len(unstable):
+        return None
+    from truestep.adapters import EngineNotInstalled, UnknownEngine, get_adapter
+    from truestep.adapters.base import facts_of
+    from truestep.cases.exact import stability_limit
+
+    try:
+        facts = facts_of(get_adapter(g.engine), g.method)
+    except (EngineNotInstalled, UnknownEngine):
+        return None
+    exact = stability_limit(case, facts) if facts is not None else None
+    if exact is None or not (np.isfinite(exact) or exact == np.inf) or exact <= 0:
+        return None
+    dts = np.sort(_num(unstable["dt"]))
+    below = dts[dts <= STABLE_MARGIN * exact]
+    if not len(below):
+        return None
+    limit = "every step" if exact == np.inf else f"steps up to {exact:.6g} s"
+    return GateResult(
+        case.name,
+        g,
+        False,
+        f"unstable at dt {below[0]:.6g} s, where its facts say it is stable ({limit} on this "
+        "linear scene): no order to fit, and the instability is the finding",
+        f">= {g.params['expect']:g} - {g.params['tol']:g}",
+    )
 
 
 def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> GateResult:
