@@ -40,17 +40,24 @@ with without_banner(BANNER):
 
 
 _PREPARED: set[tuple] = set()
-"""The scenes :func:`prepare` has built in this process: (engine, case file and name, method)."""
+"""The kinds of scene :func:`prepare` has built in this process: (engine, method, the
+case's features)."""
 
 
 def prepare(adapter: Any, case: Any, method: str) -> None:
-    """Build ``case``'s scene for ``method`` once in this process (on the CPU device only),
+    """Build ``case``'s scene for ``method`` in this process (on the CPU device only),
     before truestep forks the processes that run it: they find the solver's module
     imported and every Warp kernel module the scene needs loaded, where each would
     otherwise import and hash them afresh (0.5 to 1 s a process). Nothing is measured from
     this build; a scene the adapter cannot or will not run is not built. On a GPU nothing
-    is done: CUDA is not started in a process that forks. A scene is built once a process."""
-    key = (adapter.name, case.file, case.name, method)
+    is done: CUDA is not started in a process that forks.
+
+    Once a process for each engine, method and set of scene features (springs, planes,
+    friction ...): the kernels a scene loads follow from its method and what it holds, and
+    a build (0.1 to 0.3 s) for every sweep held up the parent that starts the next one. A
+    kernel module that a later scene needs and this build did not load is loaded by the
+    run's own process, the same kernels."""
+    key = (adapter.name, method, frozenset(case.features))
     if adapter.device != "cpu" or case.model is None or key in _PREPARED or adapter.missing(case, method):
         return
     _PREPARED.add(key)
