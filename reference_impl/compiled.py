@@ -86,10 +86,16 @@ def method_kind(method: str | type):
 
 def compiled_reason(model: ParticleModel | None, method: str) -> str | None:
     """Why ``method`` on ``model`` cannot take the compiled path, or ``None`` if it can."""
+    if model is not None and method_kind(method) is None:
+        return f"{method} is not a fixed-step explicit method"
+    return _scene_reason(model)
+
+
+def _scene_reason(model: ParticleModel | None) -> str | None:
+    """Why no compiled kernel holds ``model``'s forces, or ``None``: an ODE case, force
+    fields, emitters."""
     if model is None:
         return "an ODE case (its system is Python code)"
-    if method_kind(method) is None:
-        return f"{method} is not a fixed-step explicit method"
     if model.fields:
         return "force fields"
     if model.emitters:
@@ -322,15 +328,10 @@ def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], Non
 def derivative_reason(model: ParticleModel | None) -> str | None:
     """Why the compiled path cannot make ``model``'s derivative (:func:`derivative_for`),
     or ``None`` if it can."""
-    if model is None:
-        return "an ODE case (its system is Python code)"
-    if model.fields:
-        return "force fields"
-    if model.emitters:
-        return "emitters"
-    if model.planes:
+    reason = _scene_reason(model)
+    if reason is None and model is not None and model.planes:
         return "planes (a collision pass sets their contact between steps)"
-    return None
+    return reason
 
 
 def _derivative_args(model: ParticleModel) -> tuple:
