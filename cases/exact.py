@@ -86,7 +86,7 @@ def _check_period(case: Case) -> None:
         raise ValueError(f"needs [reference] period, a positive number of seconds, got {period!r}")
 
 
-@exact_solution("periodic", check=_check_period, params={"period": "positive"}, kind="ode")
+@exact_solution("periodic", check=_check_period, params={"period": "positive"}, kind="ode", energy=False)
 def periodic(case: Case, t: np.ndarray) -> Exact:
     """A periodic orbit known only at its start and after whole periods (``period``, s)."""
     period = float(case.exact_params["period"])
@@ -328,6 +328,7 @@ def _check_reference_run(case: Case) -> None:
     "reference-run",
     check=_check_reference_run,
     params={"method": "string", "rtol": "positive", "dt": "positive"},
+    energy=False,
 )
 def reference_run(case: Case, t: np.ndarray) -> Exact:
     """No closed form: a run of the reference implementation far finer than the sweep,

@@ -46,6 +46,7 @@ def exact_solution(
     check: Callable[[Case], None] | None = None,
     params: dict[str, str] | None = None,
     kind: str | None = None,
+    energy: bool | None = None,
 ) -> Callable[[ExactFn], ExactFn]:
     """Register an exact solution under ``name``.
 
@@ -56,6 +57,9 @@ def exact_solution(
     ``"positive"``, ``"nonnegative"``, ``"count"`` or ``"string"``): the loader checks
     each and refuses any other; without it, any plain number, string or boolean passes.
     ``kind`` (``"ode"`` or ``"particles"``) is the kind of case it solves, if only one.
+    ``energy`` says whether it gives the energy along the motion (``Exact.energy``), the
+    curve a dissipative case's energy drift is measured against: ``None`` (default) when
+    the loader should find out from its value at ``t = 0``.
     """
 
     def register(fn: ExactFn) -> ExactFn:
@@ -63,6 +67,7 @@ def exact_solution(
             fn.check = check  # type: ignore[attr-defined]
         fn.params = params  # type: ignore[attr-defined]
         fn.kind = kind  # type: ignore[attr-defined]
+        fn.energy = energy  # type: ignore[attr-defined]
         EXACT[name] = fn
         return fn
 

@@ -11,6 +11,7 @@ import fnmatch
 import os
 import re
 import tomllib
+import warnings
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -289,9 +290,41 @@ def _load_case(path: Path, limit_values: dict[str, float], engines: Iterable[str
     f.done()
     _check_gate_steps(f, case)
     check_case_gates(case, set(_engine_names() if engines is None else engines))
-    if exact is not None:
-        _check_exact(case)
+    start = _check_exact(case) if exact is not None else None
+    _warn_unmeasured_energy_drift(case, start)
     return case
+
+
+def _warn_unmeasured_energy_drift(case: Case, start: object) -> None:
+    """A ``FutureWarning`` for each ``energy_drift`` gate of a case that never measures its
+    energy drift: not conservative, and no exact energy curve to measure it against (no
+    exact solution, or one that gives none: its registration says so, or its value at
+    ``t = 0``, ``start``, has no energy). Such a gate fails every run ("measured
+    nothing"); a later release refuses it when the case loads, and this warning comes
+    first, so that a case file that loaded before still loads."""
+    gates = [g for g in case.gates if g.kind == "energy_drift"]
+    if not gates or case.conservative:
+        return
+    if case.exact is not None:
+        declared = getattr(exact_named(case.exact), "energy", None)
+        gives = declared if declared is not None else (None if start is None else start_energy(start))
+        if gives is None or gives:
+            return
+    for g in gates:
+        warnings.warn(
+            f"{case.file}: {g.where}: an energy_drift gate on a case that never measures its energy "
+            "drift (its energy is not conserved and no exact solution gives the energy curve): it "
+            "fails every run; a later release refuses it when the case loads. Gate the error, or a "
+            "property, instead.",
+            FutureWarning,
+            stacklevel=3,
+        )
+
+
+def start_energy(start: object) -> bool:
+    """Whether an exact solution's value (:class:`~truestep.cases.exact.Exact`) carries the
+    energy along the motion."""
+    return getattr(start, "energy", None) is not None
 
 
 def _engine_names() -> list[str]:
@@ -546,9 +579,10 @@ def _read_ode(o: Fields, limits: Limits) -> OdeSpec:
     return OdeSpec(name, y0, params, second_order=isinstance(system, SecondOrderSystem))
 
 
-def _check_exact(case: Case) -> None:
+def _check_exact(case: Case) -> object:
     """The named exact solution must fit the scene: its own check if it has one, else it
-    is evaluated at ``t = 0`` and must return the scene's start in the trajectory layout."""
+    is evaluated at ``t = 0`` and must return the scene's start in the trajectory layout.
+    Returns that value at ``t = 0`` (``None`` where its own check ran instead)."""
     where = "reference.exact"
     fn = exact_named(case.exact) if case.exact is not None else None
     if fn is None:
@@ -565,12 +599,12 @@ def _check_exact(case: Case) -> None:
             check = getattr(fn, "check", None)
             if check is not None:
                 check(case)
-                return
+                return None
             start = fn(case, np.array([0.0]))
     except (Exception, TimeLimitExceeded) as err:  # it says why it does not fit by raising
         raise CaseError(case.file, where, f"{case.exact!r} does not fit this case: {err}") from None
     if len(getattr(start, "t", [])) == 0:
-        return  # known at some times only, not at the start
+        return start  # known at some times only, not at the start
     shape: tuple[int, ...]
     match case.scene:
         case OdeSpec() as ode:
@@ -593,6 +627,7 @@ def _check_exact(case: Case) -> None:
             f"{case.exact!r} does not start where the case starts "
             f"(largest difference {np.max(np.abs(x - x0)):.3g})",
         )
+    return start
 
 
 def _read_gates(f: Fields) -> list[Gate]:

@@ -317,3 +317,43 @@ def test_a_property_of_another_scene_kind_is_refused_when_the_case_loads(tmp_pat
     path.write_text(text.replace('kind = "ode"', 'kind = "ode"\nproperties = ["max_strain"]', 1))
     with pytest.raises(CaseError, match=r"properties: 'max_strain' is a property of particles cases"):
         load_case(path)
+
+
+ENERGY_DRIFT_GATE = '\n[[gates]]\nkind = "energy_drift"\nmethod = "rk4"\ndt = {dt}\nmax = 1e-3\n'
+
+
+@pytest.mark.parametrize(
+    ("name", "dt", "warned"),
+    [
+        ("bouncing-ball", 0.002, True),  # dissipative contact; its exact bounce gives no energy
+        ("hanging-cloth", 0.004, True),  # damped; a reference run gives no energy curve
+        ("damped-oscillator", 0.002, False),  # damped; its closed form gives the energy curve
+        ("harmonic-oscillator", 0.002, False),  # conservative: drift from the start
+    ],
+)
+def test_an_energy_drift_gate_a_case_never_measures_warns_when_the_case_loads(
+    tmp_path: Path, name: str, dt: float, warned: bool
+) -> None:
+    """Issue 36: a gate a case can never evaluate fails every run; refusing it when the
+    case loads would break case files that loaded before, so it warns first (a
+    ``FutureWarning``, which Python shows to users) and still loads. The published tables
+    say the same: every ok row of the warned cases has no energy drift, and the others'
+    have one."""
+    import pandas as pd
+
+    text = (CASE_DIR / f"{name}.toml").read_text() + ENERGY_DRIFT_GATE.format(dt=dt)
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        case = load_case(path)
+    said = [w for w in seen if issubclass(w.category, FutureWarning)]
+    assert case.gates[-1].kind == "energy_drift"
+    assert len(said) == int(warned), [str(w.message) for w in said]
+    if warned:
+        assert f"{case.gates[-1].where}: an energy_drift gate on a case that never measures" in str(
+            said[0].message
+        )
+    published = pd.read_csv(Path(__file__).resolve().parents[1] / "reports" / "results.csv")
+    rows = published[(published["case"] == name) & (published["status"] == "ok")]
+    assert len(rows) and bool(rows["energy_drift"].notna().any()) is not warned
