@@ -254,8 +254,9 @@ class DrakeAdapter:
 
     def __init__(self, *, compiled: bool = True) -> None:
         self.compiled = compiled
-        """Whether a particle scene's derivative is the reference's compiled one (its
-        numpy one with ``compiled=False``: the same bits, slower)."""
+        """Whether Drake calls the system's compiled twin of its derivative where it has
+        one (:meth:`~truestep.reference_impl.system.System.compiled_derivative`; the Python
+        one with ``compiled=False``: the same bits, slower)."""
 
     def prepare(self, case: Case, method: str) -> None:
         """Before a run's process is forked: the scene's compiled derivative made (or

@@ -25,8 +25,8 @@ class ScipyAdapter:
     The right-hand side is the reference system's derivative, so the comparison is of
     integrators alone: its compiled twin where it has one
     (:meth:`~truestep.reference_impl.system.System.compiled_derivative`: the same bits; the
-    Python one with ``compiled=False``). ``dt`` is the tolerance (rtol = atol). Planes are met through
-    solve_ivp's events: each impact (or friction stopping a particle) is located on the
+    Python one with ``compiled=False``). ``dt`` is the tolerance (rtol = atol). Planes are
+    met through solve_ivp's events: each impact (or friction stopping a particle) is located on the
     continuous extension, the reference's collision pass acts there and the integration
     starts again (:func:`_with_impacts`). Emitters and impulses, which act between fixed
     steps, are out of its reach.
@@ -84,6 +84,7 @@ class ScipyAdapter:
 
     def __init__(self, *, compiled: bool = True) -> None:
         self.compiled = compiled
+        """Whether the right-hand side is the system's compiled twin where it has one."""
 
     def prepare(self, case: Case, method: str) -> None:
         """Before a run's process is forked: the scene's compiled derivative made (or
