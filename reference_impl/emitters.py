@@ -174,9 +174,11 @@ class Emitter:
         """Run the simulation stage of every frame that began by the system's time.
 
         With fixed steps a frame begins at the end of the step that reaches its start time
-        (exactly, when ``frame_dt`` is a multiple of the step). A step that spans several
-        frame starts (an adaptive solver's long step) runs their stages one after another
-        at the end of the step.
+        (exactly, when ``frame_dt`` is a multiple of the step); an adaptive step ends at the
+        next frame's start (:attr:`next_time`,
+        :meth:`~truestep.reference_impl.system.System.next_pass_time`). A step that spans
+        several frame starts (a fixed step longer than a frame) runs their stages one after
+        another at the end of the step.
         """
         t = system.get_time()
         slack = 1e-9 * self.spec.frame_dt
@@ -184,6 +186,12 @@ class Emitter:
             self.begin_frame(system)
             self.frame += 1
             self._next_frame_t = self.frame * self.spec.frame_dt
+
+    @property
+    def next_time(self) -> float:
+        """When the next frame begins (s): an adaptive step ends there (the simulation stage
+        acts at that instant, as it does at the end of a fixed step that reaches it)."""
+        return self._next_frame_t
 
     def begin_frame(self, system: ParticleSystem) -> None:
         """Expire particles whose lifetime reaches 0, then spawn this frame's new ones."""

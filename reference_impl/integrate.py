@@ -88,7 +88,10 @@ def integrate(
     solver (to keep its continuous extension, say); ``sample_at``: times (s) at which an
     adaptive solver with a continuous extension also records the run between its steps.
 
-    An adaptive solver with a continuous extension (``solver.dense()``) stops each step at
+    An adaptive step ends, at the latest, when the system's passes are next scheduled to
+    act (:meth:`~truestep.reference_impl.system.System.next_pass_time`: an emitter's
+    frame), so that they act at their instant. An adaptive solver with a continuous
+    extension (``solver.dense()``) also stops each step at
     the first event the system watches for (:meth:`~truestep.reference_impl.system.System.event_watch`:
     a particle reaching a plane, friction stopping it), and the passes act there. A step
     cut at an event is not recorded when ``sample_at`` is given (its state is the instant
@@ -160,8 +163,9 @@ def _run_adaptive(
     while t_end - t > slack:
         watch = system.event_watch() if locate else None
         g0 = watch(system.get_state()) if watch is not None else None
+        scheduled = system.next_pass_time()
         try:
-            h = solver.step(t_end - t)
+            h = solver.step((scheduled if t + slack < scheduled < t_end else t_end) - t)
         except FloatingPointError as err:
             return "unstable", t, steps, str(err)
         except SolverFailed as err:

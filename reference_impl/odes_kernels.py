@@ -23,14 +23,6 @@ ODE: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 
 
 @njit(**ODE)
-def circle_field(y, t, out):
-    """``x' = (-y, x)``: :meth:`odes.CircleField.derivative`."""
-    out[0] = -y[1]
-    out[1] = y[0]
-    return out
-
-
-@njit(**ODE)
 def kepler(y, t, out, mu):
     """``q' = v, v' = -mu q / |q|^3`` in the plane: :meth:`odes.KeplerProblem.derivative`."""
     q0, q1 = y[0], y[1]

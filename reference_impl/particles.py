@@ -8,6 +8,7 @@ emitters and lifetimes run between solver steps as passes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -171,6 +172,10 @@ class ParticleSystem(SecondOrderSystem):
     def between_steps(self, dt: float) -> None:
         for p in self.passes:
             p(self, dt)
+
+    def next_pass_time(self) -> float:
+        """The earliest next frame of the scene's emitters (s), ``inf`` without any."""
+        return min((float(p.next_time) for p in self.passes if hasattr(p, "next_time")), default=math.inf)
 
     located: bool = False
     """Set by an adaptive integration that stops its steps at impacts

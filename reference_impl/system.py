@@ -7,6 +7,7 @@ talks to a system through this interface and nothing else.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 
@@ -77,6 +78,12 @@ class System(ABC):
     def between_steps(self, dt: float) -> None:
         """Apply discrete events after a solver step of ``dt`` seconds (default: none)."""
         return None
+
+    def next_pass_time(self) -> float:
+        """When :meth:`between_steps` is next scheduled to act, s (an emitter's next frame):
+        an adaptive step ends there, so that the pass acts at its instant and not at the
+        end of a longer step. ``inf`` (default) where nothing is scheduled."""
+        return math.inf
 
     def observe(self) -> dict[str, np.ndarray]:
         """Per-record observables beyond the state (e.g. which particles are alive)."""

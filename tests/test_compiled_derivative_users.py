@@ -16,7 +16,8 @@ from truestep.adapters.scipy_ivp import ScipyAdapter
 from truestep.cases import load_cases
 from truestep.reference_impl.odes import Arenstorf, CircleField, KeplerProblem
 
-ODES = [c for c in load_cases("*") if c.kind == "ode"]
+ODES = [c for c in load_cases("*") if c.kind == "ode" and c.name != "circle-field"]
+"""The ODE cases with a compiled twin (the circle field's numpy derivative is the faster)."""
 
 
 @pytest.mark.parametrize(
@@ -67,4 +68,4 @@ def test_the_twins_take_the_system_s_own_parameters():
     y = np.array([0.3, -0.2, 0.1, 0.7])
     for system in (KeplerProblem(y, mu=2.5), Arenstorf(y, mu=0.1)):
         np.testing.assert_array_equal(system.compiled_derivative()(y, 0.0), system.derivative(y, 0.0))
-    assert CircleField(y[:2]).compiled_derivative()(y[:2], 1.0).tolist() == [0.2, 0.3]
+    assert CircleField(y[:2]).compiled_derivative() is None

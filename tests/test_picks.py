@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from truestep.measures.findings import conclude
-from truestep.measures.picks import cheapest, scorecard, survival
+from truestep.measures.picks import cheapest, scorecard, shared_error_methods, survival
 
 COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "energy_drift", "nfev", "wall_s"]
 
@@ -148,3 +148,32 @@ def test_a_conclusion_names_what_the_rows_say(case_named):
     assert [r[1] for r in c.least_drift] == ["rk4", "verlet", "midpoint"]
     assert [r[1] for r in c.most_drift] == ["heun"]
     assert c.failed == [("reference", "euler", "unstable", 1)]
+
+
+def test_a_case_whose_error_the_reference_s_methods_share_leaves_their_cost_ratios(case_named):
+    """bouncing-ball: the reference's rk4 and heun have one error at both steps (the
+    contact's), so neither is cheaper there than the other: their cost ratios leave the
+    case out (NaN, reached on none). Its euler, worse there, and its dopri5, which locates
+    the impact, keep errors of their own and the case; pymunk, whose contact differs, is
+    compared with the fastest run too, the reference's heun (2 ms against its 1 ms)."""
+    ball = case_named("bouncing-ball")
+    s = ball.error_scale
+    rows = [
+        (ball.name, "reference", "rk4", 4e-3, "step", "ok", 1e-3 * s, 0, 40, 0.002),
+        (ball.name, "reference", "rk4", 2e-3, "step", "ok", 5e-4 * s, 0, 80, 0.004),
+        (ball.name, "reference", "heun", 4e-3, "step", "ok", 1e-3 * s, 0, 20, 0.001),
+        (ball.name, "reference", "heun", 2e-3, "step", "ok", 5e-4 * s, 0, 40, 0.002),
+        (ball.name, "reference", "euler", 4e-3, "step", "ok", 4e-3 * s, 0, 10, 0.002),
+        (ball.name, "reference", "euler", 2e-3, "step", "ok", 2e-3 * s, 0, 20, 0.004),
+        (ball.name, "reference", "dopri5", 1e-6, "tolerance", "ok", 1e-9 * s, 0, 200, 0.003),
+        (ball.name, "pymunk", "default", 2e-3, "step", "ok", 2e-3 * s, 0, 10, 0.002),
+    ]
+    results = pd.DataFrame(rows, columns=COLUMNS)
+    assert shared_error_methods(ball, results) == ["heun", "rk4"]
+    card = scorecard(results, [ball], target=1e-2).set_index("method")
+    for method in ("rk4", "heun"):
+        assert np.isnan(card.loc[method, "cost_ratio"]) and card.loc[method, "cases_reached"] == 0
+    for method, ratio in (("default", 2.0), ("euler", 2.0), ("dopri5", 3.0)):
+        assert (
+            card.loc[method, "cost_ratio"] == pytest.approx(ratio) and card.loc[method, "cases_reached"] == 1
+        )

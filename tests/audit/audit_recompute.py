@@ -10,6 +10,7 @@ case's scene parameters (masses, springs, planes ...) and a run's raw arrays
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -33,23 +34,30 @@ def energy(model, x: np.ndarray, v: np.ndarray, alive: np.ndarray | None = None)
     if alive is not None:
         weight = weight * alive
     total = np.zeros(len(x))
-    for k in range(x.shape[1]):
-        total += weight[:, k] * (0.5 * np.sum(v[:, k] ** 2, axis=1) - x[:, k] @ model.gravity)
-    s = model.springs
-    for i, j, ks, rest in zip(s.i, s.j, s.stiffness, s.rest, strict=True):
-        length = np.sqrt(np.sum((x[:, i] - x[:, j]) ** 2, axis=1))
-        total += 0.5 * ks * (length - rest) ** 2
-    a = model.anchors
-    for i, point, ks, rest in zip(a.i, a.point, a.stiffness, a.rest, strict=True):
-        length = np.sqrt(np.sum((x[:, i] - point) ** 2, axis=1))
-        total += 0.5 * ks * (length - rest) ** 2
-    if model.gravitation is not None:
-        G, eps = model.gravitation.G, model.gravitation.softening
-        for i in range(x.shape[1]):
-            for j in range(i + 1, x.shape[1]):
-                r2 = np.sum((x[:, i] - x[:, j]) ** 2, axis=1)
-                total -= G * model.mass[i] * model.mass[j] / np.sqrt(r2 + eps**2)
+    for rows in _chunks(len(x), x.shape[1] * max(len(model.springs.i), len(model.anchors.i), 1)):
+        xs, vs = x[rows], v[rows]
+        total[rows] = np.sum(weight[rows] * (0.5 * np.sum(vs**2, axis=2) - xs @ model.gravity), axis=1)
+        s = model.springs
+        if len(s.i):
+            length = np.sqrt(np.sum((xs[:, s.i] - xs[:, s.j]) ** 2, axis=2))
+            total[rows] += np.sum(0.5 * s.stiffness * (length - s.rest) ** 2, axis=1)
+        a = model.anchors
+        if len(a.i):
+            length = np.sqrt(np.sum((xs[:, a.i] - a.point) ** 2, axis=2))
+            total[rows] += np.sum(0.5 * a.stiffness * (length - a.rest) ** 2, axis=1)
+        if model.gravitation is not None:
+            G, eps = model.gravitation.G, model.gravitation.softening
+            i, j = np.triu_indices(x.shape[1], k=1)
+            r2 = np.sum((xs[:, i] - xs[:, j]) ** 2, axis=2)
+            total[rows] -= np.sum(G * model.mass[i] * model.mass[j] / np.sqrt(r2 + eps**2), axis=1)
     return total
+
+
+def _chunks(count: int, per_row: int, budget: int = 1 << 21) -> list[slice]:
+    """Slices of ``count`` rows holding at most about ``budget`` items of ``per_row`` each
+    (the pair arrays above stay a few tens of MB however long a run)."""
+    size = max(1, budget // max(per_row, 1))
+    return [slice(k, min(k + size, count)) for k in range(0, count, size)]
 
 
 def relative_drift(e: np.ndarray) -> tuple[float, float]:
@@ -186,6 +194,7 @@ def gravitation_reference(model, t_end: float):
     return sol.y[: 3 * n, -1].reshape(n, 3), sol.y[3 * n :, -1].reshape(n, 3)
 
 
+@functools.cache
 def bounce_times(h0: float, g: float, e: float, count: int) -> tuple[np.ndarray, np.ndarray]:
     """A point dropped from rest ``h0`` above a rigid floor: the first ``count`` bounce
     times (s) and launch speeds (m/s): ``T_1 = sqrt(2 h0 / g)``, flights of ``2 e^k V / g``."""
@@ -194,7 +203,9 @@ def bounce_times(h0: float, g: float, e: float, count: int) -> tuple[np.ndarray,
     for _ in range(count - 1):
         times.append(times[-1] + 2 * launches[-1] / g)
         launches.append(e * launches[-1])
-    return np.array(times), np.array(launches)
+    times_a, launches_a = np.array(times), np.array(launches)
+    times_a.flags.writeable = launches_a.flags.writeable = False  # shared by every caller (cached)
+    return times_a, launches_a
 
 
 def bounce_height(h0: float, g: float, e: float, t):

@@ -21,6 +21,7 @@ from truestep.measures.picks import (
     restitution_fidelity,
     scene_set_error,
     scorecard,
+    shared_error_methods,
     speed_claims,
     survival,
 )
@@ -56,6 +57,9 @@ class Findings:
     scene_set: dict[str, str] = dataclasses.field(default_factory=dict)
     """case name -> why the reference's integrators do not set its error
     (:func:`truestep.measures.picks.scene_set_error`)."""
+    shared_methods: dict[str, list[str]] = dataclasses.field(default_factory=dict)
+    """case name -> the reference's methods that share that error there
+    (:func:`truestep.measures.picks.shared_error_methods`)."""
     phase_contact: pd.DataFrame = dataclasses.field(default_factory=pd.DataFrame)
     """The restitution sweep's rows whose restitution depends on where in a step the ball
     arrives beyond the band (:func:`truestep.measures.restitution.phase_contact`)."""
@@ -130,6 +134,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         notes=method_notes(results),
         peers=same_scheme(results, cases),
         scene_set={c.name: why for c in cases if (why := scene_set_error(c, results)) is not None},
+        shared_methods={c.name: m for c in cases if (m := shared_error_methods(c, results))},
         phase_contact=phase_contact(tables.get("restitution")),
     )
 

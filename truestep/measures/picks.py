@@ -121,7 +121,47 @@ def scene_set_error(case: Case, results: pd.DataFrame) -> str | None:
     spawns), not the integration, set the error. particle-fountain: midpoint, heun, rk4,
     verlet and the lecture's update all at 0.012410 m and 0.005822 m, halving with the
     step. The report says so beside the picks, which still compare the engines (whose
-    event handling differs)."""
+    event handling differs); the scorecard leaves the case out of the cost ratios of the
+    methods that share the error (:func:`shared_error_methods`)."""
+    shared = _shared(case, results)
+    if shared is None:
+        return None
+    best, other, orders, errors = shared
+    steps = sorted(set(errors[best]) & set(errors[other]))
+    shown = ", ".join(f"{errors[best][h]:.5g} at {h:.4g} s" for h in steps)
+    return (
+        f"the reference's {best} (order {orders[best]}) and {other} (order {orders[other]}) have "
+        f"the same error at every step ({shown}): something every method shares sets it, not the "
+        "integrator"
+    )
+
+
+def shared_error_methods(case: Case, results: pd.DataFrame) -> list[str]:
+    """The reference's fixed-step methods whose error on ``case`` is the one its methods
+    share (:func:`scene_set_error`: the same as its highest-order method's, to
+    :data:`SHARED_REL`, at every step both ran, at least two), sorted; empty where they
+    share none. A method that does worse there (explicit Euler's first-order flight) or
+    that locates the events (an adaptive one) keeps an error of its own."""
+    shared = _shared(case, results)
+    if shared is None:
+        return []
+    best, _, _, errors = shared
+    return sorted(m for m in errors if m == best or _same_errors(errors[best], errors[m]))
+
+
+def _same_errors(a: dict[float, float], b: dict[float, float]) -> bool:
+    """Whether two methods' errors (step -> error) are one at every step both ran (at
+    least two)."""
+    steps = set(a) & set(b)
+    return len(steps) >= 2 and all(abs(a[h] - b[h]) <= SHARED_REL * a[h] for h in steps)
+
+
+def _shared(
+    case: Case, results: pd.DataFrame
+) -> tuple[str, str, dict[str, int], dict[str, dict[float, float]]] | None:
+    """The reference's highest-order fixed-step method and one of a lower order with the
+    same errors (see :func:`scene_set_error`), the methods' orders and their errors
+    (method -> step -> error); ``None`` where there are none."""
     from truestep.adapters import get_adapter
     from truestep.adapters.base import facts_of
 
@@ -143,18 +183,11 @@ def scene_set_error(case: Case, results: pd.DataFrame) -> str | None:
         return None
     top = max(orders.values())
     for best in sorted(m for m, o in orders.items() if o == top):
+        if not all(np.isfinite(x) and x > floor for x in errors[best].values()):
+            continue
         for other in sorted(m for m, o in orders.items() if o < top):
-            steps = sorted(set(errors[best]) & set(errors[other]))
-            pairs = [(errors[best][h], errors[other][h]) for h in steps]
-            if len(pairs) >= 2 and all(
-                np.isfinite(x) and x > floor and abs(x - y) <= SHARED_REL * x for x, y in pairs
-            ):
-                shown = ", ".join(f"{x:.5g} at {h:.4g} s" for h, (x, _) in zip(steps, pairs, strict=True))
-                return (
-                    f"the reference's {best} (order {top}) and {other} (order {orders[other]}) have "
-                    f"the same error at every step ({shown}): something every method shares sets "
-                    "it, not the integrator"
-                )
+            if _same_errors(errors[best], errors[other]):
+                return best, other, orders, errors
     return None
 
 
@@ -313,9 +346,14 @@ def scorecard(
     ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
     on, the median of its cheapest wall time there over the cheapest of all runs (1: the
     fastest, or within timing noise of it, :func:`tied_with_fastest`); NaN if it reached
-    none. ``cases_run`` / ``cases_measured`` / ``cases_reached``: the family's cases it
+    none. A case whose error the reference's integrators do not set (:func:`scene_set_error`:
+    the same error for its methods of different orders) is left out of the ratios of the
+    reference's methods that share that error (:func:`shared_error_methods`), and stays in
+    the other engines' (their handling of the events it measures differs) and in those of
+    the reference's methods with an error of their own there.
+    ``cases_run`` / ``cases_measured`` / ``cases_reached``: the family's cases it
     ran / ran that have an error measure (an exact solution or reference run) / reached
-    the target on.
+    the target on (and counted, as above).
     ``stability_ratio``: over the family's cases with a stability search whose exact
     limit is not 0 (whether or not the sweep ran the method there: a search of a case
     whose sweep skips it still tells its largest stable step), the median of its largest
@@ -331,6 +369,7 @@ def scorecard(
     scale = {c.name: c.error_scale for c in cases}
     ran = results[~results["status"].isin(["unsupported", "skipped"]) & results["case"].isin(list(family))]
     ok = ran[ran["status"] == "ok"].copy()
+    shared = {c.name: shared_error_methods(c, results) for c in cases if c.name in family}
     ok["reaches"] = _num(ok, "error") <= target * ok["case"].map(scale).to_numpy(float)
     ok["band"] = _bands(ok) if len(ok) else np.zeros(0)
     reached = ok[ok["reaches"] & np.isfinite(_num(ok, "wall_s"))]
@@ -352,6 +391,8 @@ def scorecard(
             names = [c for c in dict.fromkeys(mine["case"]) if family[c] == fam]
             ratios = []
             for case in names:
+                if engine == "reference" and method in shared[case]:
+                    continue  # one error with the others there: it is no cheaper than they are
                 hit = reached[
                     (reached["case"] == case) & (reached["engine"] == engine) & (reached["method"] == method)
                 ]

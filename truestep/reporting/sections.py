@@ -70,8 +70,10 @@ def summary(cases: list[Case], found: Findings, tables: dict[str, pd.DataFrame])
         )
         lines.append(md_table(table))
     shared = [
-        f"- {text(name)}: {text(why)}; there the reference's methods are interchangeable, and "
-        "its picks compare the engines' handling of events (contacts, spawns), not integrators."
+        f"- {text(name)}: {text(why)}; there those of the reference's methods are interchangeable "
+        f"({text(', '.join(found.shared_methods.get(name, [])))}: the scorecard's cost ratios of these "
+        "leave the case out), and its picks compare the engines' handling of events (contacts, "
+        "spawns), not integrators."
         for name, why in found.scene_set.items()
     ]
     if shared:
