@@ -18,6 +18,7 @@ from truestep.measures.metrics import fit_order, round_off_floor
 from truestep.measures.peers import PEER_COLUMNS, same_scheme
 from truestep.measures.picks import (
     cheapest,
+    costly_rows,
     restitution_fidelity,
     scene_set_error,
     scorecard,
@@ -57,6 +58,9 @@ class Findings:
     scene_set: dict[str, str] = dataclasses.field(default_factory=dict)
     """case name -> why the reference's integrators do not set its error
     (:func:`truestep.measures.picks.scene_set_error`)."""
+    costly: pd.DataFrame = dataclasses.field(default_factory=pd.DataFrame)
+    """The rows of over :data:`truestep.measures.picks.LONG_ROW_S` of stepping, each beside its
+    next coarser step (:func:`truestep.measures.picks.costly_rows`)."""
     shared_methods: dict[str, list[str]] = dataclasses.field(default_factory=dict)
     """case name -> the reference's methods that share that error there
     (:func:`truestep.measures.picks.shared_error_methods`)."""
@@ -135,6 +139,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         peers=same_scheme(results, cases),
         scene_set={c.name: why for c in cases if (why := scene_set_error(c, results)) is not None},
         shared_methods={c.name: m for c in cases if (m := shared_error_methods(c, results))},
+        costly=costly_rows(results),
         phase_contact=phase_contact(tables.get("restitution")),
     )
 

@@ -458,3 +458,53 @@ def restitution_fidelity(restitution: pd.DataFrame | None) -> pd.DataFrame:
         for (e, m), g in r.groupby(["engine", "method"], sort=False)
     ]
     return pd.DataFrame(out, columns=cols)
+
+
+LONG_ROW_S = 5.0
+"""Seconds of timed stepping (a row's ``wall_s``) beyond which the report lists the row
+with what it buys (:func:`costly_rows`)."""
+COSTLY_COLUMNS = [
+    "case",
+    "engine",
+    "method",
+    "dt",
+    "dt_kind",
+    "wall_s",
+    "error",
+    "coarser_dt",
+    "coarser_wall_s",
+    "coarser_error",
+]
+
+
+def costly_rows(results: pd.DataFrame, threshold: float = LONG_ROW_S) -> pd.DataFrame:
+    """The rows that ran (any status) whose wall time (s, the median timed stepping, or the
+    one untimed run of an engine without a speed claim) is over ``threshold``, longest
+    first, each beside the same engine and method's next coarser step (or looser
+    tolerance) of the case (the ``coarser_*`` columns; NaN where the row is the coarsest it
+    ran): what the longer run
+    buys is its error against that one's. Columns :data:`COSTLY_COLUMNS`. Which rows pass
+    the threshold is a timing: a row near it may be listed on one machine and not another."""
+    ran = results[~results["status"].isin(["unsupported", "skipped"])]
+    long = ran[_num(ran, "wall_s") > threshold]
+    rows = []
+    for r in long.itertuples(index=False):
+        same = ran[(ran["case"] == r.case) & (ran["engine"] == r.engine) & (ran["method"] == r.method)]
+        coarser = same[(_num(same, "dt") > float(r.dt)) & (same["dt_kind"] == r.dt_kind)]
+        c = coarser.iloc[int(np.argmin(_num(coarser, "dt")))] if len(coarser) else None
+        rows.append(
+            {
+                "case": r.case,
+                "engine": r.engine,
+                "method": r.method,
+                "dt": float(r.dt),
+                "dt_kind": r.dt_kind,
+                "wall_s": float(r.wall_s),
+                "error": float(pd.to_numeric(r.error, errors="coerce")),
+                "coarser_dt": np.nan if c is None else float(c["dt"]),
+                "coarser_wall_s": np.nan if c is None else float(c["wall_s"]),
+                "coarser_error": np.nan if c is None else float(pd.to_numeric(c["error"], errors="coerce")),
+            }
+        )
+    frame = pd.DataFrame(rows, columns=COSTLY_COLUMNS)
+    return frame.sort_values("wall_s", ascending=False, kind="stable").reset_index(drop=True)

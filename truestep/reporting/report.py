@@ -32,6 +32,7 @@ from truestep.reporting.markdown import folded, link, md_table, text, with_units
 from truestep.reporting.scaling import scaling_section
 from truestep.reporting.sections import (
     conclusion_sentence,
+    costly_lines,
     hard_case_line,
     methods_section,
     phase_sentence,
@@ -242,6 +243,7 @@ def render_markdown(
     parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
     parts += same_scheme_section(found.peers)
     parts.append("## Work against precision, per case\n")
+    parts += costly_lines(found.costly)
     drawn = draw_case_figures(cases, results, traces, fig_dir)
     for case in cases:
         df = results[results["case"] == case.name]

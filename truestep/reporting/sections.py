@@ -552,3 +552,38 @@ def same_scheme_section(peers: pd.DataFrame) -> list[str]:
     ]
     lines.append(folded(f"{len(compared)} engine methods beside their named scheme", md_table(compared)))
     return lines
+
+
+def costly_lines(costly: pd.DataFrame) -> list[str]:
+    """The rows of over :data:`~truestep.measures.picks.LONG_ROW_S` of stepping, each with
+    what it buys against its next coarser step (:func:`~truestep.measures.picks.costly_rows`)."""
+    from truestep.measures.picks import LONG_ROW_S
+
+    if not len(costly):
+        return []
+    lines = [
+        f"The rows of more than {LONG_ROW_S:g} s of stepping, and what each buys against the same "
+        "method's next coarser step of its case:\n"
+    ]
+    for r in costly.itertuples(index=False):
+        kind = "tol" if r.dt_kind == "tolerance" else "dt"
+        unit = "" if kind == "tol" else " s"
+        run = f"{text(r.case)} {text(r.engine)} / {text(r.method)}"
+        head = f"- {run} at {kind} {_fmt(r.dt)}{unit}: {r.wall_s:.3g} s"
+        error = f"error {r.error:.3g}" if np.isfinite(r.error) else "no error measured"
+        if not np.isfinite(r.coarser_dt):
+            lines.append(f"{head}, {error}; the coarsest step it ran.")
+            continue
+        was = f"error {r.coarser_error:.3g}" if np.isfinite(r.coarser_error) else "no error measured"
+        gain = (
+            f": {r.wall_s / r.coarser_wall_s:.3g} times the time for an error "
+            f"{r.coarser_error / r.error:.3g} times smaller"
+            if np.isfinite(r.error) and np.isfinite(r.coarser_error) and r.error > 0 and r.coarser_wall_s > 0
+            else ""
+        )
+        lines.append(
+            f"{head}, {error}; at {kind} {_fmt(r.coarser_dt)}{unit}: {r.coarser_wall_s:.3g} s, {was} "
+            f"({r.coarser_dt / r.dt:.3g} times the {'tolerance' if kind == 'tol' else 'step'}{gain})."
+        )
+    lines.append("")
+    return lines
