@@ -482,9 +482,9 @@ def costly_rows(results: pd.DataFrame, threshold: float = LONG_ROW_S) -> pd.Data
     one untimed run of an engine without a speed claim) is over ``threshold``, longest
     first, each beside the same engine and method's next coarser step (or looser
     tolerance) of the case (the ``coarser_*`` columns; NaN where the row is the coarsest it
-    ran): what the longer run
-    buys is its error against that one's. Columns :data:`COSTLY_COLUMNS`. Which rows pass
-    the threshold is a timing: a row near it may be listed on one machine and not another."""
+    ran): what the longer run buys is its error against that one's. Columns
+    :data:`COSTLY_COLUMNS`. Which rows pass the threshold is a timing: a row near it may be
+    listed on one machine and not another."""
     ran = results[~results["status"].isin(["unsupported", "skipped"])]
     long = ran[_num(ran, "wall_s") > threshold]
     rows = []
