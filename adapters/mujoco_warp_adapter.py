@@ -54,7 +54,7 @@ from truestep.adapters import mujoco_adapter as mj
 from truestep.adapters import warp_runtime
 from truestep.adapters.base import FactsSpec, FixedStepAdapter
 from truestep.adapters.quiet import without_banner
-from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, wp
+from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, host_copy, host_view, wp
 from truestep.cases.case import Case
 
 with without_banner(BANNER):
@@ -91,6 +91,9 @@ class Scene:
     n: int
     device: str
     notes: list[str] = field(default_factory=list)
+    views: tuple[Any, Any] = (None, None)
+    """``qpos`` and ``qvel`` as numpy views of the device's memory on the CPU, else ``None``
+    (:func:`truestep.adapters.warp_runtime.host_view`)."""
 
 
 def capacity(host: mujoco.MjModel) -> tuple[int, int]:
@@ -119,7 +122,8 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE) -> Scene:
         d = mjw.put_data(host, hd, naconmax=contacts, njmax=rows)
         with wp.ScopedCapture(device=device) as capture:
             mjw.step(m, d)
-    return Scene(host, m, d, layout, capture.graph, pinned_x, model.n, device, list(layout.notes))
+    views = (host_view(d.qpos), host_view(d.qvel))
+    return Scene(host, m, d, layout, capture.graph, pinned_x, model.n, device, list(layout.notes), views)
 
 
 class MujocoWarpAdapter(FixedStepAdapter):
@@ -197,7 +201,8 @@ class MujocoWarpAdapter(FixedStepAdapter):
 
     def snapshot(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         """The float32 state now (the device arrays' host copies)."""
-        return scene.data.qpos.numpy().copy(), scene.data.qvel.numpy().copy()
+        (qpos, qvel), data = scene.views, scene.data
+        return host_copy(data.qpos, qpos), host_copy(data.qvel, qvel)
 
     def unpack(self, scene: Scene, snaps: list[Any]) -> tuple[np.ndarray, np.ndarray]:
         lay, t = scene.layout, len(snaps)

@@ -74,7 +74,7 @@ import numpy as np
 from truestep.adapters import contact_law, warp_runtime
 from truestep.adapters.base import FixedStepAdapter, Trajectory
 from truestep.adapters.quiet import without_banner
-from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, wp
+from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, host_copy, host_view, wp
 from truestep.cases.case import Case
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts
@@ -229,6 +229,9 @@ class Scene:
     n: int
     device: str
     notes: list[str] = field(default_factory=list)
+    views: tuple[Any, Any] = (None, None)
+    """The first state's ``particle_q`` and ``particle_qd`` as numpy views of the device's
+    memory on the CPU, else ``None`` (:func:`truestep.adapters.warp_runtime.host_view`)."""
 
 
 def _builder(model: ParticleModel) -> Any:
@@ -300,7 +303,8 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE) -> Scene:
         with wp.ScopedCapture(device=device) as capture:
             run_step()
     _reset(sim, s0, s1)
-    return Scene(sim, states, run_step, capture.graph, model.n, device)
+    views = (host_view(s0.particle_q), host_view(s0.particle_qd))
+    return Scene(sim, states, run_step, capture.graph, model.n, device, views=views)
 
 
 def _reset(sim: Any, s0: Any, s1: Any) -> None:
@@ -373,8 +377,8 @@ class NewtonAdapter(FixedStepAdapter):
 
     def snapshot(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         """The float32 state now (host copies of the device arrays)."""
-        state = scene.states[0]
-        return state.particle_q.numpy()[: scene.n].copy(), state.particle_qd.numpy()[: scene.n].copy()
+        state, (q, qd), n = scene.states[0], scene.views, scene.n
+        return host_copy(state.particle_q, q, n), host_copy(state.particle_qd, qd, n)
 
     def unpack(self, scene: Scene, snaps: list[Any]) -> tuple[np.ndarray, np.ndarray]:
         return (

@@ -100,6 +100,23 @@ def test_the_captured_graph_steps_as_plain_calls_do_bit_for_bit(case_named):
     assert not np.array_equal(graphed.data.qpos.numpy(), build(case, "RK4", 0.01).data.qpos.numpy())
 
 
+def test_a_snapshot_is_the_state_of_its_step_and_stays_so(warp_mj, case_named):
+    """On the CPU the state is read through views of the device's memory made once: a
+    snapshot equals Warp's own ``numpy()`` copy at its step, and later steps leave it as it
+    was (it is a copy, not the view)."""
+    case = case_named("spring-damper-pair")
+    scene = warp_mj.build(case, "RK4", 0.01)
+    assert all(v is not None for v in scene.views)
+    wp.capture_launch(scene.graph)
+    snap = warp_mj.snapshot(scene)
+    assert np.array_equal(snap[0], scene.data.qpos.numpy())
+    assert np.array_equal(snap[1], scene.data.qvel.numpy())
+    before = (snap[0].copy(), snap[1].copy())
+    wp.capture_launch(scene.graph)
+    assert np.array_equal(snap[0], before[0]) and np.array_equal(snap[1], before[1])
+    assert not np.array_equal(warp_mj.snapshot(scene)[0], before[0])
+
+
 def test_a_free_fall_is_semi_implicit_euler_in_float32(warp_mj, case_named):
     """``Euler`` without damping: ``y_n = y_0 + v_0 n h - g h^2 n (n + 1) / 2`` (the closed
     form of the velocity-first step), to float32's rounding of the height."""

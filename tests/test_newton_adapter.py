@@ -174,6 +174,23 @@ def test_the_captured_graph_steps_as_plain_calls_do_bit_for_bit(case_named):
         assert np.array_equal(mine, theirs)
 
 
+def test_a_snapshot_is_the_state_of_its_step_and_stays_so(newton_adapter, case_named):
+    """On the CPU the state is read through views of the device's memory made once: a
+    snapshot equals Warp's own ``numpy()`` copy at its step (the scene's particles only),
+    and later steps leave it as it was."""
+    case = case_named("spring-damper-pair")
+    scene = newton_adapter.build(case, "semi-implicit", 0.01)
+    assert all(v is not None for v in scene.views)
+    wp.capture_launch(scene.graph)
+    q, qd = newton_adapter.snapshot(scene)
+    state = scene.states[0]
+    assert np.array_equal(q, state.particle_q.numpy()[: scene.n])
+    assert np.array_equal(qd, state.particle_qd.numpy()[: scene.n])
+    before = q.copy()
+    wp.capture_launch(scene.graph)
+    assert np.array_equal(q, before) and not np.array_equal(newton_adapter.snapshot(scene)[0], before)
+
+
 def test_a_2d_scene_stays_in_its_plane(newton_adapter, case_named):
     """A 2-D scene runs in 3-D: nothing pushes it out of z = 0, to the bit."""
     case = _short(case_named("rope-pendulum"), 1.0)
