@@ -13,10 +13,16 @@ library is missing raises :class:`EngineNotInstalled`, naming the pip line that 
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
+import os
+import signal
+import sys
+import threading
 from collections.abc import Callable
 from importlib import metadata
+from types import ModuleType
 
 from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
 
@@ -116,10 +122,36 @@ def pip_line(engine: str) -> str:
     return f"pip install the package that provides engine {engine!r}"
 
 
+GUARDED_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+"""The signal handlers an adapter module's import may not change for truestep."""
+
+
+def _import_guarded(engine: str, module: str) -> ModuleType:
+    """Import an adapter's module as code truestep did not write: what it prints goes to
+    standard error (standard output is truestep's: tables, ``list``), and the working
+    directory and the handlers of :data:`GUARDED_SIGNALS` are put back as they were (a
+    module that ignores SIGTERM would make the run impossible to stop). A module that
+    calls ``sys.exit`` while it loads is an :class:`UnknownEngine` that says so."""
+    cwd = os.getcwd()
+    handlers = {s: signal.getsignal(s) for s in GUARDED_SIGNALS}
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            return importlib.import_module(module)
+    except SystemExit as err:
+        raise UnknownEngine(f"engine {engine!r}: importing {module} called sys.exit({err.code!r})") from None
+    finally:
+        with contextlib.suppress(OSError):
+            os.chdir(cwd)
+        if threading.current_thread() is threading.main_thread():
+            for s, h in handlers.items():
+                if h is not None and signal.getsignal(s) is not h:
+                    signal.signal(s, h)
+
+
 def _load_class(engine: str, target: str) -> type:
     module, _, cls = target.partition(":")
     try:
-        mod = importlib.import_module(module)
+        mod = _import_guarded(engine, module)
     except ModuleNotFoundError as err:
         missing = err.name or module
         if missing == module or module.startswith(missing + "."):

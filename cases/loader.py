@@ -37,6 +37,7 @@ from truestep.execution.time_limit import TimeLimitExceeded, time_limit
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.system import SecondOrderSystem
 from truestep.tables.spec import RESULTS
+from truestep.visible import visible
 
 CASE_DIR = plugins.CASE_DIR
 """truestep's own case library (this folder)."""
@@ -90,6 +91,24 @@ def _items(selection: str | Iterable[str]) -> list[str]:
     return [str(i).strip() for i in items if str(i).strip()] or ["*"]
 
 
+def _path_of(item: str) -> Path:
+    """``item`` as a path, ``~`` and ``~user`` expanded (:class:`SelectionError` for a user
+    the system does not know)."""
+    try:
+        return Path(item).expanduser()
+    except RuntimeError:
+        raise SelectionError(f"--cases: {visible(item)!r}: no such user to expand ~ for") from None
+
+
+def _is_dir(item: str, path: Path) -> bool:
+    """Whether ``path`` is a directory; a name the system cannot even look up (too long,
+    say) is :class:`SelectionError`."""
+    try:
+        return path.is_dir()
+    except OSError as err:
+        raise SelectionError(f"--cases: {visible(item)[:80]!r}: {err.strerror or err}") from None
+
+
 def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
     """The case files a selection names, in the order named, each once.
 
@@ -101,8 +120,8 @@ def case_files(selection: str | Iterable[str] = "*") -> list[Path]:
     lib: dict[str, Path] | None = None
     out: dict[Path, Path] = {}
     for item in _items(selection):
-        path = Path(item).expanduser()
-        if path.is_dir():
+        path = _path_of(item)
+        if _is_dir(item, path):
             files = sorted(path.glob("*.toml"))
             if not files:
                 raise SelectionError(f"--cases: {item!r} is a directory with no *.toml case file")

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 from truestep import __version__
 from truestep.cases.limits import CEILING
 from truestep.cases.limits import KEYS as LIMIT_KEYS
+from truestep.execution.supervisor import DID_NOT_FINISH
 from truestep.tables.spec import compared
 from truestep.visible import visible
 
@@ -163,10 +164,17 @@ def _run(args: argparse.Namespace) -> int:
     except (LockBusy, OutRefused, ClusterError) as err:
         raise UsageError(str(err)) from None
     laps = tables.seconds
-    print(
-        f"wrote {visible(out)}/ ({len(tables.results)} result rows) in {sum(laps.values()):.1f} s: "
-        f"sweep {laps['sweep']:.1f} s, analyses {laps['analyses']:.1f} s, report {laps['report']:.1f} s"
-    )
+    try:
+        print(
+            f"wrote {visible(out)}/ ({len(tables.results)} result rows) in {sum(laps.values()):.1f} s: "
+            f"sweep {laps['sweep']:.1f} s, analyses {laps['analyses']:.1f} s, report {laps['report']:.1f} s",
+            flush=True,
+        )
+    except OSError as err:  # stdout full or gone: the report is published all the same
+        raise UsageError(
+            f"the new report is in {visible(out)}/, but standard output could not be written: "
+            f"{err.strerror or err}"
+        ) from None
     return 0
 
 
@@ -1136,6 +1144,13 @@ def main(argv: list[str] | None = None) -> int:
     except (CaseError, UsageError, SelectionError, UnknownEngine, EngineNotInstalled, PluginError) as err:
         print(f"truestep: error: {visible(err)}", file=sys.stderr)
         return 2
+    except SystemExit as err:  # argparse is done: only code the command ran gets here
+        print(
+            f"truestep: error: code the command ran called sys.exit({visible(repr(err.code))}) "
+            "(an adapter, a case library or an exact solution): the command did not finish",
+            file=sys.stderr,
+        )
+        return DID_NOT_FINISH
 
 
 if __name__ == "__main__":

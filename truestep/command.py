@@ -3,21 +3,46 @@ every truestep run does (:func:`truestep.numerics.set_environment`, before numpy
 
 from __future__ import annotations
 
+import contextlib
+import errno
+
 from truestep import numerics
+
+STREAM_ERRORS = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG)
+"""Errors of a write to standard output that end a command with one line (exit 2), not a
+traceback: a full disk or device (``> /dev/full``), a failed terminal or file."""
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Set the numerical environment, then run :func:`truestep.cli.main`. Output cut short
-    by its reader (``truestep list | head``) ends the command quietly, as ``cat`` does."""
+    """Set the numerical environment, then run :func:`truestep.cli.main` in a worker process
+    that a small supervisor watches (:func:`truestep.execution.supervisor.supervised`): code
+    of a plugin that ends the process, leaves processes behind or ignores a signal cannot
+    end the command quietly. Output cut short by its reader (``truestep list | head``) ends
+    the command quietly, as ``cat`` does."""
+    numerics.set_environment()
+    from truestep.execution.supervisor import supervised
+
+    return supervised(lambda: _command(argv))
+
+
+def _command(argv: list[str] | None) -> int:
     import os
     import sys
 
-    numerics.set_environment()
     from truestep.cli import main as run_command
 
     try:
-        return run_command(argv)
+        code = run_command(argv)
+        sys.stdout.flush()  # here, where a full or broken stdout is said, not at exit
+        return code
     except BrokenPipeError:
         # the reader is gone: point stdout at /dev/null so that Python's exit flush is quiet
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, as a shell reports a command its pipe closed
+    except OSError as err:
+        if err.errno not in STREAM_ERRORS or err.filename is not None:
+            raise
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        with contextlib.suppress(OSError):
+            print(f"truestep: error: cannot write standard output: {err.strerror}", file=sys.stderr)
+        return 2

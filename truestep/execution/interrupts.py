@@ -1,6 +1,6 @@
-"""SIGTERM and SIGINT during ``truestep run``: kill the children, unwind, say so.
+"""SIGTERM, SIGINT and SIGHUP during ``truestep run``: kill the children, unwind, say so.
 
-Inside :func:`handled`, the first SIGTERM or SIGINT kills every live child process
+Inside :func:`handled`, the first SIGTERM, SIGINT or SIGHUP kills every live child process
 (:func:`truestep.execution.isolation.kill_children`) and raises :class:`Interrupted` where the main
 thread is, so every ``finally`` on the way out runs (staging folders are removed, the
 previous report stays). Later signals only kill children again: the unwinding itself is
@@ -14,7 +14,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-HANDLED = (signal.SIGTERM, signal.SIGINT)
+HANDLED = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 
 
 class Interrupted(BaseException):
@@ -30,7 +30,7 @@ class Interrupted(BaseException):
 
 @contextmanager
 def handled() -> Iterator[None]:
-    """Turn SIGTERM and SIGINT into :class:`Interrupted` while inside (main thread only;
+    """Turn SIGTERM, SIGINT and SIGHUP into :class:`Interrupted` while inside (main thread only;
     elsewhere nothing changes). The previous handlers are restored on the way out."""
     if threading.current_thread() is not threading.main_thread():
         yield

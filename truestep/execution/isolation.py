@@ -19,7 +19,9 @@ whatever the adapter started there (helpers, a daemon that left the group with
 an interruption (:func:`truestep.execution.process_tree.kill_tree`). Its standard output and error
 (the file descriptors, so its own subprocesses' too) go to a pipe whose last
 :data:`OUTPUT_TAIL` bytes come back in :attr:`Outcome.output`, never to truestep's own
-output; standard input is ``/dev/null``.
+output; standard input is ``/dev/null``. Its result comes back as data
+(:func:`truestep.execution.plain_data.loads`): arrays, plain values and truestep's own
+records, never an object that runs code of its own while it is read here.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import Any
 
-from truestep.execution import faults
+from truestep.execution import faults, plain_data
 from truestep.execution.oscalls import become_subreaper, die_with_parent
 from truestep.execution.process_tree import has_children, kill_group, kill_tree, reap_children
 
@@ -240,10 +242,17 @@ def _finish(run: Running, *, timed_out: bool, reap_later: bool = False) -> Outco
                 "timeout", message=BUDGET_SPENT if run.by_budget else f"no result within {run.timeout:g} s"
             )
         try:
-            status, value, output = run.conn.recv()
+            data = run.conn.recv_bytes()
         except (EOFError, OSError, ValueError):
             _end(run.proc)
             return Outcome("crashed", message=f"engine process died (exit code {run.proc.exitcode})")
+        try:
+            status, value, output = plain_data.loads(data)
+        except plain_data.Refused as err:
+            return Outcome("crashed", message=plain_data.refused_words(err))
+        except Exception as err:  # bytes that are no result of _child's: said, not raised
+            words = f"its result could not be read: {type(err).__name__}: {err}"
+            return Outcome("crashed", message=words[:300])
         return (
             Outcome("ok", value, output=output)
             if status == "ok"

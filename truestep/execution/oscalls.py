@@ -48,12 +48,12 @@ def exchange(a: os.PathLike | str, b: os.PathLike | str) -> bool:
     raise OSError(err, os.strerror(err), os.fspath(a), None, os.fspath(b))
 
 
-def die_with_parent(parent: int) -> None:
-    """In a child process: be sent SIGKILL when the parent dies, and exit at once if
-    ``parent`` (its pid before the fork) is already gone."""
+def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
+    """In a child process: be sent ``sig`` (SIGKILL unless told) when the parent dies, and
+    exit at once if ``parent`` (its pid before the fork) is already gone."""
     libc = _libc()
     if libc is not None:
-        libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
     if os.getppid() != parent:
         os._exit(1)
 

@@ -1,0 +1,220 @@
+"""The ``truestep`` command runs its work in a worker that a small supervisor watches
+(issue 37, items 5-7): plugin code that ends the process, ignores the signals that stop a
+run, changes directory, prints at import, or leaves processes behind cannot end the
+command quietly or outlive it. Each test runs the real command on a plugin written to do
+one of those things."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from kill_helpers import still_running
+
+from truestep.execution.supervisor import DID_NOT_FINISH, GRACE_ENV
+
+RUN = ["run", "--quick", "--cases", "free-fall"]
+
+PLUGINS = {
+    "exits_at_import": """
+        import sys
+        sys.exit(0)
+    """,
+    "exits_in_missing": """
+        import os
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "exits-in-missing"
+
+            def missing(self, case, method):
+                os._exit(0)
+    """,
+    "sys_exit_in_missing": """
+        import sys
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "sys-exit-in-missing"
+
+            def missing(self, case, method):
+                sys.exit(0)
+    """,
+    "rude_at_import": """
+        import os, signal, time
+        from pathlib import Path
+        from truestep.adapters.reference import ReferenceAdapter
+
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        HERE = os.getcwd()
+        os.chdir("/")
+        print("PRINTED-AT-IMPORT")
+
+        class X(ReferenceAdapter):
+            name = "rude-at-import"
+            methods = ("rk4",)
+            adaptive_methods = ()
+
+            def simulate(self, case, method, dt, **kw):
+                Path(HERE, "started").write_text(str(os.getpid()))
+                time.sleep(120)
+    """,
+    "ignores_term_while_running": """
+        import os, signal, subprocess, sys, time
+        from pathlib import Path
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "ignores-term"
+            methods = ("rk4",)
+            adaptive_methods = ()
+
+            def prepare(self, case, method):  # in the command's own process
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+            def simulate(self, case, method, dt, **kw):
+                helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+                Path("helper.pid").write_text(str(helper.pid))
+                time.sleep(120)
+    """,
+    "daemon_in_prepare": """
+        import os, time
+        from pathlib import Path
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "daemon-in-prepare"
+            methods = ("rk4",)
+            adaptive_methods = ()
+
+            def prepare(self, case, method):  # in the command's own process
+                if Path("daemon.pid").exists():
+                    return
+                if os.fork() == 0:
+                    os.setsid()
+                    if os.fork() == 0:
+                        Path("daemon.pid").write_text(str(os.getpid()))
+                        time.sleep(120)
+                    os._exit(0)
+                while not Path("daemon.pid").exists():
+                    time.sleep(0.01)
+    """,
+    "helper_then_sleep": """
+        import os, subprocess, sys, time
+        from pathlib import Path
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "helper-then-sleep"
+            methods = ("rk4",)
+            adaptive_methods = ()
+
+            def simulate(self, case, method, dt, **kw):
+                helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+                Path("helper.pid").write_text(str(helper.pid))
+                time.sleep(120)
+    """,
+}
+
+
+@pytest.fixture
+def plugins(tmp_path) -> Path:
+    for name, text in PLUGINS.items():
+        (tmp_path / f"{name}.py").write_text(textwrap.dedent(text))
+    return tmp_path
+
+
+def _start(where: Path, *args: str, grace: int = 30) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(where), GRACE_ENV: str(grace)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "truestep", *args],
+        cwd=where,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for(path: Path, timeout: float = 60.0) -> int:
+    deadline = time.monotonic() + timeout
+    while not path.exists() or not path.read_text():
+        assert time.monotonic() < deadline, f"{path.name} never appeared"
+        time.sleep(0.05)
+    time.sleep(0.2)
+    return int(path.read_text())
+
+
+def _lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("truestep:")]
+
+
+def test_os_exit_in_plugin_code_is_no_success(plugins):
+    proc = _start(plugins, *RUN, "--engines", "exits_in_missing:X,reference", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == DID_NOT_FINISH, err
+    (line,) = _lines(err)
+    assert "exited with status 0 before it finished" in line
+    assert not (plugins / "rep").exists()
+
+
+def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):
+    proc = _start(plugins, *RUN, "--engines", "exits_at_import:X", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 2 and "importing exits_at_import called sys.exit(0)" in err, err
+    proc = _start(plugins, *RUN, "--engines", "sys_exit_in_missing:X", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == DID_NOT_FINISH and "called sys.exit(0)" in err, err
+    assert "Traceback" not in err and not (plugins / "rep").exists()
+
+
+def test_a_plugin_cannot_take_the_signals_the_directory_or_standard_output(plugins):
+    proc = _start(plugins, *RUN, "--engines", "rude_at_import:X", "--out", "rep")
+    _wait_for(plugins / "started")
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    (line,) = _lines(err)
+    assert "interrupted by SIGTERM" in line
+    assert "PRINTED-AT-IMPORT" in err and "PRINTED-AT-IMPORT" not in out
+    assert (plugins / ".rep.partial").is_dir()  # the journal beside --out, not under /
+
+
+def test_a_worker_that_ignores_sigterm_is_killed_after_the_grace_with_what_it_started(plugins):
+    proc = _start(plugins, *RUN, "--engines", "ignores_term_while_running:X", "--out", "rep", grace=2)
+    helper = _wait_for(plugins / "helper.pid")
+    began = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "had not stopped 2 s later" in _lines(err)[-1]
+    assert time.monotonic() - began < 30
+    assert still_running([helper]) == []
+
+
+def test_a_daemon_started_in_the_command_s_own_process_does_not_outlive_it(plugins):
+    proc = _start(plugins, *RUN, "--engines", "daemon_in_prepare:X", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert still_running([int((plugins / "daemon.pid").read_text())]) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGHUP])
+def test_sigkill_or_sighup_of_the_command_leaves_no_process_of_its_run(plugins, sig):
+    proc = _start(plugins, *RUN, "--engines", "helper_then_sleep:X", "--out", "rep")
+    helper = _wait_for(plugins / "helper.pid")
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert still_running([helper], 10.0) == []
+    if sig == signal.SIGHUP:
+        assert proc.returncode == 128 + sig and "interrupted by SIGHUP" in _lines(err)[-1], err
+    else:
+        assert proc.returncode == -sig
