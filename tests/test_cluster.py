@@ -134,6 +134,31 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path: Path, capsys, monkeypatc
     assert "local:N" in capsys.readouterr().err
 
 
+def test_a_server_that_accepts_and_never_answers_is_one_line_within_the_limit(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """Dask's own timeout covers the TCP connection only: a server that accepts and says
+    nothing held ``Client`` forever (still running at 400 s). Now the first answer has a
+    limit too."""
+    import threading
+    import time
+
+    from truestep.execution import cluster
+
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(cluster, "CONNECT_MARGIN_S", 1.0)
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(8)
+        held: list[socket.socket] = []
+        threading.Thread(target=lambda: held.extend(server.accept() for _ in range(8)), daemon=True).start()
+        began = time.monotonic()
+        assert _run(tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{server.getsockname()[1]}") == 2
+        assert time.monotonic() - began < 30
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if line.startswith("truestep:")]
+    assert len(err) == 1 and "no answer within 2 s" in err[0] and "no Dask scheduler answers" in err[0]
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -32,8 +32,10 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from truestep.execution.isolation import Call, Outcome
 from truestep.execution.sweep_job import SweepJob, host_name
@@ -44,6 +46,8 @@ that start that sweep die at once (``os._exit``), counted by files in ``DIR``.""
 LOCAL_PREFIX = "local:"
 SEMAPHORE_PREFIX = "truestep-timed-"
 CONNECT_TIMEOUT_S = 20.0
+CONNECT_MARGIN_S = 5.0
+"""Seconds past :data:`CONNECT_TIMEOUT_S` that a scheduler's first answer may take."""
 """How long to wait for a scheduler to answer, s."""
 
 
@@ -145,6 +149,32 @@ def _prepare_worker() -> None:
         _PRELOADED[0] = True
 
 
+def _client_within(client: Callable[..., Any], address: str, seconds: float) -> Any:
+    """``client(address)`` made in a thread of its own, and given up on after ``seconds``
+    plus a margin: Dask's own ``timeout`` covers the TCP connection, not the scheduler's
+    first answer, and a server that accepts and never answers holds ``Client`` forever."""
+    made: list[Any] = []
+    failed: list[BaseException] = []
+
+    def connect() -> None:
+        try:
+            made.append(client(address, timeout=seconds))
+        except BaseException as err:  # handed to the caller's thread
+            failed.append(err)
+
+    thread = threading.Thread(target=connect, name="truestep-connect", daemon=True)
+    thread.start()
+    thread.join(seconds + CONNECT_MARGIN_S)
+    if failed:
+        raise failed[0]
+    if not made:
+        raise ClusterError(
+            f"--scheduler {address}: no answer within {seconds + CONNECT_MARGIN_S:g} s "
+            "(something accepts connections there, but no Dask scheduler answers)"
+        )
+    return made[0]
+
+
 class Cluster:
     """A connection to a Dask scheduler (or a :class:`~distributed.LocalCluster` of
     ``N`` single-threaded worker processes for ``local:N``) that runs sweeps and untimed
@@ -168,7 +198,7 @@ class Cluster:
                 )
                 self.client = Client(self._local, timeout=CONNECT_TIMEOUT_S)
             else:
-                self.client = Client(address, timeout=CONNECT_TIMEOUT_S)
+                self.client = _client_within(Client, address, CONNECT_TIMEOUT_S)
         except ClusterError:
             raise
         except Exception as err:  # any failure to connect is the one error
