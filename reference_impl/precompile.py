@@ -9,6 +9,7 @@ processes, so that the runs, timed one at a time, find them ready.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import sys
 import time
 from collections.abc import Callable, Iterable
@@ -48,13 +49,19 @@ def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type | None]]
     return needed
 
 
-def _prepare_each(pairs: list[tuple], progress: Callable[[str], None] | None) -> None:
+def _prepare_each(
+    pairs: list[tuple], progress: Callable[[str], None] | None, parent: int | None = None
+) -> None:
     """Prepare each (model, method) of ``pairs``; the lines of a slow one (``progress``,
     standard error by default) carry how many of ``pairs`` are done and, from the pace so
-    far, the seconds left: ``[3/12, ~40 s left] compiling ...``."""
+    far, the seconds left: ``[3/12, ~40 s left] compiling ...``. In a forked helper,
+    ``parent`` is the pid that started it: once that process is gone (killed, interrupted)
+    the helper stops before its next loop instead of compiling on for nobody."""
     say = progress or _stderr
     began = time.perf_counter()
     for i, (model, method) in enumerate(pairs):
+        if parent is not None and os.getppid() != parent:
+            os._exit(1)
         counted = _counted(say, i, len(pairs), began)
         if method is DERIVATIVE:
             compiled.derivative_for(model, progress=counted)
@@ -105,7 +112,8 @@ def compile_all(
     if workers > 1 and not numba.config.DISABLE_JIT:
         context = multiprocessing.get_context("fork")
         children = [
-            context.Process(target=_prepare_each, args=(needed[k::workers], None)) for k in range(1, workers)
+            context.Process(target=_prepare_each, args=(needed[k::workers], None, os.getpid()), daemon=True)
+            for k in range(1, workers)
         ]
         for child in children:
             child.start()

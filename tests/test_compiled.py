@@ -18,6 +18,7 @@ methods known by their facts alone, and the composition itself.
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numba
@@ -531,3 +532,21 @@ def test_the_compiled_derivative_is_the_numpy_system_s_bit_for_bit(case):
         t = float(rng.uniform(0.0, case.duration))
         np.testing.assert_array_equal(fast(y, t), system.derivative(y, t), err_msg=f"{case.name} at {k}")
     np.testing.assert_array_equal(fast(y0, 0.0), system.derivative(y0, 0.0))
+
+
+def test_a_compile_helper_whose_parent_is_gone_stops_before_its_next_loop():
+    """``compile_all``'s forked helpers check, before each loop, that the process that
+    started them still runs: after a SIGKILL of ``truestep compile`` they stop instead of
+    compiling on into the cache for nobody."""
+    import multiprocessing
+
+    from truestep.cases import load_cases
+    from truestep.reference_impl import precompile
+
+    model = load_cases("spring-chain")[0].particles
+    helper = multiprocessing.get_context("fork").Process(
+        target=precompile._prepare_each, args=([(model, "rk4")], None, os.getppid())
+    )
+    helper.start()
+    helper.join(60)
+    assert helper.exitcode == 1  # its parent is this process, not the pid it was given

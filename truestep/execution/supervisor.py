@@ -135,7 +135,7 @@ def _supervise(pid: int, read: int) -> int:
     reap_children()
     if said:
         return int(said.split()[-1])
-    return _unfinished(status, fired[0] if gave_up else None)
+    return _unfinished(status, fired[0] if fired else None, gave_up=bool(gave_up))
 
 
 def _read_all(fd: int) -> bytes:
@@ -150,15 +150,21 @@ def _read_all(fd: int) -> bytes:
     return b"".join(chunks).strip()
 
 
-def _unfinished(status: int, killed_after: int | None) -> int:
+def _unfinished(status: int, passed_on: int | None, *, gave_up: bool) -> int:
     """The line and exit code of a worker that ended without saying its code;
-    ``killed_after``: the signal after which the supervisor killed it, if it did."""
-    if killed_after is not None:
+    ``passed_on``: the first signal passed on to it, if any; ``gave_up``: whether the
+    supervisor then killed it."""
+    if passed_on is not None and gave_up:
         _say(
-            f"truestep: interrupted by {signal.Signals(killed_after).name}: the command had not "
+            f"truestep: interrupted by {signal.Signals(passed_on).name}: the command had not "
             f"stopped {GRACE_S} s later, and was killed with every process it started"
         )
-        return 128 + killed_after
+        return 128 + passed_on
+    if passed_on is not None and os.WIFSIGNALED(status) and os.WTERMSIG(status) == passed_on:
+        _say(
+            f"truestep: interrupted by {signal.Signals(passed_on).name}"
+        )  # a command without a line of its own
+        return 128 + passed_on
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         _say(
