@@ -23,6 +23,7 @@ import threading
 from collections.abc import Callable
 from importlib import metadata
 from types import ModuleType
+from typing import Any
 
 from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
 
@@ -176,10 +177,34 @@ def adapter_class(name: str) -> type:
 def get_adapter(name: str) -> Adapter:
     """Instantiate the adapter of engine ``name`` (a registered name or ``module:Class``).
 
-    Raises :class:`UnknownEngine` for a name nothing registers and
-    :class:`EngineNotInstalled` when the engine's library is missing.
+    Raises :class:`UnknownEngine` for a name nothing registers, and for an adapter whose
+    construction raises (its ``__init__`` is plugin code: the error is one line naming
+    it), and :class:`EngineNotInstalled` when the engine's library is missing.
     """
-    return adapter_class(name)()
+    cls = adapter_class(name)
+    try:
+        return cls()
+    except (Exception, SystemExit) as err:
+        raise UnknownEngine(
+            f"engine {name!r}: its adapter {cls.__module__}.{cls.__qualname__} could not be made: "
+            f"{type(err).__name__}: {str(err)[:200]}"
+        ) from None
+
+
+def plugin_answer(engine: str, what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """``fn(*args, **kwargs)``, a call truestep makes to an adapter in its own process
+    (``missing``, ``duplicate``, ``skip``, ``prepare_all``): an exception it raises
+    (``SystemExit`` too) becomes :class:`PluginFailed`, whose text names the engine and
+    the call ``what``."""
+    try:
+        return fn(*args, **kwargs)
+    except (Exception, SystemExit) as err:
+        raise PluginFailed(f"{engine}: {what} raised {type(err).__name__}: {str(err)[:300]}") from None
+
+
+class PluginFailed(Exception):
+    """An adapter's answer to a question truestep asked it in its own process raised: the
+    rows that needed the answer are ``crashed`` with this text."""
 
 
 def resolve_engine(spec: str, say: Callable[[str], None] | None = None) -> str:
@@ -224,6 +249,7 @@ __all__ = [
     "Adapter",
     "EngineNotInstalled",
     "FixedStepAdapter",
+    "PluginFailed",
     "Recording",
     "Trajectory",
     "UnknownEngine",
@@ -232,6 +258,7 @@ __all__ = [
     "engine_status",
     "get_adapter",
     "pip_line",
+    "plugin_answer",
     "registered",
     "resolve_engine",
 ]

@@ -653,7 +653,7 @@ def cmd_history(args: argparse.Namespace) -> int:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from truestep.adapters import engine_status, get_adapter, registered, shadowed
+    from truestep.adapters import UnknownEngine, engine_status, get_adapter, registered, shadowed
 
     cases = _load(args.cases)
     if args.quick and args.cases == "*":
@@ -673,7 +673,11 @@ def cmd_list(args: argparse.Namespace) -> int:
         if status != "installed":
             print(visible(f"  {name:10s} {status}"))
             continue
-        a = get_adapter(name)
+        try:
+            a = get_adapter(name)
+        except UnknownEngine as err:  # its adapter could not be made: one line, the list goes on
+            print(visible(f"  {name:10s} unusable: {err}"))
+            continue
         print(visible(f"  {name:10s} methods: {', '.join(map(str, a.methods))}"))
         print(visible(f"  {'':10s} capabilities: {', '.join(sorted(map(str, a.capabilities)))}"))
     return 0

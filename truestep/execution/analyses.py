@@ -12,7 +12,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import get_adapter
+from truestep.adapters import PluginFailed, get_adapter, plugin_answer
 from truestep.adapters.base import facts_of
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
@@ -82,7 +82,11 @@ def stability_table(
             adapter = get_adapter(engine)
             for method in adapter.methods:
                 row: dict[str, object] = {"case": case.name, "engine": engine, "method": method}
-                missing = adapter.missing(case, method)
+                try:
+                    missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
+                except PluginFailed as err:
+                    rows.append({**row, "dt_limit_exact": np.nan, "status": "crashed", "note": str(err)})
+                    continue
                 adaptive = method in adapter.adaptive_methods
                 exact = None if adaptive else stability_limit(case, facts_of(adapter, method))
                 row["dt_limit_exact"] = np.nan if exact is None else exact
@@ -345,7 +349,11 @@ def restitution_table(
         for method in adapter.methods:
             if engine == "reference" and method not in REFERENCE_BOUNCE_METHODS:
                 continue
-            missing = adapter.missing(probe, method)
+            try:
+                missing = plugin_answer(engine, "missing()", adapter.missing, probe, method)
+            except PluginFailed as err:
+                groups.append([{"engine": engine, "method": method, "status": "crashed", "note": str(err)}])
+                continue
             if missing or method in adapter.adaptive_methods:
                 why = ",".join(sorted(missing)) or (
                     "adaptive: the sweep compares fixed steps (its bounces are measured in the cases)"

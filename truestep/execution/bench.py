@@ -67,7 +67,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import get_adapter
+from truestep.adapters import PluginFailed, get_adapter, plugin_answer
 from truestep.cases.case import Case
 from truestep.execution.bench_defaults import BUDGET_S, SIZES
 from truestep.execution.isolation import Outcome, run_isolated
@@ -304,8 +304,16 @@ def _prepare_and_warm_up(
 
 
 def _static_reason(adapter, case: Case, engine: str, method: str) -> tuple[str, str] | None:
-    """``(status, note)`` of a pair that is not run at any n, or ``None`` to run it."""
-    missing = adapter.missing(case, method)
+    """``(status, note)`` of a pair that is not run at any n, or ``None`` to run it (``crashed``
+    where the adapter's ``missing`` or ``duplicate`` raised)."""
+    try:
+        missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
+        duplicate = getattr(adapter, "duplicate", None)
+        same = (
+            plugin_answer(engine, "duplicate()", duplicate, case, method) if duplicate is not None else None
+        )
+    except PluginFailed as err:
+        return "crashed", str(err)
     if missing:
         return "unsupported", "needs " + ", ".join(sorted(missing))
     if method in adapter.adaptive_methods:
@@ -313,9 +321,8 @@ def _static_reason(adapter, case: Case, engine: str, method: str) -> tuple[str, 
             "adaptive: its dt is a tolerance and it chooses its own steps, so steps per run cannot be set"
         )
     reasons = [r for e, m, r in case.skip if e == engine and m in (method, "*")]
-    duplicate = getattr(adapter, "duplicate", None)
-    if duplicate is not None and (why := duplicate(case, method)):
-        reasons.append(why)
+    if same:
+        reasons.append(same)
     if reasons:
         return "skipped", f"the case skips it: {reasons[0]}"
     return None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable
@@ -13,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import adapter_class, get_adapter
+from truestep.adapters import PluginFailed, adapter_class, get_adapter, plugin_answer
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
@@ -381,15 +382,27 @@ def preload() -> None:
 def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
     """Compile what the planned sweeps (case, engine, method, entries) will run before the
     first is timed, for each engine that can (``prepare_all(pairs, workers=...)``), on
-    ``workers`` cores (default: all). Nothing a run measures depends on it."""
+    ``workers`` cores (default: all). Nothing a run measures depends on it: a
+    ``prepare_all`` that raises is one line on standard error, and each run then prepares
+    what it needs itself (and fails in its own row if that fails too)."""
     pairs: dict[str, list[tuple]] = {}
     for case, engine, method, entries in planned:
         if not entries[0][3]:
             pairs.setdefault(engine, []).append((case, method))
     for engine, wanted in pairs.items():
         ahead = getattr(get_adapter(engine), "prepare_all", None)
-        if ahead is not None:
-            ahead(wanted, workers=workers or len(os.sched_getaffinity(0)))
+        if ahead is None:
+            continue
+        try:
+            plugin_answer(
+                engine,
+                "prepare_all()",
+                ahead,
+                wanted,
+                workers=workers or len(os.sched_getaffinity(0)),
+            )
+        except PluginFailed as err:
+            print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)
 
 
 def duplicate_of(adapter, case: Case, method: str) -> str | None:
@@ -416,18 +429,27 @@ def unsupported_message(engine: str, missing: str) -> str:
 def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float | None, bool, str]]:
     """(method, dt, adaptive, why-not) for every row this case and engine produce.
 
-    ``why-not`` is empty for a run, else ``unsupported: <features>`` or ``skipped: <reason>``
-    and the row is written without running.
+    ``why-not`` is empty for a run, else ``unsupported: <features>``, ``skipped: <reason>``
+    or ``crashed: <why>`` (the adapter's ``missing``, ``duplicate`` or ``skip`` raised:
+    :func:`~truestep.adapters.plugin_answer`) and the row is written without running.
     """
     adapter = get_adapter(engine)
     for method in adapter.methods:
         adaptive = method in adapter.adaptive_methods
-        missing = adapter.missing(case, method)
+        try:
+            missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
+            said = [
+                plugin_answer(engine, "duplicate()", duplicate_of, adapter, case, method),
+                plugin_answer(engine, "skip()", left_out, adapter, case, method),
+            ]
+        except PluginFailed as err:
+            yield method, None, adaptive, f"crashed:{err}"
+            continue
         if missing:
             yield method, None, adaptive, "unsupported:" + ",".join(sorted(missing))
             continue
         skip = [r for e, m, r in case.skip if e == engine and m in (method, "*")]
-        skip += [r for r in [duplicate_of(adapter, case, method), left_out(adapter, case, method)] if r]
+        skip += [r for r in said if r]
         if skip:
             yield method, None, adaptive, "skipped:" + skip[0]
             continue
@@ -504,7 +526,7 @@ def run_matrix(
                         "dt_kind": "tolerance" if adaptive else "step",
                         "status": status,
                         "missing": detail if status == "unsupported" else "",
-                        "message": detail if status == "skipped" else unsupported_message(engine, detail),
+                        "message": unsupported_message(engine, detail) if status == "unsupported" else detail,
                         "host": "",
                     }
                 ]

@@ -22,7 +22,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from truestep.adapters import get_adapter
+from truestep.adapters import PluginFailed, get_adapter, plugin_answer
 from truestep.adapters.base import facts_of
 from truestep.adapters.reference import build_system
 from truestep.cases.case import Case, Gate
@@ -156,11 +156,16 @@ def declared_order_pairs(
         for engine in engines:
             adapter = get_adapter(engine)
             for method in adapter.methods:
+                try:  # an adapter whose answer raises has crashed rows here, and no gate
+                    missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
+                    same = plugin_answer(engine, "duplicate()", duplicate_of, adapter, case, method)
+                except PluginFailed:
+                    continue
                 if (
                     method in adapter.adaptive_methods
-                    or adapter.missing(case, method)
+                    or missing
                     or any(e == engine and m in (method, "*") for e, m, _ in case.skip)
-                    or duplicate_of(adapter, case, method) is not None
+                    or same is not None
                 ):
                     continue
                 facts = facts_of(adapter, method)
