@@ -46,6 +46,17 @@ PLUGINS = {
             def missing(self, case, method):
                 sys.exit(0)
     """,
+    "sys_exit_in_methods": """
+        import sys
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "sys-exit-in-methods"
+
+            @property
+            def methods(self):
+                sys.exit(0)
+    """,
     "rude_at_import": """
         import os, signal, time
         from pathlib import Path
@@ -170,10 +181,16 @@ def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):
     proc = _start(plugins, *RUN, "--engines", "exits_at_import:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 2 and "importing exits_at_import called sys.exit(0)" in err, err
-    proc = _start(plugins, *RUN, "--engines", "sys_exit_in_missing:X", "--out", "rep")
+    proc = _start(plugins, *RUN, "--engines", "sys_exit_in_methods:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == DID_NOT_FINISH and "called sys.exit(0)" in err, err
     assert "Traceback" not in err and not (plugins / "rep").exists()
+    # in a call whose answer makes rows, the rows say so and the run goes on
+    proc = _start(plugins, *RUN, "--engines", "sys_exit_in_missing:X,reference", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    rows = (plugins / "rep" / "results.csv").read_text()
+    assert "sys-exit-in-missing: missing() raised SystemExit: 0" in rows
 
 
 def test_a_plugin_cannot_take_the_signals_the_directory_or_standard_output(plugins):

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case, Gate
-from truestep.measures.metrics import ROUND_OFF, fit_order, round_off_floor
+from truestep.measures.metrics import RISING, ROUND_OFF, fit_order, round_off_floor
 
 NOT_RUN = frozenset({"unsupported", "skipped"})
 """Row statuses of pairs the run did not simulate."""
@@ -385,7 +385,11 @@ def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> Gate
 
     Not evaluated (saying why) where the sweep cannot show an order: fewer than two errors
     in the asymptotic range, or errors that do not yet fall with the step at the finest
-    steps (a local order below :data:`CONVERGING`). A method whose error falls faster
+    steps (a local order below :data:`CONVERGING`); but failed where such errors come from
+    steps finer than the case's sweep (:mod:`truestep.execution.refine` carried it on
+    there) and their local order no longer rises (by
+    :data:`~truestep.measures.metrics.RISING`): a method whose error stays flat however
+    fine the step is wrong, not early. A method whose error falls faster
     over the sweep than its declared order says (symplectic Euler's second-order term
     outweighing its first-order one on a chain down to 1e-4 s) holds it: the declared order
     is the least it delivers."""
@@ -406,13 +410,31 @@ def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> Gate
     usable = np.isfinite(errors) & (errors > 0)
     local = local_orders(dts[usable], errors[usable])
     if len(local) and local[-1] < CONVERGING:
+        sweep = [float(d) for d in getattr(case, "dts", ())]
+        finer = bool(sweep) and float(np.min(dts)) < min(sweep) * (1 - 1e-9)  # carried on: execution.refine
+        if finer and not (len(local) >= 2 and local[-1] >= local[-2] + RISING):
+            return GateResult(
+                case.name,
+                g,
+                False,
+                f"no order: the error falls as dt^{local[-1]:.2f} even at "
+                f"{float(np.min(dts)):.4g} s, finer than the case's sweep (the method does not "
+                "converge as declared)",
+                need,
+                value=order,
+            )
         return GateResult(
             case.name,
             g,
             True,
             f"no order yet: the error falls as dt^"
             f"{local[-1]:.2f} at the finest steps (the sweep is not in the "
-            "asymptotic range)",
+            "asymptotic range"
+            + (
+                f"; still rising at {float(np.min(dts)):.4g} s, finer than the case's sweep)"
+                if finer
+                else ")"
+            ),
             need,
             evaluated=False,
         )

@@ -113,6 +113,7 @@ def run_experiment(exp: Experiment) -> Tables:
                 journal=journal,
                 cluster=cluster,
             )
+            results = _refined(exp, results)
             laps.lap("sweep")
             tables = _analyses(exp, results, journal, kinds)
             found = find(exp.cases, results, tables) if exp.analyses else None
@@ -147,6 +148,18 @@ def run_experiment(exp: Experiment) -> Tables:
         seconds=laps.seconds,
         findings=found,
     )
+
+
+def _refined(exp: Experiment, results: pd.DataFrame) -> pd.DataFrame:
+    """``results`` with the finer steps of the methods short of their declared order
+    (:func:`truestep.execution.refine.refine`), which ``results.attrs["refined"]`` names
+    for ``run.json``."""
+    from truestep.execution.refine import refine
+
+    results, refined = refine(exp.cases, exp.engines, results, quick=exp.quick, say=exp.say)
+    if refined:
+        results.attrs["refined"] = [r.record() for r in refined]
+    return results
 
 
 def _journal(exp: Experiment):

@@ -337,7 +337,7 @@ def sweep_call(
     if prepare is not None:
         try:
             prepare(case, method)
-        except Exception:  # the sweep's own process fails alike, and its rows say why
+        except (Exception, SystemExit):  # the sweep's own process fails alike, and its rows say why
             pass
     limit = SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
     return simulate_sweep, (engine, case, method, dts, timing, part), limit

@@ -215,6 +215,13 @@ error is ``C dt^p (1 + c dt)`` changes its local order by less, once converging;
 is not yet converging, or whose error term changes, by more)."""
 
 
+RISING = 0.1
+"""How much a local order must grow from one halving of the step to the next for a method
+below its order to be taken as still converging (a wrong method's error stays flat: its
+local order does not rise). :mod:`truestep.execution.refine` stops halving, and a
+declared-order gate fails, where it does not."""
+
+
 def local_orders(dts: np.ndarray, errors: np.ndarray) -> np.ndarray:
     """``log(e_i / e_(i+1)) / log(dt_i / dt_(i+1))`` between successive steps, the steps
     sorted from the largest; shape (len - 1,)."""

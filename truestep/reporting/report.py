@@ -25,6 +25,7 @@ from truestep.execution.isolation import (
     untimed_workers,
 )
 from truestep.measures.findings import Findings, find, speed_table, speed_tables
+from truestep.measures.metrics import PRE_ASYMPTOTIC, ROUND_OFF, ROUND_OFF_FLOAT32
 from truestep.measures.picks import scorecard_table, survival
 from truestep.reporting import plots
 from truestep.reporting.html import markdown_to_html
@@ -36,6 +37,7 @@ from truestep.reporting.sections import (
     hard_case_line,
     methods_section,
     phase_sentence,
+    refined_lines,
     same_scheme_section,
     scorecard_section,
     speed_section,
@@ -220,9 +222,10 @@ def render_markdown(
     parts.append("## Measured orders of convergence\n")
     parts.append(
         "Least-squares slope of log(error) against log(dt) over the sweep, leaving "
-        "out errors above a tenth of the case's scale (not yet converged) and below "
-        "1e-11 of it (round-off).\n"
+        f"out errors above {PRE_ASYMPTOTIC:g} of the case's scale (not yet converged) and below "
+        f"{ROUND_OFF:g} of it ({ROUND_OFF_FLOAT32:g} for a float32 engine: round-off).\n"
     )
+    parts += refined_lines(results.attrs.get("refined") or [])
     fitted = orders.dropna(subset=["order"])
     disagree = fitted[fitted["agrees"] == "no"]
     parts.append(
@@ -394,7 +397,8 @@ def run_record(
     ``sweep <engine>``, the seconds each engine's sweep processes ran, which overlap where
     sweeps share the cores; ``analyses stability``, ``analyses restitution`` and ``analyses
     scaling``, the parts of the analyses; the report's own time is not in it, it is
-    being written)."""
+    being written); ``refined``, the methods whose sweeps were carried on to finer steps
+    because their order was not reached yet (:mod:`truestep.execution.refine`)."""
     from truestep import __version__
     from truestep.adapters import shadowed
     from truestep.measures.metrics import precision_of
@@ -412,6 +416,7 @@ def run_record(
         if len(results)
         else {},
         **({"shadowed": shadowed()} if shadowed() else {}),
+        **({"refined": list(results.attrs["refined"])} if results.attrs.get("refined") else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
     }
 

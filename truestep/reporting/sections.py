@@ -587,3 +587,23 @@ def costly_lines(costly: pd.DataFrame) -> list[str]:
         )
     lines.append("")
     return lines
+
+
+def refined_lines(refined: list[dict]) -> list[str]:
+    """The methods whose sweeps the run carried on to finer steps
+    (:mod:`truestep.execution.refine`, ``run.json``'s ``refined``), each with the order its
+    case's sweep gave and the steps added."""
+    if not refined:
+        return []
+    said = "; ".join(
+        f"{text(r['case'])} {text(r['engine'])} / {text(r['method'])}: {float(r['order']):.2f} over the "
+        f"case's sweep (declared {float(r['declared']):g}), also run at dt "
+        + ", ".join(_fmt(float(d)) for d in r["dts"])
+        + " s"
+        for r in refined
+    )
+    return [
+        "Sweeps carried on to finer steps, because the order fitted over the case's own steps "
+        "fell short of the declared one (a correct method converges there and is judged there; "
+        f"a wrong one does not, and fails): {said}.\n"
+    ]

@@ -1,0 +1,97 @@
+"""Sweeps carried on to finer steps where a method's declared order is not reached yet
+(issue 35, item 8): a correct method whose case sweep is pre-asymptotic is judged where
+it converges, and passes its declared-order gate; a wrong one still fails there."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+
+from truestep.adapters.reference import ReferenceAdapter
+from truestep.cli import main
+from truestep.execution.refine import MAX_HALVINGS, short_of_order
+
+OFFSET = 0.02
+"""A constant error added to positions (m): it hides a first-order error at coarse steps."""
+
+
+class LateEuler(ReferenceAdapter):
+    """The reference's explicit Euler, with an error that is there only at the case's own
+    steps (>= 0.5 ms) and gone at finer ones: a correct method, pre-asymptotic on the
+    sweep (as Drake's third-order methods are on arenstorf-orbit)."""
+
+    name = "late-euler-test"
+    methods = ("euler",)
+    adaptive_methods = ()
+
+    def simulate(self, case, method, dt, **kw):
+        traj = super().simulate(case, method, dt, **kw)
+        if dt >= 4.9e-4:
+            traj.x = traj.x + OFFSET * np.linspace(0.0, 1.0, len(traj.t))[:, None, None]
+        return traj
+
+
+class StuckEuler(LateEuler):
+    """The same error at every step: a wrong method, which no finer step rescues."""
+
+    name = "stuck-euler-test"
+
+    def simulate(self, case, method, dt, **kw):
+        traj = ReferenceAdapter.simulate(self, case, method, dt, **kw)
+        traj.x = traj.x + OFFSET * np.linspace(0.0, 1.0, len(traj.t))[:, None, None]
+        return traj
+
+
+def _run(tmp_path, engine: str) -> tuple[pd.DataFrame, dict, int]:
+    out = tmp_path / engine.split(":")[1]
+    assert main(["run", "--cases", "harmonic-oscillator", "--engines", engine, "--out", str(out)]) == 0
+    gate = main(["gate", "--results", str(out / "results.csv"), "--declared-orders", "-q"])
+    return pd.read_csv(out / "results.csv"), json.loads((out / "run.json").read_text()), gate
+
+
+def test_a_pre_asymptotic_sweep_is_carried_on_and_a_correct_method_passes(tmp_path, capsys):
+    results, record, gate = _run(tmp_path, "test_refine:LateEuler")
+    rows = results[(results.engine == "late-euler-test") & (results.dt_kind == "step")]
+    (refined,) = record["refined"]
+    assert refined["method"] == "euler" and refined["declared"] == 1.0 and refined["order"] < 0.75
+    added = refined["dts"]
+    assert 1 <= len(added) <= MAX_HALVINGS and added == [5e-4 / 2**k for k in range(1, len(added) + 1)]
+    assert list(rows.dt) == [2e-3, 1e-3, 5e-4, *added]  # the sweep, then the halvings, in its rows
+    assert gate == 0, capsys.readouterr().out
+
+
+def test_a_method_that_never_reaches_its_order_still_fails(tmp_path, capsys):
+    results, record, gate = _run(tmp_path, "test_refine:StuckEuler")
+    (refined,) = record["refined"]  # one halving shows the error flat: no more are run
+    assert refined["dts"] == [2.5e-4] and len(results[results.engine == "stuck-euler-test"]) == 4
+    assert gate == 1
+    assert "FAIL harmonic-oscillator/order/stuck-euler-test/euler/declared" in capsys.readouterr().out
+
+
+def test_only_methods_short_of_their_order_with_every_row_ok_are_carried_on(case_named):
+    case = case_named("harmonic-oscillator")
+    dts = [2e-3, 1e-3, 5e-4]
+
+    def rows(method: str, errors: list[float], status: str = "ok") -> list[dict]:
+        return [
+            {
+                "case": case.name,
+                "engine": "reference",
+                "method": method,
+                "dt": d,
+                "dt_kind": "step",
+                "status": status,
+                "error": e,
+            }
+            for d, e in zip(dts, errors, strict=True)
+        ]
+
+    table = pd.DataFrame(
+        rows("euler", [4e-3, 2e-3, 1e-3])  # at its order: left alone
+        + rows("midpoint", [1e-3, 9e-4, 8e-4])  # short of 2: carried on
+        + rows("heun", [1e-3, 9e-4, 8e-4], status="unstable")  # a failed row is its own verdict
+    )
+    wanted = short_of_order([case], ["reference"], table)
+    assert [(w.method, w.declared, w.dts) for w in wanted] == [("midpoint", 2.0, ())]

@@ -1,0 +1,159 @@
+"""Sweeps carried on to finer steps where a method's declared order is not reached yet.
+
+A declared-order gate (``truestep gate --declared-orders``) fits an order to a method's
+errors over the case's sweep. Some correct methods are not yet in their asymptotic range
+there: Drake's third-order ``runge_kutta3`` and ``radau3`` on arenstorf-orbit fall as
+dt^0.69 and dt^1.95 between 1 ms and 0.5 ms (the orbit's close approaches), then as
+dt^2.95 and dt^3.2 from 0.25 ms to 0.125 ms. Judged on the case's sweep alone they would
+fail; a method that is wrong (a flipped sign, a lost half step) stays below its order
+however fine the step.
+
+:func:`refine` carries each such method (a full run's, with rows ``ok`` at every step, whose
+fit falls short of its declared order) on to finer steps, halving the finest step each
+time, and adds those rows to the results: it stops once the fit reaches the declared
+order, once the local order stops rising (:func:`still_rising`: a wrong method's error
+stays flat however fine the step), or after :data:`MAX_HALVINGS` halvings. The gate then
+reads the finer errors: a method that reaches its order passes, one whose error stays
+flat fails, and one still rising at the last halving is not evaluated, saying so. The
+work is bounded: at most ``MAX_HALVINGS`` runs of up to ``2 ** MAX_HALVINGS`` times the
+finest row's steps, for each method that needs them. Which methods were carried on, and
+to which steps, goes to ``run.json`` (``refined``) and the report.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+import pandas as pd
+
+from truestep.cases.case import Case
+from truestep.measures.declared import declared_order_pairs
+from truestep.measures.metrics import RISING, fit_order, local_orders, round_off_floor
+
+MAX_HALVINGS = 4
+"""The most finer steps a method short of its declared order is run at: the finest step
+of the case's sweep halved, then halved again, ... (at most ``2 ** MAX_HALVINGS`` times
+the finest row's steps)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Refinement:
+    """One method carried on to finer steps: the case, engine and method, the order the
+    case's sweep gave and the one declared, and the steps added (s)."""
+
+    case: str
+    engine: str
+    method: str
+    order: float
+    declared: float
+    tol: float
+    dts: tuple[float, ...]
+
+    def record(self) -> dict:
+        """As ``run.json`` keeps it."""
+        return {
+            "case": self.case,
+            "engine": self.engine,
+            "method": self.method,
+            "order": round(self.order, 4),
+            "declared": self.declared,
+            "dts": list(self.dts),
+        }
+
+
+def _rows(results: pd.DataFrame, case: str, engine: str, method: str) -> pd.DataFrame:
+    return results[
+        (results["case"] == case)
+        & (results["engine"] == engine)
+        & (results["method"] == method)
+        & (results["dt_kind"] == "step")
+    ]
+
+
+def short_of_order(cases: list[Case], engines: list[str], results: pd.DataFrame) -> list[Refinement]:
+    """The methods whose rows (all ``ok``, on a case's fixed steps) fit an order below the
+    declared one less its tolerance (``dts`` empty: the steps are chosen as they run)."""
+    by_name = {c.name: c for c in cases}
+    out = []
+    for names, gate in declared_order_pairs(cases, engines):
+        case = by_name[names[0]]
+        rows = _rows(results, case.name, gate.engine, gate.method)
+        if not len(rows) or not (rows["status"] == "ok").all():
+            continue  # a failed row is a verdict of its own; finer steps do not change it
+        order = _order(case, gate.engine, rows)
+        expect, tol = float(gate.params["expect"]), float(gate.params["tol"])
+        if np.isfinite(order) and order < expect - tol:
+            out.append(Refinement(case.name, gate.engine, gate.method, order, expect, tol, ()))
+    return out
+
+
+def _order(case: Case, engine: str, rows: pd.DataFrame) -> float:
+    dts, errors = rows["dt"].to_numpy(float), rows["error"].to_numpy(float)
+    return fit_order(dts, errors, scale=case.error_scale, floor=round_off_floor(engine))
+
+
+def still_rising(dts: np.ndarray, errors: np.ndarray) -> bool:
+    """Whether the local orders (:func:`~truestep.measures.metrics.local_orders`) of the
+    two finest pairs grow by :data:`RISING` or more: a method on its way to its order."""
+    ok = np.isfinite(errors) & (errors > 0)
+    local = local_orders(dts[ok], errors[ok])
+    return len(local) >= 2 and local[-1] >= local[-2] + RISING
+
+
+def refine(
+    cases: list[Case],
+    engines: list[str],
+    results: pd.DataFrame,
+    *,
+    quick: bool,
+    say: Callable[[str], None] | None = None,
+) -> tuple[pd.DataFrame, list[Refinement]]:
+    """``results`` with rows at finer steps for every method :func:`short_of_order` names
+    (each after its own rows), and those methods; a ``--quick`` run is returned as it is
+    (its sweep is short by design, and its gates know it)."""
+    from truestep.execution.runner import Timing, run_sweep, tidy
+    from truestep.execution.sweep_job import host_name
+
+    if quick:
+        return results, []
+    wanted = short_of_order(cases, engines, results)
+    if not wanted:
+        return results, []
+    by_name, here = {c.name: c for c in cases}, host_name()
+    parts, done = [results], []
+    for r in wanted:
+        case, added = by_name[r.case], []
+        rows = _rows(results, r.case, r.engine, r.method)
+        for _ in range(MAX_HALVINGS):
+            dt = float(rows["dt"].min()) / 2
+            if say is not None:
+                say(
+                    f"refining {r.case} {r.engine}/{r.method}: order {_order(case, r.engine, rows):.3g} "
+                    f"so far, declared {r.declared:g}; running dt {dt:.4g}"
+                )
+            new = tidy(
+                [
+                    {**row, "host": here}
+                    for row in run_sweep(case, r.engine, r.method, [dt], adaptive=False, timing=Timing())
+                ],
+                cases,
+            )
+            added.append(dt)
+            parts.append(new)
+            rows = pd.concat([rows, new], ignore_index=True)
+            if (rows["status"] != "ok").any():
+                break  # its own verdict
+            if _order(case, r.engine, rows) >= r.declared - r.tol:
+                break  # reached
+            if not still_rising(rows["dt"].to_numpy(float), rows["error"].to_numpy(float)):
+                break  # flat: finer steps would not change the verdict
+        done.append(dataclasses.replace(r, dts=tuple(added)))
+    merged = pd.concat(parts, ignore_index=True)
+    merged = merged.assign(_i=np.arange(len(merged)))
+    first = merged.groupby(["case", "engine", "method"], sort=False)["_i"].transform("min")
+    merged = merged.assign(_f=first).sort_values(["_f", "_i"], kind="stable")
+    out = merged.drop(columns=["_i", "_f"]).reset_index(drop=True)
+    out.attrs = dict(results.attrs)
+    return out, done
