@@ -81,3 +81,13 @@ def test_a_prepare_all_that_raises_is_a_line_and_the_runs_prepare_themselves(tmp
     ) in err
     results = pd.read_csv(tmp_path / "rep" / "results.csv")
     assert (results.status == "ok").all() and len(results) > 0
+
+
+def test_an_adapter_is_asked_about_duplicates_only_for_a_scene_it_can_model(case_named):
+    """``duplicate`` and ``skip`` are asked only where ``missing`` is empty, as before they
+    were plugin calls: pybullet's ``duplicate`` reads a particle scene, and an ODE case's
+    rows stay ``unsupported`` (found by the quick baseline gate, not by a test)."""
+    from truestep.execution.runner import plan
+
+    reasons = {why for _, _, _, why in plan(case_named("circle-field"), "pybullet", quick=True)}
+    assert reasons and all(why.startswith("unsupported:") for why in reasons), reasons

@@ -309,9 +309,8 @@ def _static_reason(adapter, case: Case, engine: str, method: str) -> tuple[str, 
     try:
         missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
         duplicate = getattr(adapter, "duplicate", None)
-        same = (
-            plugin_answer(engine, "duplicate()", duplicate, case, method) if duplicate is not None else None
-        )
+        asked = duplicate is not None and not missing
+        same = plugin_answer(engine, "duplicate()", duplicate, case, method) if asked else None
     except PluginFailed as err:
         return "crashed", str(err)
     if missing:

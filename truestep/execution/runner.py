@@ -438,10 +438,14 @@ def plan(case: Case, engine: str, *, quick: bool) -> Iterable[tuple[str, float |
         adaptive = method in adapter.adaptive_methods
         try:
             missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
-            said = [
-                plugin_answer(engine, "duplicate()", duplicate_of, adapter, case, method),
-                plugin_answer(engine, "skip()", left_out, adapter, case, method),
-            ]
+            said = (
+                []
+                if missing
+                else [
+                    plugin_answer(engine, "duplicate()", duplicate_of, adapter, case, method),
+                    plugin_answer(engine, "skip()", left_out, adapter, case, method),
+                ]
+            )
         except PluginFailed as err:
             yield method, None, adaptive, f"crashed:{err}"
             continue

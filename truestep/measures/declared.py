@@ -158,7 +158,11 @@ def declared_order_pairs(
             for method in adapter.methods:
                 try:  # an adapter whose answer raises has crashed rows here, and no gate
                     missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
-                    same = plugin_answer(engine, "duplicate()", duplicate_of, adapter, case, method)
+                    same = (
+                        None
+                        if missing
+                        else plugin_answer(engine, "duplicate()", duplicate_of, adapter, case, method)
+                    )
                 except PluginFailed:
                     continue
                 if (
