@@ -409,10 +409,21 @@ def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> Gate
     dts, errors = _num(ok["dt"]), _num(ok["error"])
     usable = np.isfinite(errors) & (errors > 0)
     local = local_orders(dts[usable], errors[usable])
+    sweep = [float(d) for d in getattr(case, "dts", ())]
+    finer = bool(sweep) and float(np.min(dts)) < min(sweep) * (1 - 1e-9)  # carried on: execution.refine
+    rising = len(local) >= 2 and local[-1] >= local[-2] + RISING
+    if finer and rising and order < p["expect"] - p["tol"]:
+        return GateResult(
+            case.name,
+            g,
+            True,
+            f"no order yet: {order:.3f} so far, the local order still rising at {float(np.min(dts)):.4g} s "
+            "(carried on finer than the case's sweep as far as truestep goes)",
+            need,
+            evaluated=False,
+        )
     if len(local) and local[-1] < CONVERGING:
-        sweep = [float(d) for d in getattr(case, "dts", ())]
-        finer = bool(sweep) and float(np.min(dts)) < min(sweep) * (1 - 1e-9)  # carried on: execution.refine
-        if finer and not (len(local) >= 2 and local[-1] >= local[-2] + RISING):
+        if finer and not rising:
             return GateResult(
                 case.name,
                 g,

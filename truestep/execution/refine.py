@@ -8,8 +8,9 @@ dt^2.95 and dt^3.2 from 0.25 ms to 0.125 ms. Judged on the case's sweep alone th
 fail; a method that is wrong (a flipped sign, a lost half step) stays below its order
 however fine the step.
 
-:func:`refine` carries each such method (a full run's, with rows ``ok`` at every step, whose
-fit falls short of its declared order) on to finer steps, halving the finest step each
+:func:`refine` carries each such method (a full run's, with rows ``ok`` at every step,
+whose error falls with the step at the sweep's finest steps, and whose fit falls short of
+its declared order: the ones the gate would fail) on to finer steps, halving the finest step each
 time, and adds those rows to the results: it stops once the fit reaches the declared
 order, once the local order stops rising (:func:`still_rising`: a wrong method's error
 stays flat however fine the step), or after :data:`MAX_HALVINGS` halvings. The gate then
@@ -73,8 +74,9 @@ def _rows(results: pd.DataFrame, case: str, engine: str, method: str) -> pd.Data
 
 
 def short_of_order(cases: list[Case], engines: list[str], results: pd.DataFrame) -> list[Refinement]:
-    """The methods whose rows (all ``ok``, on a case's fixed steps) fit an order below the
-    declared one less its tolerance (``dts`` empty: the steps are chosen as they run)."""
+    """The methods whose rows (all ``ok``, on a case's fixed steps, converging at the finest:
+    :func:`_converging`) fit an order below the declared one less its tolerance: the ones
+    the declared-order gate would fail (``dts`` empty: the steps are chosen as they run)."""
     by_name = {c.name: c for c in cases}
     out = []
     for names, gate in declared_order_pairs(cases, engines):
@@ -84,9 +86,23 @@ def short_of_order(cases: list[Case], engines: list[str], results: pd.DataFrame)
             continue  # a failed row is a verdict of its own; finer steps do not change it
         order = _order(case, gate.engine, rows)
         expect, tol = float(gate.params["expect"]), float(gate.params["tol"])
-        if np.isfinite(order) and order < expect - tol:
+        if np.isfinite(order) and order < expect - tol and _converging(rows):
             out.append(Refinement(case.name, gate.engine, gate.method, order, expect, tol, ()))
     return out
+
+
+def _converging(rows: pd.DataFrame) -> bool:
+    """Whether the error falls with the step at the sweep's finest steps (a local order of
+    :data:`~truestep.ci.gates.CONVERGING` or more): the gate judges such a sweep, and fails
+    it if its order is short. A sweep whose error does not fall yet is not judged (the gate
+    says so), and is not carried on: implicit Euler on mass-ratio-chain is still rising
+    four halvings down, and Newton's XPBD on the rope stays flat."""
+    from truestep.ci.gates import CONVERGING
+
+    dts, errors = rows["dt"].to_numpy(float), rows["error"].to_numpy(float)
+    ok = np.isfinite(errors) & (errors > 0)
+    local = local_orders(dts[ok], errors[ok])
+    return bool(len(local)) and local[-1] >= CONVERGING
 
 
 def _order(case: Case, engine: str, rows: pd.DataFrame) -> float:
