@@ -235,3 +235,16 @@ def test_sigkill_or_sighup_of_the_command_leaves_no_process_of_its_run(plugins, 
         assert proc.returncode == 128 + sig and "interrupted by SIGHUP" in _lines(err)[-1], err
     else:
         assert proc.returncode == -sig
+
+
+def test_code_after_a_call_of_the_entry_point_runs_once(tmp_path):
+    """``truestep.command.main`` called from a script: the worker exits when the command
+    is done, and only the supervisor returns to the script."""
+    script = (
+        "from truestep import command\n"
+        "code = command.main(['list', '--cases', 'free-fall', '--engines', 'reference'])\n"
+        "print('AFTER', code)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines().count("AFTER 0") == 1, done.stdout

@@ -28,6 +28,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable
+from typing import NoReturn
 
 from truestep.execution.oscalls import become_subreaper, die_with_parent
 from truestep.execution.process_tree import kill_tree, reap_children
@@ -55,9 +56,9 @@ FORWARDED = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 
 def supervised(work: Callable[[], int]) -> int:
     """``work()`` in a forked worker process, watched as the module docstring says; the
-    exit code the command ends with. In the worker this returns ``work()``'s code (after
-    telling the supervisor); in the supervisor, the code to exit with. Where the system
-    cannot fork, ``work()`` here."""
+    exit code the command ends with, returned in the supervisor only (the worker exits
+    with ``work()``'s code once it has told the supervisor, so that code after a call of
+    the command's entry point runs once). Where the system cannot fork, ``work()`` here."""
     if not hasattr(os, "fork"):
         return work()
     read, write = os.pipe()
@@ -74,9 +75,9 @@ def supervised(work: Callable[[], int]) -> int:
     return _supervise(pid, read)
 
 
-def _work(work: Callable[[], int], write: int, parent: int) -> int:
-    """In the worker: run ``work`` and say its exit code on ``write`` (1 for an exception,
-    whose traceback Python then prints as usual)."""
+def _work(work: Callable[[], int], write: int, parent: int) -> NoReturn:
+    """In the worker: run ``work``, say its exit code on ``write`` (1 for an exception,
+    whose traceback Python then prints as usual) and exit with it."""
     die_with_parent(parent, signal.SIGTERM)
     try:
         code = work()
@@ -90,7 +91,7 @@ def _work(work: Callable[[], int], write: int, parent: int) -> int:
         _say_code(write, 1)
         raise
     _say_code(write, code)
-    return code
+    raise SystemExit(code)  # the worker ends here: only the supervisor returns to the caller
 
 
 def _say_code(write: int, code: int) -> None:
