@@ -175,7 +175,11 @@ class Adapter(Protocol):
         model unrun (a bound on the work it takes on, stated), a ``skipped`` row with
         that message; and ``precision``: ``"float32"`` for an engine whose state is
         single precision, whose order fits then stop at float32's round-off
-        (:func:`truestep.measures.metrics.round_off_floor`).
+        (:func:`truestep.measures.metrics.round_off_floor`);
+    12. optionally, ``same_steps(case, method) -> (other, why) | None``: another of its
+        methods whose steps ``method`` repeats bit for bit on ``case``, and why. Both
+        stay rows of the sweep; the stability search is made once, for ``other``, and
+        ``method``'s row carries its result and says so.
 
     :class:`FixedStepAdapter` does 2 to 4 and 9 for an engine that steps a particle scene.
     """

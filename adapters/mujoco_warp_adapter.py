@@ -179,6 +179,11 @@ class MujocoWarpAdapter(FixedStepAdapter):
     def build(self, case: Case, method: str, h: float) -> Scene:
         return build(case, method, h, device=self.device)
 
+    def same_steps(self, case: Case, method: str) -> tuple[str, str] | None:
+        """The method whose steps ``method`` repeats bit for bit: MuJoCo's rule
+        (:func:`truestep.adapters.mujoco_adapter.same_steps`), which holds here too (tested)."""
+        return mj.same_steps(case, method)
+
     def prepare(self, case: Case, method: str) -> None:
         """Before the sweep's process is forked: the scene built once here, so that the
         process finds Warp's kernels loaded (:func:`truestep.adapters.warp_runtime.prepare`)."""

@@ -356,3 +356,35 @@ def test_force_field_and_impulse_through_applied_forces(stage_forces):
     np.testing.assert_allclose(run.x[:, 0, 0], x_wind, rtol=0, atol=tol)
     assert run.v[-1, 0, 1] == pytest.approx((1.0 - np.exp(-0.6)) * np.exp(-1.0), abs=0.02)
     assert ("held constant" in run.message) is not stage_forces
+
+
+@pytest.mark.parametrize("name", ["rope-pendulum", "hanging-cloth", "damped-oscillator"])
+def test_a_scene_without_constraints_steps_the_same_bits_without_contact_and_solver(name):
+    """MuJoCo C on the model of a scene without planes, written with contact and constraint
+    disabled and with both on: the same qpos and qvel, bit for bit, for every integrator,
+    stepped by ``mj_step`` itself."""
+    from truestep.adapters.mujoco_adapter import INTEGRATORS, NEEDS_NO_CONSTRAINTS, mjcf
+
+    model = load_case(CASES / f"{name}.toml").particles
+    assert not model.planes
+    for method in INTEGRATORS:
+        states = []
+        for lean in (True, False):
+            xml, layout = mjcf(model, method, 0.002, only_what_it_needs=lean)
+            assert (NEEDS_NO_CONSTRAINTS in xml) is lean
+            m = mujoco.MjModel.from_xml_string(xml)
+            d = mujoco.MjData(m)
+            d.qpos[:] = model.x0[layout.free, : layout.dim].ravel()
+            d.qvel[:] = model.v0[layout.free, : layout.dim].ravel()
+            mujoco.mj_step(m, d, nstep=300)
+            states.append((d.qpos.copy(), d.qvel.copy()))
+        assert np.array_equal(states[0][0], states[1][0]) and np.array_equal(states[0][1], states[1][1]), (
+            method
+        )
+
+
+def test_a_scene_with_a_plane_keeps_contact_and_constraints():
+    from truestep.adapters.mujoco_adapter import NEEDS_NO_CONSTRAINTS, mjcf
+
+    model = load_case(CASES / "bouncing-ball.toml").particles
+    assert model.planes and NEEDS_NO_CONSTRAINTS not in mjcf(model, "Euler", 0.002)[0]

@@ -217,3 +217,28 @@ def test_on_the_cpu_its_rows_run_once_untimed_and_say_so(case_named):
     assert int(once.extra["repeats"]) == 0 and int(timed.extra["repeats"]) == 1
     assert once.wall_s > 0 and np.array_equal(once.x, timed.x)
     assert "no speed claim" in once.message
+
+
+@pytest.mark.parametrize("name", ["rope-pendulum", "hanging-cloth", "damped-oscillator"])
+def test_a_scene_without_constraints_steps_the_same_bits_without_contact_and_solver(
+    case_named, name, monkeypatch
+):
+    """A scene without planes is written with contact and constraint disabled
+    (:data:`~truestep.adapters.mujoco_adapter.NEEDS_NO_CONSTRAINTS`): every integrator's
+    steps equal those of the model with both stages on, bit for bit."""
+    from truestep.adapters import mujoco_adapter as mj
+
+    case = case_named(name)
+    assert not case.particles.planes
+    plain_mjcf = mj.mjcf
+    for method in INTEGRATORS:
+        lean = build(case, method, 0.002)
+        monkeypatch.setattr(mj, "mjcf", lambda *a, **k: plain_mjcf(*a, **k, only_what_it_needs=False))
+        full = build(case, method, 0.002)
+        monkeypatch.setattr(mj, "mjcf", plain_mjcf)
+        assert lean.model.opt.disableflags != full.model.opt.disableflags
+        for _ in range(40):
+            wp.capture_launch(lean.graph)
+            wp.capture_launch(full.graph)
+        for a, b in ((lean.data.qpos, full.data.qpos), (lean.data.qvel, full.data.qvel)):
+            assert np.array_equal(a.numpy(), b.numpy()), method

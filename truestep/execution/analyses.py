@@ -75,6 +75,8 @@ def stability_table(
     """
     rows: list[dict] = []
     calls, slots = [], []
+    searched: dict[tuple[str, str, str], dict] = {}
+    sharing: list[tuple[dict, tuple[str, str, str], str]] = []
     for case in cases:
         if case.stability is None or (quick and not case.stability.quick):
             continue
@@ -96,8 +98,12 @@ def stability_table(
                     rows.append({**row, "status": "skipped", "note": "adaptive: chooses its own step"})
                 elif (same := duplicate_of(adapter, case, method)) is not None:
                     rows.append({**row, "status": "skipped", "note": same})
+                elif (twin := _twin_searched(engine, adapter, case, method, searched)) is not None:
+                    rows.append(row)
+                    sharing.append((row, (case.name, engine, twin[0]), twin[1]))
                 else:
                     rows.append(row)
+                    searched[(case.name, engine, method)] = row
                     slots.append(row)
                     calls.append(
                         (
@@ -132,7 +138,31 @@ def stability_table(
     )
     with Progress(len(calls), "stability", say=progress) as bar:
         run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
+    for row, key, why in sharing:
+        twin = searched[key]
+        words = f"the same steps as {key[2]}'s, bit for bit ({why}): its search"
+        row.update({c: twin.get(c, np.nan) for c in ("dt_limit", "dt_unstable", "runs", "status")})
+        row["note"] = "; ".join(n for n in (words, twin.get("note")) if isinstance(n, str) and n)
     return STABILITY.frame(rows)
+
+
+def _twin_searched(
+    engine: str, adapter, case: Case, method: str, searched: dict[tuple[str, str, str], dict]
+) -> tuple[str, str] | None:
+    """``(other method, why)`` where the adapter says ``method`` steps ``case`` bit for bit
+    as another method does (its optional ``same_steps``, Adapter protocol item 12) and that
+    method's search is already in the table; else ``None``. A ``same_steps`` that raises,
+    or names a method not searched, leaves ``method`` to its own search."""
+    same = getattr(adapter, "same_steps", None)
+    if same is None:
+        return None
+    try:
+        twin = plugin_answer(engine, "same_steps()", same, case, method)
+    except PluginFailed:
+        return None
+    if twin is None or (case.name, engine, twin[0]) not in searched:
+        return None
+    return str(twin[0]), str(twin[1])
 
 
 def prepare_before_fork(runs: Iterable[tuple[str, Case, str]]) -> None:
