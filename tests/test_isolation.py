@@ -99,9 +99,9 @@ def _span(seconds: float) -> tuple[float, float]:
     return start, time.monotonic()
 
 
-def _lanes(cores: int) -> tuple[dict, dict, list]:
-    """Three timed and four untimed calls of 0.2 s through ``run_lanes`` on ``cores``;
-    their spans, which lane each is in, and (call, whether a timed call was running) for
+def _lanes(cores: int, timed_s: float = 0.2, untimed_s: float = 0.2) -> tuple[dict, dict, list]:
+    """Three timed calls of ``timed_s`` and four untimed ones of ``untimed_s`` through
+    ``run_lanes`` on ``cores``; their spans, which lane each is in, and (call, when) for
     every ``done``."""
     from truestep.execution.isolation import run_lanes
 
@@ -114,7 +114,9 @@ def _lanes(cores: int) -> tuple[dict, dict, list]:
         spans[j] = outcome.value
         log.append((j, time.monotonic()))
 
-    run_lanes(timed, untimed, lambda j: (_span, (0.2,), 30.0), done, cores=cores)
+    run_lanes(
+        timed, untimed, lambda j: (_span, (timed_s if j in timed else untimed_s,), 30.0), done, cores=cores
+    )
     return spans, {j: j in timed for j in spans}, log
 
 
@@ -133,9 +135,20 @@ def test_timed_calls_run_alone_and_untimed_ones_on_the_cores_left():
         assert not any(_overlap(a, b) for i, a in enumerate(timed) for b in timed[i + 1 :])
         for a in timed:
             beside = [s for j, s in spans.items() if not is_timed[j] and _overlap(a, s)]
-            assert len(beside) <= cores - 1
+            for s in beside:  # at no moment more than cores - 1 untimed calls beside it
+                assert sum(_overlap(s, other) for other in beside if other is not s) == 0 or cores > 2
+            assert cores > 1 or not beside
             handled = [t for j, t in log if not is_timed[j]]
             assert not any(a[0] < t < a[1] for t in handled)
     spans, is_timed, _ = _lanes(2)
     untimed = [spans[j] for j in spans if not is_timed[j]]
     assert any(_overlap(a, b) for a in untimed for b in spans.values() if a is not b)  # cores shared
+
+
+def test_the_untimed_core_does_not_wait_for_a_long_timed_call():
+    """Timed calls of 1 s and untimed ones of 0.1 s on two cores: the untimed calls follow
+    one another beside the first timed call, not one per gap between timed calls."""
+    spans, is_timed, _ = _lanes(2, timed_s=1.0, untimed_s=0.1)
+    first = min((spans[j] for j in spans if is_timed[j]), key=lambda s: s[0])
+    beside = [spans[j] for j in spans if not is_timed[j] and _overlap(first, spans[j])]
+    assert len(beside) >= 3

@@ -334,10 +334,12 @@ def run_lanes(
     its child is forked and handed to ``done(j, outcome)`` when it ends.
 
     The ``timed`` lane runs one call at a time, in order, and keeps a core to itself: it
-    starts only while at most ``cores - 1`` untimed children run, and while it runs this
-    process does nothing but wait (no ``call`` or ``done`` of the untimed lane: those wait
-    for the gap between two timed calls). The ``untimed`` lane keeps the other cores busy
-    (all of them once the timed lane is done); on one core it runs after the timed lane.
+    starts only while at most ``cores - 1`` untimed children run. While it runs, this
+    process only starts the untimed call that takes the place of one just ended (on the
+    core that child left free: the untimed cores never wait for a long timed call) and
+    otherwise waits; the untimed outcomes' ``done`` waits for the gap between two timed
+    calls. The ``untimed`` lane keeps the other cores busy (all of them once the timed
+    lane is done); on one core it runs after the timed lane.
     Never raises for what happens inside a child; the run's budget holds as in
     :func:`run_isolated_all`."""
     timed_left, untimed_left = list(timed)[::-1], list(untimed)[::-1]
@@ -354,15 +356,16 @@ def run_lanes(
 
     try:
         while timed_left or untimed_left or running or held:
-            if not any(is_timed for _, is_timed in running.values()):
+            timed_busy = any(is_timed for _, is_timed in running.values())
+            if not timed_busy:
                 for j, outcome in held:
                     done(j, outcome)
                 held.clear()
-                room = max(0, cores - 1) if timed_left else max(1, cores)
-                while untimed_left and sum(1 for _, t in running.values() if not t) < room:
-                    start(untimed_left.pop(), False)
-                if timed_left and len(running) <= max(0, cores - 1):
-                    start(timed_left.pop(), True)
+            room = max(0, cores - 1) if timed_left or timed_busy else max(1, cores)
+            while untimed_left and sum(1 for _, t in running.values() if not t) < room:
+                start(untimed_left.pop(), False)
+            if not timed_busy and timed_left and len(running) <= max(0, cores - 1):
+                start(timed_left.pop(), True)
             if not running:
                 continue
             now = time.monotonic()
