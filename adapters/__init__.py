@@ -183,12 +183,34 @@ def get_adapter(name: str) -> Adapter:
     """
     cls = adapter_class(name)
     try:
-        return cls()
+        adapter = cls()
     except (Exception, SystemExit) as err:
         raise UnknownEngine(
             f"engine {name!r}: its adapter {cls.__module__}.{cls.__qualname__} could not be made: "
             f"{type(err).__name__}: {str(err)[:200]}"
         ) from None
+    _check_methods(name, adapter)
+    return adapter
+
+
+def _check_methods(name: str, adapter: Any) -> None:
+    """An adapter's ``methods`` are distinct non-empty strings and its ``adaptive_methods``
+    some of them (a method listed twice would make two rows of one key, which no table
+    reader takes): else :class:`UnknownEngine`, naming what is wrong."""
+    methods = getattr(adapter, "methods", None)
+    if not isinstance(methods, (tuple, list)) or not all(isinstance(m, str) and m for m in methods):
+        raise UnknownEngine(
+            f"engine {name!r}: its adapter's methods must be a tuple of names, got {methods!r:.100}"
+        )
+    twice = sorted({m for m in methods if methods.count(m) > 1})
+    if twice:
+        raise UnknownEngine(f"engine {name!r}: its adapter lists the method {twice[0]!r} twice in methods")
+    adaptive = getattr(adapter, "adaptive_methods", ())
+    if not isinstance(adaptive, (tuple, list, set, frozenset)) or any(m not in methods for m in adaptive):
+        raise UnknownEngine(
+            f"engine {name!r}: its adapter's adaptive_methods must be some of its methods, "
+            f"got {adaptive!r:.100}"
+        )
 
 
 def plugin_answer(engine: str, what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:

@@ -70,3 +70,36 @@ def test_standard_output_on_a_full_device_is_one_line(tmp_path):
         "No space left on device"
     ]
     assert (tmp_path / "rep" / "results.csv").is_file()
+    for asked in (("--help",), ("gate", "--help"), ("--version",)):  # argparse would pass in silence
+        helped = _command(*asked, cwd=tmp_path)
+        assert helped.returncode == 2 and helped.stderr.strip().splitlines() == [
+            "truestep: error: cannot write standard output: No space left on device"
+        ], asked
+
+
+def test_bench_sizes_over_the_particle_limit_are_one_line_about_sizes(capsys, tmp_path):
+    assert main(["bench", "--sizes", "100,1e12", "--out", str(tmp_path / "b")]) == 2
+    line = _one_line(capsys)
+    assert line.startswith("truestep: error: --sizes: 1e+12 particles is over the 1e+06")
+    assert "particle-rain.toml" not in line and not (tmp_path / "b").exists()
+
+
+def test_a_case_run_under_a_raised_limit_is_gated_under_it(tmp_path, capsys, monkeypatch):
+    """A case over the default steps limit, run with ``--limit``: ``gate`` refuses it
+    without the limit in one line that says how to raise it, and gates it with
+    ``--limit`` as ``run`` took it."""
+    from truestep.cases.loader import CASE_DIR
+
+    text = (CASE_DIR / "free-fall.toml").read_text()
+    assert "dt = [0.1, 0.05, 0.02, 0.01]\n" in text
+    (tmp_path / "big.toml").write_text(
+        text.replace("dt = [0.1, 0.05, 0.02, 0.01]\n", "dt = [0.1, 0.05, 0.02, 0.01, 1e-8]\n", 1)
+    )
+    monkeypatch.chdir(tmp_path)
+    run = ["run", "--quick", "--engines", "reference", "--cases", "big.toml", "--out", "rep"]
+    assert main(run) == 2 and "--limit steps=N" in _one_line(capsys)
+    assert main([*run, "--limit", "steps=2e8"]) == 0
+    capsys.readouterr()
+    assert main(["gate", "--results", "rep/results.csv", "-q"]) == 2
+    assert "big.toml" in _one_line(capsys)
+    assert main(["gate", "--results", "rep/results.csv", "-q", "--limit", "steps=2e8"]) == 0

@@ -4,6 +4,7 @@ naming the engine, or ``crashed`` rows with the reason, and the rest of the run 
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from truestep import adapters
@@ -91,3 +92,54 @@ def test_an_adapter_is_asked_about_duplicates_only_for_a_scene_it_can_model(case
 
     reasons = {why for _, _, _, why in plan(case_named("circle-field"), "pybullet", quick=True)}
     assert reasons and all(why.startswith("unsupported:") for why in reasons), reasons
+
+
+class ListsTwice(ReferenceAdapter):
+    name = "lists-twice-test"
+    methods = ("rk4", "euler", "rk4")
+    adaptive_methods = ()
+
+
+class OddFailure(ReferenceAdapter):
+    """An adapter whose runs say they blew up at a time that is no time: a word, or
+    before the run began."""
+
+    name = "odd-failure-test"
+    methods = ("rk4", "euler")
+    adaptive_methods = ()
+
+    def simulate(self, case, method, dt, **kw):
+        traj = super().simulate(case, method, dt, **kw)
+        traj.status, traj.t_fail = "unstable", "soon" if method == "rk4" else -1e300
+        return traj
+
+
+def test_a_method_listed_twice_is_one_line(tmp_path, capsys):
+    assert _run(tmp_path, "test_plugin_calls:ListsTwice") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        err[-1]
+        == "truestep: error: engine 'lists-twice-test': its adapter lists the method 'rk4' twice in methods"
+    )
+
+
+def test_a_failure_time_that_is_no_time_is_a_crashed_row_that_gate_reads(tmp_path, capsys):
+    assert _run(tmp_path, "test_plugin_calls:OddFailure") == 0
+    results = pd.read_csv(tmp_path / "rep" / "results.csv")
+    assert set(results.status) == {"crashed"}
+    said = set(results.message)
+    assert "adapter returned t_fail = 'soon' (a time in s, or None)" in said
+    assert any(m.startswith("adapter returned t_fail = -1e+300 s, outside the run") for m in said)
+    capsys.readouterr()
+    assert main(["gate", "--results", str(tmp_path / "rep" / "results.csv"), "-q"]) in (0, 1)
+    assert "error" not in capsys.readouterr().err
+
+
+def test_a_value_no_table_holds_makes_the_row_crashed_naming_it():
+    from truestep.execution.runner import unreadable
+
+    row = {"status": "ok", "message": "", "error": -1e300, "nfev": -3, "energy_drift": 0.1}
+    unreadable(row)
+    assert row["status"] == "crashed" and np.isnan(row["error"]) and np.isnan(row["nfev"])
+    assert "error = -1e+300" in row["message"] and "nfev = -3" in row["message"]
+    assert row["energy_drift"] == 0.1

@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from truestep import __version__
 from truestep.cases.limits import CEILING
@@ -57,15 +57,41 @@ def _quoted(value: object) -> str:
     return repr(text if len(text) <= 60 else text[:57] + "...")
 
 
+def _limit_arguments(parser: argparse.ArgumentParser, whose: str) -> None:
+    """``--limit`` and ``--trust-limits``, alike for ``run`` and ``gate`` (a case run under
+    a raised limit is gated under the same limit)."""
+    parser.add_argument(
+        "--limit",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set a cost limit for every case, over the defaults and the case "
+        "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable",
+    )
+    parser.add_argument(
+        "--trust-limits",
+        action="store_true",
+        help=f"the cases of {whose} are trusted: --limit may raise a limit beyond "
+        "the ceiling a case file cannot pass ("
+        + ", ".join(f"{k} {getattr(CEILING, k):.3g}" for k in LIMIT_KEYS)
+        + ")",
+    )
+
+
 def _load(selection: str, limit_items: list[str] | None = None, *, trust_limits: bool = False) -> list[Case]:
     from truestep.cases import load_cases
+
+    return load_cases(selection, limits=_limits(limit_items, trust_limits), trust_limits=trust_limits)
+
+
+def _limits(items: list[str] | None, trusted: bool) -> dict[str, float]:
+    """The ``--limit`` items as a mapping (a bad one is a :class:`UsageError`)."""
     from truestep.cases.limits import parse_override
 
     try:
-        limits = parse_override(limit_items or [], trusted=trust_limits)
+        return parse_override(items or [], trusted=trusted)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    return load_cases(selection, limits=limits, trust_limits=trust_limits)
 
 
 def _reproduce(args: argparse.Namespace) -> list[str]:
@@ -231,9 +257,12 @@ def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
     return tables
 
 
-def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Case]:
+def _cases_of(
+    results: pd.DataFrame, where: Path, engines: set[str], limits: dict[str, float], trusted: bool
+) -> list[Case]:
     """The cases a results table covers: by the file it names (``case_source``), else by
-    name in the case library; their gates may name ``engines``."""
+    name in the case library, under ``limits`` (``--limit``, ``trusted`` with
+    ``--trust-limits``); their gates may name ``engines``."""
     from truestep.cases import library, load_case
 
     lib = library()
@@ -244,9 +273,9 @@ def _cases_of(results: pd.DataFrame, where: Path, engines: set[str]) -> list[Cas
     for name in dict.fromkeys(results["case"].astype(str)):
         src = str(sources.get(name, name))
         if src != name and Path(src).is_file():
-            cases.append(load_case(src, engines=engines))
+            cases.append(load_case(src, engines=engines, limits=limits, trust_limits=trusted))
         elif name in lib:
-            cases.append(load_case(lib[name], engines=engines))
+            cases.append(load_case(lib[name], engines=engines, limits=limits, trust_limits=trusted))
         else:
             raise UsageError(
                 f"{where}: case {_quoted(name)} is not in the case library and its "
@@ -489,8 +518,11 @@ def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -
 
     results = tables["results"]
     engines = set(registered()) | set(results["engine"].astype(str))
+    limits = _limits(args.limit, args.trust_limits)
     cases = (
-        load_cases(args.cases, engines=engines) if args.cases else _cases_of(results, results_path, engines)
+        load_cases(args.cases, engines=engines, limits=limits, trust_limits=args.trust_limits)
+        if args.cases
+        else _cases_of(results, results_path, engines, limits, args.trust_limits)
     )
     extra = [item for f in args.gates for item in load_gates_file(f)]
     for _, g in extra:
@@ -710,6 +742,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--sizes: expected particle counts of 1 or more, comma-separated, got {args.sizes!r}"
         )
+    from truestep.cases.limits import DEFAULT
+
+    if max(sizes) > DEFAULT.particles:
+        raise UsageError(
+            f"--sizes: {max(sizes):g} particles is over the {DEFAULT.particles:g} a scene may have "
+            "(the rain scene is read as a case, under the default limits)"
+        )
     if not 0 < args.budget <= BENCH_BUDGET_MAX_S:
         raise UsageError(
             f"--budget: expected seconds above 0 and at most {BENCH_BUDGET_MAX_S:g}, got {args.budget:g}"
@@ -830,8 +869,18 @@ def _results_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, except that help and usage that cannot be written (standard
+    output on a full device) raise :class:`OSError` rather than pass in silence: the
+    command then says so and ends 2 (argparse would exit 0 after ``--help`` wrote nothing)."""
+
+    def _print_message(self, message: str, file: Any = None) -> None:
+        if message:
+            (file or sys.stderr).write(message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="truestep",
         description="truestep: a verification and benchmark harness for "
         "physically based animation. Exit codes: 0 success, 1 a gate failed or nothing was "
@@ -871,22 +920,7 @@ def build_parser() -> argparse.ArgumentParser:
         "run the rest; the cases, engines, their code, --quick and truestep version must be "
         "the same (else exit 2). Without --resume a run starts afresh",
     )
-    run.add_argument(
-        "--limit",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="set a cost limit for every case, over the defaults and the case "
-        "files' [limits] (keys: " + ", ".join(LIMIT_KEYS) + "); repeatable",
-    )
-    run.add_argument(
-        "--trust-limits",
-        action="store_true",
-        help="the cases of this run are trusted: --limit may raise a limit beyond "
-        "the ceiling a case file cannot pass ("
-        + ", ".join(f"{k} {getattr(CEILING, k):.3g}" for k in LIMIT_KEYS)
-        + ")",
-    )
+    _limit_arguments(run, "this run")
     run.add_argument(
         "--scheduler",
         default=None,
@@ -928,6 +962,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ITEMS",
         help=CASES_HELP.replace("every case of the library", "the cases of the results"),
     )
+    _limit_arguments(gate, "the results (those the run read with --limit)")
     gate.add_argument(
         "--gates",
         action="append",

@@ -32,9 +32,10 @@ def _command(argv: list[str] | None) -> int:
     from truestep.cli import main as run_command
 
     try:
-        code = run_command(argv)
-        sys.stdout.flush()  # here, where a full or broken stdout is said, not at exit
-        return code
+        try:
+            return run_command(argv)
+        finally:  # here, where a full or broken stdout is said, not at exit (--help too)
+            sys.stdout.flush()
     except BrokenPipeError:
         # the reader is gone: point stdout at /dev/null so that Python's exit flush is quiet
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

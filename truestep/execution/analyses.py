@@ -139,10 +139,10 @@ def stability_table(
     with Progress(len(calls), "stability", say=progress) as bar:
         run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
     for row, key, why in sharing:
-        twin = searched[key]
+        searched_row = searched[key]
         words = f"the same steps as {key[2]}'s, bit for bit ({why}): its search"
-        row.update({c: twin.get(c, np.nan) for c in ("dt_limit", "dt_unstable", "runs", "status")})
-        row["note"] = "; ".join(n for n in (words, twin.get("note")) if isinstance(n, str) and n)
+        row.update({c: searched_row.get(c, np.nan) for c in ("dt_limit", "dt_unstable", "runs", "status")})
+        row["note"] = "; ".join(n for n in (words, searched_row.get("note")) if isinstance(n, str) and n)
     return STABILITY.frame(rows)
 
 

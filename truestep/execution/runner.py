@@ -168,6 +168,29 @@ def joined(measured: Outcome, timed: Outcome) -> Outcome:
     return Outcome("ok", value=steps, output=(measured.output + timed.output).strip())
 
 
+def unreadable(row: dict) -> None:
+    """A row holding a value no results table may hold (a negative error, a fraction of a
+    count, an infinite drift: :func:`truestep.tables.io.check_rows`' bounds, from an
+    adapter's or a case's own measure) becomes ``crashed``, naming the column and the value,
+    and that cell is left empty: what ``run`` writes, ``gate`` reads."""
+    from truestep.tables.spec import RESULTS
+
+    for c in RESULTS.columns:
+        value = row.get(c.name)
+        if c.least is None or value is None or isinstance(value, str):
+            continue
+        try:
+            v = float(value)
+        except (TypeError, ValueError, OverflowError):
+            v = float("inf")
+        bad = np.isinf(v) or v < c.least or (c.most is not None and v > c.most)
+        bad = bad or (c.whole and np.isfinite(v) and v != round(v))
+        if bad:
+            row[c.name] = np.nan
+            said = f"the run gave {c.name} = {v:.6g}, not a value a results table holds"
+            row.update(status="crashed", message="; ".join(m for m in (row.get("message"), said) if m))
+
+
 def row_from(
     case: Case,
     engine: str,
@@ -224,6 +247,7 @@ def row_from(
                 traj.message = "; ".join(m for m in (traj.message, frozen) if m)
             row.update(status=traj.status, t_fail=traj.t_fail, message=str(traj.message)[:MESSAGE_CHARS])
             row.update(measure(case, traj))
+            unreadable(row)
     except TimeLimitExceeded as err:  # a hang on case data: this case's rows, not the run's
         _MEASURE_TIMED_OUT[case.file] = str(err)
         row.update(status="timeout", message=str(err))

@@ -48,8 +48,9 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
     ``n`` particles (``n`` given), else ``y`` (T, dim) for an ODE case (or, from an
     adapter written before ``y``, ``x`` as (T, 1, dim)); ``v`` as ``x`` or ``None``;
     ``energy`` (T,) or ``None``; ``alive`` (T, n) or ``None``; a known status; at least
-    two records when the status is ``ok``; a wall time that is positive and finite, and
-    counts (``nfev``, ``steps``) that are not negative.
+    two records when the status is ``ok``; a wall time that is positive and finite,
+    counts (``nfev``, ``steps``) that are not negative, and a ``t_fail`` that is ``None``,
+    NaN or a time within the run.
     """
     if not isinstance(traj, Trajectory):
         return f"adapter returned {type(traj).__name__}, not a Trajectory"
@@ -63,7 +64,7 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
         x = np.asarray(traj.x if n is not None or traj.y is None else traj.y[:, None], dtype=float)
     except (TypeError, ValueError, IndexError) as err:
         return f"adapter returned non-numeric t or {'x' if n is not None else 'y'} ({str(err)[:60]})"
-    breach = _times_breach(t, duration)
+    breach = _times_breach(t, duration) or _t_fail_breach(traj.t_fail, duration)
     if breach is not None:
         return breach
     wall = _number(traj.wall_s)
@@ -86,6 +87,21 @@ def contract_breach(traj: object, n: int | None = None, *, duration: float | Non
             return f"adapter returned {name} of shape {_shape(value)}, expected {expect}"
     if traj.status == "ok" and len(t) < 2:
         return "adapter returned status 'ok' with one record: nothing was simulated"
+    return None
+
+
+def _t_fail_breach(t_fail: object, duration: float | None) -> str | None:
+    """Why a run's ``t_fail`` breaks the contract: it is ``None``, NaN, or a simulated time
+    (s) from 0 to the case's end; anything else (a word, a negative or infinite number)
+    is no time a table can hold."""
+    if t_fail is None:
+        return None
+    value = float("nan") if isinstance(t_fail, (str, bytes)) else _number(t_fail)
+    if isinstance(t_fail, (str, bytes)) or np.isinf(value):
+        return f"adapter returned t_fail = {str(t_fail)[:40]!r} (a time in s, or None)"
+    end = duration * (1 + END_SLACK) + 1e-12 if duration is not None else np.inf
+    if np.isfinite(value) and not 0 <= value <= end:
+        return f"adapter returned t_fail = {value:.6g} s, outside the run (0 to {end:.6g} s)"
     return None
 
 
