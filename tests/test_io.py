@@ -205,9 +205,12 @@ def test_a_table_cut_short_is_refused(tmp_path, capsys):
 
     from truestep.cli import main
 
-    published = Path(__file__).resolve().parents[1] / "reports" / "results.csv"
+    published = (Path(__file__).resolve().parents[1] / "reports" / "results.csv").read_bytes()
+    half = len(published) // 2
+    if published[half - 1 : half] == b"\n":  # cut inside a row, not at its end
+        half -= 1
     cut = tmp_path / "results.csv"
-    cut.write_bytes(published.read_bytes()[: len(published.read_bytes()) // 2])
+    cut.write_bytes(published[:half])
     assert main(["gate", "--results", str(cut), "-q"]) == 2
     err = capsys.readouterr().err
     assert "truncated: its last line has no end" in err and "Traceback" not in err
