@@ -53,7 +53,41 @@ def test_the_public_run_writes_the_same_tables_and_leaves_no_journal(tmp_path):
     assert set(record["seconds"]) == {"sweep", "analyses", "compile", "sweep reference", *kinds}
     spent = record["seconds"]
     assert 0 < spent["sweep reference"] <= spent["sweep"] and 0 <= spent["compile"] <= spent["sweep"]
-    assert sum(spent[k] for k in kinds) <= spent["analyses"]  # the parts of the analyses
+    # the searches and drops run beside the sweep's timed runs, the scaling table after it
+    assert sum(spent[k] for k in kinds) <= spent["sweep"] + spent["analyses"]
+
+
+class _Squares:
+    """A backlog of untimed calls (:class:`truestep.execution.isolation.Backlog`)."""
+
+    def __init__(self, n: int) -> None:
+        self.n, self.started, self.values = n, [], {}
+
+    def __len__(self) -> int:
+        return self.n
+
+    def call(self, k):
+        self.started.append(k)
+        return (pow, (k, 2), 10.0)
+
+    def done(self, k, out):
+        self.values[k] = out.value
+
+
+def test_work_beside_the_sweep_is_done_and_leaves_its_rows_as_they_are():
+    """Untimed calls handed to the sweep (the analyses' searches and drops) each run once
+    and come back to their own ``done``; the sweep's non-timing columns are those of a
+    sweep without them."""
+    from truestep.ci.baseline import identical
+    from truestep.execution.runner import run_matrix
+
+    cases = truestep.load_cases("harmonic-oscillator")
+    backlog = _Squares(5)
+    beside = run_matrix(cases, ["reference"], quick=True, progress=lambda _: None, alongside=[backlog])
+    alone = run_matrix(cases, ["reference"], quick=True, progress=lambda _: None)
+    assert sorted(backlog.started) == list(range(5)) and backlog.values == {k: k * k for k in range(5)}
+    differs, cells = identical({"results": alone}, {"results": beside})
+    assert cells > 100 and differs == []
 
 
 def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypatch):

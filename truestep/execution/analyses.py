@@ -17,7 +17,8 @@ from truestep.adapters.base import facts_of
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
 from truestep.cases.loader import CASE_DIR, load_case
-from truestep.execution.isolation import run_untimed, untimed_workers
+from truestep.execution import faults
+from truestep.execution.isolation import Call, Outcome, run_untimed, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.runner import duplicate_of, preload
 from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
@@ -58,6 +59,70 @@ def _search(engine: str, case: Case, method: str, quick: bool, exact: float | No
     return result, time.perf_counter() - start
 
 
+class UntimedPart:
+    """One analysis's untimed runs, planned before any of them starts: ``calls`` isolated
+    calls that may run in any order and place (:func:`run_untimed`, or on the cores the
+    sweep's timed runs leave, :func:`truestep.execution.runner.run_matrix`'s ``alongside``),
+    each handed back to :meth:`done`, and :meth:`table` once all are. Its progress bar
+    (:class:`Progress`; ``progress`` takes the lines instead) starts with its first call;
+    :attr:`seconds` is the wall time from that start to the last call's end."""
+
+    def __init__(
+        self,
+        kind: str,
+        calls: list[Call],
+        on_done: Callable[[int, Outcome, Progress], None],
+        make_table: Callable[[], pd.DataFrame],
+        progress: Callable[[str], None] | None,
+    ) -> None:
+        self.kind, self.calls = kind, calls
+        self._on_done, self._make_table, self._progress = on_done, make_table, progress
+        self._bar: Progress | None = None
+        self._first: float | None = None
+        self._last: float | None = None
+
+    def __len__(self) -> int:
+        return len(self.calls)
+
+    def call(self, k: int) -> Call:
+        """The ``k``-th call, just before it starts."""
+        if self._bar is None:
+            self._bar = Progress(len(self.calls), self.kind, say=self._progress)
+            self._first = self._bar.start
+        return self.calls[k]
+
+    def done(self, k: int, out: Outcome) -> None:
+        """The ``k``-th call's outcome."""
+        if self._bar is None:  # not started: the run's budget was spent
+            self.call(k)
+        assert self._bar is not None
+        self._on_done(k, out, self._bar)
+        self._last = time.perf_counter()
+        faults.point("analyses")
+
+    def run(self, workers: int) -> UntimedPart:
+        """Run every call here (``workers`` at once, or on the cluster of
+        :func:`~truestep.execution.isolation.set_untimed_runner`)."""
+        run_untimed([self.call(k) for k in range(len(self))], workers, self.done)
+        return self
+
+    def table(self) -> pd.DataFrame:
+        """The analysis's table, once every call is done."""
+        if self._bar is not None:
+            self._bar.close()
+        return self._make_table()
+
+    @property
+    def seconds(self) -> float:
+        if self._first is None or self._last is None:
+            return 0.0
+        return self._last - self._first
+
+
+SHARED_COLUMNS = ("dt_limit", "dt_unstable", "runs", "status")
+"""What a method whose steps are another's, bit for bit, takes from that one's search."""
+
+
 def stability_table(
     cases: list[Case],
     engines: list[str],
@@ -73,6 +138,14 @@ def stability_table(
     finished search is a line with done / total and the time left (:class:`Progress`;
     ``progress`` takes the lines instead).
     """
+    return stability_part(cases, engines, quick=quick, progress=progress).run(workers).table()
+
+
+def stability_part(
+    cases: list[Case], engines: list[str], *, quick: bool, progress: Callable[[str], None] | None = None
+) -> UntimedPart:
+    """The searches of :func:`stability_table`, planned (longest first, so that no long
+    search starts last while the other cores idle)."""
     rows: list[dict] = []
     calls, slots = [], []
     searched: dict[tuple[str, str, str], dict] = {}
@@ -113,8 +186,8 @@ def stability_table(
                         )
                     )
 
-    def done(k: int, out) -> None:
-        row = slots[k]
+    def done(k: int, out: Outcome, bar: Progress) -> None:
+        row = slots[order[k]]
         if out.status != "ok":
             row.update(status=out.status, note=out.message)
             bar.done(f"{row['case']} {row['engine']}/{row['method']}: {out.status}")
@@ -131,19 +204,21 @@ def stability_table(
             f"{seconds:.1f} s"
         )
 
+    def table() -> pd.DataFrame:
+        for row, key, why in sharing:
+            searched_row = searched[key]
+            words = f"the same steps as {key[2]}'s, bit for bit ({why}): its search"
+            row.update(
+                {c: searched_row.get(c, np.nan) for c in ("dt_limit", "dt_unstable", "runs", "status")}
+            )
+            row["note"] = "; ".join(n for n in (words, searched_row.get("note")) if isinstance(n, str) and n)
+        return STABILITY.frame(rows)
+
     prepare_before_fork((engine, case, method) for _, (engine, case, method, *_), _t in calls)
-    # Longest first, so that no long search starts last while the other cores idle.
     order = sorted(
         range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
     )
-    with Progress(len(calls), "stability", say=progress) as bar:
-        run_untimed([calls[k] for k in order], workers, lambda k, out: done(order[k], out))
-    for row, key, why in sharing:
-        searched_row = searched[key]
-        words = f"the same steps as {key[2]}'s, bit for bit ({why}): its search"
-        row.update({c: searched_row.get(c, np.nan) for c in ("dt_limit", "dt_unstable", "runs", "status")})
-        row["note"] = "; ".join(n for n in (words, searched_row.get("note")) if isinstance(n, str) and n)
-    return STABILITY.frame(rows)
+    return UntimedPart("stability", [calls[k] for k in order], done, table, progress)
 
 
 def _twin_searched(
@@ -369,6 +444,13 @@ def restitution_table(
     each finished drop is a line with done / total and the time left (as
     :func:`stability_table`).
     """
+    return restitution_part(engines, quick=quick, progress=progress).run(workers).table()
+
+
+def restitution_part(
+    engines: list[str], *, quick: bool, progress: Callable[[str], None] | None = None
+) -> UntimedPart:
+    """The drops of :func:`restitution_table`, planned."""
     e_set = QUICK_RESTITUTION_SET if quick else RESTITUTION_SET
     dts = QUICK_RESTITUTION_DTS if quick else RESTITUTION_DTS
     groups: list[list[dict]] = []  # the rows of one drop (or one unsupported method)
@@ -396,7 +478,7 @@ def restitution_table(
                     slots.append((len(groups) - 1, engine, method, e, dt))
                     calls.append((_bounce_rows, (engine, method, e, dt), 60.0))
 
-    def done(k: int, out) -> None:
+    def done(k: int, out: Outcome, bar: Progress) -> None:
         g, engine, method, e, dt = slots[k]
         bar.done(f"{engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
         if out.status == "ok":
@@ -416,9 +498,21 @@ def restitution_table(
 
     first = {(engine, method): (e, dt) for _, engine, method, e, dt in reversed(slots)}
     prepare_before_fork((engine, bounce_case(*first[engine, method]), method) for engine, method in first)
-    with Progress(len(calls), "restitution", say=progress) as bar:
-        run_untimed(calls, workers, done)
-    return RESTITUTION.frame([r for g in groups for r in g])
+    return UntimedPart(
+        "restitution", calls, done, lambda: RESTITUTION.frame([r for g in groups for r in g]), progress
+    )
+
+
+def untimed_parts(
+    cases: list[Case], engines: list[str], *, quick: bool, progress: Callable[[str], None] | None = None
+) -> list[UntimedPart]:
+    """The untimed analyses of :func:`run_analyses` for these cases and engines, planned:
+    the stability searches and, when a case tagged ``restitution`` is among ``cases``, the
+    bounce drops."""
+    parts = [stability_part(cases, engines, quick=quick, progress=progress)]
+    if any("restitution" in c.tags for c in cases):
+        parts.append(restitution_part(engines, quick=quick, progress=progress))
+    return parts
 
 
 @own_run()
@@ -430,6 +524,7 @@ def run_analyses(
     quick: bool,
     progress: Callable[[str], None] | None = None,
     seconds: dict[str, float] | None = None,
+    ran: list[UntimedPart] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """Every table besides ``results``: ``stability`` (for the cases with a search),
     ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
@@ -438,36 +533,34 @@ def run_analyses(
     ``quick``; else empty).
 
     The first two are not timed: their runs share the machine's cores
-    (:func:`untimed_workers`). The scaling table is timed, so it runs after them, one run
-    at a time. Each phase shows done / total and the time left (``progress`` takes the
-    lines instead); ``seconds`` receives each one's wall time (``analyses stability``,
-    ``analyses restitution``, ``analyses scaling``, s).
+    (:func:`untimed_workers`), here, or already, beside the sweep: ``ran`` holds those
+    parts (:func:`untimed_parts`, every call done). The scaling table is timed, so it runs
+    after them, one run at a time. Each phase shows done / total and the time left
+    (``progress`` takes the lines instead); ``seconds`` receives each one's wall time
+    (``analyses stability``, ``analyses restitution``, ``analyses scaling``, s; for a part
+    run beside the sweep, from its first call's start to its last call's end).
     """
     from truestep.execution.bench import RAIN_CASE, scaling_table
 
     preload()
-    workers = untimed_workers()
-    bouncing = any("restitution" in c.tags for c in cases)
+    if ran is None:
+        ran = [
+            part.run(untimed_workers())
+            for part in untimed_parts(cases, engines, quick=quick, progress=progress)
+        ]
+    tables = {part.kind: part.table() for part in ran}
+    tables.setdefault("restitution", RESTITUTION.frame([]))
+    if seconds is not None:
+        for part in ran:
+            seconds[f"analyses {part.kind}"] = round(part.seconds, 3)
+        seconds.setdefault("analyses restitution", 0.0)
     rain = next((c for c in cases if c.name == RAIN_CASE), None)
-    makers = {
-        "stability": lambda: stability_table(cases, engines, quick=quick, workers=workers, progress=progress),
-        "restitution": lambda: (
-            restitution_table(engines, quick=quick, workers=workers, progress=progress)
-            if bouncing
-            else RESTITUTION.frame([])
-        ),
-        "scaling": lambda: (
-            scaling_table(
-                engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress
-            )
-            if rain is not None and not quick
-            else SCALING.frame([])
-        ),
-    }
-    tables = {}
-    for kind, make in makers.items():
-        start = time.perf_counter()
-        tables[kind] = make()
-        if seconds is not None:
-            seconds[f"analyses {kind}"] = round(time.perf_counter() - start, 3)
+    start = time.perf_counter()
+    tables["scaling"] = (
+        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress)
+        if rain is not None and not quick
+        else SCALING.frame([])
+    )
+    if seconds is not None:
+        seconds["analyses scaling"] = round(time.perf_counter() - start, 3)
     return tables

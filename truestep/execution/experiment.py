@@ -104,6 +104,7 @@ def run_experiment(exp: Experiment) -> Tables:
     kinds: dict[str, float] = {}  # the analyses' seconds, per kind
     try:
         with _cluster(exp.scheduler, journal) as cluster:
+            ahead = _untimed_ahead(exp, journal, cluster)
             results = run_matrix(
                 exp.cases,
                 exp.engines,
@@ -112,10 +113,11 @@ def run_experiment(exp: Experiment) -> Tables:
                 traces=traces,
                 journal=journal,
                 cluster=cluster,
+                alongside=ahead or (),
             )
             results = _refined(exp, results)
             laps.lap("sweep")
-            tables = _analyses(exp, results, journal, kinds)
+            tables = _analyses(exp, results, journal, kinds, ahead)
             found = find(exp.cases, results, tables) if exp.analyses else None
             laps.lap("analyses")
         if exp.out is not None:
@@ -179,20 +181,40 @@ def _journal(exp: Experiment):
     return journal
 
 
-def _analyses(exp: Experiment, results: pd.DataFrame, journal, seconds: dict[str, float]) -> dict:
-    """The analyses' tables: from the journal of a resumed run that finished them, else run
-    (and kept in the journal; ``seconds`` receives each kind's wall time)."""
-    from truestep.execution import faults
+def _kept_analyses(exp: Experiment, journal) -> dict | None:
+    """The analyses' tables of the run ``exp`` resumes, if it finished them."""
+    return journal.analyses() if journal is not None and exp.resume is not None else None
+
+
+def _untimed_ahead(exp: Experiment, journal, cluster: Cluster | None) -> list | None:
+    """The analyses' untimed runs (searches, drops), planned to run beside the sweep's
+    timed runs on the cores those leave (:func:`truestep.execution.analyses.untimed_parts`),
+    where they are to run on this machine and the run has not kept their tables; else
+    ``None``."""
+    from truestep.execution.analyses import untimed_parts
+    from truestep.numerics import own_run
+
+    if not exp.analyses or cluster is not None or _kept_analyses(exp, journal) is not None:
+        return None
+    with own_run():
+        return untimed_parts(exp.cases, exp.engines, quick=exp.quick, progress=exp.rows)
+
+
+def _analyses(
+    exp: Experiment, results: pd.DataFrame, journal, seconds: dict[str, float], ran: list | None
+) -> dict:
+    """The analyses' tables: from the journal of a resumed run that finished them, else
+    made (their untimed parts already run where ``ran`` holds them; kept in the journal;
+    ``seconds`` receives each kind's wall time)."""
     from truestep.execution.analyses import run_analyses
 
     if not exp.analyses:
         return {"stability": pd.DataFrame(), "restitution": pd.DataFrame(), "scaling": pd.DataFrame()}
-    tables = journal.analyses() if journal is not None and exp.resume is not None else None
+    tables = _kept_analyses(exp, journal)
     if tables is None:
-        with faults.phase("analyses"):
-            tables = run_analyses(
-                exp.cases, exp.engines, results, quick=exp.quick, progress=exp.rows, seconds=seconds
-            )
+        tables = run_analyses(
+            exp.cases, exp.engines, results, quick=exp.quick, progress=exp.rows, seconds=seconds, ran=ran
+        )
         if journal is not None:
             journal.put_analyses(tables)
     return tables

@@ -27,15 +27,12 @@ from __future__ import annotations
 import os
 import signal
 from collections import Counter
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 KILL_AT = "TRUESTEP_KILL_AT"
 CHILD_PIDS = "TRUESTEP_CHILD_PIDS"
 SIGNALS = {"KILL": signal.SIGKILL, "TERM": signal.SIGTERM, "INT": signal.SIGINT}
 
 _passed: Counter[str] = Counter()
-_phase: list[str] = []
 
 
 def parse(spec: str) -> tuple[str, int, signal.Signals]:
@@ -57,23 +54,6 @@ def point(name: str) -> None:
     at, k, sig = parse(spec)
     if at == name and _passed[name] == k:
         os.kill(os.getpid(), sig)
-
-
-@contextmanager
-def phase(name: str) -> Iterator[None]:
-    """While inside, each finished child process (:mod:`truestep.execution.isolation`) passes the
-    point ``name``."""
-    _phase.append(name)
-    try:
-        yield
-    finally:
-        _phase.pop()
-
-
-def child_finished() -> None:
-    """A child process finished: the point of the current :func:`phase`, if any."""
-    if _phase:
-        point(_phase[-1])
 
 
 def note_child(pid: int) -> None:

@@ -39,7 +39,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import wait
-from typing import Any
+from typing import Any, Protocol
 
 from truestep.execution import faults, plain_data
 from truestep.execution.oscalls import become_subreaper, die_with_parent
@@ -66,6 +66,18 @@ holds the interpreter lock, before the thread that drains the pipe can run."""
 
 Call = tuple[Callable[..., Any], tuple, float]
 """``(fn, args, timeout_s)``: one isolated call."""
+
+
+class Backlog(Protocol):
+    """Untimed isolated calls that may run whenever a core is free: ``len`` of them, the
+    ``k``-th made by ``call(k)`` just before it starts and handed to ``done(k, outcome)``
+    when it ends (:class:`truestep.execution.analyses.UntimedPart`)."""
+
+    def __len__(self) -> int: ...
+
+    def call(self, k: int) -> Call: ...
+
+    def done(self, k: int, out: Outcome) -> None: ...
 
 
 _RUN_DEADLINE: list[float | None] = [None]
@@ -313,7 +325,6 @@ def run_isolated_all(
                     finished = outcomes[r.index] = _finish(r, timed_out=timed_out, reap_later=True)
                     if done is not None:
                         done(r.index, finished)
-                    faults.child_finished()
     finally:
         for r in running:
             _end(r.proc)
@@ -377,7 +388,6 @@ def run_lanes(
                 if r.conn in ready or timed_out:
                     del running[slot]
                     finished = _finish(r, timed_out=timed_out, reap_later=True)
-                    faults.child_finished()
                     if not is_timed and timed_busy:
                         held.append((r.index, finished))
                     else:

@@ -7,7 +7,7 @@ import os
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,7 +18,7 @@ from truestep.adapters import PluginFailed, adapter_class, get_adapter, plugin_a
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
-from truestep.execution.isolation import Call, Outcome, run_isolated, run_lanes, untimed_workers
+from truestep.execution.isolation import Backlog, Call, Outcome, run_isolated, run_lanes, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.time_limit import TimeLimitExceeded, time_limit
@@ -496,6 +496,7 @@ def run_matrix(
     traces: dict | None = None,
     journal: Journal | None = None,
     cluster: Cluster | None = None,
+    alongside: Sequence[Backlog] = (),
 ) -> pd.DataFrame:
     """Run every (case, engine, method, dt) and return the tidy results table.
 
@@ -507,7 +508,10 @@ def run_matrix(
     row's line to ``progress`` when it is given. With a ``journal``
     (:class:`truestep.execution.journal.Journal`), each finished sweep is checkpointed there, and a
     sweep it already holds is taken from it instead of being run again. Every row
-    records the ``host`` it ran on.
+    records the ``host`` it ran on. The untimed calls of ``alongside`` (:class:`Backlog`:
+    the analyses' searches and drops, which do not read the sweep) run on this machine's
+    cores after the sweep's own untimed runs, beside its timed ones, and are handed to
+    their ``done`` (not with a ``cluster``: its caller runs them there).
     """
     timing = timing or (QUICK_TIMING if quick else Timing())
     preload()
@@ -575,8 +579,8 @@ def run_matrix(
                 continue
             local.append((k, dts, adaptive))
         spent: dict[str, float] = {}
-        if local:
-            _run_here(planned, local, timing, traces is not None, finished, spent)
+        if local or alongside:
+            _run_here(planned, local, timing, traces is not None, finished, spent, alongside)
         if jobs and cluster is not None:
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
@@ -595,6 +599,7 @@ def _run_here(
     keep_traces: bool,
     finished: Callable[[int, list[dict], dict], None],
     spent: dict[str, float],
+    alongside: Sequence[Backlog] = (),
 ) -> None:
     """The sweeps ``local`` (planned index, steps, adaptive) on this machine
     (:func:`~truestep.execution.isolation.run_lanes`): the timed runs of engines that make a
@@ -602,7 +607,8 @@ def _run_here(
     cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
     and the measured runs of a split sweep (:func:`split_sweep`). Each finished sweep's
     rows go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
-    processes, from a process's start (its ``prepare`` included) to its outcome."""
+    processes, from a process's start (its ``prepare`` included) to its outcome. The calls
+    of ``alongside`` follow the sweep's untimed runs in the untimed lane."""
     here = host_name()
     timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
     halves = [
@@ -613,7 +619,12 @@ def _run_here(
     began: dict[int, float] = {}
     waiting: dict[int, dict[str, Outcome]] = {}
 
+    extra = [(b, k) for b in alongside for k in range(len(b))]
+
     def call(i: int) -> Call:
+        if i >= len(halves):
+            backlog, k = extra[i - len(halves)]
+            return backlog.call(k)
         j, part = halves[i]
         k, dts, _ = local[j]
         case, engine, method, _ = planned[k]
@@ -621,6 +632,10 @@ def _run_here(
         return sweep_call(case, engine, method, dts, timings[j], part)
 
     def done(i: int, outcome: Outcome) -> None:
+        if i >= len(halves):
+            backlog, k = extra[i - len(halves)]
+            backlog.done(k, outcome)
+            return
         j, part = halves[i]
         k, dts, adaptive = local[j]
         case, engine, method, _ = planned[k]
@@ -647,6 +662,7 @@ def _run_here(
 
     timed = [i for i, (j, part) in enumerate(halves) if timings[j].timed and part != "measured"]
     untimed = [i for i, (j, part) in enumerate(halves) if not timings[j].timed or part == "measured"]
+    untimed += range(len(halves), len(halves) + len(extra))
     run_lanes(timed, untimed, call, done, cores=untimed_workers())
 
 

@@ -395,9 +395,10 @@ def run_record(
     wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``;
     ``compile``, the part of the sweep spent compiling ahead of the first timed run;
     ``sweep <engine>``, the seconds each engine's sweep processes ran, which overlap where
-    sweeps share the cores; ``analyses stability``, ``analyses restitution`` and ``analyses
-    scaling``, the parts of the analyses; the report's own time is not in it, it is
-    being written); ``refined``, the methods whose sweeps were carried on to finer steps
+    sweeps share the cores; ``analyses stability`` and ``analyses restitution``, from the
+    first search or drop's start to the last one's end, which overlap ``sweep`` where they
+    run beside its timed runs, and ``analyses scaling``; the report's own time is not in
+    it, it is being written); ``refined``, the methods whose sweeps were carried on to finer steps
     because their order was not reached yet (:mod:`truestep.execution.refine`)."""
     from truestep import __version__
     from truestep.adapters import shadowed
