@@ -57,37 +57,21 @@ def test_the_public_run_writes_the_same_tables_and_leaves_no_journal(tmp_path):
     assert sum(spent[k] for k in kinds) <= spent["sweep"] + spent["analyses"]
 
 
-class _Squares:
-    """A backlog of untimed calls (:class:`truestep.execution.isolation.Backlog`)."""
-
-    def __init__(self, n: int) -> None:
-        self.n, self.started, self.values = n, [], {}
-
-    def __len__(self) -> int:
-        return self.n
-
-    def call(self, k):
-        self.started.append(k)
-        return (pow, (k, 2), 10.0)
-
-    def done(self, k, out):
-        self.values[k] = out.value
-
-
-def test_work_beside_the_sweep_is_done_and_leaves_its_rows_as_they_are():
-    """Untimed calls handed to the sweep (the analyses' searches and drops) each run once
-    and come back to their own ``done``; the sweep's non-timing columns are those of a
-    sweep without them."""
+def test_a_run_beside_its_analyses_gives_the_tables_of_one_after_them(tmp_path):
+    """The searches and drops run as the backlog of the sweep's lanes (the default) give
+    the tables they give when they run after the sweep (:func:`run_analyses` alone)."""
     from truestep.ci.baseline import identical
-    from truestep.execution.runner import run_matrix
+    from truestep.execution.analyses import run_analyses
 
-    cases = truestep.load_cases("harmonic-oscillator")
-    backlog = _Squares(5)
-    beside = run_matrix(cases, ["reference"], quick=True, progress=lambda _: None, alongside=[backlog])
-    alone = run_matrix(cases, ["reference"], quick=True, progress=lambda _: None)
-    assert sorted(backlog.started) == list(range(5)) and backlog.values == {k: k * k for k in range(5)}
-    differs, cells = identical({"results": alone}, {"results": beside})
-    assert cells > 100 and differs == []
+    cases = truestep.load_cases("harmonic-oscillator,bouncing-ball")
+    tables = truestep.run(cases, ["reference", "pymunk"], quick=True, progress=lambda _: None)
+    after = run_analyses(cases, ["reference", "pymunk"], tables.results, quick=True, progress=lambda _: None)
+    assert len(after["stability"]) and len(after["restitution"])
+    differs, cells = identical(
+        {"stability": after["stability"], "restitution": after["restitution"]},
+        {"stability": tables.stability, "restitution": tables.restitution},
+    )
+    assert cells > 50 and differs == []
 
 
 def test_without_an_output_there_is_no_journal_and_no_report(tmp_path, monkeypatch):

@@ -152,3 +152,68 @@ def test_the_untimed_core_does_not_wait_for_a_long_timed_call():
     first = min((spans[j] for j in spans if is_timed[j]), key=lambda s: s[0])
     beside = [spans[j] for j in spans if not is_timed[j] and _overlap(first, spans[j])]
     assert len(beside) >= 3
+
+
+class _Sleeps:
+    """A backlog (:class:`truestep.execution.isolation.Backlog`) of ``n`` calls of
+    :func:`_span`, recording when each was made (just before its fork) and its span."""
+
+    def __init__(self, n: int, seconds: float) -> None:
+        self.n, self.seconds = n, seconds
+        self.made: dict[int, float] = {}
+        self.spans: dict[int, tuple[float, float]] = {}
+
+    def __len__(self) -> int:
+        return self.n
+
+    def call(self, k):
+        self.made[k] = time.monotonic()
+        return (_span, (self.seconds,), 30.0)
+
+    def done(self, k, outcome):
+        assert outcome.status == "ok" and k not in self.spans, outcome.message
+        self.spans[k] = outcome.value
+
+
+def test_a_backlog_fills_the_cores_the_timed_calls_leave_across_runs():
+    """On two cores, a backlog of untimed calls starts beside the first timed call, goes on
+    across two ``run`` calls, leaves a core free for a timed run made outside the lanes
+    (``free_core``: no backlog call starts until ``finish``), and is all done once by
+    ``finish``; no timed call ever runs beside more than one other call."""
+    from truestep.execution.isolation import Lanes
+
+    backlog = _Sleeps(6, 0.3)
+    timed: dict[tuple[int, int], tuple[float, float]] = {}
+    handled: list[float] = []
+
+    def done_in(run: int):
+        def done(j, outcome):
+            assert outcome.status == "ok", outcome.message
+            timed[run, j] = outcome.value
+            handled.append(time.monotonic())
+
+        return done
+
+    with Lanes(2, [backlog]) as lanes:
+        lanes.run([0, 1], [], lambda j: (_span, (0.3,), 30.0), done_in(1))
+        lanes.run([0], [], lambda j: (_span, (0.3,), 30.0), done_in(2))
+        lanes.free_core()
+        freed = time.monotonic()
+        started_before = set(backlog.made)
+        time.sleep(0.4)  # what runs outside the lanes: nothing of the backlog starts meanwhile
+        assert set(backlog.made) == started_before
+        lanes.finish()
+    assert sorted(backlog.spans) == list(range(6)) and len(timed) == 3
+    assert min(backlog.made.values()) < handled[0]  # the first started beside the first timed call
+    running_when_freed = [s for s in backlog.spans.values() if s[0] < freed < s[1]]
+    assert len(running_when_freed) <= 1
+    every = list(timed.values()) + list(backlog.spans.values())
+    for a in timed.values():
+        assert sum(_overlap(a, b) for b in every if b is not a) <= 1 or _at_most_one_at_a_time(a, every)
+
+
+def _at_most_one_at_a_time(a: tuple[float, float], spans: list[tuple[float, float]]) -> bool:
+    """Whether at every moment of ``a`` at most one other span of ``spans`` runs."""
+    others = [b for b in spans if b is not a and _overlap(a, b)]
+    edges = sorted({a[0], *(t for b in others for t in b if a[0] < t < a[1])})
+    return all(sum(b[0] <= t < b[1] for b in others) <= 1 for t in edges)

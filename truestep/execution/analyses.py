@@ -18,7 +18,7 @@ from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
 from truestep.cases.loader import CASE_DIR, load_case
 from truestep.execution import faults
-from truestep.execution.isolation import Call, Outcome, run_untimed, untimed_workers
+from truestep.execution.isolation import Call, Lanes, Outcome, run_untimed, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.runner import duplicate_of, preload
 from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
@@ -525,6 +525,7 @@ def run_analyses(
     progress: Callable[[str], None] | None = None,
     seconds: dict[str, float] | None = None,
     ran: list[UntimedPart] | None = None,
+    lanes: Lanes | None = None,
 ) -> dict[str, pd.DataFrame]:
     """Every table besides ``results``: ``stability`` (for the cases with a search),
     ``restitution`` (when a case tagged ``restitution`` is among ``cases``; else empty)
@@ -533,12 +534,14 @@ def run_analyses(
     ``quick``; else empty).
 
     The first two are not timed: their runs share the machine's cores
-    (:func:`untimed_workers`), here, or already, beside the sweep: ``ran`` holds those
-    parts (:func:`untimed_parts`, every call done). The scaling table is timed, so it runs
-    after them, one run at a time. Each phase shows done / total and the time left
-    (``progress`` takes the lines instead); ``seconds`` receives each one's wall time
-    (``analyses stability``, ``analyses restitution``, ``analyses scaling``, s; for a part
-    run beside the sweep, from its first call's start to its last call's end).
+    (:func:`untimed_workers`), here, or, where ``ran`` holds those parts
+    (:func:`untimed_parts`), as the backlog of ``lanes`` beside the sweep's timed runs. The
+    scaling table is timed, so it runs one run at a time on a core of its own: after the
+    others, or with their backlog's children that still run on the other cores (none
+    started meanwhile), then the backlog's rest. Each phase shows done / total and the
+    time left (``progress`` takes the lines instead); ``seconds`` receives each one's wall
+    time (``analyses stability``, ``analyses restitution``, ``analyses scaling``, s; for a
+    part run as a backlog, from its first call's start to its last call's end).
     """
     from truestep.execution.bench import RAIN_CASE, scaling_table
 
@@ -548,19 +551,27 @@ def run_analyses(
             part.run(untimed_workers())
             for part in untimed_parts(cases, engines, quick=quick, progress=progress)
         ]
-    tables = {part.kind: part.table() for part in ran}
+    rain = next((c for c in cases if c.name == RAIN_CASE), None)
+    if lanes is not None:
+        lanes.free_core()
+    start = time.perf_counter()
+    tables = {
+        "scaling": (
+            scaling_table(
+                engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress
+            )
+            if rain is not None and not quick
+            else SCALING.frame([])
+        )
+    }
+    if seconds is not None:
+        seconds["analyses scaling"] = round(time.perf_counter() - start, 3)
+    if lanes is not None:
+        lanes.finish()
+    tables.update({part.kind: part.table() for part in ran})
     tables.setdefault("restitution", RESTITUTION.frame([]))
     if seconds is not None:
         for part in ran:
             seconds[f"analyses {part.kind}"] = round(part.seconds, 3)
         seconds.setdefault("analyses restitution", 0.0)
-    rain = next((c for c in cases if c.name == RAIN_CASE), None)
-    start = time.perf_counter()
-    tables["scaling"] = (
-        scaling_table(engines, sizes=SCALING_SIZES, budget_s=SCALING_BUDGET_S, case=rain, progress=progress)
-        if rain is not None and not quick
-        else SCALING.frame([])
-    )
-    if seconds is not None:
-        seconds["analyses scaling"] = round(time.perf_counter() - start, 3)
-    return tables
+    return {kind: tables[kind] for kind in ("stability", "restitution", "scaling")}

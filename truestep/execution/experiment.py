@@ -25,6 +25,7 @@ from truestep.cases.case import Case
 
 if TYPE_CHECKING:
     from truestep.execution.cluster import Cluster
+    from truestep.execution.isolation import Lanes
     from truestep.measures.findings import Findings
 
 
@@ -88,7 +89,7 @@ def run_experiment(exp: Experiment) -> Tables:
     the analyses, the report. Raises :class:`~truestep.execution.journal.JournalError` when ``resume``
     holds no run of these cases and engines, and :class:`~truestep.execution.cluster.ClusterError`
     (saying what the journal keeps) when the cluster cannot be reached or goes away."""
-    from truestep.execution.isolation import set_run_budget
+    from truestep.execution.isolation import Lanes, set_run_budget, untimed_workers
     from truestep.execution.runner import run_matrix
     from truestep.measures.findings import find
     from truestep.reporting import publish
@@ -105,19 +106,20 @@ def run_experiment(exp: Experiment) -> Tables:
     try:
         with _cluster(exp.scheduler, journal) as cluster:
             ahead = _untimed_ahead(exp, journal, cluster)
-            results = run_matrix(
-                exp.cases,
-                exp.engines,
-                quick=exp.quick,
-                progress=exp.rows,
-                traces=traces,
-                journal=journal,
-                cluster=cluster,
-                alongside=ahead or (),
-            )
-            results = _refined(exp, results)
-            laps.lap("sweep")
-            tables = _analyses(exp, results, journal, kinds, ahead)
+            with Lanes(untimed_workers(), ahead or ()) as lanes:
+                results = run_matrix(
+                    exp.cases,
+                    exp.engines,
+                    quick=exp.quick,
+                    progress=exp.rows,
+                    traces=traces,
+                    journal=journal,
+                    cluster=cluster,
+                    lanes=lanes,
+                )
+                results = _refined(exp, results, lanes)
+                laps.lap("sweep")
+                tables = _analyses(exp, results, journal, kinds, ahead, lanes)
             found = find(exp.cases, results, tables) if exp.analyses else None
             laps.lap("analyses")
         if exp.out is not None:
@@ -152,13 +154,13 @@ def run_experiment(exp: Experiment) -> Tables:
     )
 
 
-def _refined(exp: Experiment, results: pd.DataFrame) -> pd.DataFrame:
+def _refined(exp: Experiment, results: pd.DataFrame, lanes: Lanes) -> pd.DataFrame:
     """``results`` with the finer steps of the methods short of their declared order
-    (:func:`truestep.execution.refine.refine`), which ``results.attrs["refined"]`` names
-    for ``run.json``."""
+    (:func:`truestep.execution.refine.refine`, run through ``lanes``), which
+    ``results.attrs["refined"]`` names for ``run.json``."""
     from truestep.execution.refine import refine
 
-    results, refined = refine(exp.cases, exp.engines, results, quick=exp.quick, say=exp.say)
+    results, refined = refine(exp.cases, exp.engines, results, quick=exp.quick, say=exp.say, lanes=lanes)
     if refined:
         results.attrs["refined"] = [r.record() for r in refined]
     return results
@@ -187,10 +189,10 @@ def _kept_analyses(exp: Experiment, journal) -> dict | None:
 
 
 def _untimed_ahead(exp: Experiment, journal, cluster: Cluster | None) -> list | None:
-    """The analyses' untimed runs (searches, drops), planned to run beside the sweep's
-    timed runs on the cores those leave (:func:`truestep.execution.analyses.untimed_parts`),
-    where they are to run on this machine and the run has not kept their tables; else
-    ``None``."""
+    """The analyses' untimed runs (searches, drops), planned to run on the cores the sweep's
+    and the refinement's timed runs leave (:func:`truestep.execution.analyses.untimed_parts`,
+    the backlog of the run's :class:`~truestep.execution.isolation.Lanes`), where they are
+    to run on this machine and the run has not kept their tables; else ``None``."""
     from truestep.execution.analyses import untimed_parts
     from truestep.numerics import own_run
 
@@ -201,11 +203,16 @@ def _untimed_ahead(exp: Experiment, journal, cluster: Cluster | None) -> list | 
 
 
 def _analyses(
-    exp: Experiment, results: pd.DataFrame, journal, seconds: dict[str, float], ran: list | None
+    exp: Experiment,
+    results: pd.DataFrame,
+    journal,
+    seconds: dict[str, float],
+    ran: list | None,
+    lanes: Lanes,
 ) -> dict:
     """The analyses' tables: from the journal of a resumed run that finished them, else
-    made (their untimed parts already run where ``ran`` holds them; kept in the journal;
-    ``seconds`` receives each kind's wall time)."""
+    made (their untimed parts in the backlog of ``lanes`` where ``ran`` holds them; kept
+    in the journal; ``seconds`` receives each kind's wall time)."""
     from truestep.execution.analyses import run_analyses
 
     if not exp.analyses:
@@ -213,7 +220,14 @@ def _analyses(
     tables = _kept_analyses(exp, journal)
     if tables is None:
         tables = run_analyses(
-            exp.cases, exp.engines, results, quick=exp.quick, progress=exp.rows, seconds=seconds, ran=ran
+            exp.cases,
+            exp.engines,
+            results,
+            quick=exp.quick,
+            progress=exp.rows,
+            seconds=seconds,
+            ran=ran,
+            lanes=lanes,
         )
         if journal is not None:
             journal.put_analyses(tables)

@@ -29,6 +29,8 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import fcntl
+import functools
+import itertools
 import multiprocessing as mp
 import os
 import signal
@@ -341,63 +343,177 @@ def run_lanes(
     done: Callable[[int, Outcome], None],
     cores: int,
 ) -> None:
-    """Run two lanes of isolated calls at once, each call made by ``call(j)`` just before
-    its child is forked and handed to ``done(j, outcome)`` when it ends.
+    """Run two lanes of isolated calls at once (:meth:`Lanes.run` on ``cores`` cores, with
+    no backlog)."""
+    with Lanes(cores) as lanes:
+        lanes.run(timed, untimed, call, done)
 
-    The ``timed`` lane runs one call at a time, in order, and keeps a core to itself: it
-    starts only while at most ``cores - 1`` untimed children run. While it runs, this
-    process only starts the untimed call that takes the place of one just ended (on the
-    core that child left free: the untimed cores never wait for a long timed call) and
-    otherwise waits; the untimed outcomes' ``done`` waits for the gap between two timed
-    calls. The ``untimed`` lane keeps the other cores busy (all of them once the timed
-    lane is done); on one core it runs after the timed lane.
-    Never raises for what happens inside a child; the run's budget holds as in
-    :func:`run_isolated_all`."""
-    timed_left, untimed_left = list(timed)[::-1], list(untimed)[::-1]
-    running: dict[int, tuple[Running, bool]] = {}  # slot -> (run, timed)
-    held: list[tuple[int, Outcome]] = []  # untimed outcomes waiting for a gap
-    slots = iter(range(len(timed) + len(untimed)))
 
-    def start(j: int, is_timed: bool) -> None:
-        if _budget_left() <= 0:  # not started: this call's row says why
-            done(j, Outcome("timeout", message=BUDGET_SPENT))
-            return
-        run = _start(j, call(j))
-        running[next(slots)] = (run, is_timed)
+@dataclass
+class _Child:
+    """A running child of :class:`Lanes`: its run, whether it is timed, and whose it is
+    (the index and ``done`` of a :meth:`Lanes.run` call, or a backlog's)."""
 
-    try:
-        while timed_left or untimed_left or running or held:
-            timed_busy = any(is_timed for _, is_timed in running.values())
-            if not timed_busy:
-                for j, outcome in held:
-                    done(j, outcome)
-                held.clear()
-            room = max(0, cores - 1) if timed_left or timed_busy else max(1, cores)
-            while untimed_left and sum(1 for _, t in running.values() if not t) < room:
-                start(untimed_left.pop(), False)
-            if not timed_busy and timed_left and len(running) <= max(0, cores - 1):
-                start(timed_left.pop(), True)
-            if not running:
-                continue
-            now = time.monotonic()
-            runs = [r for r, _ in running.values()]
-            ready = wait([r.conn for r in runs], timeout=max(0.0, min(r.deadline for r in runs) - now))
-            timed_busy = any(is_timed for _, is_timed in running.values())
-            for slot, (r, is_timed) in list(running.items()):
-                timed_out = r.conn not in ready and time.monotonic() >= r.deadline
-                if r.conn in ready or timed_out:
-                    del running[slot]
-                    finished = _finish(r, timed_out=timed_out, reap_later=True)
-                    if not is_timed and timed_busy:
-                        held.append((r.index, finished))
-                    else:
-                        done(r.index, finished)
-    finally:
-        for r, _ in running.values():
-            _end(r.proc)
-            r.conn.close()
-            _LIVE.pop(r.proc.pid, None)
+    run: Running
+    timed: bool
+    index: int
+    done: Callable[[int, Outcome], None]
+    own: bool
+
+
+class Lanes:
+    """Two lanes of isolated calls on ``cores`` cores, and a ``backlog`` of untimed work
+    (:class:`Backlog`) that fills the cores they leave, across every :meth:`run` until
+    :meth:`finish` runs the rest on all of them. A context manager: leaving it ends the
+    children still running. Never raises for what happens inside a child; the run's
+    budget holds as in :func:`run_isolated_all`."""
+
+    def __init__(self, cores: int, backlog: Sequence[Backlog] = ()) -> None:
+        self.cores = max(1, cores)
+        self._backlog = [(b, k) for b in backlog for k in range(len(b))][::-1]
+        self._running: dict[int, _Child] = {}
+        self._held: list[tuple[_Child, Outcome]] = []  # untimed outcomes waiting for a gap
+        self._slots = itertools.count()
+
+    def __enter__(self) -> Lanes:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End every child still running (a run interrupted, or left unfinished)."""
+        for child in self._running.values():
+            _end(child.run.proc)
+            child.run.conn.close()
+            _LIVE.pop(child.run.proc.pid, None)
+        self._running.clear()
         reap_exited(wait=True)
+
+    def run(
+        self,
+        timed: Sequence[int],
+        untimed: Sequence[int],
+        call: Callable[[int], Call],
+        done: Callable[[int, Outcome], None],
+    ) -> None:
+        """Run the calls ``timed`` and ``untimed``, each made by ``call(j)`` just before its
+        child is forked and handed to ``done(j, outcome)`` when it ends; return once all
+        are done (backlog children may still run).
+
+        The ``timed`` lane runs one call at a time, in order, and keeps a core to itself: it
+        starts only while at most ``cores - 1`` untimed children run. While it runs, this
+        process only starts the untimed call that takes the place of one just ended (on the
+        core that child left free: the untimed cores never wait for a long timed call) and
+        otherwise waits; the untimed outcomes' ``done`` waits for the gap between two timed
+        calls. The ``untimed`` lane, then the backlog, keep the other cores busy (all of
+        them once the timed lane is done); on one core the untimed lane runs after the
+        timed lane."""
+        timed_left, untimed_left = list(timed)[::-1], list(untimed)[::-1]
+
+        def own_left() -> bool:
+            return bool(timed_left or untimed_left or any(c.own for c in self._running.values()))
+
+        try:
+            while own_left() or any(c.own for c, _ in self._held):
+                self._step(timed_left, untimed_left, call, done)
+            self._deliver()
+        except BaseException:
+            self.close()
+            raise
+
+    def finish(self) -> None:
+        """Run the rest of the backlog on every core; return once it is all done."""
+        try:
+            while self._backlog or self._running or self._held:
+                self._step([], [], _no_call, _no_done)
+        except BaseException:
+            self.close()
+            raise
+
+    def free_core(self) -> None:
+        """Wait (collecting what ends, starting nothing) until at most ``cores - 1``
+        children run: a core for a timed run made outside the lanes."""
+        try:
+            while len(self._running) > self.cores - 1:
+                self._collect(timed_busy=False)
+            self._deliver()
+        except BaseException:
+            self.close()
+            raise
+
+    def _step(
+        self,
+        timed_left: list[int],
+        untimed_left: list[int],
+        call: Callable[[int], Call],
+        done: Callable[[int, Outcome], None],
+    ) -> None:
+        """Deliver held outcomes in a gap, start what may start, wait for one to end."""
+        timed_busy = any(c.timed for c in self._running.values())
+        if not timed_busy:
+            self._deliver()
+        room = max(0, self.cores - 1) if timed_left or timed_busy else self.cores
+        while self._untimed_running() < room and (untimed_left or self._backlog):
+            if untimed_left:
+                j = untimed_left.pop()
+                self._start(j, functools.partial(call, j), done, timed=False, own=True)
+            else:
+                backlog, k = self._backlog.pop()
+                self._start(k, functools.partial(backlog.call, k), backlog.done, timed=False, own=False)
+        if not timed_busy and timed_left and len(self._running) <= self.cores - 1:
+            j = timed_left.pop()
+            self._start(j, functools.partial(call, j), done, timed=True, own=True)
+        if self._running:
+            self._collect(timed_busy=any(c.timed for c in self._running.values()))
+
+    def _untimed_running(self) -> int:
+        return sum(1 for c in self._running.values() if not c.timed)
+
+    def _start(
+        self,
+        index: int,
+        make: Callable[[], Call],
+        done: Callable[[int, Outcome], None],
+        *,
+        timed: bool,
+        own: bool,
+    ) -> None:
+        if _budget_left() <= 0:  # not started: this call's row says why
+            done(index, Outcome("timeout", message=BUDGET_SPENT))
+            return
+        run = _start(index, make())
+        self._running[next(self._slots)] = _Child(run, timed, index, done, own)
+
+    def _collect(self, *, timed_busy: bool) -> None:
+        """Wait for a child to end (or its time to run out) and hand its outcome on: an
+        untimed one's is held while a timed call runs."""
+        runs = [c.run for c in self._running.values()]
+        now = time.monotonic()
+        ready = wait([r.conn for r in runs], timeout=max(0.0, min(r.deadline for r in runs) - now))
+        for slot, child in list(self._running.items()):
+            r = child.run
+            timed_out = r.conn not in ready and time.monotonic() >= r.deadline
+            if r.conn in ready or timed_out:
+                del self._running[slot]
+                finished = _finish(r, timed_out=timed_out, reap_later=True)
+                if not child.timed and timed_busy:
+                    self._held.append((child, finished))
+                else:
+                    child.done(child.index, finished)
+
+    def _deliver(self) -> None:
+        held, self._held = self._held, []
+        for child, outcome in held:
+            child.done(child.index, outcome)
+
+
+def _no_call(j: int) -> Call:
+    raise AssertionError(f"no call {j} in this lane")
+
+
+def _no_done(j: int, out: Outcome) -> None:
+    raise AssertionError(f"no call {j} in this lane")
 
 
 _UNTIMED: list[Any] = [None]

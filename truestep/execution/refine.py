@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -32,6 +33,9 @@ import pandas as pd
 from truestep.cases.case import Case
 from truestep.measures.declared import declared_order_pairs
 from truestep.measures.metrics import RISING, fit_order, local_orders, round_off_floor
+
+if TYPE_CHECKING:
+    from truestep.execution.isolation import Lanes
 
 MAX_HALVINGS = 4
 """The most finer steps a method short of its declared order is run at: the finest step
@@ -125,10 +129,12 @@ def refine(
     *,
     quick: bool,
     say: Callable[[str], None] | None = None,
+    lanes: Lanes | None = None,
 ) -> tuple[pd.DataFrame, list[Refinement]]:
     """``results`` with rows at finer steps for every method :func:`short_of_order` names
     (each after its own rows), and those methods; a ``--quick`` run is returned as it is
-    (its sweep is short by design, and its gates know it)."""
+    (its sweep is short by design, and its gates know it). The runs go through ``lanes``
+    where it is given (:func:`~truestep.execution.runner.run_sweep`)."""
     from truestep.execution.runner import Timing, run_sweep, tidy
     from truestep.execution.sweep_job import host_name
 
@@ -149,13 +155,8 @@ def refine(
                     f"refining {r.case} {r.engine}/{r.method}: order {_order(case, r.engine, rows):.3g} "
                     f"so far, declared {r.declared:g}; running dt {dt:.4g}"
                 )
-            new = tidy(
-                [
-                    {**row, "host": here}
-                    for row in run_sweep(case, r.engine, r.method, [dt], adaptive=False, timing=Timing())
-                ],
-                cases,
-            )
+            swept = run_sweep(case, r.engine, r.method, [dt], adaptive=False, timing=Timing(), lanes=lanes)
+            new = tidy([{**row, "host": here} for row in swept], cases)
             added.append(dt)
             parts.append(new)
             rows = pd.concat([rows, new], ignore_index=True)

@@ -7,7 +7,7 @@ import os
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,7 +18,7 @@ from truestep.adapters import PluginFailed, adapter_class, get_adapter, plugin_a
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
-from truestep.execution.isolation import Backlog, Call, Outcome, run_isolated, run_lanes, untimed_workers
+from truestep.execution.isolation import Call, Lanes, Outcome, run_isolated, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.time_limit import TimeLimitExceeded, time_limit
@@ -339,15 +339,23 @@ def run_sweep(
     adaptive: bool,
     timing: Timing,
     traces: dict | None = None,
+    lanes: Lanes | None = None,
 ) -> list[dict]:
     """The rows of one case, engine and method over its sweep.
 
-    The sweep runs in one child process (see :func:`simulate_sweep`); if that process
-    dies or runs out of time (``timeout_s`` per step), every step is run again in a
-    process of its own, so that the row of the step that crashed or hung says so and the
-    others are measured.
+    The sweep runs in one child process (see :func:`simulate_sweep`; in the timed lane of
+    ``lanes`` where it is given); if that process dies or runs out of time (``timeout_s``
+    per step), every step is run again in a process of its own, so that the row of the step
+    that crashed or hung says so and the others are measured.
     """
-    outcome = run_isolated(*sweep_call(case, engine, method, dts, timing))
+    if lanes is None:
+        outcome = run_isolated(*sweep_call(case, engine, method, dts, timing))
+    else:
+        got: list[Outcome] = []
+        lane = ([0], []) if timing.timed and makes_speed_claim(get_adapter(engine)) else ([], [0])
+        made = sweep_call(case, engine, method, dts, timing)
+        lanes.run(*lane, lambda _: made, lambda _, out: got.append(out))
+        (outcome,) = got
     return sweep_rows(outcome, case, engine, method, dts, adaptive=adaptive, timing=timing, traces=traces)
 
 
@@ -496,7 +504,7 @@ def run_matrix(
     traces: dict | None = None,
     journal: Journal | None = None,
     cluster: Cluster | None = None,
-    alongside: Sequence[Backlog] = (),
+    lanes: Lanes | None = None,
 ) -> pd.DataFrame:
     """Run every (case, engine, method, dt) and return the tidy results table.
 
@@ -508,10 +516,9 @@ def run_matrix(
     row's line to ``progress`` when it is given. With a ``journal``
     (:class:`truestep.execution.journal.Journal`), each finished sweep is checkpointed there, and a
     sweep it already holds is taken from it instead of being run again. Every row
-    records the ``host`` it ran on. The untimed calls of ``alongside`` (:class:`Backlog`:
-    the analyses' searches and drops, which do not read the sweep) run on this machine's
-    cores after the sweep's own untimed runs, beside its timed ones, and are handed to
-    their ``done`` (not with a ``cluster``: its caller runs them there).
+    records the ``host`` it ran on. The sweeps run here go through ``lanes`` where it is
+    given (:class:`~truestep.execution.isolation.Lanes`, whose backlog, the analyses'
+    searches and drops, fills the cores the sweep's own runs leave).
     """
     timing = timing or (QUICK_TIMING if quick else Timing())
     preload()
@@ -579,8 +586,8 @@ def run_matrix(
                 continue
             local.append((k, dts, adaptive))
         spent: dict[str, float] = {}
-        if local or alongside:
-            _run_here(planned, local, timing, traces is not None, finished, spent, alongside)
+        if local:
+            _run_here(planned, local, timing, traces is not None, finished, spent, lanes)
         if jobs and cluster is not None:
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
@@ -599,16 +606,16 @@ def _run_here(
     keep_traces: bool,
     finished: Callable[[int, list[dict], dict], None],
     spent: dict[str, float],
-    alongside: Sequence[Backlog] = (),
+    lanes: Lanes | None = None,
 ) -> None:
     """The sweeps ``local`` (planned index, steps, adaptive) on this machine
-    (:func:`~truestep.execution.isolation.run_lanes`): the timed runs of engines that make a
+    (:meth:`~truestep.execution.isolation.Lanes.run`): the timed runs of engines that make a
     speed claim one sweep at a time on a core of their own; everything untimed on the
     cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
     and the measured runs of a split sweep (:func:`split_sweep`). Each finished sweep's
     rows go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
-    processes, from a process's start (its ``prepare`` included) to its outcome. The calls
-    of ``alongside`` follow the sweep's untimed runs in the untimed lane."""
+    processes, from a process's start (its ``prepare`` included) to its outcome. Through
+    ``lanes`` where it is given (its backlog follows the sweep's untimed runs)."""
     here = host_name()
     timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
     halves = [
@@ -619,12 +626,7 @@ def _run_here(
     began: dict[int, float] = {}
     waiting: dict[int, dict[str, Outcome]] = {}
 
-    extra = [(b, k) for b in alongside for k in range(len(b))]
-
     def call(i: int) -> Call:
-        if i >= len(halves):
-            backlog, k = extra[i - len(halves)]
-            return backlog.call(k)
         j, part = halves[i]
         k, dts, _ = local[j]
         case, engine, method, _ = planned[k]
@@ -632,10 +634,6 @@ def _run_here(
         return sweep_call(case, engine, method, dts, timings[j], part)
 
     def done(i: int, outcome: Outcome) -> None:
-        if i >= len(halves):
-            backlog, k = extra[i - len(halves)]
-            backlog.done(k, outcome)
-            return
         j, part = halves[i]
         k, dts, adaptive = local[j]
         case, engine, method, _ = planned[k]
@@ -662,8 +660,11 @@ def _run_here(
 
     timed = [i for i, (j, part) in enumerate(halves) if timings[j].timed and part != "measured"]
     untimed = [i for i, (j, part) in enumerate(halves) if not timings[j].timed or part == "measured"]
-    untimed += range(len(halves), len(halves) + len(extra))
-    run_lanes(timed, untimed, call, done, cores=untimed_workers())
+    if lanes is not None:
+        lanes.run(timed, untimed, call, done)
+        return
+    with Lanes(untimed_workers()) as own:
+        own.run(timed, untimed, call, done)
 
 
 def case_source(case: Case, lib: dict | None = None) -> str:
