@@ -73,9 +73,14 @@ def run_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture
 def copy(run_dir, tmp_path):
-    """A copy of the run's tables, to alter: returns (dir, results)."""
+    """A copy of the run's tables, to alter into another run's: returns (dir, results). Its
+    ``run.json`` keeps no row counts (those of the run copied would refuse the altered
+    tables as cut short or changed, :func:`truestep.tables.io.check_recorded_rows`)."""
     dest = tmp_path / "copy"
     shutil.copytree(run_dir, dest, ignore=shutil.ignore_patterns("figures", "index.*"))
+    record = json.loads((dest / "run.json").read_text())
+    record.pop("rows", None)
+    (dest / "run.json").write_text(json.dumps(record))
     return dest, pd.read_csv(dest / "results.csv")
 
 

@@ -214,3 +214,30 @@ def test_a_table_cut_short_is_refused(tmp_path, capsys):
     assert main(["gate", "--results", str(cut), "-q"]) == 2
     err = capsys.readouterr().err
     assert "truncated: its last line has no end" in err and "Traceback" not in err
+
+
+def test_a_table_cut_at_the_end_of_a_row_is_refused_by_its_recorded_row_count(tmp_path, capsys):
+    """A results table cut just after a newline reads as a table of fewer runs; the run
+    records each table's row count in ``run.json``, so ``gate`` (on the run, and on it as
+    a baseline) and :func:`truestep.compare` refuse it: exit 2, one line naming both
+    counts. The run's own tables pass."""
+    import truestep
+    from truestep.tables.io import TableError
+
+    out = tmp_path / "run"
+    truestep.run(["free-fall", "bouncing-ball"], ["reference"], quick=True, out=out, progress=lambda _: None)
+    assert main(["gate", "--results", str(out / "results.csv"), "-q"]) == 0
+    whole = (out / "results.csv").read_bytes()
+    rows = whole.count(b"\n") - 1
+    cut = whole[: [k for k, b in enumerate(whole) if b == ord("\n")][rows // 2] + 1]
+    (out / "results.csv").write_bytes(cut)
+    capsys.readouterr()
+    for argv in (
+        ["--results", str(out / "results.csv")],
+        ["--results", str(out / "results.csv"), "--baseline", str(out)],
+    ):
+        assert main(["gate", *argv, "-q"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"{rows // 2} rows, but the run that wrote it recorded {rows}" in err[0]
+    with pytest.raises(TableError, match="cut short or changed since"):
+        truestep.compare(out, out)

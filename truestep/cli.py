@@ -249,11 +249,16 @@ def _run_tables(results_path: Path) -> dict[str, pd.DataFrame | None]:
     if not os.path.lexists(results_path):
         raise UsageError(f"{results_path}: no such file (run `truestep run` first)")
     tables = {"results": _read_csv(results_path, RESULTS_NEEDS, "results")}
-    from truestep.tables.io import REQUIRED
+    from truestep.tables.io import REQUIRED, TableError, check_recorded_rows
 
     for name in ("stability", "restitution"):
         path = results_path.parent / f"{name}.csv"
         tables[name] = _read_csv(path, set(REQUIRED[name]), name) if os.path.lexists(path) else None
+    if results_path.name == "results.csv":  # a run's own table, beside its record
+        try:
+            check_recorded_rows(results_path.parent, tables)
+        except TableError as err:
+            raise UsageError(str(err)) from None
     return tables
 
 

@@ -385,6 +385,7 @@ def run_record(
     quick: bool,
     argv: list[str],
     seconds: dict[str, float] | None = None,
+    rows: dict[str, int] | None = None,
 ) -> dict:
     """``run.json``: the truestep version and revision, the command, whether it was quick,
     the cases and engines the run was asked for (in order), the floating-point
@@ -399,7 +400,9 @@ def run_record(
     first search or drop's start to the last one's end, which overlap ``sweep`` where they
     run beside its timed runs, and ``analyses scaling``; the report's own time is not in
     it, it is being written); ``refined``, the methods whose sweeps were carried on to finer steps
-    because their order was not reached yet (:mod:`truestep.execution.refine`)."""
+    because their order was not reached yet (:mod:`truestep.execution.refine`); ``rows``,
+    the row count of each table written (:func:`truestep.tables.io.check_recorded_rows`:
+    a table cut short at the end of a row is refused)."""
     from truestep import __version__
     from truestep.adapters import shadowed
     from truestep.measures.metrics import precision_of
@@ -419,6 +422,7 @@ def run_record(
         **({"shadowed": shadowed()} if shadowed() else {}),
         **({"refined": list(results.attrs["refined"])} if results.attrs.get("refined") else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
+        **({"rows": dict(rows)} if rows else {}),
     }
 
 
@@ -497,9 +501,11 @@ def write_report(
             scaling.to_csv(stage / "scaling.csv", index=False, columns=SCALING_COLUMNS)
         import json
 
-        (stage / RUN_FILE).write_text(
-            json.dumps(run_record(cases, results, quick=quick, argv=argv, seconds=seconds), indent=1) + "\n"
-        )
+        written = {"results": len(results), **{n: len(tables[n]) for n in ("stability", "restitution")}}
+        if scaling is not None and len(scaling):
+            written["scaling"] = len(scaling)
+        record = run_record(cases, results, quick=quick, argv=argv, seconds=seconds, rows=written)
+        (stage / RUN_FILE).write_text(json.dumps(record, indent=1) + "\n")
         findings = findings if findings is not None else find(cases, results, tables)
         scorecard_table(findings.scorecard, findings.fidelity).to_csv(stage / "scorecard.csv", index=False)
         faults.point("report-csv")

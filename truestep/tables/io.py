@@ -287,11 +287,49 @@ NOT_MEASURED = frozenset({"dt", "nfev", "steps", "wall_s", "wall_s_spread", "rep
 """Numeric columns of a results table that describe a run rather than measure it."""
 
 
+RUN_RECORD = "run.json"
+"""The run's record beside its tables, whose ``rows`` (where it has them) are the row
+count of each table the run wrote."""
+
+
+def recorded_rows(directory: Path) -> dict[str, int]:
+    """The row count of each table, as the run that wrote ``directory`` recorded it (the
+    ``rows`` of its ``run.json``); empty where it records none (no record, a record of an
+    older truestep, or one that cannot be read: its own readers say why)."""
+    import json
+
+    from truestep.cases.files import read_regular
+
+    path = Path(directory) / RUN_RECORD
+    try:
+        record = json.loads(read_regular(path, 1 << 20).decode("utf-8"))
+    except (OSError, ValueError):
+        return {}
+    rows = record.get("rows") if isinstance(record, dict) else None
+    if not isinstance(rows, dict):
+        return {}
+    return {str(k): v for k, v in rows.items() if isinstance(v, int) and not isinstance(v, bool)}
+
+
+def check_recorded_rows(directory: Path, tables: dict[str, pd.DataFrame | None]) -> None:
+    """Refuse (:class:`TableError`) a table of ``directory`` whose rows are not as many as
+    its run recorded (:func:`recorded_rows`): one cut short at the end of a row, or changed
+    after the run, reads as a table of fewer runs and nothing else would tell."""
+    counts = recorded_rows(directory)
+    for name, table in tables.items():
+        want = counts.get(name)
+        if table is not None and want is not None and len(table) != want:
+            raise TableError(
+                f"{Path(directory) / f'{name}.csv'}: {len(table)} rows, but the run that wrote it "
+                f"recorded {want} ({RUN_RECORD}): the table was cut short or changed since"
+            )
+
+
 def read_run_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
     """``results`` (required) and ``stability``, ``restitution`` (``None`` when absent) of a
-    run's output directory, each read strictly (:func:`read_table`); raises
-    :class:`TableError` for a directory that is not one, a missing results table or any
-    malformed table."""
+    run's output directory, each read strictly (:func:`read_table`) and as many rows as the
+    run recorded (:func:`check_recorded_rows`); raises :class:`TableError` for a directory
+    that is not one, a missing results table or any malformed table."""
     directory = Path(directory)
     if not directory.is_dir():
         raise TableError(f"{directory}: not a directory of a run's tables")
@@ -304,4 +342,5 @@ def read_run_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
     for name in ("stability", "restitution"):
         path = directory / f"{name}.csv"
         out[name] = read_table(path, name, set(REQUIRED[name]), rows=False) if os.path.lexists(path) else None
+    check_recorded_rows(directory, out)
     return out
