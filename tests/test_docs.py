@@ -121,6 +121,17 @@ def test_every_case_file_key_the_loader_reads_is_documented():
     assert not missing, f"keys the loader reads that guides/case-files.md never names: {missing}"
 
 
+def test_every_property_is_listed_on_the_case_file_page():
+    """The Properties table of the case-file page names every property a case may ask for
+    (:data:`truestep.measures.properties.PROPERTIES`), and nothing else."""
+    from truestep.measures.properties import PROPERTIES
+
+    page = (DOCS / "guides" / "case-files.md").read_text()
+    section = page.split("## Properties", 1)[1].split("\n## ", 1)[0]
+    listed = set(re.findall(r"^\| `([a-z_]+)` \|", section, flags=re.M))
+    assert listed == set(PROPERTIES)
+
+
 def test_every_public_name_and_engine_has_its_page():
     api = (DOCS / "reference" / "api.md").read_text()
     missing = [n for n in truestep.__all__ if not n.startswith("_") and f"- {n}\n" not in api]
