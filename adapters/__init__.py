@@ -213,13 +213,38 @@ def _check_methods(name: str, adapter: Any) -> None:
         )
 
 
-def plugin_answer(engine: str, what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+ANSWER_S = 30.0
+"""Seconds an adapter has to answer a question truestep asks it in its own process
+(``missing``, ``duplicate``, ``skip``, ``same_steps``: each reads a scene and answers at
+once)."""
+PREPARE_ALL_S = 1800.0
+"""Seconds an adapter's ``prepare_all`` has to compile what a run needs (a cold cache
+compiles for minutes)."""
+
+
+def plugin_answer(
+    engine: str,
+    what: str,
+    fn: Callable[..., Any],
+    *args: Any,
+    limit_s: float | None = None,
+    **kwargs: Any,
+) -> Any:
     """``fn(*args, **kwargs)``, a call truestep makes to an adapter in its own process
-    (``missing``, ``duplicate``, ``skip``, ``prepare_all``): an exception it raises
-    (``SystemExit`` too) becomes :class:`PluginFailed`, whose text names the engine and
-    the call ``what``."""
+    (``missing``, ``duplicate``, ``skip``, ``same_steps``, ``prepare_all``): an exception
+    it raises (``SystemExit`` too), or a call still running after ``limit_s`` seconds
+    (default :data:`ANSWER_S`), becomes :class:`PluginFailed`, whose text names the
+    engine and the call ``what``. The limit interrupts Python code and numpy between its
+    C loops (:func:`truestep.execution.time_limit.time_limit`); compiled code that never
+    returns to Python is not interrupted."""
+    from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+
+    limit_s = ANSWER_S if limit_s is None else limit_s
     try:
-        return fn(*args, **kwargs)
+        with time_limit(limit_s, f"{engine}: {what}"):
+            return fn(*args, **kwargs)
+    except TimeLimitExceeded:
+        raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s") from None
     except (Exception, SystemExit) as err:
         raise PluginFailed(f"{engine}: {what} raised {type(err).__name__}: {str(err)[:300]}") from None
 

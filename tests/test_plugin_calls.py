@@ -28,6 +28,18 @@ class MissingRaises(ReferenceAdapter):
         raise RuntimeError("missing() broke")
 
 
+class MissingHangs(ReferenceAdapter):
+    name = "missing-hangs-test"
+    methods = ("rk4",)
+    adaptive_methods = ()
+
+    def missing(self, case, method):
+        import time
+
+        time.sleep(3600)  # a licence server that never answers
+        return frozenset()
+
+
 class PrepareAllRaises(ReferenceAdapter):
     name = "prepare-all-raises-test"
     methods = ("rk4",)
@@ -71,6 +83,19 @@ def test_a_missing_that_raises_makes_its_rows_crashed_and_the_run_goes_on(tmp_pa
     stability = pd.read_csv(tmp_path / "rep" / "stability.csv")
     searched = stability[stability.engine == "missing-raises-test"]
     assert len(searched) == 2 and set(searched.status) == {"crashed"}
+
+
+def test_a_missing_that_never_answers_makes_its_rows_crashed_within_the_limit(tmp_path, monkeypatch):
+    """A question truestep asks an adapter in its own process has a time limit
+    (:data:`truestep.adapters.ANSWER_S`, 1 s here): a ``missing()`` that never answers
+    makes its rows ``crashed``, saying so, and the run goes on (issue 37, item 7)."""
+    monkeypatch.setattr(adapters, "ANSWER_S", 1.0)
+    assert _run(tmp_path, "test_plugin_calls:MissingHangs,reference") == 0
+    results = pd.read_csv(tmp_path / "rep" / "results.csv")
+    mine = results[results.engine == "missing-hangs-test"]
+    assert len(mine) >= 1 and set(mine.status) == {"crashed"}
+    assert set(mine.message) == {"missing-hangs-test: missing() gave no answer within 1 s"}
+    assert (results[results.engine == "reference"].status == "ok").all()
 
 
 def test_a_prepare_all_that_raises_is_a_line_and_the_runs_prepare_themselves(tmp_path, capsys):

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import PluginFailed, adapter_class, get_adapter, plugin_answer
+from truestep.adapters import PREPARE_ALL_S, PluginFailed, adapter_class, get_adapter, plugin_answer
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
@@ -432,6 +432,7 @@ def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
                 ahead,
                 wanted,
                 workers=workers or len(os.sched_getaffinity(0)),
+                limit_s=PREPARE_ALL_S,
             )
         except PluginFailed as err:
             print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)
