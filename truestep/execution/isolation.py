@@ -38,7 +38,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import Any, Protocol
@@ -414,30 +414,30 @@ class Lanes:
         def own_left() -> bool:
             return bool(timed_left or untimed_left or any(c.own for c in self._running.values()))
 
-        try:
+        with self._closed_on_error():
             while own_left() or any(c.own for c, _ in self._held):
                 self._step(timed_left, untimed_left, call, done)
             self._deliver()
-        except BaseException:
-            self.close()
-            raise
 
     def finish(self) -> None:
         """Run the rest of the backlog on every core; return once it is all done."""
-        try:
+        with self._closed_on_error():
             while self._backlog or self._running or self._held:
                 self._step([], [], _no_call, _no_done)
-        except BaseException:
-            self.close()
-            raise
 
     def free_core(self) -> None:
         """Wait (collecting what ends, starting nothing) until at most ``cores - 1``
         children run: a core for a timed run made outside the lanes."""
-        try:
+        with self._closed_on_error():
             while len(self._running) > self.cores - 1:
                 self._collect(timed_busy=False)
             self._deliver()
+
+    @contextlib.contextmanager
+    def _closed_on_error(self) -> Iterator[None]:
+        """End every child if the block raises (an interruption, a ``done`` that fails)."""
+        try:
+            yield
         except BaseException:
             self.close()
             raise
