@@ -220,6 +220,9 @@ once)."""
 PREPARE_ALL_S = 1800.0
 """Seconds an adapter's ``prepare_all`` has to compile what a run needs (a cold cache
 compiles for minutes)."""
+PREPARE_S = 600.0
+"""Seconds an adapter's ``prepare(case, method)`` has to compile or load what one scene and
+method need (a cold cache compiles a scene's kernels in about a minute)."""
 
 
 def plugin_answer(
@@ -231,7 +234,7 @@ def plugin_answer(
     **kwargs: Any,
 ) -> Any:
     """``fn(*args, **kwargs)``, a call truestep makes to an adapter in its own process
-    (``missing``, ``duplicate``, ``skip``, ``same_steps``, ``prepare_all``): an exception
+    (``missing``, ``duplicate``, ``skip``, ``same_steps``, ``prepare``, ``prepare_all``): an exception
     it raises (``SystemExit`` too), or a call still running after ``limit_s`` seconds
     (default :data:`ANSWER_S`), becomes :class:`PluginFailed`, whose text names the
     engine and the call ``what``. The limit interrupts Python code and numpy between its

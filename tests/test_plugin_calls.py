@@ -40,6 +40,19 @@ class MissingHangs(ReferenceAdapter):
         return frozenset()
 
 
+class PrepareHangs(ReferenceAdapter):
+    name = "prepare-hangs-test"
+    methods = ("rk4", "euler")
+    adaptive_methods = ()
+    asked: list[tuple[str, str]] = []  # noqa: RUF012 (the calls made in this process)
+
+    def prepare(self, case, method):
+        import time
+
+        PrepareHangs.asked.append((case.name, method))
+        time.sleep(3600)  # a kernel cache on a network disk that never answers
+
+
 class PrepareAllRaises(ReferenceAdapter):
     name = "prepare-all-raises-test"
     methods = ("rk4",)
@@ -96,6 +109,22 @@ def test_a_missing_that_never_answers_makes_its_rows_crashed_within_the_limit(tm
     assert len(mine) >= 1 and set(mine.status) == {"crashed"}
     assert set(mine.message) == {"missing-hangs-test: missing() gave no answer within 1 s"}
     assert (results[results.engine == "reference"].status == "ok").all()
+
+
+def test_a_prepare_that_never_answers_holds_up_nothing_past_its_limit(tmp_path, monkeypatch):
+    """``prepare(case, method)``, which truestep calls in its own process before it forks
+    a sweep's or a search's runs, has a time limit too (:data:`truestep.adapters.PREPARE_S`,
+    1 s here): one that never answers is let go, and the runs, which prepare what they need
+    in their own processes, give their rows and searches (issue 37)."""
+    from truestep.execution import runner
+
+    monkeypatch.setattr(runner, "PREPARE_S", 1.0)
+    assert _run(tmp_path, "test_plugin_calls:PrepareHangs", "harmonic-oscillator") == 0
+    results = pd.read_csv(tmp_path / "rep" / "results.csv")
+    assert len(results) > 0 and (results.status == "ok").all()
+    stability = pd.read_csv(tmp_path / "rep" / "stability.csv")
+    assert len(stability) == 2 and set(stability.status) == {"ok"}
+    assert set(PrepareHangs.asked) == {("harmonic-oscillator", "rk4"), ("harmonic-oscillator", "euler")}
 
 
 def test_a_prepare_all_that_raises_is_a_line_and_the_runs_prepare_themselves(tmp_path, capsys):

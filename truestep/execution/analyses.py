@@ -3,11 +3,10 @@ cost grows with the number of particles."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -20,7 +19,7 @@ from truestep.cases.loader import CASE_DIR, load_case
 from truestep.execution import faults
 from truestep.execution.isolation import Call, Lanes, Outcome, run_untimed, untimed_workers
 from truestep.execution.progress import Progress
-from truestep.execution.runner import duplicate_of, preload
+from truestep.execution.runner import duplicate_of, preload, prepare_here
 from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
 from truestep.measures.stability import SearchTimeout, search_case
 from truestep.numerics import own_run
@@ -65,7 +64,11 @@ class UntimedPart:
     sweep's timed runs leave, :func:`truestep.execution.runner.run_matrix`'s ``alongside``),
     each handed back to :meth:`done`, and :meth:`table` once all are. Its progress bar
     (:class:`Progress`; ``progress`` takes the lines instead) starts with its first call;
-    :attr:`seconds` is the wall time from that start to the last call's end."""
+    :attr:`seconds` is the wall time from that start to the last call's end.
+
+    ``prepares[k]`` is the (engine, case, method) whose adapter ``prepare`` the ``k``-th
+    call needs (:func:`prepare_before_fork`): made just before its fork, once for each, so
+    that planning holds up nothing (beside a sweep, the sweep has made most of them)."""
 
     def __init__(
         self,
@@ -74,9 +77,12 @@ class UntimedPart:
         on_done: Callable[[int, Outcome, Progress], None],
         make_table: Callable[[], pd.DataFrame],
         progress: Callable[[str], None] | None,
+        prepares: Sequence[tuple[str, Case, str]] = (),
     ) -> None:
         self.kind, self.calls = kind, calls
         self._on_done, self._make_table, self._progress = on_done, make_table, progress
+        self._prepares = prepares
+        self._prepared: set[tuple[str, str, str]] = set()
         self._bar: Progress | None = None
         self._first: float | None = None
         self._last: float | None = None
@@ -85,10 +91,12 @@ class UntimedPart:
         return len(self.calls)
 
     def call(self, k: int) -> Call:
-        """The ``k``-th call, just before it starts."""
+        """The ``k``-th call, just before it starts (its adapter prepared)."""
         if self._bar is None:
             self._bar = Progress(len(self.calls), self.kind, say=self._progress)
             self._first = self._bar.start
+        if self._prepares:
+            prepare_before_fork([self._prepares[k]], self._prepared)
         return self.calls[k]
 
     def done(self, k: int, out: Outcome) -> None:
@@ -214,11 +222,12 @@ def stability_part(
             row["note"] = "; ".join(n for n in (words, searched_row.get("note")) if isinstance(n, str) and n)
         return STABILITY.frame(rows)
 
-    prepare_before_fork((engine, case, method) for _, (engine, case, method, *_), _t in calls)
     order = sorted(
         range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
     )
-    return UntimedPart("stability", [calls[k] for k in order], done, table, progress)
+    planned = [calls[k] for k in order]
+    prepares = [(engine, case, method) for _, (engine, case, method, *_), _t in planned]
+    return UntimedPart("stability", planned, done, table, progress, prepares)
 
 
 def _twin_searched(
@@ -240,20 +249,19 @@ def _twin_searched(
     return str(twin[0]), str(twin[1])
 
 
-def prepare_before_fork(runs: Iterable[tuple[str, Case, str]]) -> None:
+def prepare_before_fork(
+    runs: Iterable[tuple[str, Case, str]], seen: set[tuple[str, str, str]] | None = None
+) -> None:
     """Each adapter's optional ``prepare(case, method)`` (compile, load kernels), called
     here once per engine, scene and method before the processes that run them are forked,
     so that each process finds them ready instead of paying for them again. A prepare that
-    fails is left for the run itself to report."""
-    seen: set[tuple[str, str, str]] = set()
+    fails is left for the run itself to report. ``seen`` holds the (engine, case name,
+    method) already prepared, and receives these."""
+    seen = set() if seen is None else seen
     for engine, case, method in runs:
-        if (engine, case.name, method) in seen:
-            continue
-        seen.add((engine, case.name, method))
-        prepare = getattr(get_adapter(engine), "prepare", None)
-        if prepare is not None:
-            with contextlib.suppress(Exception):
-                prepare(case, method)
+        if (engine, case.name, method) not in seen:
+            seen.add((engine, case.name, method))
+            prepare_here(engine, case, method)
 
 
 def _exact_words(limit: object) -> str:
@@ -496,10 +504,15 @@ def restitution_part(
                 }
             )
 
-    first = {(engine, method): (e, dt) for _, engine, method, e, dt in reversed(slots)}
-    prepare_before_fork((engine, bounce_case(*first[engine, method]), method) for engine, method in first)
+    first = {(engine, method): bounce_case(e, dt) for _, engine, method, e, dt in reversed(slots)}
+    prepares = [(engine, first[engine, method], method) for _, engine, method, _e, _dt in slots]
     return UntimedPart(
-        "restitution", calls, done, lambda: RESTITUTION.frame([r for g in groups for r in g]), progress
+        "restitution",
+        calls,
+        done,
+        lambda: RESTITUTION.frame([r for g in groups for r in g]),
+        progress,
+        prepares,
     )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import sys
@@ -14,7 +15,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import PREPARE_ALL_S, PluginFailed, adapter_class, get_adapter, plugin_answer
+from truestep.adapters import (
+    PREPARE_ALL_S,
+    PREPARE_S,
+    PluginFailed,
+    adapter_class,
+    get_adapter,
+    plugin_answer,
+)
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.execution import faults
@@ -365,14 +373,21 @@ def sweep_call(
     """The isolated call of one sweep (:func:`simulate_sweep`, its ``part``), after the adapter's
     optional ``prepare(case, method)`` here, before the fork (compiling, loading kernels:
     every run of the sweep finds it ready)."""
-    prepare = getattr(get_adapter(engine), "prepare", None)
-    if prepare is not None:
-        try:
-            prepare(case, method)
-        except (Exception, SystemExit):  # the sweep's own process fails alike, and its rows say why
-            pass
+    prepare_here(engine, case, method)
     limit = SWEEP_SLACK * case.timeout_s * len(dts) + 10.0
     return simulate_sweep, (engine, case, method, dts, timing, part), limit
+
+
+def prepare_here(engine: str, case: Case, method: str) -> None:
+    """The adapter's optional ``prepare(case, method)`` (compile, load kernels), here in
+    truestep's own process before it forks the runs that need it, within
+    :data:`~truestep.adapters.PREPARE_S` seconds (:func:`~truestep.adapters.plugin_answer`).
+    A prepare that raises or gives no answer is let go: the runs then prepare in their own
+    processes, which fail or run out of time alike, and their rows say why."""
+    prepare = getattr(get_adapter(engine), "prepare", None)
+    if prepare is not None:
+        with contextlib.suppress(PluginFailed):
+            plugin_answer(engine, "prepare()", prepare, case, method, limit_s=PREPARE_S)
 
 
 def sweep_rows(
