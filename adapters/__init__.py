@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import importlib
 import os
 import signal
 import sys
@@ -132,14 +131,23 @@ def _import_guarded(engine: str, module: str) -> ModuleType:
     standard error (standard output is truestep's: tables, ``list``), and the working
     directory and the handlers of :data:`GUARDED_SIGNALS` are put back as they were (a
     module that ignores SIGTERM would make the run impossible to stop). A module that
-    calls ``sys.exit`` while it loads is an :class:`UnknownEngine` that says so."""
+    calls ``sys.exit`` while it loads, or does not load within
+    :data:`~truestep.cases.plugins.IMPORT_S` seconds, is an :class:`UnknownEngine` that
+    says so."""
+    from truestep.cases.plugins import IMPORT_S, import_within
+    from truestep.execution.time_limit import TimeLimitExceeded
+
     cwd = os.getcwd()
     handlers = {s: signal.getsignal(s) for s in GUARDED_SIGNALS}
     try:
         with contextlib.redirect_stdout(sys.stderr):
-            return importlib.import_module(module)
+            return import_within(module, f"importing {module}")
     except SystemExit as err:
         raise UnknownEngine(f"engine {engine!r}: importing {module} called sys.exit({err.code!r})") from None
+    except TimeLimitExceeded:
+        raise UnknownEngine(
+            f"engine {engine!r}: importing {module} gave no answer within {IMPORT_S:g} s"
+        ) from None
     finally:
         with contextlib.suppress(OSError):
             os.chdir(cwd)

@@ -39,8 +39,23 @@ BUILTIN_SYSTEMS: dict[str, type[System]] = {
 """The lecture's ODE systems: ``[ode] system`` name -> class."""
 
 
+IMPORT_S = 300.0
+"""Seconds an installed package's module has to import, and a case library's callable to
+name its directory (code truestep did not write: a licence check or a network disk that
+never answers ends as an error naming the entry, not as a run that never starts)."""
+
+
 class PluginError(ValueError):
     """An entry point that cannot be used; ``str()`` names the group, the entry and why."""
+
+
+def import_within(module: str, what: str) -> ModuleType:
+    """``importlib.import_module(module)`` within :data:`IMPORT_S` seconds (a
+    :class:`~truestep.execution.time_limit.TimeLimitExceeded` past it, naming ``what``)."""
+    from truestep.execution.time_limit import time_limit
+
+    with time_limit(IMPORT_S, what):
+        return importlib.import_module(module)
 
 
 @functools.cache
@@ -49,25 +64,49 @@ def _group(group: str) -> dict[str, str]:
 
 
 def _load(group: str, name: str, value: str) -> Any:
+    from truestep.execution.time_limit import TimeLimitExceeded
+
     module, _, attr = value.partition(":")
     try:
-        obj: Any = importlib.import_module(module)
+        obj: Any = import_within(module, f"importing {module}")
         for part in filter(None, attr.split(".")):
             obj = getattr(obj, part)
-    except Exception as err:  # a broken plugin is a clear error, not a traceback
+    except TimeLimitExceeded:
+        raise PluginError(
+            f"entry point {group} {name} = {value!r}: importing {module} gave no answer within {IMPORT_S:g} s"
+        ) from None
+    except (Exception, SystemExit) as err:  # a broken plugin is a clear error, not a traceback
         raise PluginError(f"entry point {group} {name} = {value!r}: {type(err).__name__}: {err}") from None
     return obj
+
+
+def _directory_of(name: str, value: str, obj: Any) -> Any:
+    """The directory a case library's entry point names: a module's own, or what the
+    attribute is or (a callable) returns, within :data:`IMPORT_S` seconds."""
+    from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+
+    if isinstance(obj, ModuleType):
+        return Path(obj.__file__).parent if obj.__file__ else None
+    if not callable(obj):
+        return obj
+    try:
+        with time_limit(IMPORT_S, f"{value}()"):
+            return obj()
+    except TimeLimitExceeded:
+        raise PluginError(
+            f"entry point {CASES_GROUP} {name} = {value!r}: calling it gave no answer within {IMPORT_S:g} s"
+        ) from None
+    except (Exception, SystemExit) as err:
+        raise PluginError(
+            f"entry point {CASES_GROUP} {name} = {value!r}: calling it raised {type(err).__name__}: {err}"
+        ) from None
 
 
 def case_directories() -> list[tuple[str, Path]]:
     """(entry-point name, directory) of every installed case library, truestep's first."""
     dirs = [("truestep", CASE_DIR)]
     for name, value in sorted(_group(CASES_GROUP).items()):
-        obj = _load(CASES_GROUP, name, value)
-        if isinstance(obj, ModuleType):
-            where = Path(obj.__file__).parent if obj.__file__ else None
-        else:
-            where = obj() if callable(obj) else obj
+        where = _directory_of(name, value, _load(CASES_GROUP, name, value))
         if not isinstance(where, str | Path) or not Path(where).is_dir():
             raise PluginError(f"entry point {CASES_GROUP} {name} = {value!r}: {where!r} is not a directory")
         if not any(Path(where).glob("*.toml")):

@@ -197,3 +197,26 @@ def test_a_value_no_table_holds_makes_the_row_crashed_naming_it():
     assert row["status"] == "crashed" and np.isnan(row["error"]) and np.isnan(row["nfev"])
     assert "error = -1e+300" in row["message"] and "nfev = -3" in row["message"]
     assert row["energy_drift"] == 0.1
+
+
+def test_a_plugin_module_or_case_library_that_never_answers_is_one_line(tmp_path, monkeypatch, capsys):
+    """Importing an installed package's module (an adapter, a case library) and calling a
+    case library's callable have a time limit (:data:`truestep.cases.plugins.IMPORT_S`,
+    1 s here): one that never answers is an error naming it, exit 2 and no traceback, not
+    a run that never starts (issue 37)."""
+    from truestep.cases import plugins
+
+    monkeypatch.setattr(plugins, "IMPORT_S", 1.0)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "hangs_at_import.py").write_text("import time\ntime.sleep(3600)\n")
+    (tmp_path / "slow_cases.py").write_text("import time\n\ndef where():\n    time.sleep(3600)\n")
+    assert _run(tmp_path, "hangs_at_import:Adapter") == 2
+    err = capsys.readouterr().err
+    assert "importing hangs_at_import gave no answer within 1 s" in err and "Traceback" not in err
+    assert "hangs_at_import" not in __import__("sys").modules
+    groups = {plugins.CASES_GROUP: {"slow": "slow_cases:where"}}
+    monkeypatch.setattr(plugins, "_group", lambda group: groups.get(group, {}))
+    assert main(["list", "--cases", "free-fall"]) == 2
+    err = capsys.readouterr().err
+    assert "entry point truestep.cases slow = 'slow_cases:where': calling it gave no answer within 1 s" in err
+    assert "Traceback" not in err
