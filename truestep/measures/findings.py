@@ -26,6 +26,7 @@ from truestep.measures.picks import (
     speed_claims,
     survival,
 )
+from truestep.measures.reference_floor import ReferenceFloor, reference_floor
 from truestep.measures.restitution import phase_contact
 
 
@@ -67,6 +68,9 @@ class Findings:
     phase_contact: pd.DataFrame = dataclasses.field(default_factory=pd.DataFrame)
     """The restitution sweep's rows whose restitution depends on where in a step the ball
     arrives beyond the band (:func:`truestep.measures.restitution.phase_contact`)."""
+    floors: dict[str, ReferenceFloor] = dataclasses.field(default_factory=dict)
+    """case name -> its reference run's own error, for a case measured against a run
+    (:func:`truestep.measures.reference_floor.reference_floor`)."""
 
 
 Run = tuple[str, str, float, str, float]
@@ -141,6 +145,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         shared_methods={c.name: m for c in cases if (m := shared_error_methods(c, results))},
         costly=costly_rows(results),
         phase_contact=phase_contact(tables.get("restitution")),
+        floors={c.name: f for c in cases if (f := reference_floor(c)) is not None},
     )
 
 

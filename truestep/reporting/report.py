@@ -274,10 +274,7 @@ def render_markdown(
             *case.properties,
         ]
         parts.append(folded(f"{len(shown)} runs of {case.name}", md_table(with_units(shown[cols]))))
-        if case.name in found.conclusions:
-            parts.append(conclusion_sentence(case, found.conclusions[case.name]))
-        if contact := phase_sentence(case, shown, found.phase_contact):
-            parts.append(contact)
+        parts += _case_notes(case, shown, found)
     stab = tables.get("stability")
     parts.append("## Stability limits\n")
     if stab is not None and len(stab):
@@ -335,6 +332,19 @@ def render_markdown(
 
 
 LectureFigures = list[tuple[Path, str]] | Callable[[], list[tuple[Path, str]]] | None
+
+
+def _case_notes(case: Case, shown: pd.DataFrame, found: Findings) -> list[str]:
+    """The sentences under a case's table: its conclusion, its contact's phases, and the
+    error floor of the run it is measured against, where the findings hold them."""
+    notes = []
+    if case.name in found.conclusions:
+        notes.append(conclusion_sentence(case, found.conclusions[case.name]))
+    if contact := phase_sentence(case, shown, found.phase_contact):
+        notes.append(contact)
+    if case.name in found.floors:
+        notes.append(found.floors[case.name].words())
+    return notes
 
 
 def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]:
