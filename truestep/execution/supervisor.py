@@ -23,7 +23,9 @@ The supervisor forks before truestep imports numpy or any engine, so it holds li
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import ctypes
 import os
 import signal
 import sys
@@ -91,7 +93,23 @@ def _work(work: Callable[[], int], write: int, parent: int) -> NoReturn:
         _say_code(write, 1)
         raise
     _say_code(write, code)
-    raise SystemExit(code)  # the worker ends here: only the supervisor returns to the caller
+    _exit_at_once(code)  # the worker ends here: only the supervisor returns to the caller
+
+
+def _exit_at_once(code: int) -> NoReturn:
+    """End the worker as Python would, less the teardown of its objects: the exit
+    handlers run and every buffered stream (Python's and C's) is flushed, then the process
+    exits without freeing what it holds. Freeing a process that holds every engine, their
+    scenes and a run's tables one object at a time took 2.8 s after a quick run had
+    written its report (mypy's ``hard_exit`` does the same for the same reason)."""
+    with contextlib.suppress(Exception):
+        atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    with contextlib.suppress(Exception):  # an engine's C stdio buffers
+        ctypes.CDLL(None).fflush(None)
+    os._exit(code)
 
 
 def _say_code(write: int, code: int) -> None:
