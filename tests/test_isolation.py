@@ -217,29 +217,3 @@ def _at_most_one_at_a_time(a: tuple[float, float], spans: list[tuple[float, floa
     others = [b for b in spans if b is not a and _overlap(a, b)]
     edges = sorted({a[0], *(t for b in others for t in b if a[0] < t < a[1])})
     return all(sum(b[0] <= t < b[1] for b in others) <= 1 for t in edges)
-
-
-def _sum_of(values) -> float:
-    return float(values.sum())
-
-
-def test_memory_backed_by_huge_pages_keeps_every_value_and_forks_as_before(monkeypatch):
-    """Backing the parent's memory with huge pages (before its forks) changes no value, in
-    the parent or in a child forked after it; where the kernel has transparent huge
-    pages (Linux 6.1+, not ``never``) it collapses a 64 MiB array's range."""
-    import numpy as np
-
-    from truestep.execution import isolation, oscalls
-
-    values = np.random.default_rng(7).random(8 << 20)  # 64 MiB, touched
-    before = values.copy()
-    collapsed = oscalls.collapse_to_huge_pages()
-    assert np.array_equal(values, before)
-    thp = "/sys/kernel/mm/transparent_hugepage/enabled"
-    kernel = tuple(int(x) for x in os.uname().release.split(".")[:2] if x.isdigit())
-    if os.path.exists(thp) and "[never]" not in open(thp).read() and kernel >= (6, 1):
-        assert collapsed >= 32 << 20
-    monkeypatch.setattr(isolation, "COLLAPSE_FROM", 0)
-    monkeypatch.setattr(isolation, "_COLLAPSED_AT", [0])
-    assert run_isolated(_sum_of, (values,), 30.0).value == float(before.sum())
-    assert isolation._COLLAPSED_AT[0] > 0

@@ -44,12 +44,7 @@ from multiprocessing.connection import wait
 from typing import Any, Protocol
 
 from truestep.execution import faults, plain_data
-from truestep.execution.oscalls import (
-    anonymous_bytes,
-    become_subreaper,
-    collapse_to_huge_pages,
-    die_with_parent,
-)
+from truestep.execution.oscalls import become_subreaper, die_with_parent
 from truestep.execution.process_tree import has_children, kill_group, kill_tree, reap_children
 
 
@@ -216,30 +211,8 @@ class Running:
     by_budget: bool = False
 
 
-COLLAPSE_FROM = 256 << 20
-"""Anonymous memory (bytes) from which this process backs it with huge pages before a
-fork (:func:`_cheaper_forks`); below it a fork costs a few ms anyway."""
-COLLAPSE_EVERY = 64 << 20
-"""Growth of anonymous memory (bytes) after which it does so again."""
-_COLLAPSED_AT = [0]
-
-
-def _cheaper_forks() -> None:
-    """Before a fork: once this process holds :data:`COLLAPSE_FROM` of anonymous memory,
-    and again after each :data:`COLLAPSE_EVERY` it grows, back it with huge pages
-    (:func:`truestep.execution.oscalls.collapse_to_huge_pages`). A fork's cost in this
-    process, and its child's exit, grow with the page-table entries copied: a process
-    holding every engine and their scenes (600-700 MiB) took 12-27 ms a fork, about 5 s
-    of a quick run's 269 forks; after it about half. Nothing a child computes changes."""
-    held = anonymous_bytes()
-    if held >= COLLAPSE_FROM and held - _COLLAPSED_AT[0] >= COLLAPSE_EVERY:
-        collapse_to_huge_pages()
-        _COLLAPSED_AT[0] = held
-
-
 def _start(index: int, call: Call) -> Running:
     fn, args, timeout = call
-    _cheaper_forks()
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, os.getpid(), fn, args), daemon=True)

@@ -1,8 +1,7 @@
 """Linux system calls the standard library lacks, through ctypes: exchanging two paths at
 once (``renameat2`` with ``RENAME_EXCHANGE``), dying with the parent
-(``prctl(PR_SET_PDEATHSIG)``), adopting orphaned descendants
-(``prctl(PR_SET_CHILD_SUBREAPER)``) and backing memory with huge pages
-(``madvise(MADV_COLLAPSE)``). Elsewhere they report that they are not available."""
+(``prctl(PR_SET_PDEATHSIG)``) and adopting orphaned descendants
+(``prctl(PR_SET_CHILD_SUBREAPER)``). Elsewhere they report that they are not available."""
 
 from __future__ import annotations
 
@@ -17,9 +16,6 @@ AT_FDCWD = -100
 RENAME_EXCHANGE = 2
 PR_SET_PDEATHSIG = 1
 PR_SET_CHILD_SUBREAPER = 36
-MADV_COLLAPSE = 25
-HUGE_PAGE = 2 << 20
-"""The size of a transparent huge page on x86-64 and most arm64 kernels (bytes)."""
 
 
 @cache
@@ -68,47 +64,3 @@ def become_subreaper() -> bool:
     they stay in its tree to be found and killed; ``False`` where not available."""
     libc = _libc()
     return libc is not None and libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
-
-
-def anonymous_bytes() -> int:
-    """This process's resident anonymous memory (bytes; ``RssAnon``), 0 where unknown."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as status:
-            for line in status:
-                if line.startswith("RssAnon:"):
-                    return int(line.split()[1]) << 10
-    except (OSError, ValueError):
-        pass
-    return 0
-
-
-def collapse_to_huge_pages() -> int:
-    """Back this process's private anonymous memory with transparent huge pages where the
-    kernel can (``madvise(MADV_COLLAPSE)``, Linux 6.1 and later): each 2 MiB then takes
-    one page-table entry instead of 512, so a ``fork`` of a process that holds every
-    engine copies a few hundred entries, not ~10^5 (measured: 10 ms a fork down to 2.4 ms
-    at 300 MiB). The contents do not change. Returns the bytes asked for in ranges the
-    kernel accepted; 0 where it cannot (another system, an older kernel, huge pages off).
-    """
-    libc = _libc()
-    if libc is None:
-        return 0
-    madvise = libc.madvise
-    madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
-    madvise.restype = ctypes.c_int
-    collapsed = 0
-    try:
-        with open("/proc/self/maps", encoding="ascii", errors="replace") as maps:
-            ranges = [line.split() for line in maps]
-    except OSError:
-        return 0
-    for fields in ranges:
-        anonymous = len(fields) < 6 or fields[5] == "[heap]"
-        if len(fields) < 2 or fields[1] != "rw-p" or not anonymous:
-            continue
-        start, end = (int(x, 16) for x in fields[0].split("-"))
-        start = (start + HUGE_PAGE - 1) & ~(HUGE_PAGE - 1)
-        end &= ~(HUGE_PAGE - 1)
-        if end > start and madvise(start, end - start, MADV_COLLAPSE) == 0:
-            collapsed += end - start
-    return collapsed

@@ -46,6 +46,12 @@ class ReferenceFloor:
     order: int | None
     floor: float | None
 
+    def _ratio_words(self) -> str:
+        """How many times a method of this order at twice the step errs more than at the
+        step: 2^p - 1 ("as much as" for order 1)."""
+        ratio = 2 ** (self.order or 1) - 1
+        return "as much as" if ratio == 1 else f"{ratio} times"
+
     def words(self) -> str:
         """The note the report gives the case."""
         if self.floor is not None and self.order is not None:
@@ -53,8 +59,8 @@ class ReferenceFloor:
                 f"Error floor: the errors here are measured against a run of the reference's "
                 f"`{self.method}` at {self.step:.4g} s, whose own error is about {self.floor:.2g} "
                 f"(the same method at {self.other:.4g} s differs from it by {self.difference:.2g}, "
-                f"{2**self.order - 1} times the error of a method of order {self.order} at half "
-                "the step): an error below that says nothing of a run.\n"
+                f"{self._ratio_words()} the error of a method of order {self.order} at half the "
+                "step): an error below that says nothing of a run.\n"
             )
         return (
             f"Error floor: the errors here are measured against a run of the reference's "
