@@ -261,3 +261,73 @@ def test_the_rope_s_limit_is_an_interval_because_its_motion_is_chaotic(case_name
     found = search_case(case, lambda c, h: reference.simulate(c, "symplectic-euler", h))
     assert "round-off decides" in found.note
     assert found.dt_limit <= 0.00414 <= found.dt_unstable
+
+
+@pytest.mark.parametrize(
+    ("hint_ends", "boundary"),
+    [
+        ((0.0500, 0.0510), 0.0505),  # the boundary inside the hint
+        ((0.0500, 0.0510), 0.0620),  # above it: steps up from its high end
+        ((0.0500, 0.0510), 0.0210),  # below it: steps down from its low end
+        ((0.0500, 0.0510), 0.5),  # stable at every step up to dt_hi
+        ((0.0500, 0.0510), 1e-4),  # unstable at every step down to dt_lo
+    ],
+    ids=["inside", "above", "below", "stable-everywhere", "unstable-everywhere"],
+)
+def test_a_search_from_another_engines_bracket_finds_the_boundary_of_its_own_runs(hint_ends, boundary):
+    """A hint only chooses where to look: wherever the engine's own boundary lies (a run
+    is stable below ``boundary``), the bracket found holds it to the tolerance, as the
+    search over the whole bracket does, and every run it counts was made. A hint that
+    holds the boundary saves most runs; one that misses it costs a few more."""
+    from truestep.measures.stability import Hint, _first_bracket, bisect_limit
+
+    dt_lo, dt_hi, rel_tol = 1e-3, 0.2, 1e-2
+    made: list[float] = []
+
+    def stable_at(dt: float) -> bool:
+        made.append(dt)
+        return dt < boundary
+
+    def search(lo: float, hi: float, runs_before: int, *, bracketed: bool = False):
+        r = bisect_limit(stable_at, lo, hi, rel_tol=rel_tol, bracketed=bracketed)
+        return dataclasses.replace(r, runs=r.runs + runs_before)
+
+    found = _first_bracket(Hint(*hint_ends, "peer"), stable_at, search, dt_lo, dt_hi, rel_tol)
+    assert found.runs == len(made)
+    assert found.note.startswith("searched first at peer's bracket (0.05, 0.051) s")
+    if boundary > dt_hi:
+        assert (found.dt_limit, found.dt_unstable) == (dt_hi, math.inf)
+    elif boundary <= dt_lo:
+        assert (found.dt_limit, found.dt_unstable) == (0.0, dt_lo)
+    else:
+        assert found.dt_limit < boundary <= found.dt_unstable
+        assert found.dt_unstable / found.dt_limit - 1 <= rel_tol
+    made.clear()
+    whole = bisect_limit(stable_at, dt_lo, dt_hi, rel_tol=rel_tol)
+    if boundary == 0.0505:  # a hint that holds the boundary saves most of the runs
+        assert found.runs <= 4 < whole.runs
+    else:  # one that misses it costs a few runs more (each step out squares its ratio)
+        assert found.runs <= whole.runs + (3 if dt_lo < boundary <= dt_hi else 8)
+
+
+def test_mujoco_warp_s_search_from_mujoco_s_bracket_is_the_same_made_here_or_handed_over(case_named):
+    """MuJoCo Warp's search starts from MuJoCo's bracket (the same integrator in float64):
+    handed over when MuJoCo's search is done, else MuJoCo's search made first in the same
+    process. Both give the same result, bit for bit, and a bracket of MuJoCo Warp's own
+    runs: stable at its limit, unstable at its unstable end over the search's horizon."""
+    from truestep.execution.analyses import _peer_of, _search
+    from truestep.measures.stability import Hint
+
+    case = case_named("harmonic-oscillator")
+    peer = _peer_of(get_adapter("mujoco-warp"), case, "RK4")
+    assert peer is not None and peer.engine == "mujoco"
+    made_here, _ = _search("mujoco-warp", case, "RK4", True, None, peer)
+    theirs, _ = _search("mujoco", case, "RK4", True, peer.exact)
+    handed, _ = _search(
+        "mujoco-warp", case, "RK4", True, None, Hint(theirs.dt_limit, theirs.dt_unstable, "mujoco")
+    )
+    assert made_here == handed
+    assert "mujoco's bracket" in handed.note and handed.runs < 15
+    scale = energy_scale(case)
+    assert is_stable(_search_run(case, "mujoco-warp", "RK4", handed.dt_limit), case=case, scale=scale)
+    assert not is_stable(_search_run(case, "mujoco-warp", "RK4", handed.dt_unstable), case=case, scale=scale)

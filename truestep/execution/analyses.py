@@ -21,7 +21,7 @@ from truestep.execution.isolation import Call, Lanes, Outcome, run_untimed, unti
 from truestep.execution.progress import Progress
 from truestep.execution.runner import duplicate_of, preload, prepare_here
 from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
-from truestep.measures.stability import SearchTimeout, search_case
+from truestep.measures.stability import Hint, SearchResult, SearchTimeout, search_case
 from truestep.numerics import own_run
 from truestep.tables.spec import RESTITUTION, SCALING, STABILITY
 
@@ -46,16 +46,73 @@ SCALING_SIZES = (1e2, 1e3, 1e4, 1e5)
 """Particle counts of a full run's scaling table."""
 
 
-def _search(engine: str, case: Case, method: str, quick: bool, exact: float | None = None):
+@dataclasses.dataclass(frozen=True)
+class PeerSearch:
+    """A search to make first, in the searching process, for its bracket (a :class:`Hint`):
+    the ``engine`` this one re-implements (``correctness_peer_of``), and that engine's
+    exact limit of the method on the case (s), where one is known."""
+
+    engine: str
+    exact: float | None
+
+
+def _search(
+    engine: str,
+    case: Case,
+    method: str,
+    quick: bool,
+    exact: float | None = None,
+    hint: Hint | PeerSearch | None = None,
+):
     """``(SearchResult or the safety valve's message, seconds)`` of one search; ``exact``
-    is the method's exact limit on the case (s) where one is known."""
+    is the method's exact limit on the case (s) where one is known; ``hint``: another
+    engine's bracket to try first, or that engine's search to make here for it."""
     adapter = get_adapter(engine)
     start = time.perf_counter()
+    if isinstance(hint, PeerSearch):
+        hint = _peer_hint(hint, case, method, quick)
     try:
-        result = search_case(case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick, exact=exact)
+        result = search_case(
+            case, lambda c, dt: adapter.simulate(c, method, dt), quick=quick, exact=exact, hint=hint
+        )
     except SearchTimeout as err:
         return str(err), time.perf_counter() - start
     return result, time.perf_counter() - start
+
+
+def _peer_hint(peer: PeerSearch, case: Case, method: str, quick: bool) -> Hint | None:
+    """The bracket of ``peer``'s own search of ``method`` on ``case`` (the search its row
+    publishes, made again here: the same runs give the same bracket), or ``None`` where
+    that search ends without one."""
+    try:
+        found, _ = _search(peer.engine, case, method, quick, peer.exact)
+    except Exception:  # the peer's failure is its own row's; this search goes on without
+        return None
+    return _hint_of(peer.engine, found)
+
+
+def _hint_of(engine: str, found: object) -> Hint | None:
+    """``engine``'s bracket from its search's result (a :class:`SearchResult` with status
+    ``ok``), else ``None``."""
+    if not isinstance(found, SearchResult) or found.status != "ok":
+        return None
+    return Hint(found.dt_limit, found.dt_unstable, engine)
+
+
+def _peer_of(adapter, case: Case, method: str) -> PeerSearch | None:
+    """The search whose bracket ``adapter``'s search of ``method`` starts from: its
+    ``correctness_peer_of`` engine's, where that engine is installed, has ``method`` and
+    models ``case``; else ``None``."""
+    peer = getattr(adapter, "correctness_peer_of", None)
+    if not isinstance(peer, str):
+        return None
+    try:
+        other = get_adapter(peer)
+        if method not in other.methods or method in other.adaptive_methods or other.missing(case, method):
+            return None
+    except Exception:  # not installed, or an adapter that cannot answer: no hint
+        return None
+    return PeerSearch(peer, stability_limit(case, facts_of(other, method)))
 
 
 class UntimedPart:
@@ -68,7 +125,9 @@ class UntimedPart:
 
     ``prepares[k]`` is the (engine, case, method) whose adapter ``prepare`` the ``k``-th
     call needs (:func:`prepare_before_fork`): made just before its fork, once for each, so
-    that planning holds up nothing (beside a sweep, the sweep has made most of them)."""
+    that planning holds up nothing (beside a sweep, the sweep has made most of them).
+    ``fill(k, call)``, where given, completes the ``k``-th call then from what the calls
+    done so far found (a search's :class:`~truestep.measures.stability.Hint`)."""
 
     def __init__(
         self,
@@ -78,8 +137,10 @@ class UntimedPart:
         make_table: Callable[[], pd.DataFrame],
         progress: Callable[[str], None] | None,
         prepares: Sequence[tuple[str, Case, str]] = (),
+        fill: Callable[[int, Call], Call] | None = None,
     ) -> None:
         self.kind, self.calls = kind, calls
+        self._fill = fill
         self._on_done, self._make_table, self._progress = on_done, make_table, progress
         self._prepares = prepares
         self._prepared: set[tuple[str, str, str]] = set()
@@ -97,7 +158,7 @@ class UntimedPart:
             self._first = self._bar.start
         if self._prepares:
             prepare_before_fork([self._prepares[k]], self._prepared)
-        return self.calls[k]
+        return self.calls[k] if self._fill is None else self._fill(k, self.calls[k])
 
     def done(self, k: int, out: Outcome) -> None:
         """The ``k``-th call's outcome."""
@@ -186,10 +247,11 @@ def stability_part(
                     rows.append(row)
                     searched[(case.name, engine, method)] = row
                     slots.append(row)
+                    peer = _peer_of(adapter, case, method)
                     calls.append(
                         (
                             _search,
-                            (engine, case, method, quick, exact),
+                            (engine, case, method, quick, exact, peer),
                             case.timeout_s * case.stability.max_runs,
                         )
                     )
@@ -222,12 +284,43 @@ def stability_part(
             row["note"] = "; ".join(n for n in (words, searched_row.get("note")) if isinstance(n, str) and n)
         return STABILITY.frame(rows)
 
-    order = sorted(
-        range(len(calls)), key=lambda k: -_search_cost(calls[k][1][0], calls[k][1][1], calls[k][1][2])
-    )
+    order = sorted(range(len(calls)), key=_sources_first(calls))
     planned = [calls[k] for k in order]
     prepares = [(engine, case, method) for _, (engine, case, method, *_), _t in planned]
-    return UntimedPart("stability", planned, done, table, progress, prepares)
+    return UntimedPart("stability", planned, done, table, progress, prepares, fill=_peer_bracket(searched))
+
+
+def _sources_first(calls: list[Call]) -> Callable[[int], tuple[bool, float]]:
+    """The order of the searches: those another search starts from (:class:`PeerSearch`)
+    first, so that their brackets are in when those start; then the longest first."""
+    sources = {(c[1][1].name, c[1][5].engine, c[1][2]) for c in calls if isinstance(c[1][5], PeerSearch)}
+
+    def key(k: int) -> tuple[bool, float]:
+        engine, case, method = calls[k][1][:3]
+        return (case.name, engine, method) not in sources, -_search_cost(engine, case, method)
+
+    return key
+
+
+def _peer_bracket(searched: dict[tuple[str, str, str], dict]) -> Callable[[int, Call], Call]:
+    """A search's call as it starts: where its peer's search (a :class:`PeerSearch`) is done
+    here, that search's bracket (a :class:`Hint`, or ``None`` if it found none) instead of
+    the search to make again: the same bracket either way, only the work differs."""
+
+    def fill(k: int, call: Call) -> Call:
+        fn, args, timeout = call
+        peer = args[5]
+        if not isinstance(peer, PeerSearch):
+            return call
+        row = searched.get((args[1].name, peer.engine, args[2]))
+        if row is None or "status" not in row:
+            return call
+        known = None
+        if row["status"] == "ok":
+            known = Hint(float(row["dt_limit"]), float(row["dt_unstable"]), peer.engine)
+        return fn, (*args[:5], known), timeout
+
+    return fill
 
 
 def _twin_searched(

@@ -550,6 +550,66 @@ def _roundoff_interval(
     return SearchResult(lo, hi, runs, "; ".join(n for n in (result.note, note) if n))
 
 
+@dataclass(frozen=True)
+class Hint:
+    """Where another engine running the same scheme found the boundary: its ``dt_limit``
+    and ``dt_unstable`` (s), and its name (``source``), for the search's note."""
+
+    dt_limit: float
+    dt_unstable: float
+    source: str
+
+    def usable(self, dt_lo: float, dt_hi: float) -> bool:
+        """Whether it is a finite bracket inside ``(dt_lo, dt_hi]``."""
+        lo, hi = self.dt_limit, self.dt_unstable
+        return math.isfinite(lo) and math.isfinite(hi) and dt_lo < lo < hi <= dt_hi
+
+
+def _first_bracket(
+    hint: Hint | None,
+    stable_at: Callable[[float], bool],
+    search: Callable[..., SearchResult],
+    dt_lo: float,
+    dt_hi: float,
+    rel_tol: float,
+) -> SearchResult:
+    """The search's first bisection: over ``(dt_lo, dt_hi)``, or, with a usable ``hint``,
+    from the hint's ends run first. Stable at its low end and unstable at its high end:
+    the bracket is the hint's (bisected on to the tolerance). Stable at both: steps above
+    it, each ratio to the last the square of the one before (from the hint's ratio, at
+    least ``1 + rel_tol``), until one is unstable (or ``dt_hi`` is stable); unstable at its
+    low end: steps below it, likewise, until one is stable (or ``dt_lo`` is unstable). A
+    search of a float32 re-implementation from its float64 original's bracket makes a few
+    runs where one over the whole bracket makes 16 to 26 (MuJoCo Warp from MuJoCo)."""
+    if hint is None or not hint.usable(dt_lo, dt_hi):
+        return search(dt_lo, dt_hi, 0)
+    lo, hi = hint.dt_limit, hint.dt_unstable
+    said = f"searched first at {hint.source}'s bracket ({lo:.6g}, {hi:.6g}) s"
+    ratio = max(hi / lo, 1.0 + rel_tol)
+    runs = 1
+    if stable_at(lo):
+        runs += 1
+        while stable_at(hi):
+            if hi >= dt_hi:
+                found = SearchResult(dt_hi, math.inf, runs, f"stable at every step tried (up to {dt_hi:g} s)")
+                return dataclasses.replace(found, note=f"{said}; {found.note}")
+            lo, hi, ratio = hi, min(hi * ratio, dt_hi), ratio * ratio
+            runs += 1
+    else:
+        hi = lo
+        while True:
+            if lo <= dt_lo:
+                found = SearchResult(0.0, dt_lo, runs, f"unstable at every step tried (even {dt_lo:g} s)")
+                return dataclasses.replace(found, note=f"{said}; {found.note}")
+            lo, ratio = max(lo / ratio, dt_lo), ratio * ratio
+            runs += 1
+            if stable_at(lo):
+                break
+            hi = lo
+    found = search(lo, hi, runs, bracketed=True)
+    return dataclasses.replace(found, note="; ".join(n for n in (said, found.note) if n))
+
+
 class _SolverFailedAt(Exception):
     def __init__(self, dt: float, message: str) -> None:
         super().__init__(message)
@@ -562,6 +622,7 @@ def search_case(
     *,
     quick: bool = False,
     exact: float | None = None,
+    hint: Hint | None = None,
 ) -> SearchResult:
     """Bisect ``case.stability``'s bracket; ``simulate(case, dt)`` runs one engine and method.
 
@@ -574,7 +635,10 @@ def search_case(
     (s, where the method's is known) is run again long enough to show the growth
     (:func:`_not_above_exact`). Without an exact limit, the start is nudged by a few ulps
     at the limit and at the unstable end, and where that flips a verdict the bracket widens
-    to where it does not (:func:`_roundoff_interval`). A run whose solver fails ends the
+    to where it does not (:func:`_roundoff_interval`). A ``hint`` (another engine's
+    bracket for the same scheme) is tried first: where this engine is stable at its low
+    end and unstable at its high end, the bisection starts there (:func:`_first_bracket`);
+    it only chooses where to look, every verdict is this engine's own run. A run whose solver fails ends the
     search with status ``solver-failed`` and no limit. A search still running after
     ``budget_s`` seconds raises :class:`SearchTimeout` (a safety valve: it never shortens
     a search).
@@ -622,7 +686,7 @@ def search_case(
         return dataclasses.replace(r, runs=r.runs + runs_before)
 
     try:
-        result = search(spec.dt_lo, spec.dt_hi, 0)
+        result = _first_bracket(hint, stable_at, search, spec.dt_lo, spec.dt_hi, rel_tol)
         first = result.dt_limit
         for fraction in MONOTONE_PROBES:
             probe = fraction * result.dt_limit
