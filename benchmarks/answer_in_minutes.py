@@ -36,6 +36,9 @@ TARGETS_S = {
     "bash .ci/run (fresh clone)": 480.0,
 }
 """The target of each figure, s."""
+TRUESTEP = [str(Path(sys.executable).with_name("truestep"))]
+"""The ``truestep`` command of the interpreter running this script (its environment's,
+whether or not that environment is on ``PATH``)."""
 
 
 def timed(argv: list[str], *, env: dict | None = None, cwd: Path = REPO) -> tuple[float, int]:
@@ -62,7 +65,7 @@ def run_figure(name: str, args: list[str], *, cold: bool = False) -> None:
         if cold:
             env.update(NUMBA_CACHE_DIR=f"{tmp}/numba", WARP_CACHE_PATH=f"{tmp}/warp")
         out = Path(tmp) / "out"
-        wall, code = timed(["truestep", "run", *args, "--out", str(out)], env=env)
+        wall, code = timed([*TRUESTEP, "run", *args, "--out", str(out)], env=env)
         report(name, wall, code, phases(out))
 
 
