@@ -404,9 +404,10 @@ class FixedStepAdapter(abc.ABC):
         return []
 
     def snapshot(self, scene: Any) -> Any:
-        """The state now, in any form :meth:`unpack` understands (default: copied arrays)."""
+        """The state now, in any form :meth:`unpack` understands (default: copied arrays;
+        a complex state is refused, not cut to its real part)."""
         x, v = self.read(scene)
-        return np.array(x, dtype=float), np.array(v, dtype=float)
+        return _real(x, "positions"), _real(v, "velocities")
 
     def unpack(self, scene: Any, snaps: list[Any]) -> tuple[np.ndarray, np.ndarray]:
         """Positions and velocities (T, n, 3) from ``T`` snapshots."""
@@ -504,3 +505,12 @@ class FixedStepAdapter(abc.ABC):
             message="; ".join(notes),
             extremes=rec.extremes,
         )
+
+
+def _real(values: Any, what: str) -> np.ndarray:
+    """``values`` as a float64 copy; ``TypeError`` for complex numbers, whose imaginary
+    part a cast would drop without a word (the row is then ``crashed``, saying so)."""
+    array = np.asarray(values)
+    if array.dtype.kind == "c":
+        raise TypeError(f"read() returned complex {what} ({array.dtype}): a state is real numbers")
+    return np.array(array, dtype=float)

@@ -55,8 +55,13 @@ def _prepare_each(
     """Prepare each (model, method) of ``pairs``; the lines of a slow one (``progress``,
     standard error by default) carry how many of ``pairs`` are done and, from the pace so
     far, the seconds left: ``[3/12, ~40 s left] compiling ...``. In a forked helper,
-    ``parent`` is the pid that started it: once that process is gone (killed, interrupted)
-    the helper stops before its next loop instead of compiling on for nobody."""
+    ``parent`` is the pid that started it: the helper is killed when that process ends
+    (killed, interrupted), mid-compile too, instead of compiling on for nobody (a cache
+    file cut short is compiled again by the next run: :mod:`truestep.reference_impl.cache_guard`)."""
+    if parent is not None:
+        from truestep.execution.oscalls import die_with_parent
+
+        die_with_parent(parent)
     say = progress or _stderr
     began = time.perf_counter()
     for i, (model, method) in enumerate(pairs):

@@ -39,6 +39,34 @@ def test_an_empty_out_is_exit_2_and_reports_is_not_touched(tmp_path, monkeypatch
     assert (tmp_path / "reports" / "mine.txt").read_text() == "keep"
 
 
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["figures", "--out", ""], "--out: an empty path"),
+        (["bench", "--engines", "reference", "--sizes", "10", "--out", " "], "--out: an empty path"),
+        (["baseline", "save", "--results", "results.csv", ""], "DIR: an empty path"),
+        (["baseline", "save", "--results", "results.csv", "."], "DIR: . is the working folder"),
+        (
+            ["run", "--quick", "--cases", "free-fall", "--engines", "reference", "--out", ".."],
+            "the working folder",
+        ),
+        (["figures", "--out", "."], "--out: . is the working folder"),
+    ],
+    ids=["figures-empty", "bench-blank", "baseline-empty", "baseline-here", "run-above", "figures-here"],
+)
+def test_no_command_writes_into_an_empty_out_or_replaces_the_working_folder(
+    tmp_path, monkeypatch, capsys, argv, said
+):
+    """Every command that writes a folder refuses an empty value (an unset variable) and
+    the working folder or one above it, which it would replace whole: exit 2, one line,
+    nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.txt").write_text("keep")
+    assert main(argv) == 2
+    assert said in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
+
+
 def test_a_users_folder_under_a_staging_name_of_a_dead_run_is_left(tmp_path):
     dead = 2**22 + 12345  # above any pid this machine hands out
     theirs = tmp_path / f".rep.staging-{dead}"

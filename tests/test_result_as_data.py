@@ -133,3 +133,13 @@ def test_a_run_whose_adapter_returns_such_an_object_goes_on_and_says_so(tmp_path
     assert {r["status"] for r in rows} <= {"ok", "crashed"} and rows[-1]["status"] == "crashed"
     assert "posix._exit" in rows[-1]["message"]
     assert all(r["status"] == "ok" for r in rows[:-1])
+
+
+def test_complex_positions_read_back_are_a_crashed_row_not_their_real_part():
+    """An adapter whose ``read()`` returns complex numbers: a cast to float would keep the
+    real part without a word and the rows would read ``ok``; the run is refused instead."""
+    from truestep.adapters.base import _real
+
+    assert _real(np.ones(3), "positions").dtype == np.float64
+    with pytest.raises(TypeError, match="complex positions"):
+        _real(np.ones(3) + 1e-3j, "positions")

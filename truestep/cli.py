@@ -106,6 +106,24 @@ def _reproduce(args: argparse.Namespace) -> list[str]:
     return argv
 
 
+def _folder(value: str, option: str) -> Path:
+    """The folder ``option`` names, refused when the value is empty or blank (``--out
+    "$OUTDIR"`` with the variable unset must not mean the working folder) or names the
+    working folder or one above it (truestep replaces the folder it writes whole, and a
+    shell left in a folder replaced under it is in none)."""
+    if not value.strip():
+        raise UsageError(f"{option}: an empty path (an unset variable?): name the folder")
+    path = Path(value)
+    here = Path.cwd().resolve()
+    whole = path.resolve()
+    if whole == here or whole in here.parents:
+        raise UsageError(
+            f"{option}: {visible(value)} is the working folder or one above it, which truestep "
+            "would replace whole: name a folder inside it"
+        )
+    return path
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """``truestep run``: sweep, analyses, report; checkpointed for ``--resume``.
 
@@ -117,8 +135,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from truestep.execution.interrupts import Interrupted, handled
     from truestep.execution.isolation import set_run_budget
 
-    if args.out is not None and not args.out.strip():  # `--out "$OUTDIR"`, unset: not reports/
-        raise UsageError("--out: an empty path (an unset variable?): name the folder")
+    if args.out is not None:  # `--out "$OUTDIR"`, unset: not reports/
+        _folder(args.out, "--out")
     from truestep.execution.journal import Journal
 
     with handled():
@@ -625,7 +643,7 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     from truestep.ci.saved import BaselineRefused, save
 
     try:
-        provenance = save(Path(args.results), Path(args.dir))
+        provenance = save(Path(args.results), _folder(args.dir, "DIR"))
     except BaselineRefused as err:
         raise UsageError(str(err)) from None
     except OSError as err:
@@ -725,7 +743,7 @@ def cmd_figures(args: argparse.Namespace) -> int:
     from truestep.reporting.folder import OutRefused, prepare
 
     try:
-        out = prepare(Path(args.out))
+        out = prepare(_folder(args.out, "--out"))
     except OutRefused as err:
         raise UsageError(str(err)) from None
     for path, caption in write_lecture_figures(out / "figures"):
@@ -758,20 +776,21 @@ def cmd_bench(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--budget: expected seconds above 0 and at most {BENCH_BUDGET_MAX_S:g}, got {args.budget:g}"
         )
+    folder = _folder(args.out, "--out")
     engines = select_engines(args.engines, say=_say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
     from truestep.reporting.folder import OutRefused, check_out, prepare
 
     try:
-        check_out(Path(args.out))
+        check_out(folder)
     except OutRefused as err:
         raise UsageError(str(err)) from None
     start = time.perf_counter()
     table = scaling_table(engines, sizes=sizes, budget_s=args.budget)
     bandwidth = table.attrs["bandwidth_bytes_per_s"]
     try:
-        out = prepare(Path(args.out))
+        out = prepare(folder)
     except OutRefused as err:
         raise UsageError(str(err)) from None
     table.to_csv(out / "scaling.csv", index=False, columns=COLUMNS)
