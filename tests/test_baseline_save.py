@@ -177,3 +177,37 @@ def test_the_pytest_mark_reads_results_and_compares_with_a_baseline(project, tmp
     failed = [line for line in bad.stdout.splitlines() if line.startswith("FAILED")]
     assert any("test_physics[baseline/results]" in line for line in failed), bad.stdout[-3000:]
     assert "WORSE  results harmonic-oscillator reference rk4 dt=" in bad.stdout
+
+
+def test_a_users_folder_in_the_place_a_save_writes_through_is_never_deleted(project, tmp_path):
+    """``.DIR.saving`` is where a save writes before it swaps the baseline in: a folder of
+    that name that truestep did not write (no marker) is refused, not deleted; one a
+    killed save left (its marker in it) is replaced."""
+    from truestep.ci.saved import STAGE_MARKER, BaselineRefused, save
+
+    run = project[1]
+    theirs = tmp_path / ".kept.saving"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine")
+    with pytest.raises(BaselineRefused, match="did not write"):
+        save(run / "results.csv", tmp_path / "kept")
+    assert (theirs / "notes.txt").read_text() == "mine"
+    left = tmp_path / ".other.saving"
+    left.mkdir()
+    (left / STAGE_MARKER).touch()
+    save(run / "results.csv", tmp_path / "other")
+    assert not left.exists() and (tmp_path / "other" / "results.csv").is_file()
+
+
+def test_a_marker_item_no_system_can_look_up_is_passed_on_as_a_name(tmp_path):
+    """A marker's ``cases=`` item too long for a file name (or with a NUL byte) is no
+    path beside the test: it goes on as given, and the loader's one-line error names it,
+    not an ``OSError`` traceback from looking for it."""
+    from truestep.pytest_plugin import _paths
+
+    assert _paths(["a" * 300, "x\0y"], tmp_path) == ("a" * 300, "x\0y")
+    (tmp_path / "mine.toml").write_text("")
+    assert _paths("mine.toml, harmonic-oscillator", tmp_path) == (
+        str(tmp_path / "mine.toml"),
+        "harmonic-oscillator",
+    )

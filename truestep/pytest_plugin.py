@@ -64,14 +64,24 @@ class Selection:
 
 
 def _paths(value: Any, base: Path) -> tuple[str, ...]:
+    """Each item of a marker's ``cases=`` or ``gates=``: a path beside the test file where
+    one exists there, else as given (a case name, a glob; the loader says what is wrong
+    with it, as for the command line)."""
     items = [] if value is None else value.split(",") if isinstance(value, str) else list(value)
     out = []
     for item in (str(i).strip() for i in items if str(i).strip()):
         near = base / item
-        out.append(
-            str(near) if ("/" in item or item.endswith(".toml") or near.exists()) and near.exists() else item
-        )
+        out.append(str(near) if _exists(near) else item)
     return tuple(out)
+
+
+def _exists(path: Path) -> bool:
+    """Whether ``path`` exists; ``False`` for a name the system cannot look up (too long,
+    a NUL byte)."""
+    try:
+        return path.exists()
+    except (OSError, ValueError):
+        return False
 
 
 def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
@@ -104,7 +114,7 @@ def _one_path(value: Any, base: Path, name: str) -> str | None:
         return None
     path = Path(str(value))
     for candidate in (base / path, path):
-        if candidate.exists():
+        if _exists(candidate):
             return str(candidate)
     raise pytest.UsageError(f"@pytest.mark.{MARKER}: {name}={str(value)!r}: no such file or folder")
 

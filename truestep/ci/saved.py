@@ -26,6 +26,10 @@ TABLE_FILES = ("results.csv", "stability.csv", "restitution.csv")
 """The tables a baseline keeps (``scaling.csv`` is timing only, and not compared)."""
 RUN_FILE = "run.json"
 PROVENANCE = "provenance.json"
+STAGE_MARKER = ".truestep-saving"
+"""The file that marks the folder a save writes through (``.DIR.saving``) as truestep's:
+a save killed before it was done leaves it, and the next save replaces it; a folder of
+that name without it is the user's, and is never deleted."""
 FILES = (*TABLE_FILES, RUN_FILE, PROVENANCE, MARKER)
 
 
@@ -125,8 +129,14 @@ def save(results: Path, dest: Path, *, root: Path | None = None) -> dict:
             f"{run_dir}/{RUN_FILE}: missing or unreadable: a baseline needs the run's record"
         )
     stage = dest.with_name(f".{dest.name}.saving")
-    shutil.rmtree(stage, ignore_errors=True)
+    if os.path.lexists(stage) and not (stage / STAGE_MARKER).is_file():
+        raise BaselineRefused(
+            f"{stage}: a folder truestep did not write is in the place it saves through: "
+            "move it, or save under another name"
+        )
+    shutil.rmtree(stage, ignore_errors=True)  # a save killed before it was done
     stage.mkdir(parents=True)
+    (stage / STAGE_MARKER).touch()
     try:
         for name in TABLE_FILES:
             table = pd.read_csv(run_dir / name, dtype=str, keep_default_na=False, na_filter=False)
@@ -155,6 +165,7 @@ def save(results: Path, dest: Path, *, root: Path | None = None) -> dict:
         }
         (stage / PROVENANCE).write_text(json.dumps(provenance, indent=1, sort_keys=True) + "\n")
         (stage / MARKER).write_text('{"written_by": "truestep", "kind": "baseline", "schema": 1}\n')
+        (stage / STAGE_MARKER).unlink()
         if os.path.lexists(dest):
             shutil.rmtree(dest)
         stage.rename(dest)
