@@ -107,9 +107,12 @@ def test_home_and_current_directories_are_refused(tmp_path, monkeypatch, capsys)
     monkeypatch.setenv("HOME", str(home))
     monkeypatch.chdir(home)
     before = snapshot(home)
-    for out in (".", str(home), os.path.expanduser("~")):
+    for out in (".", str(home), os.path.expanduser("~")):  # the working folder: refused as that
         assert main(["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", out]) == 2
-        assert "not a report truestep wrote" in capsys.readouterr().err
+        assert "is the working folder or one above it" in capsys.readouterr().err
+    monkeypatch.chdir(tmp_path)  # home, not the working folder: refused as a folder truestep did not write
+    assert main(["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", str(home)]) == 2
+    assert "not a report truestep wrote" in capsys.readouterr().err
     assert snapshot(home) == before
 
 
