@@ -135,7 +135,7 @@ def _import_guarded(engine: str, module: str) -> ModuleType:
     :data:`~truestep.cases.plugins.IMPORT_S` seconds, is an :class:`UnknownEngine` that
     says so."""
     from truestep.cases.plugins import IMPORT_S, import_within
-    from truestep.execution.time_limit import TimeLimitExceeded
+    from truestep.runtime.time_limit import TimeLimitExceeded
 
     cwd = os.getcwd()
     handlers = {s: signal.getsignal(s) for s in GUARDED_SIGNALS}
@@ -246,9 +246,9 @@ def plugin_answer(
     it raises (``SystemExit`` too), or a call still running after ``limit_s`` seconds
     (default :data:`ANSWER_S`), becomes :class:`PluginFailed`, whose text names the
     engine and the call ``what``. The limit interrupts Python code and numpy between its
-    C loops (:func:`truestep.execution.time_limit.time_limit`); compiled code that never
+    C loops (:func:`truestep.runtime.time_limit.time_limit`); compiled code that never
     returns to Python is not interrupted."""
-    from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+    from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 
     limit_s = ANSWER_S if limit_s is None else limit_s
     try:

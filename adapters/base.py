@@ -210,6 +210,12 @@ def resolve_facts(spec: FactsSpec | None) -> MethodFacts | None:
     return get_solver(spec).facts
 
 
+def duplicate_of(adapter, case: Case, method: str) -> str | None:
+    """Why ``method`` would repeat another method of the adapter bit for bit, or ``None``."""
+    duplicate = getattr(adapter, "duplicate", None)
+    return duplicate(case, method) if duplicate is not None else None
+
+
 def facts_of(adapter: Any, method: str) -> MethodFacts | None:
     """The declared facts of an adapter's method, or ``None`` if it declares none.
 

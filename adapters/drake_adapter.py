@@ -63,6 +63,7 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from truestep.adapters.base import EnergyExtremes, FactsSpec, Trajectory, finite_until, thin_records
 from truestep.adapters.reference import build_system, trajectory_of_states
 from truestep.cases.case import Case
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.integrate import BLOWUP, record_indices
 from truestep.reference_impl.precompile import DERIVATIVE, compile_all
 from truestep.reference_impl.solvers.explicit_rk import tableau_stability
@@ -178,13 +179,13 @@ METHOD_NOTES: Mapping[str, str] = MappingProxyType(
 
 UNSUPPORTED_NOTES: Mapping[str, str] = MappingProxyType(
     {
-        "planes": "Drake's contact is compliant (Hunt-Crossley) with no coefficient of restitution, "
+        Feature.PLANES: "Drake's contact is compliant (Hunt-Crossley) with no coefficient of restitution, "
         "and its integrators see no collision events",
-        "thin-walls": "Drake's contact has no coefficient of restitution",
-        "friction": "Drake's contact has no coefficient of restitution",
-        "emitters": "particles that appear and expire act between steps, which Drake's integrators never see",
-        "lifetimes": "particles that expire act between steps, which Drake's integrators never see",
-        "impulses": "impulses act between steps, which Drake's integrators never see",
+        Feature.THIN_WALLS: "Drake's contact has no coefficient of restitution",
+        Feature.FRICTION: "Drake's contact has no coefficient of restitution",
+        Feature.EMITTERS: "particles that appear and expire act between steps, "
+        "which Drake's integrators never see",
+        Feature.IMPULSES: "impulses act between steps, which Drake's integrators never see",
     }
 )
 """Why a feature is beyond this adapter, for the ``unsupported`` row's message."""
@@ -236,19 +237,19 @@ class DrakeAdapter:
     errors at the same steps, :mod:`truestep.measures.peers`)."""
     capabilities = frozenset(
         {
-            "ode",
-            "second-order",
-            "point-masses",
-            "2d",
-            "3d",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "universal-gravitation",
-            "force-fields",
-            "pinned-particles",
+            Feature.ODE,
+            Feature.SECOND_ORDER,
+            Feature.POINT_MASSES,
+            Feature.PLANAR,
+            Feature.SPATIAL,
+            Feature.UNIFORM_GRAVITY,
+            Feature.DRAG,
+            Feature.SPRINGS,
+            Feature.SPRING_DAMPING,
+            Feature.ANCHORED_SPRINGS,
+            Feature.UNIVERSAL_GRAVITATION,
+            Feature.FORCE_FIELDS,
+            Feature.PINNED_PARTICLES,
         }
     )
 
@@ -274,8 +275,12 @@ class DrakeAdapter:
         """Features of ``case`` beyond :attr:`capabilities`; ``semi_explicit_euler`` also
         needs a second-order scene (Drake's ``q`` and ``v``)."""
         lacking = set(case.features) - self.capabilities
-        if method == "semi_explicit_euler" and case.kind == "ode" and "second-order" not in case.features:
-            lacking.add("second-order")
+        if (
+            method == "semi_explicit_euler"
+            and case.kind == "ode"
+            and Feature.SECOND_ORDER not in case.features
+        ):
+            lacking.add(Feature.SECOND_ORDER)
         return lacking
 
     def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False) -> Trajectory:

@@ -179,6 +179,7 @@ from truestep.adapters.contact_law import (
 )
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.integrate import CHECK_EVERY, record_indices
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts, Stability
@@ -537,21 +538,21 @@ class MujocoAdapter(FixedStepAdapter):
     """The reference method each names as its scheme (compared in the report)."""
     capabilities = frozenset(
         {
-            "2d",
-            "3d",
-            "point-masses",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "universal-gravitation",
-            "force-fields",
-            "planes",
-            "thin-walls",
-            "friction",
-            "pinned-particles",
-            "impulses",
+            Feature.PLANAR,
+            Feature.SPATIAL,
+            Feature.POINT_MASSES,
+            Feature.UNIFORM_GRAVITY,
+            Feature.DRAG,
+            Feature.SPRINGS,
+            Feature.SPRING_DAMPING,
+            Feature.ANCHORED_SPRINGS,
+            Feature.UNIVERSAL_GRAVITATION,
+            Feature.FORCE_FIELDS,
+            Feature.PLANES,
+            Feature.THIN_WALLS,
+            Feature.FRICTION,
+            Feature.PINNED_PARTICLES,
+            Feature.IMPULSES,
         }
     )
 

@@ -56,11 +56,12 @@ from truestep.adapters.base import FactsSpec, FixedStepAdapter
 from truestep.adapters.quiet import without_banner
 from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, host_copy, host_view, wp
 from truestep.cases.case import Case
+from truestep.reference_impl.features import Feature
 
 with without_banner(BANNER):
     import mujoco_warp as mjw
 
-APPLIED = ("universal-gravitation", "force-fields", "impulses")
+APPLIED = (Feature.UNIVERSAL_GRAVITATION, Feature.FORCE_FIELDS, Feature.IMPULSES)
 """Features the MuJoCo adapter adds through MuJoCo C's passive-force callback."""
 
 CAPABILITIES = mj.MujocoAdapter.capabilities - frozenset(APPLIED)
@@ -151,7 +152,7 @@ class MujocoWarpAdapter(FixedStepAdapter):
     method_facts: ClassVar[dict[str, FactsSpec]] = mj.METHOD_FACTS
     peers: ClassVar[dict[str, str]] = {"Euler": "symplectic-euler", "RK4": "rk4"}
     """The reference method each names as its scheme (compared in the report)."""
-    unsupported_notes: ClassVar[dict[str, str]] = {
+    unsupported_notes: ClassVar[dict[Feature, str]] = {
         feature: "MuJoCo Warp has no passive-force callback, through which truestep adds this force to MuJoCo"
         for feature in APPLIED
     }

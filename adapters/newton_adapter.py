@@ -76,6 +76,7 @@ from truestep.adapters.base import FixedStepAdapter, Trajectory
 from truestep.adapters.quiet import without_banner
 from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, host_copy, host_view, wp
 from truestep.cases.case import Case
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts
 
@@ -110,26 +111,26 @@ order fits and stability searches then check on scenes where the sweeps do not c
 
 CAPABILITIES = frozenset(
     {
-        "point-masses",
-        "2d",
-        "3d",
-        "uniform-gravity",
-        "drag",
-        "springs",
-        "spring-damping",
-        "anchored-springs",
-        "planes",
-        "pinned-particles",
+        Feature.POINT_MASSES,
+        Feature.PLANAR,
+        Feature.SPATIAL,
+        Feature.UNIFORM_GRAVITY,
+        Feature.DRAG,
+        Feature.SPRINGS,
+        Feature.SPRING_DAMPING,
+        Feature.ANCHORED_SPRINGS,
+        Feature.PLANES,
+        Feature.PINNED_PARTICLES,
     }
 )
 
 REASONS = {
-    "universal-gravitation": "Newton has no force between particle pairs, and truestep adds none",
-    "force-fields": "Newton has no force field element, and truestep adds none",
-    "impulses": "truestep does not add time-windowed forces to Newton",
-    "emitters": "truestep does not spawn particles in Newton",
-    "friction": "Newton's particle friction is a regularised slope truestep does not normalise yet",
-    "thin-walls": "Newton's planes are half-spaces (nothing tunnels through them)",
+    Feature.UNIVERSAL_GRAVITATION: "Newton has no force between particle pairs, and truestep adds none",
+    Feature.FORCE_FIELDS: "Newton has no force field element, and truestep adds none",
+    Feature.IMPULSES: "truestep does not add time-windowed forces to Newton",
+    Feature.EMITTERS: "truestep does not spawn particles in Newton",
+    Feature.FRICTION: "Newton's particle friction is a regularised slope truestep does not normalise yet",
+    Feature.THIN_WALLS: "Newton's planes are half-spaces (nothing tunnels through them)",
 }
 """Why each feature Newton lacks here is unsupported (the row's message)."""
 
@@ -349,7 +350,7 @@ class NewtonAdapter(FixedStepAdapter):
         "vbd": "implicit-euler",
     }
     """The reference method each names as its scheme (compared in the report)."""
-    unsupported_notes: ClassVar[dict[str, str]] = REASONS
+    unsupported_notes: ClassVar[dict[Feature, str]] = REASONS
     capabilities = CAPABILITIES
 
     def __init__(self, *, device: str = DEVICE) -> None:

@@ -173,6 +173,7 @@ from truestep.adapters.base import FixedStepAdapter
 from truestep.adapters.quiet import import_quietly
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
 
 p = import_quietly("pybullet", banner=r"^pybullet build time:")  # its greeting, on stderr
@@ -445,21 +446,21 @@ class PybulletAdapter(FixedStepAdapter):
     dampers included, held at the start of the step: the reference's symplectic Euler."""
     capabilities = frozenset(
         {
-            "2d",
-            "3d",
-            "point-masses",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "universal-gravitation",
-            "force-fields",
-            "planes",
-            "thin-walls",
-            "friction",
-            "pinned-particles",
-            "impulses",
+            Feature.PLANAR,
+            Feature.SPATIAL,
+            Feature.POINT_MASSES,
+            Feature.UNIFORM_GRAVITY,
+            Feature.DRAG,
+            Feature.SPRINGS,
+            Feature.SPRING_DAMPING,
+            Feature.ANCHORED_SPRINGS,
+            Feature.UNIVERSAL_GRAVITATION,
+            Feature.FORCE_FIELDS,
+            Feature.PLANES,
+            Feature.THIN_WALLS,
+            Feature.FRICTION,
+            Feature.PINNED_PARTICLES,
+            Feature.IMPULSES,
         }
     )
 

@@ -104,6 +104,7 @@ import pymunk.batch
 from truestep.adapters.base import FixedStepAdapter
 from truestep.cases.case import Case
 from truestep.reference_impl import forces
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.integrate import BLOWUP
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts, Stability
@@ -269,20 +270,20 @@ class PymunkAdapter(FixedStepAdapter):
     undamped; a spring's damper is integrated exactly (:func:`exact_damper_step`)."""
     capabilities = frozenset(
         {
-            "point-masses",
-            "2d",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "planes",
-            "thin-walls",
-            "friction",
-            "pinned-particles",
-            "impulses",
-            "force-fields",
-            "universal-gravitation",
+            Feature.POINT_MASSES,
+            Feature.PLANAR,
+            Feature.UNIFORM_GRAVITY,
+            Feature.DRAG,
+            Feature.SPRINGS,
+            Feature.SPRING_DAMPING,
+            Feature.ANCHORED_SPRINGS,
+            Feature.PLANES,
+            Feature.THIN_WALLS,
+            Feature.FRICTION,
+            Feature.PINNED_PARTICLES,
+            Feature.IMPULSES,
+            Feature.FORCE_FIELDS,
+            Feature.UNIVERSAL_GRAVITATION,
         }
     )
     collision_slop = 1e-4
@@ -292,7 +293,7 @@ class PymunkAdapter(FixedStepAdapter):
         missing = case.features - self.capabilities
         model = case.model
         if model is not None and any(abs(p.normal[2]) > 0 for p in model.planes):
-            missing.add("3d")
+            missing.add(Feature.SPATIAL)
         return missing
 
     def build(self, case: Case, method: str, h: float) -> _Stepper:

@@ -17,6 +17,7 @@ from truestep.adapters.base import (
 from truestep.cases.case import Case, OdeSpec
 from truestep.cases.plugins import ode_system
 from truestep.reference_impl.compiled import compiled_reason, prepared, run_compiled
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.particles import ParticleSystem, total_energy
@@ -84,24 +85,24 @@ class ReferenceAdapter:
 
     capabilities = frozenset(
         {
-            "ode",
-            "second-order",
-            "point-masses",
-            "2d",
-            "3d",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "universal-gravitation",
-            "force-fields",
-            "planes",
-            "thin-walls",
-            "friction",
-            "emitters",
-            "pinned-particles",
-            "impulses",
+            Feature.ODE,
+            Feature.SECOND_ORDER,
+            Feature.POINT_MASSES,
+            Feature.PLANAR,
+            Feature.SPATIAL,
+            Feature.UNIFORM_GRAVITY,
+            Feature.DRAG,
+            Feature.SPRINGS,
+            Feature.SPRING_DAMPING,
+            Feature.ANCHORED_SPRINGS,
+            Feature.UNIVERSAL_GRAVITATION,
+            Feature.FORCE_FIELDS,
+            Feature.PLANES,
+            Feature.THIN_WALLS,
+            Feature.FRICTION,
+            Feature.EMITTERS,
+            Feature.PINNED_PARTICLES,
+            Feature.IMPULSES,
         }
     )
 
@@ -110,9 +111,9 @@ class ReferenceAdapter:
         if (
             METHODS[method].needs_second_order
             and isinstance(case.scene, OdeSpec)
-            and "second-order" not in case.features
+            and Feature.SECOND_ORDER not in case.features
         ):
-            missing.add("second-order")
+            missing.add(Feature.SECOND_ORDER)
         return missing
 
     def prepare(self, case: Case, method: str) -> None:

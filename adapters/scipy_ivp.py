@@ -13,6 +13,7 @@ from scipy.integrate import solve_ivp
 from truestep.adapters.base import EnergyExtremes, Trajectory, finite_until
 from truestep.adapters.reference import build_system, trajectory_of_states
 from truestep.cases.case import Case
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.solvers import MethodFacts, Stability
 
@@ -63,22 +64,22 @@ class ScipyAdapter:
     their stability data never give a step limit here."""
     capabilities = frozenset(
         {
-            "ode",
-            "second-order",
-            "point-masses",
-            "2d",
-            "3d",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "universal-gravitation",
-            "force-fields",
-            "pinned-particles",
-            "planes",
-            "thin-walls",
-            "friction",
+            Feature.ODE,
+            Feature.SECOND_ORDER,
+            Feature.POINT_MASSES,
+            Feature.PLANAR,
+            Feature.SPATIAL,
+            Feature.UNIFORM_GRAVITY,
+            Feature.DRAG,
+            Feature.SPRINGS,
+            Feature.SPRING_DAMPING,
+            Feature.ANCHORED_SPRINGS,
+            Feature.UNIVERSAL_GRAVITATION,
+            Feature.FORCE_FIELDS,
+            Feature.PINNED_PARTICLES,
+            Feature.PLANES,
+            Feature.THIN_WALLS,
+            Feature.FRICTION,
         }
     )
 

@@ -8,6 +8,7 @@ from typing import Any, ClassVar, TypeAlias
 
 import numpy as np
 
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
 
 FAMILIES: dict[str, str] = {
@@ -48,7 +49,7 @@ class OdeSpec:
 
     def features(self) -> set[str]:
         """Modelling features the ODE needs (``ode``, and ``second-order`` if it splits)."""
-        return {"ode"} | ({"second-order"} if self.is_second_order else set())
+        return {Feature.ODE} | ({Feature.SECOND_ORDER} if self.is_second_order else set())
 
     @property
     def is_second_order(self) -> bool:

@@ -22,7 +22,6 @@ from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, Scene, StabilityS
 from truestep.cases.errors import CaseError, SelectionError
 from truestep.cases.exact import exact_named, exact_names
 from truestep.cases.fields import Fields, short
-from truestep.cases.files import FileRefused, read_regular
 from truestep.cases.limits import (
     DEFAULT,
     MIN_STEP_S,
@@ -32,12 +31,14 @@ from truestep.cases.limits import (
     override,
     read_limits,
 )
+from truestep.cases.property_names import PROPERTY_KINDS
 from truestep.cases.scene import read_scene
-from truestep.execution.time_limit import TimeLimitExceeded, time_limit
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.system import SecondOrderSystem
+from truestep.runtime.files import FileRefused, read_regular
+from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
+from truestep.runtime.visible import visible
 from truestep.tables.spec import RESULTS
-from truestep.visible import visible
 
 CASE_DIR = plugins.CASE_DIR
 """truestep's own case library (this folder)."""
@@ -366,15 +367,14 @@ def check_case_gates(case: Case, engines: set[str]) -> None:
 
 
 def _read_properties(f: Fields, kind: str) -> list[str]:
-    """``properties``: names of registered properties that read this kind of case."""
-    from truestep.measures.properties import PROPERTIES, SCENE_KINDS
-
-    names = f.strings("properties", [], choices=set(PROPERTIES))
+    """``properties``: names of properties (:mod:`truestep.cases.property_names`) that read
+    this kind of case."""
+    names = f.strings("properties", [], choices=set(PROPERTY_KINDS))
     for name in names:
-        if SCENE_KINDS.get(name, kind) != kind:
+        if PROPERTY_KINDS.get(name, kind) != kind:
             raise f.error(
                 "properties",
-                f"{short(name)} is a property of {SCENE_KINDS[name]} cases; this case is kind = {kind!r}",
+                f"{short(name)} is a property of {PROPERTY_KINDS[name]} cases; this case is kind = {kind!r}",
             )
     return names
 

@@ -51,8 +51,8 @@ class PluginError(ValueError):
 
 def import_within(module: str, what: str) -> ModuleType:
     """``importlib.import_module(module)`` within :data:`IMPORT_S` seconds (a
-    :class:`~truestep.execution.time_limit.TimeLimitExceeded` past it, naming ``what``)."""
-    from truestep.execution.time_limit import time_limit
+    :class:`~truestep.runtime.time_limit.TimeLimitExceeded` past it, naming ``what``)."""
+    from truestep.runtime.time_limit import time_limit
 
     with time_limit(IMPORT_S, what):
         return importlib.import_module(module)
@@ -64,7 +64,7 @@ def _group(group: str) -> dict[str, str]:
 
 
 def _load(group: str, name: str, value: str) -> Any:
-    from truestep.execution.time_limit import TimeLimitExceeded
+    from truestep.runtime.time_limit import TimeLimitExceeded
 
     module, _, attr = value.partition(":")
     try:
@@ -83,7 +83,7 @@ def _load(group: str, name: str, value: str) -> Any:
 def _directory_of(name: str, value: str, obj: Any) -> Any:
     """The directory a case library's entry point names: a module's own, or what the
     attribute is or (a callable) returns, within :data:`IMPORT_S` seconds."""
-    from truestep.execution.time_limit import TimeLimitExceeded, time_limit
+    from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 
     if isinstance(obj, ModuleType):
         return Path(obj.__file__).parent if obj.__file__ else None

@@ -13,6 +13,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from truestep.reference_impl.features import Feature
+
 G_UNIVERSAL = 6.67384e-11
 """The lecture's gravitational constant, m^3 kg^-1 s^-2."""
 
@@ -201,34 +203,34 @@ class ParticleModel:
 
     def features(self) -> set[str]:
         """The modelling features this scene needs, by the names adapters declare."""
-        f = {"point-masses"}
-        f.add("2d" if self.dimension == 2 else "3d")
+        f: set[str] = {Feature.POINT_MASSES}
+        f.add(Feature.PLANAR if self.dimension == 2 else Feature.SPATIAL)
         if np.any(self.gravity != 0):
-            f.add("uniform-gravity")
+            f.add(Feature.UNIFORM_GRAVITY)
         if self.drag:
-            f.add("drag")
+            f.add(Feature.DRAG)
         if len(self.springs):
-            f.add("springs")
+            f.add(Feature.SPRINGS)
             if np.any(self.springs.damping != 0):
-                f.add("spring-damping")
+                f.add(Feature.SPRING_DAMPING)
         if len(self.anchors):
-            f.add("anchored-springs")
+            f.add(Feature.ANCHORED_SPRINGS)
             if np.any(self.anchors.damping != 0):
-                f.add("spring-damping")
+                f.add(Feature.SPRING_DAMPING)
         if self.gravitation is not None:
-            f.add("universal-gravitation")
+            f.add(Feature.UNIVERSAL_GRAVITATION)
         if self.fields:
-            f.add("force-fields")
+            f.add(Feature.FORCE_FIELDS)
         if self.planes:
-            f.add("planes")
+            f.add(Feature.PLANES)
             if any(p.friction for p in self.planes):
-                f.add("friction")
+                f.add(Feature.FRICTION)
             if any(p.thickness for p in self.planes):
-                f.add("thin-walls")
+                f.add(Feature.THIN_WALLS)
         if self.emitters:
-            f.add("emitters")
+            f.add(Feature.EMITTERS)
         if np.any(self.fixed):
-            f.add("pinned-particles")
+            f.add(Feature.PINNED_PARTICLES)
         if self.impulses:
-            f.add("impulses")
+            f.add(Feature.IMPULSES)
         return f

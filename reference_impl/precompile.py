@@ -59,7 +59,7 @@ def _prepare_each(
     (killed, interrupted), mid-compile too, instead of compiling on for nobody (a cache
     file cut short is compiled again by the next run: :mod:`truestep.reference_impl.cache_guard`)."""
     if parent is not None:
-        from truestep.execution.oscalls import die_with_parent
+        from truestep.runtime.oscalls import die_with_parent
 
         die_with_parent(parent)
     say = progress or _stderr

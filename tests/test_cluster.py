@@ -23,7 +23,7 @@ import pytest
 from truestep.cli import main
 from truestep.execution.cluster import KILL_WORKER
 from truestep.execution.runner import MACHINE_COLUMNS
-from truestep.reporting.folder import MARKER, MARKER_TEXT
+from truestep.runtime.folder import MARKER, MARKER_TEXT
 
 CASES = "free-fall,harmonic-oscillator"
 TIMING = set(MACHINE_COLUMNS)

@@ -16,7 +16,7 @@ from pathlib import Path
 from kill_helpers import still_running
 
 from truestep.adapters.reference import ReferenceAdapter
-from truestep.execution.isolation import finish_isolated, run_isolated, start_isolated
+from truestep.runtime.isolation import finish_isolated, run_isolated, start_isolated
 
 
 def _spawn(pids: Path, how: str, then: str = "return") -> str:
@@ -72,9 +72,9 @@ def test_what_a_call_starts_dies_with_it_and_its_output_stays_with_it(tmp_path, 
 SIGTERMED = """
 import sys, time
 from pathlib import Path
-from truestep.execution.interrupts import Interrupted, handled
+from truestep.runtime.interrupts import Interrupted, handled
 from test_containment import _spawn
-from truestep.execution.isolation import start_isolated
+from truestep.runtime.isolation import start_isolated
 with handled():
     try:
         start_isolated(_spawn, (Path(sys.argv[1]), sys.argv[2], "hang"), 120.0)

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from truestep.cases import CaseError, load_case
-from truestep.cases.files import FileRefused, read_regular
 from truestep.cli import main
+from truestep.runtime.files import FileRefused, read_regular
 
 CAP = 1024
 

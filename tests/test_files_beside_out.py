@@ -11,8 +11,8 @@ import pytest
 
 from truestep.cli import main
 from truestep.execution.journal import Journal, JournalError
-from truestep.execution.run_lock import LockBusy, RunLock
-from truestep.reporting.publish import recover
+from truestep.runtime.publish import recover
+from truestep.runtime.run_lock import LockBusy, RunLock
 
 
 def test_a_hard_link_in_the_locks_place_is_refused_and_its_file_kept(tmp_path):

@@ -12,7 +12,7 @@ import pytest
 from kill_helpers import snapshot
 
 from truestep.cli import main
-from truestep.reporting.folder import MARKER, MARKER_TEXT, OutRefused, check_out, prepare
+from truestep.runtime.folder import MARKER, MARKER_TEXT, OutRefused, check_out, prepare
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 
@@ -147,7 +147,7 @@ def test_the_python_api_refuses_the_same_folders(tmp_path):
 
 
 def test_scratch_names_planted_beside_out_are_removed_never_followed(tmp_path):
-    from truestep.reporting import publish
+    from truestep.runtime import publish
 
     elsewhere = _mine(tmp_path / "elsewhere")
     before = snapshot(elsewhere)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import time
 
-from truestep.execution.isolation import run_isolated, run_isolated_all
+from truestep.runtime.isolation import run_isolated, run_isolated_all
 
 
 def _square(x: int) -> int:
@@ -103,7 +103,7 @@ def _lanes(cores: int, timed_s: float = 0.2, untimed_s: float = 0.2) -> tuple[di
     """Three timed calls of ``timed_s`` and four untimed ones of ``untimed_s`` through
     ``run_lanes`` on ``cores``; their spans, which lane each is in, and (call, when) for
     every ``done``."""
-    from truestep.execution.isolation import run_lanes
+    from truestep.runtime.isolation import run_lanes
 
     timed, untimed = [0, 1, 2], [3, 4, 5, 6]
     spans: dict[int, tuple[float, float]] = {}
@@ -155,7 +155,7 @@ def test_the_untimed_core_does_not_wait_for_a_long_timed_call():
 
 
 class _Sleeps:
-    """A backlog (:class:`truestep.execution.isolation.Backlog`) of ``n`` calls of
+    """A backlog (:class:`truestep.runtime.isolation.Backlog`) of ``n`` calls of
     :func:`_span`, recording when each was made (just before its fork) and its span."""
 
     def __init__(self, n: int, seconds: float) -> None:
@@ -180,7 +180,7 @@ def test_a_backlog_fills_the_cores_the_timed_calls_leave_across_runs():
     across two ``run`` calls, leaves a core free for a timed run made outside the lanes
     (``free_core``: no backlog call starts until ``finish``), and is all done once by
     ``finish``; no timed call ever runs beside more than one other call."""
-    from truestep.execution.isolation import Lanes
+    from truestep.runtime.isolation import Lanes
 
     backlog = _Sleeps(6, 0.3)
     timed: dict[tuple[int, int], tuple[float, float]] = {}

@@ -10,8 +10,8 @@ import pandas as pd
 
 from truestep.adapters.base import Trajectory
 from truestep.execution import runner
-from truestep.execution.isolation import Outcome
 from truestep.execution.timing import NOT_REPEATABLE, End, TimedRuns, Timing, end_of, merged
+from truestep.runtime.isolation import Outcome
 
 SHORT = Timing(min_total_s=0.0, min_repeats=1, max_repeats=2, long_run_s=float("inf"))
 """Two timed runs a row, however long it takes (no verdict on the clock)."""

@@ -7,6 +7,7 @@ import math
 import matplotlib.pyplot as plt
 import pandas as pd
 
+from truestep import style
 from truestep.reporting import plots
 
 
@@ -39,7 +40,7 @@ def _stability_rows() -> pd.DataFrame:
 def test_a_search_without_a_limit_keeps_its_row_and_a_lower_bound_is_hatched(tmp_path, monkeypatch):
     shown = {}
 
-    def keep(fig, path, dpi=plots.REPORT_DPI):
+    def keep(fig, path, dpi=style.REPORT_DPI):
         ax = fig.axes[0]
         shown["labels"] = [t.get_text() for t in ax.get_yticklabels()]
         shown["texts"] = [t.get_text() for t in ax.texts]
@@ -86,12 +87,12 @@ def test_every_built_in_series_has_its_own_colour_and_each_engine_its_marker():
         for e in ("reference", "scipy", "pymunk", "pybullet", "mujoco", "drake")
         for m in get_adapter(e).methods
     ]
-    colours = [plots.series_style(e, m)["color"] for e, m in pairs]
+    colours = [style.series_style(e, m)["color"] for e, m in pairs]
     assert len(set(colours)) == len(pairs), "two built-in series share a colour"
-    markers = {e: plots.series_style(e, m)["marker"] for e, m in pairs}
+    markers = {e: style.series_style(e, m)["marker"] for e, m in pairs}
     assert len(set(markers.values())) == len(markers)
     # A plugin's series gets a colour too, the same on every call (and in every run).
-    assert plots.series_colour("my-euler", "semi-implicit") == plots.series_colour(
+    assert style.series_colour("my-euler", "semi-implicit") == style.series_colour(
         "my-euler", "semi-implicit"
     )
 
@@ -99,7 +100,7 @@ def test_every_built_in_series_has_its_own_colour_and_each_engine_its_marker():
 def test_every_built_in_series_has_a_colour_of_its_own():
     """Issue 38, item 3: reference/euler and newton/semi-implicit shared #e6194b, though the
     table's docstring says every colour is distinct."""
-    from truestep.reporting.plots import MORE_COLOURS, SERIES_COLOURS
+    from truestep.style import MORE_COLOURS, SERIES_COLOURS
 
     colours = [c.lower() for c in SERIES_COLOURS.values()]
     assert len(set(colours)) == len(colours)

@@ -24,11 +24,11 @@ import pytest
 from kill_helpers import _running, pids_in, scratch_left, snapshot, still_running
 
 from truestep.cli import main
-from truestep.execution.faults import CHILD_PIDS, KILL_AT, parse
-from truestep.execution.oscalls import exchange
 from truestep.execution.runner import preload
-from truestep.reporting import publish
-from truestep.reporting.folder import MARKER, MARKER_TEXT
+from truestep.runtime import publish
+from truestep.runtime.faults import CHILD_PIDS, KILL_AT, parse
+from truestep.runtime.folder import MARKER, MARKER_TEXT
+from truestep.runtime.oscalls import exchange
 
 RUN = ["run", "--quick", "--engines", "reference", "--cases", "free-fall", "--out", "rep"]
 POINTS = ("report-csv", "report-figures", "report-index", "report-swap", "report-swapped")
@@ -202,8 +202,8 @@ def test_directories_are_exchanged_here(tmp_path):
 
 CHILD_SCRIPT = """
 import sys, time
-from truestep.execution.interrupts import Interrupted, handled
-from truestep.execution.isolation import start_isolated
+from truestep.runtime.interrupts import Interrupted, handled
+from truestep.runtime.isolation import start_isolated
 with handled():
     try:
         run = start_isolated(time.sleep, (60,), 120.0)

@@ -15,9 +15,9 @@ import pytest
 
 from truestep.adapters.base import Trajectory
 from truestep.adapters.reference import ReferenceAdapter
-from truestep.execution import plain_data
-from truestep.execution.isolation import run_isolated
 from truestep.execution.timing import TimedRuns
+from truestep.runtime import plain_data
+from truestep.runtime.isolation import run_isolated
 
 
 class ExitsWhenRead:
@@ -88,8 +88,8 @@ def test_truestep_s_records_and_arrays_come_back_whole():
 
 
 def test_only_truestep_s_dataclasses_are_built_not_its_functions():
-    with pytest.raises(plain_data.Refused, match=r"truestep\.execution\.process_tree\.kill_tree"):
-        plain_data.loads(pickle.dumps(_Named("truestep.execution.process_tree", "kill_tree", (os.getpid(),))))
+    with pytest.raises(plain_data.Refused, match=r"truestep\.runtime\.process_tree\.kill_tree"):
+        plain_data.loads(pickle.dumps(_Named("truestep.runtime.process_tree", "kill_tree", (os.getpid(),))))
     assert dataclasses.is_dataclass(plain_data.loads(pickle.dumps(TimedRuns([1.0], []))))
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 
 from truestep.cli import main
-from truestep.execution.isolation import BUDGET_SPENT
+from truestep.runtime.isolation import BUDGET_SPENT
 
 
 def test_a_spent_budget_makes_timeout_rows_and_the_report_is_still_written(tmp_path, capsys):

@@ -12,14 +12,14 @@ import time
 import pytest
 
 from truestep.cli import main
-from truestep.execution.run_lock import LockBusy, RunLock, lock_path
+from truestep.runtime.run_lock import LockBusy, RunLock, lock_path
 
 RUN = ["run", "--quick", "--engines", "reference", "--cases", "free-fall"]
 
 HOLD = """
 import sys, time
 from pathlib import Path
-from truestep.execution.run_lock import RunLock
+from truestep.runtime.run_lock import RunLock
 lock = RunLock(Path(sys.argv[1]))
 lock.acquire()
 print("held", flush=True)

@@ -51,7 +51,7 @@ def test_the_shared_row_is_its_twins_search_and_says_so(monkeypatch):
     calls = []
 
     def run_in_process(todo, workers, done):
-        from truestep.execution.isolation import Outcome
+        from truestep.runtime.isolation import Outcome
 
         for k, (fn, args, _timeout) in enumerate(todo):
             calls.append(args[:3])

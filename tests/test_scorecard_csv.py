@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from truestep.cases import load_cases
-from truestep.reporting.folder import REPORT_FILES
+from truestep.runtime.folder import REPORT_FILES
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 

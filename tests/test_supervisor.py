@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from kill_helpers import still_running
 
-from truestep.execution.supervisor import DID_NOT_FINISH, GRACE_ENV
+from truestep.runtime.supervisor import DID_NOT_FINISH, GRACE_ENV
 
 RUN = ["run", "--quick", "--cases", "free-fall"]
 

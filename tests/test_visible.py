@@ -16,7 +16,7 @@ from truestep.ci.baseline import compare
 from truestep.ci.gates import GateResult
 from truestep.reporting.html import markdown_to_html
 from truestep.reporting.markdown import md_table, text
-from truestep.visible import visible
+from truestep.runtime.visible import visible
 
 HIDDEN = [
     "\u202e",

@@ -41,6 +41,7 @@ _EXPORTS: dict[str, str] = {
     "load_cases": "truestep.cases.loader",
     "Exact": "truestep.cases.exact",
     "exact_solution": "truestep.cases.exact",
+    "Feature": "truestep.reference_impl.features",
     "ParticleModel": "truestep.reference_impl.model",
     "MethodFacts": "truestep.reference_impl.solvers.facts",
     "Stability": "truestep.reference_impl.solvers.facts",
@@ -59,6 +60,7 @@ __all__ = [
     "Case",
     "CaseError",
     "Exact",
+    "Feature",
     "FixedStepAdapter",
     "Gate",
     "MethodFacts",
@@ -107,6 +109,7 @@ if TYPE_CHECKING:
     from truestep.cases.exact import Exact, exact_solution
     from truestep.cases.loader import load_case, load_cases
     from truestep.execution.runner import run_matrix
+    from truestep.reference_impl.features import Feature
     from truestep.reference_impl.model import ParticleModel
     from truestep.reference_impl.solvers.facts import MethodFacts, Stability
     from truestep.reference_impl.system import SecondOrderSystem, System

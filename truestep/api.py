@@ -13,6 +13,7 @@ Everything here takes and returns plain values and pandas tables::
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import sys
 from collections.abc import Callable, Iterable
@@ -25,9 +26,9 @@ from truestep.cases import Case, CaseError, load_cases
 from truestep.cases.fields import short
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.ci.gates import GateResult, check_gates, verdict_table
-from truestep.execution.experiment import Tables
+from truestep.execution.experiment import Experiment, Finished, Tables
 from truestep.numerics import own_run
-from truestep.visible import visible
+from truestep.runtime.visible import visible
 
 
 def select_engines(
@@ -89,7 +90,7 @@ def run(
     """Run the matrix (and, with ``analyses``, the stability searches, the restitution
     sweep and scaling) and return the tables; with ``out``, also write the report there, as
     ``truestep run --out`` does (a folder truestep may replace, locked for the run, else
-    :class:`~truestep.reporting.folder.OutRefused` or :class:`~truestep.execution.run_lock.LockBusy`),
+    :class:`~truestep.runtime.folder.OutRefused` or :class:`~truestep.runtime.run_lock.LockBusy`),
     checkpointing each finished sweep in a journal beside it until the report is in place.
     ``truestep run`` is this function (:mod:`truestep.execution.experiment`).
 
@@ -101,7 +102,7 @@ def run(
     time budget, s; ``lecture_figures``: also draw the lecture's figures; ``argv``: the
     command line the report says reproduces the run.
     """
-    from truestep.execution.experiment import Experiment, run_experiment
+    from truestep.execution.experiment import run_experiment
 
     say = progress or (lambda msg: print(visible(msg), file=sys.stderr))
     chosen = _cases(cases)
@@ -122,10 +123,12 @@ def run(
         rows=progress,
         say=say,
     )
+    if exp.out is not None:
+        exp.report = functools.partial(_publish, exp)
     if exp.out is None:
         return run_experiment(exp)
-    from truestep.execution.run_lock import RunLock
-    from truestep.reporting.folder import check_out
+    from truestep.runtime.folder import check_out
+    from truestep.runtime.run_lock import RunLock
 
     check_out(exp.out)
     locks = [
@@ -141,6 +144,26 @@ def run(
     finally:
         for lock in locks:
             lock.release()
+
+
+def _publish(exp: Experiment, run: Finished) -> None:
+    """Write the report of ``run`` into ``exp.out`` (the experiment's ``report`` hook)."""
+    from truestep.reporting.report import write_report
+
+    assert exp.out is not None
+    write_report(
+        exp.out,
+        exp.cases,
+        run.results,
+        run.tables,
+        quick=exp.quick,
+        argv=exp.argv,
+        traces=None if exp.quick else run.traces,
+        with_lecture_figures=exp.lecture_figures,
+        findings=run.findings,
+        progress=exp.rows,
+        seconds=run.seconds,
+    )
 
 
 def gate_results(

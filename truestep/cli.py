@@ -22,9 +22,9 @@ from typing import TYPE_CHECKING, Any
 from truestep import __version__
 from truestep.cases.limits import CEILING
 from truestep.cases.limits import KEYS as LIMIT_KEYS
-from truestep.execution.supervisor import DID_NOT_FINISH
+from truestep.runtime.supervisor import DID_NOT_FINISH
+from truestep.runtime.visible import visible
 from truestep.tables.spec import compared
-from truestep.visible import visible
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -132,8 +132,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     with one line that says so. Finished sweeps (and the analyses, once done) stay in the
     journal beside ``--out`` (:mod:`truestep.execution.journal`) until the report is published.
     """
-    from truestep.execution.interrupts import Interrupted, handled
-    from truestep.execution.isolation import set_run_budget
+    from truestep.runtime.interrupts import Interrupted, handled
+    from truestep.runtime.isolation import set_run_budget
 
     if args.out is not None:  # `--out "$OUTDIR"`, unset: not reports/
         _folder(args.out, "--out")
@@ -176,8 +176,8 @@ def _run(args: argparse.Namespace) -> int:
     from truestep.api import run, select_engines
     from truestep.execution.cluster import ClusterError
     from truestep.execution.journal import JournalError
-    from truestep.execution.run_lock import LockBusy
-    from truestep.reporting.folder import OutRefused
+    from truestep.runtime.folder import OutRefused
+    from truestep.runtime.run_lock import LockBusy
 
     args.out = args.out or args.resume or "reports"
     if not 0 < args.budget < float("inf"):
@@ -224,11 +224,11 @@ def _run(args: argparse.Namespace) -> int:
 
 def _check_out(out: Path) -> None:
     """Fail before the sweep if the report cannot be published at ``out``: a folder that
-    is not a report truestep wrote (:func:`truestep.reporting.folder.check_out`: a file, a
+    is not a report truestep wrote (:func:`truestep.runtime.folder.check_out`: a file, a
     folder of other things, a link elsewhere), a mount point (the report is put in place
     by renaming a directory), a parent where this process cannot create the staging
     folder and the journal, or too little space beside it."""
-    from truestep.reporting.folder import OutRefused, check_out
+    from truestep.runtime.folder import OutRefused, check_out
 
     try:
         real = check_out(out)
@@ -740,7 +740,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_figures(args: argparse.Namespace) -> int:
     from truestep.figures.lecture import write_lecture_figures
-    from truestep.reporting.folder import OutRefused, prepare
+    from truestep.runtime.folder import OutRefused, prepare
 
     try:
         out = prepare(_folder(args.out, "--out"))
@@ -780,7 +780,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     engines = select_engines(args.engines, say=_say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
-    from truestep.reporting.folder import OutRefused, check_out, prepare
+    from truestep.runtime.folder import OutRefused, check_out, prepare
 
     try:
         check_out(folder)

@@ -15,12 +15,12 @@ traceback: a full disk or device (``> /dev/full``), a failed terminal or file.""
 
 def main(argv: list[str] | None = None) -> int:
     """Set the numerical environment, then run :func:`truestep.cli.main` in a worker process
-    that a small supervisor watches (:func:`truestep.execution.supervisor.supervised`): code
+    that a small supervisor watches (:func:`truestep.runtime.supervisor.supervised`): code
     of a plugin that ends the process, leaves processes behind or ignores a signal cannot
     end the command quietly. Output cut short by its reader (``truestep list | head``) ends
     the command quietly, as ``cat`` does."""
     numerics.set_environment()
-    from truestep.execution.supervisor import supervised
+    from truestep.runtime.supervisor import supervised
 
     return supervised(lambda: _command(argv))
 

@@ -1794,7 +1794,7 @@ def my_limit(case, engine: str, method: str) -> float | None:
 
 
 def _in_process(calls, workers, done):
-    from truestep.execution.isolation import Outcome
+    from truestep.runtime.isolation import Outcome
 
     for k, (fn, args, _timeout) in enumerate(calls):
         done(k, Outcome("ok", fn(*args)))

@@ -10,7 +10,7 @@ import sys
 
 from kill_helpers import snapshot
 
-from truestep.reporting.folder import MARKER, MARKER_TEXT
+from truestep.runtime.folder import MARKER, MARKER_TEXT
 
 
 def test_a_full_disk_is_exit_2_with_one_line_and_the_old_report_survives(tmp_path):

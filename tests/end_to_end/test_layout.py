@@ -18,15 +18,32 @@ FOLDERS = {
     "cases": "truestep.cases",
     "reference_impl": "truestep.reference_impl",
 }
-LAYERS = {"harness": 0, "adapters": 1, "cases": 2, "reference_impl": 3}
-"""Which folder may import which: a module imports only modules of its own folder or of a
-folder below it (harness -> adapters -> cases -> reference_impl)."""
-LAYER_EXCEPTIONS = {
-    ("truestep.cases.loader", "truestep.adapters"),
-    ("truestep.cases.loader", "truestep.measures.properties"),
-}
-"""Known arrows against the layers, each a lazy import inside a function (the loader checks
-that a gate names a registered engine and a known property)."""
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("runtime", "numerics", "style", ""),
+    ("tables",),
+    ("reference_impl",),
+    ("cases",),
+    ("adapters",),
+    ("measures",),
+    ("execution",),
+    ("figures",),
+    ("reporting",),
+    ("ci",),
+    ("api",),
+    ("cli", "command", "pytest_plugin", "__main__"),
+)
+"""The package's layers, bottom first, by the part of a module's name after ``truestep.``: a
+module imports only its own layer or one below. At the bottom the leaves every part may use
+(processes, locks, publishing and safe reads in ``runtime``; the figures' look in
+``style``; thread pinning in ``numerics``; the package root's version), then the tables'
+column spec, the reference's numerics, the cases, the adapters, the measures, the
+experiment driver, the figures, the report, the CI gates, the Python API and, on top, the
+command line and the pytest plugin."""
+LAYER_EXCEPTIONS = {("truestep.cases.loader", "truestep.adapters")}
+"""Known arrows against the layers, each a lazy import inside a function: the loader's
+default for the engines a case's gates may name is every engine the adapters' registry
+knows (built-in, entry points, and ``module:Class`` names resolved in this process);
+callers above the cases pass the names themselves."""
 
 
 def _source_modules() -> dict[str, Path]:
@@ -48,8 +65,9 @@ def graph() -> grimp.ImportGraph:
 
 
 def _layer(module: str) -> int:
-    part = module.split(".")[1] if module.count(".") else ""
-    return LAYERS.get(part, LAYERS["harness"])
+    parts = module.split(".")
+    part = parts[1] if len(parts) > 1 else ""
+    return next(i for i, names in enumerate(LAYERS) if part in names)
 
 
 def test_the_folders_are_linked_into_the_package():
@@ -135,15 +153,36 @@ def test_the_cycle_finder_finds_a_cycle():
 
 
 def test_dependencies_point_one_way(graph):
-    """harness -> adapters -> cases -> reference_impl; reference_impl imports nothing of
-    truestep's other folders, and no folder imports the harness (but for the known arrows,
-    and leaves: modules that import nothing of truestep, such as the tables' column spec)."""
+    """Every import, lazy ones included, points to the importer's layer or one below
+    (:data:`LAYERS`), but for the known arrows; the leaves import nothing of truestep."""
     leaves = {m for m in graph.modules if not graph.find_modules_directly_imported_by(m)}
-    assert {"truestep.numerics", "truestep.tables.spec", "truestep.execution.time_limit"} <= leaves
+    assert {
+        "truestep.numerics",
+        "truestep.tables.spec",
+        "truestep.runtime.time_limit",
+        "truestep.style",
+    } <= leaves
     against = [
         (m, w)
         for m in sorted(graph.modules)
         for w in sorted(graph.find_modules_directly_imported_by(m))
-        if _layer(w) < _layer(m) and w != "truestep" and w not in leaves and (m, w) not in LAYER_EXCEPTIONS
+        if _layer(w) > _layer(m) and (m, w) not in LAYER_EXCEPTIONS
     ]
     assert against == []
+    assert {(m, w) for m, w in LAYER_EXCEPTIONS if w in graph.find_modules_directly_imported_by(m)} == (
+        LAYER_EXCEPTIONS
+    ), "a known arrow is gone: take it off the list"
+
+
+def test_every_module_is_in_a_layer():
+    """A new subpackage names its layer before it lands (:data:`LAYERS`)."""
+    known = {part for names in LAYERS for part in names}
+    assert {m.split(".")[1] for m in _source_modules() if m.count(".")} <= known
+
+
+def test_the_leaves_import_nothing_above_them(graph):
+    """``runtime`` and ``style`` import only themselves (and ``numerics``): every other part
+    may import them, in a child process or before any engine is loaded."""
+    for m in graph.modules:
+        if _layer(m) == 0:
+            assert all(_layer(w) == 0 for w in graph.find_modules_directly_imported_by(m)), m

@@ -16,8 +16,8 @@ from kill_helpers import assert_same_tables, pids_in, scratch_left, snapshot, st
 
 from truestep.cases import load_cases
 from truestep.cli import main
-from truestep.execution.faults import CHILD_PIDS, KILL_AT
 from truestep.execution.journal import Journal, fingerprint
+from truestep.runtime.faults import CHILD_PIDS, KILL_AT
 
 RUN = ["run", "--quick", "--engines", "reference", "--cases", "harmonic-oscillator,bouncing-ball"]
 """A stability search (the oscillator) and restitution drops (the ball)."""

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case, Gate
-from truestep.measures.metrics import RISING, ROUND_OFF, fit_order, round_off_floor
+from truestep.measures.metrics import CONVERGING, RISING, ROUND_OFF, fit_order, round_off_floor
 
 NOT_RUN = frozenset({"unsupported", "skipped"})
 """Row statuses of pairs the run did not simulate."""
@@ -330,13 +330,6 @@ def _stability(case: Case, g: Gate, stability: pd.DataFrame | None) -> GateResul
     if "min" in p:
         ok = ok and limit >= p["min"]
     return GateResult(case.name, g, bool(ok), text, need, value=limit)
-
-
-CONVERGING = 0.5
-"""The least local order (:func:`truestep.measures.metrics.local_orders`) at the finest steps of a
-sweep that shows a method converging: every consistent method's error falls at least as
-``dt^1`` once it converges, so a slower fall means the sweep has not reached that regime
-(implicit Euler damping a stiff cloth's motion away at every swept step)."""
 
 
 STABLE_MARGIN = 0.99

@@ -24,7 +24,7 @@ from pathlib import Path
 from truestep.ci.baseline import Comparison
 from truestep.ci.gates import GateResult
 from truestep.reporting.markdown import text
-from truestep.visible import visible
+from truestep.runtime.visible import visible
 
 
 def shown_path(path: str) -> str:

@@ -12,17 +12,17 @@ import numpy as np
 import pandas as pd
 
 from truestep.adapters import PluginFailed, get_adapter, plugin_answer
-from truestep.adapters.base import facts_of
+from truestep.adapters.base import duplicate_of, facts_of
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
 from truestep.cases.loader import CASE_DIR, load_case
-from truestep.execution import faults
-from truestep.execution.isolation import Call, Lanes, Outcome, run_untimed, untimed_workers
 from truestep.execution.progress import Progress
-from truestep.execution.runner import duplicate_of, preload, prepare_here
+from truestep.execution.runner import preload, prepare_here
 from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
 from truestep.measures.stability import Hint, SearchResult, SearchTimeout, search_case
 from truestep.numerics import own_run
+from truestep.runtime import faults
+from truestep.runtime.isolation import Call, Lanes, Outcome, run_untimed, untimed_workers
 from truestep.tables.spec import RESTITUTION, SCALING, STABILITY
 
 STABILITY_COLUMNS = STABILITY.names
@@ -171,7 +171,7 @@ class UntimedPart:
 
     def run(self, workers: int) -> UntimedPart:
         """Run every call here (``workers`` at once, or on the cluster of
-        :func:`~truestep.execution.isolation.set_untimed_runner`)."""
+        :func:`~truestep.runtime.isolation.set_untimed_runner`)."""
         run_untimed([self.call(k) for k in range(len(self))], workers, self.done)
         return self
 

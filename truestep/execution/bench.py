@@ -16,7 +16,7 @@ How a run is timed
   the case loader's scene reader: the same seeded uniform positions in the same box, the
   same mass, radius, floor and gravity, so each particle's physics is the case's.
 - Every call of an adapter happens in a forked child process
-  (:func:`truestep.execution.isolation.run_isolated`), one at a time: a crash or a hang is a row
+  (:func:`truestep.runtime.isolation.run_isolated`), one at a time: a crash or a hang is a row
   (``crashed``, ``timeout``), and no run shares the CPU with another.
 - Warm-up: an engine that compiles what a scene needs (``adapter.prepare(case, method)``,
   the reference) does so first, in this process, so that every child it forks finds it
@@ -70,8 +70,8 @@ import pandas as pd
 from truestep.adapters import PluginFailed, get_adapter, plugin_answer
 from truestep.cases.case import Case
 from truestep.execution.bench_defaults import BUDGET_S, SIZES
-from truestep.execution.isolation import Outcome, run_isolated
 from truestep.execution.progress import Progress
+from truestep.runtime.isolation import Outcome, run_isolated
 from truestep.tables.spec import SCALING
 
 RAIN_CASE = "particle-rain"
@@ -598,7 +598,7 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
     """
     import matplotlib.pyplot as plt
 
-    from truestep.reporting.plots import save, series_style
+    from truestep.style import save, series_style
 
     path = Path(path)
     per_s = bandwidth / BYTES_PER_PARTICLE_STEP

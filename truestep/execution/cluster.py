@@ -17,7 +17,7 @@ What it adds is what keeps the numbers honest:
   is lost), so the ratios a case's gates read (a speed-up of one engine over another)
   compare rows timed on the same machine. Every row records its ``host``.
 - **Untimed work on every worker.** Stability searches and bounce drops
-  (:func:`truestep.execution.isolation.run_untimed`) go to every worker, with no semaphore.
+  (:func:`truestep.runtime.isolation.run_untimed`) go to every worker, with no semaphore.
 - **Faults.** A worker lost mid-task (killed, a crashed engine that takes the worker
   down, out of memory) has its tasks run again elsewhere by the scheduler; each sweep's
   rows come back exactly once. A sweep that kills workers
@@ -37,8 +37,8 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from truestep.execution.isolation import Call, Outcome
 from truestep.execution.sweep_job import SweepJob, host_name
+from truestep.runtime.isolation import Call, Outcome
 
 KILL_WORKER = "TRUESTEP_KILL_WORKER"
 """Fault injection for tests: ``CASE/ENGINE/METHOD:N:DIR`` makes the first ``N`` workers
@@ -67,7 +67,7 @@ def _allow_children() -> None:
     Dask's worker processes are daemonic (``distributed.worker.daemon``), and
     :mod:`multiprocessing` refuses to start children from a daemonic process. The
     children truestep starts die with their parent (``PR_SET_PDEATHSIG`` in
-    :mod:`truestep.execution.isolation`) and are always joined, which is what the refusal guards.
+    :mod:`truestep.runtime.isolation`) and are always joined, which is what the refusal guards.
     """
     process = mp.current_process()
     if process.daemon:
@@ -129,7 +129,7 @@ def worker_numerics() -> dict:
 
 def untimed_task(call: Call) -> Outcome:
     """One untimed isolated call (a stability search, a bounce drop) on this worker."""
-    from truestep.execution.isolation import run_isolated_all
+    from truestep.runtime.isolation import run_isolated_all
 
     _allow_children()
     _prepare_worker()

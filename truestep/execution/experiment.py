@@ -1,13 +1,14 @@
-"""The one experiment driver: a run of cases and engines from the sweep to the report.
+"""The one experiment driver: a run of cases and engines from the sweep to its findings.
 
 ``truestep run`` and :func:`truestep.run` both come here (:func:`run_experiment`) once their
 cases and engines are chosen and the output folder, if any, is checked and locked. It owns
 what every run shares: the journal beside the output (checkpoints for ``--resume``), the
-run's budget (:func:`truestep.execution.isolation.set_run_budget`), the Dask cluster of
+run's budget (:func:`truestep.runtime.isolation.set_run_budget`), the Dask cluster of
 ``--scheduler`` (:mod:`truestep.execution.cluster`), the sweep
 (:func:`truestep.execution.runner.run_matrix`, each run isolated in a process of its own),
 the analyses (:func:`truestep.execution.analyses.run_analyses`: stability searches, the
-restitution sweep, scaling) and the report (:func:`truestep.reporting.report.write_report`).
+restitution sweep, scaling); it returns the tables and findings, and the caller's
+``report`` hook (the API's) publishes them while the journal still keeps the run.
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ from truestep.cases.case import Case
 
 if TYPE_CHECKING:
     from truestep.execution.cluster import Cluster
-    from truestep.execution.isolation import Lanes
     from truestep.measures.findings import Findings
+    from truestep.runtime.isolation import Lanes
 
 
 @dataclass
@@ -68,6 +69,8 @@ class Experiment:
     lecture_figures : also draw the lecture's figures into the report
     rows : each result row's line goes here (default: a progress bar on standard error)
     say : what the run has to say (resuming, a lost lock taken over)
+    report : what publishes the report once the analyses are done (the API's, with an
+        output folder), while the journal still keeps the run; ``None``: tables only
     """
 
     cases: list[Case]
@@ -82,17 +85,36 @@ class Experiment:
     lecture_figures: bool = False
     rows: Callable[[str], None] | None = None
     say: Callable[[str], None] = print
+    report: Callable[[Finished], None] | None = None
+
+
+@dataclass
+class Finished:
+    """A run's sweep and analyses as its report reads them (:attr:`Experiment.report`).
+
+    results : the results table;  tables : the analyses' tables by name (``stability``,
+    ``restitution``, ``scaling``);  traces : the trajectories the report's figures draw,
+    by (case, engine, method);  findings : what the run found, ``None`` without analyses;
+    seconds : wall time of each phase so far, s (``run.json`` keeps them)
+    """
+
+    results: pd.DataFrame
+    tables: dict[str, pd.DataFrame]
+    traces: dict
+    findings: Findings | None
+    seconds: dict[str, float]
 
 
 def run_experiment(exp: Experiment) -> Tables:
     """Run ``exp``: the sweep (checkpointed in the journal when there is an output folder),
-    the analyses, the report. Raises :class:`~truestep.execution.journal.JournalError` when ``resume``
-    holds no run of these cases and engines, and :class:`~truestep.execution.cluster.ClusterError`
-    (saying what the journal keeps) when the cluster cannot be reached or goes away."""
-    from truestep.execution.isolation import Lanes, set_run_budget, untimed_workers
+    the analyses, then ``exp.report`` (the driver draws nothing itself). Raises
+    :class:`~truestep.execution.journal.JournalError` when ``resume`` holds no run of these
+    cases and engines, and :class:`~truestep.execution.cluster.ClusterError` (saying what the
+    journal keeps) when the cluster cannot be reached or goes away."""
     from truestep.execution.runner import run_matrix
     from truestep.measures.findings import find
-    from truestep.reporting import publish
+    from truestep.runtime import publish
+    from truestep.runtime.isolation import Lanes, set_run_budget, untimed_workers
 
     journal = None
     if exp.out is not None:
@@ -122,22 +144,9 @@ def run_experiment(exp: Experiment) -> Tables:
                 tables = _analyses(exp, results, journal, kinds, ahead, lanes)
             found = find(exp.cases, results, tables) if exp.analyses else None
             laps.lap("analyses")
-        if exp.out is not None:
-            from truestep.reporting.report import write_report
-
-            write_report(
-                exp.out,
-                exp.cases,
-                results,
-                tables,
-                quick=exp.quick,
-                argv=exp.argv,
-                traces=None if exp.quick else traces,
-                with_lecture_figures=exp.lecture_figures,
-                findings=found,
-                progress=exp.rows,
-                seconds={**laps.seconds, **results.attrs.get("sweep_seconds", {}), **kinds},
-            )
+        if exp.report is not None:
+            seconds = {**laps.seconds, **results.attrs.get("sweep_seconds", {}), **kinds}
+            exp.report(Finished(results, tables, traces, found, seconds))
             laps.lap("report")
     finally:
         set_run_budget(None)
@@ -191,7 +200,7 @@ def _kept_analyses(exp: Experiment, journal) -> dict | None:
 def _untimed_ahead(exp: Experiment, journal, cluster: Cluster | None) -> list | None:
     """The analyses' untimed runs (searches, drops), planned to run on the cores the sweep's
     and the refinement's timed runs leave (:func:`truestep.execution.analyses.untimed_parts`,
-    the backlog of the run's :class:`~truestep.execution.isolation.Lanes`), where they are
+    the backlog of the run's :class:`~truestep.runtime.isolation.Lanes`), where they are
     to run on this machine and the run has not kept their tables; else ``None``."""
     from truestep.execution.analyses import untimed_parts
     from truestep.numerics import own_run
@@ -256,7 +265,7 @@ def _cluster(address: str | None, journal) -> Iterator[Cluster | None]:
         yield None
         return
     from truestep.execution.cluster import Cluster, ClusterError
-    from truestep.execution.isolation import set_untimed_runner
+    from truestep.runtime.isolation import set_untimed_runner
 
     try:
         with Cluster(address) as cluster:

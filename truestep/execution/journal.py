@@ -35,7 +35,6 @@ from typing import Any
 
 from truestep import __version__
 from truestep.cases.case import Case
-from truestep.cases.files import FileRefused, read_regular
 from truestep.execution.checkpoint_data import (
     DataError,
     dump_json,
@@ -47,7 +46,8 @@ from truestep.execution.checkpoint_data import (
     traces_from,
     traces_to,
 )
-from truestep.reporting.publish import beside
+from truestep.runtime.files import FileRefused, read_regular
+from truestep.runtime.publish import beside
 
 SweepKey = tuple[str, str, str]
 """(case, engine, method)."""
@@ -415,7 +415,7 @@ def _case_change(was: Any, now: list) -> tuple[Any, Any]:
 
 
 def _short(value: Any) -> str:
-    from truestep.visible import visible
+    from truestep.runtime.visible import visible
 
     text = value if isinstance(value, str) else json.dumps(value)
     text = visible(text)

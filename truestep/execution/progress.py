@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from truestep.visible import visible
+from truestep.runtime.visible import visible
 
 
 class Progress:
@@ -54,7 +54,7 @@ class Progress:
 
     def done(self, line: str = "", n: int = 1) -> None:
         """``n`` items finished; ``line`` says what the last one gave (hidden characters
-        of names in it shown, :func:`truestep.visible.visible`)."""
+        of names in it shown, :func:`truestep.runtime.visible.visible`)."""
         self.count += n
         line = visible(line)
         if self.say is not None:

@@ -35,7 +35,7 @@ from truestep.measures.declared import declared_order_pairs
 from truestep.measures.metrics import RISING, fit_order, local_orders, round_off_floor
 
 if TYPE_CHECKING:
-    from truestep.execution.isolation import Lanes
+    from truestep.runtime.isolation import Lanes
 
 MAX_HALVINGS = 4
 """The most finer steps a method short of its declared order is run at: the finest step
@@ -97,11 +97,11 @@ def short_of_order(cases: list[Case], engines: list[str], results: pd.DataFrame)
 
 def _converging(rows: pd.DataFrame) -> bool:
     """Whether the error falls with the step at the sweep's finest steps (a local order of
-    :data:`~truestep.ci.gates.CONVERGING` or more): the gate judges such a sweep, and fails
+    :data:`~truestep.measures.metrics.CONVERGING` or more): the gate judges such a sweep, and fails
     it if its order is short. A sweep whose error does not fall yet is not judged (the gate
     says so), and is not carried on: implicit Euler on mass-ratio-chain is still rising
     four halvings down, and Newton's XPBD on the rope stays flat."""
-    from truestep.ci.gates import CONVERGING
+    from truestep.measures.metrics import CONVERGING
 
     dts, errors = rows["dt"].to_numpy(float), rows["error"].to_numpy(float)
     ok = np.isfinite(errors) & (errors > 0)

@@ -23,13 +23,10 @@ from truestep.adapters import (
     get_adapter,
     plugin_answer,
 )
-from truestep.adapters.base import Trajectory
+from truestep.adapters.base import Trajectory, duplicate_of
 from truestep.cases.case import Case
-from truestep.execution import faults
-from truestep.execution.isolation import Call, Lanes, Outcome, run_isolated, untimed_workers
 from truestep.execution.progress import Progress
 from truestep.execution.sweep_job import SweepJob, host_name
-from truestep.execution.time_limit import TimeLimitExceeded, time_limit
 from truestep.execution.timing import (
     NOT_REPEATABLE as NOT_REPEATABLE,
 )
@@ -52,6 +49,9 @@ from truestep.measures import metrics
 from truestep.measures.trust import checked
 from truestep.numerics import own_run
 from truestep.reference_impl.model import ParticleModel
+from truestep.runtime import faults
+from truestep.runtime.isolation import Call, Lanes, Outcome, run_isolated, untimed_workers
+from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 from truestep.tables.spec import RESULTS, writable
 
 if TYPE_CHECKING:
@@ -295,7 +295,7 @@ OUTPUT_CHARS = 500
 
 def with_output(message: str, output: str) -> str:
     """A failed row's message, with the end of what its engine process wrote (captured by
-    :mod:`truestep.execution.isolation`, never shown on truestep's own output)."""
+    :mod:`truestep.runtime.isolation`, never shown on truestep's own output)."""
     output = " ".join(output.split())
     if output:
         shown = output if len(output) <= OUTPUT_CHARS else "..." + output[-OUTPUT_CHARS:]
@@ -453,12 +453,6 @@ def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
             print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)
 
 
-def duplicate_of(adapter, case: Case, method: str) -> str | None:
-    """Why ``method`` would repeat another method of the adapter bit for bit, or ``None``."""
-    duplicate = getattr(adapter, "duplicate", None)
-    return duplicate(case, method) if duplicate is not None else None
-
-
 def left_out(adapter, case: Case, method: str) -> str | None:
     """Why the adapter leaves a case it can model unrun (its optional ``skip``: a scene
     beyond the work it takes on), or ``None``."""
@@ -533,7 +527,7 @@ def run_matrix(
     (:class:`truestep.execution.journal.Journal`), each finished sweep is checkpointed there, and a
     sweep it already holds is taken from it instead of being run again. Every row
     records the ``host`` it ran on. The sweeps run here go through ``lanes`` where it is
-    given (:class:`~truestep.execution.isolation.Lanes`, whose backlog, the analyses'
+    given (:class:`~truestep.runtime.isolation.Lanes`, whose backlog, the analyses'
     searches and drops, fills the cores the sweep's own runs leave).
     """
     timing = timing or (QUICK_TIMING if quick else Timing())
@@ -625,7 +619,7 @@ def _run_here(
     lanes: Lanes | None = None,
 ) -> None:
     """The sweeps ``local`` (planned index, steps, adaptive) on this machine
-    (:meth:`~truestep.execution.isolation.Lanes.run`): the timed runs of engines that make a
+    (:meth:`~truestep.runtime.isolation.Lanes.run`): the timed runs of engines that make a
     speed claim one sweep at a time on a core of their own; everything untimed on the
     cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
     and the measured runs of a split sweep (:func:`split_sweep`). Each finished sweep's

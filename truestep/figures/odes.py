@@ -28,7 +28,7 @@ from truestep.figures.style import (
 )
 from truestep.reference_impl.solvers import get_solver
 from truestep.reference_impl.system import System
-from truestep.reporting.plots import series_colour
+from truestep.style import series_colour
 
 MORE_STARTS = ((0.9, 0.75), (1.6, -0.9))
 """Starting points of the vector-field figure's other integral curves (its case has the first)."""

@@ -1,6 +1,6 @@
 """How the lecture's figures look: resolution, colours, line styles, legends.
 
-A line that is an engine/method series is styled by :func:`truestep.reporting.plots.series_style`
+A line that is an engine/method series is styled by :func:`truestep.style.series_style`
 (every line of the lecture's figures is the reference engine, in its method's colour;
 shades of that colour tell step sizes apart). Things that are not engines (particles, scene variants) take
 :data:`SCENE_COLOURS`, none of which is an engine's colour; exact solutions are a light
@@ -18,14 +18,14 @@ import matplotlib.colors as mcolors
 import matplotlib.pyplot as plt
 import numpy as np
 
-from truestep.reporting.plots import save, series_style
+from truestep.style import save, series_style
 
 DPI = 100
 """Resolution of every figure, dots per inch (as the report's other figures:
-:data:`truestep.reporting.plots.REPORT_DPI`)."""
+:data:`truestep.style.REPORT_DPI`)."""
 SCENE_COLOURS = ("#e69f00", "#56b4e9", "#999933", "#cc79a7", "#44aa99")
 """Colours for particles and scene variants (none is an engine/method series' colour,
-:data:`truestep.reporting.plots.SERIES_COLOURS`)."""
+:data:`truestep.style.SERIES_COLOURS`)."""
 NIGHT = "#0d0d17"
 """Background of the particle renderings: particles add light, as point light sources."""
 EXACT_COLOUR = "#c9c9c9"

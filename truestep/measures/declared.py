@@ -23,10 +23,9 @@ from collections.abc import Iterable
 import numpy as np
 
 from truestep.adapters import PluginFailed, get_adapter, plugin_answer
-from truestep.adapters.base import facts_of
+from truestep.adapters.base import duplicate_of, facts_of
 from truestep.adapters.reference import build_system
 from truestep.cases.case import Case, Gate
-from truestep.execution.runner import duplicate_of
 from truestep.reference_impl.solvers import MethodFacts
 from truestep.reference_impl.system import SecondOrderSystem
 

@@ -7,6 +7,7 @@ import numpy as np
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case, OdeSpec, ode_states
 from truestep.cases.exact import Exact, exact_named
+from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
 
 _EXACT_CACHE: dict[tuple[int, bytes], tuple[Case, Exact]] = {}
@@ -139,7 +140,7 @@ def energy_drift(
     return float("nan"), float("nan")
 
 
-ENERGY_SOURCES = frozenset({"force-fields", "emitters", "impulses"})
+ENERGY_SOURCES = frozenset({Feature.FORCE_FIELDS, Feature.EMITTERS, Feature.IMPULSES})
 """Scene features that may put energy in: without them a scene's energy can only fall."""
 
 
@@ -220,6 +221,13 @@ RISING = 0.1
 below its order to be taken as still converging (a wrong method's error stays flat: its
 local order does not rise). :mod:`truestep.execution.refine` stops halving, and a
 declared-order gate fails, where it does not."""
+
+
+CONVERGING = 0.5
+"""The least local order (:func:`local_orders`) at the finest steps of a
+sweep that shows a method converging: every consistent method's error falls at least as
+``dt^1`` once it converges, so a slower fall means the sweep has not reached that regime
+(implicit Euler damping a stiff cloth's motion away at every swept step)."""
 
 
 def local_orders(dts: np.ndarray, errors: np.ndarray) -> np.ndarray:

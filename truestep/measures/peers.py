@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.measures.metrics import ROUND_OFF, round_off_floor
+from truestep.reference_impl.features import Feature
 
 PEER_COLUMNS = ("engine", "method", "peer", "cases", "rows", "ratio", "ratio_min", "ratio_max", "verdict")
 """The table's columns: the engine and its method, the reference method it names as its
@@ -56,7 +57,7 @@ FLOAT32_MARGIN = 10.0
 """A float32 engine is compared where the reference's error is at least this many times
 its round-off floor: there float32's rounding moves the ratio by a tenth at most."""
 
-CONTACT = frozenset({"planes", "thin-walls", "friction"})
+CONTACT = frozenset({Feature.PLANES, Feature.THIN_WALLS, Feature.FRICTION})
 """Features where engines model the physics differently (soft contact, restitution
 rules): a case with any of them is no test of an integrator's scheme."""
 

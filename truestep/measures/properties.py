@@ -16,6 +16,7 @@ import numpy as np
 from truestep.adapters.base import Trajectory
 from truestep.cases.case import Case
 from truestep.cases.exact_particles import bounce_schedule
+from truestep.cases.property_names import PROPERTY_KINDS
 from truestep.measures.restitution import bounces, heights
 from truestep.reference_impl.emitters import lifetime_values, pool_starts, spawn_count_moments, spawn_mean
 from truestep.reference_impl.meshes import signed_volume
@@ -30,16 +31,12 @@ FAILURES = {"tunnelled": "tunnelled"}
 though it finished: property name -> the word a report uses for that failure."""
 
 
-SCENE_KINDS: dict[str, str] = {}
-"""The kind of case (``particles`` or ``ode``) each property reads: a case of another kind
-that names it is refused when it loads."""
-
-
 def register(fn: Property) -> Property:
-    """Add ``fn`` to :data:`PROPERTIES` under its own name, as a property of particle scenes
-    (every property of truestep reads particles)."""
+    """Add ``fn`` to :data:`PROPERTIES` under its own name, which the cases' vocabulary
+    (:data:`~truestep.cases.property_names.PROPERTY_KINDS`) must list."""
+    if fn.__name__ not in PROPERTY_KINDS:
+        raise ValueError(f"{fn.__name__} is not a property name of truestep.cases.property_names")
     PROPERTIES[fn.__name__] = fn
-    SCENE_KINDS[fn.__name__] = "particles"
     return fn
 
 

@@ -12,8 +12,8 @@ import re
 import numpy as np
 import pandas as pd
 
+from truestep.runtime.visible import visible
 from truestep.tables.spec import labels
-from truestep.visible import visible
 
 
 def fmt(x: object, digits: int = 3) -> str:
@@ -33,7 +33,7 @@ _ESCAPE = re.compile("([" + re.escape(ESCAPED) + "])")
 def text(value: object) -> str:
     """``value`` as Markdown that shows exactly its characters: whitespace (new lines
     included) collapsed to single spaces, hidden characters (controls, bidirectional
-    controls, zero-width ones) written as escapes (:func:`truestep.visible.visible`),
+    controls, zero-width ones) written as escapes (:func:`truestep.runtime.visible.visible`),
     every markup character backslash-escaped. Everything a case file or an adapter wrote
     (titles, descriptions, messages, engine and method names) goes into the report
     through it, so it can neither inject markup nor embed a file nor hide a character."""

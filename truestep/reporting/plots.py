@@ -3,7 +3,6 @@ engine, the same in every figure (the lecture's figures and the scaling plot too
 
 from __future__ import annotations
 
-import zlib
 from pathlib import Path
 
 import matplotlib
@@ -15,100 +14,8 @@ import pandas as pd
 
 from truestep.measures.restitution import PHASES
 from truestep.measures.stability import ROUNDOFF_DECIDES
-from truestep.visible import visible
-
-SERIES_COLOURS: dict[tuple[str, str], str] = {
-    ("reference", "euler"): "#e6194b",
-    ("reference", "midpoint"): "#3cb44b",
-    ("reference", "heun"): "#f58231",
-    ("reference", "rk4"): "#4363d8",
-    ("reference", "dopri5"): "#911eb4",
-    ("reference", "symplectic-euler"): "#12a4c4",
-    ("reference", "verlet"): "#f032e6",
-    ("reference", "implicit-euler"): "#9a6324",
-    ("reference", "lecture"): "#000075",
-    ("scipy", "RK45"): "#469990",
-    ("scipy", "DOP853"): "#808000",
-    ("scipy", "Radau"): "#800000",
-    ("pymunk", "default"): "#d4a000",
-    ("pybullet", "default"): "#ff5c8a",
-    ("pybullet", "clean"): "#556b2f",
-    ("mujoco", "Euler"): "#000000",
-    ("mujoco", "implicit"): "#708090",
-    ("mujoco", "implicitfast"): "#7b68ee",
-    ("mujoco", "RK4"): "#2e8b57",
-    ("drake", "explicit_euler"): "#c71585",
-    ("drake", "semi_explicit_euler"): "#00ced1",
-    ("drake", "runge_kutta2"): "#ff8c00",
-    ("drake", "runge_kutta3"): "#6a5acd",
-    ("drake", "implicit_euler"): "#8b0000",
-    ("drake", "radau1"): "#bc8f8f",
-    ("drake", "radau3"): "#006400",
-    ("drake", "runge_kutta5"): "#0000cd",
-    ("drake", "bogacki_shampine3"): "#9acd32",
-    ("drake", "radau3-ec"): "#483d8b",
-    ("mujoco-warp", "Euler"): "#8b7d6b",
-    ("mujoco-warp", "implicit"): "#20b2aa",
-    ("mujoco-warp", "implicitfast"): "#da70d6",
-    ("mujoco-warp", "RK4"): "#e9967a",
-    ("newton", "semi-implicit"): "#b03060",
-    ("newton", "xpbd"): "#00fa9a",
-    ("newton", "vbd"): "#87ceeb",
-}
-"""A colour for each built-in engine/method series, distinct from every other's, in every
-figure. A series of another engine or method takes one of :data:`MORE_COLOURS`, chosen by
-its name (the same in every run)."""
-MORE_COLOURS = ("#a9a9a9", "#8b4513", "#ff1493", "#1e90ff", "#b22222", "#228b22", "#daa520", "#4b0082")
-ENGINE_MARKERS = {
-    "reference": "o",
-    "scipy": "s",
-    "pymunk": "^",
-    "pybullet": "D",
-    "mujoco": "v",
-    "drake": "h",
-    "mujoco-warp": "P",
-    "newton": "X",
-}
-"""A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`)."""
-MORE_MARKERS = ("P", "X", "*", "h", "p", "<", ">")
-ENGINE_LINES: dict[str, str | tuple] = {
-    "reference": "-",
-    "scipy": ":",
-    "pymunk": "--",
-    "pybullet": "-.",
-    "mujoco": (0, (6, 2, 1, 2, 1, 2)),
-    "drake": (0, (1, 1)),
-    "mujoco-warp": (0, (3, 1, 1, 1)),
-    "newton": (0, (5, 1)),
-}
-"""A line style for each engine (another engine's is solid)."""
-LEGEND_FONT = 9
-"""Legend text, points (12 px at :data:`REPORT_DPI`)."""
-LEGEND_ROW_IN = 0.2
-"""Inches a legend entry takes at :data:`LEGEND_FONT` (text and spacing)."""
-
-
-def legend_height(entries: int, least: float) -> float:
-    """A figure height (in) at least ``least`` and tall enough for a one-column legend of
-    ``entries`` beside the axes: a run with every engine has about 30 series, which a
-    fixed height would cut at both ends."""
-    return max(least, LEGEND_ROW_IN * entries + 0.8)
-
-
-def _chosen(name: str, options: tuple) -> object:
-    """One of ``options`` for ``name``, the same in every run and on every machine."""
-    return options[zlib.crc32(name.encode("utf-8", "replace")) % len(options)]
-
-
-def series_colour(engine: str, method: str) -> str:
-    """The colour of an engine/method series in every figure."""
-    known = SERIES_COLOURS.get((engine, method))
-    return known if known is not None else str(_chosen(f"{engine}/{method}", MORE_COLOURS))
-
-
-REPORT_DPI = 100
-"""Resolution of the report's figures: at least 1000 pixels across at the widths drawn
-(the page shows them at most 1100 wide), small enough to inline."""
+from truestep.runtime.visible import visible
+from truestep.style import LEGEND_FONT, legend_height, save, series_colour, series_style
 
 
 def _plain(title: str) -> str:
@@ -122,36 +29,6 @@ def _pair(engine: object, method: object) -> str:
     read as mathtext, never hidden by a leading underscore."""
     label = _plain(visible(f"{engine} / {method}"))
     return " " + label if label.startswith("_") else label
-
-
-def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
-    """Write ``fig`` as a compact PNG: ``dpi``, then reduced to a 256-colour palette.
-
-    Line plots use a few dozen colours (one per series, and their anti-aliased edges), so
-    the palette keeps each series' own colour and the file (inlined in the HTML report)
-    shrinks about threefold.
-    """
-    from PIL import Image
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    with Image.open(path) as img:
-        small = img.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE)
-    small.save(path, optimize=True)
-    return path
-
-
-def series_style(engine: str, method: str) -> dict:
-    """Matplotlib keywords of an engine/method series: its colour (:func:`series_colour`),
-    its engine's marker and line style."""
-    return {
-        "color": series_colour(engine, method),
-        "linestyle": ENGINE_LINES.get(engine, "-"),
-        "marker": ENGINE_MARKERS.get(engine) or _chosen(engine, MORE_MARKERS),
-        "markersize": 5,
-        "linewidth": 1.4,
-    }
 
 
 def work_precision(df: pd.DataFrame, case: str, title: str, path: Path, unit: str = "m") -> Path | None:

@@ -18,12 +18,6 @@ from pathlib import Path
 import pandas as pd
 
 from truestep.cases.case import Case
-from truestep.execution.isolation import (
-    finish_isolated,
-    run_isolated_all,
-    start_isolated,
-    untimed_workers,
-)
 from truestep.measures.findings import Findings, find, speed_table, speed_tables
 from truestep.measures.metrics import PRE_ASYMPTOTIC, ROUND_OFF, ROUND_OFF_FLOAT32
 from truestep.measures.picks import scorecard_table, survival
@@ -43,7 +37,13 @@ from truestep.reporting.sections import (
     speed_section,
     summary,
 )
-from truestep.visible import visible
+from truestep.runtime.isolation import (
+    finish_isolated,
+    run_isolated_all,
+    start_isolated,
+    untimed_workers,
+)
+from truestep.runtime.visible import visible
 
 PACKAGES = (
     "numpy",
@@ -444,7 +444,7 @@ def read_run_record(directory: Path) -> dict | None:
     import json
 
     from truestep.cases.errors import CaseError
-    from truestep.cases.files import read_regular
+    from truestep.runtime.files import read_regular
 
     path = Path(directory) / RUN_FILE
     if not os.path.lexists(path):
@@ -480,19 +480,18 @@ def write_report(
     takes the lines instead).
 
     The whole new report is written into a staging folder beside ``out`` and put in
-    place of the old one as a whole (:mod:`truestep.reporting.publish`): at every instant ``out``
+    place of the old one as a whole (:mod:`truestep.runtime.publish`): at every instant ``out``
     holds either the whole previous report or the whole new one, also when the process
     is killed. ``out`` must be a folder truestep may replace
-    (:func:`truestep.reporting.folder.check_out`: absent, empty, or a report truestep wrote
+    (:func:`truestep.runtime.folder.check_out`: absent, empty, or a report truestep wrote
     holding nothing else), checked again here, after the run; the new report carries the
-    marker (:data:`truestep.reporting.folder.MARKER`). On failure or interruption the
+    marker (:data:`truestep.runtime.folder.MARKER`). On failure or interruption the
     staging folder is removed and the children still drawing are killed.
     """
-    from truestep.execution import faults
-    from truestep.execution.isolation import kill_children
     from truestep.execution.progress import Progress
-    from truestep.reporting import publish
-    from truestep.reporting.folder import check_out, write_marker
+    from truestep.runtime import faults, publish
+    from truestep.runtime.folder import check_out, write_marker
+    from truestep.runtime.isolation import kill_children
 
     out = publish.target(out)
     publish.recover(out)

@@ -91,7 +91,7 @@ def _value(table: pd.DataFrame, col: str, mask: np.ndarray) -> str:
 
 
 def _text_of(path: Path) -> str:
-    from truestep.cases.files import FileRefused, read_regular
+    from truestep.runtime.files import FileRefused, read_regular
 
     try:
         raw = read_regular(path, MAX_TABLE_BYTES)
@@ -298,7 +298,7 @@ def recorded_rows(directory: Path) -> dict[str, int]:
     older truestep, or one that cannot be read: its own readers say why)."""
     import json
 
-    from truestep.cases.files import read_regular
+    from truestep.runtime.files import read_regular
 
     path = Path(directory) / RUN_RECORD
     try:

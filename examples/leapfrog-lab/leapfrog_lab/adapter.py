@@ -11,16 +11,16 @@ class LeapfrogAdapter(truestep.FixedStepAdapter):
     methods = ("leapfrog",)
     capabilities = frozenset(
         {
-            "point-masses",
-            "2d",
-            "3d",
-            "uniform-gravity",
-            "drag",
-            "springs",
-            "spring-damping",
-            "anchored-springs",
-            "planes",
-            "pinned-particles",
+            truestep.Feature.POINT_MASSES,
+            truestep.Feature.PLANAR,
+            truestep.Feature.SPATIAL,
+            truestep.Feature.UNIFORM_GRAVITY,
+            truestep.Feature.DRAG,
+            truestep.Feature.SPRINGS,
+            truestep.Feature.SPRING_DAMPING,
+            truestep.Feature.ANCHORED_SPRINGS,
+            truestep.Feature.PLANES,
+            truestep.Feature.PINNED_PARTICLES,
         }
     )
     method_facts: ClassVar = {"leapfrog": "verlet"}  # every fact of Verlet's: omega h < 2, order 2

@@ -32,8 +32,8 @@ import sys
 from collections.abc import Callable
 from typing import NoReturn
 
-from truestep.execution.oscalls import become_subreaper, die_with_parent
-from truestep.execution.process_tree import kill_tree, reap_children
+from truestep.runtime.oscalls import become_subreaper, die_with_parent
+from truestep.runtime.process_tree import kill_tree, reap_children
 
 DID_NOT_FINISH = 3
 """The exit code of a command whose process ended before it finished, without a signal

@@ -1,7 +1,7 @@
 """SIGTERM, SIGINT and SIGHUP during ``truestep run``: kill the children, unwind, say so.
 
 Inside :func:`handled`, the first SIGTERM, SIGINT or SIGHUP kills every live child process
-(:func:`truestep.execution.isolation.kill_children`) and raises :class:`Interrupted` where the main
+(:func:`truestep.runtime.isolation.kill_children`) and raises :class:`Interrupted` where the main
 thread is, so every ``finally`` on the way out runs (staging folders are removed, the
 previous report stays). Later signals only kill children again: the unwinding itself is
 not interrupted.
@@ -35,7 +35,7 @@ def handled() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    from truestep.execution.isolation import kill_children
+    from truestep.runtime.isolation import kill_children
 
     fired: list[int] = []
 

@@ -5,7 +5,7 @@ case's rows, not the run.
 :func:`time_limit` uses ``SIGALRM`` (``setitimer``), so it interrupts Python code and
 numpy calls between their C loops; it works in the main thread of a POSIX process and
 is a no-op elsewhere (a worker thread, Windows), where the per-run process timeouts of
-:mod:`truestep.execution.isolation` still hold.
+:mod:`truestep.runtime.isolation` still hold.
 """
 
 from __future__ import annotations

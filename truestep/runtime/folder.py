@@ -19,8 +19,8 @@ import os
 import stat
 from pathlib import Path
 
-from truestep.cases.files import FileRefused, read_regular
-from truestep.visible import visible
+from truestep.runtime.files import FileRefused, read_regular
+from truestep.runtime.visible import visible
 
 MARKER = ".truestep-report"
 """The marker file's name."""

@@ -21,8 +21,8 @@ import sys
 import time
 from pathlib import Path
 
-from truestep.cases.files import FileRefused, read_regular
-from truestep.reporting.publish import beside
+from truestep.runtime.files import FileRefused, read_regular
+from truestep.runtime.publish import beside
 
 MAX_LOCK_BYTES = 4096
 """The most read of a lock file, for the line that names the run holding it."""

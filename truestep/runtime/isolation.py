@@ -8,19 +8,19 @@ share the CPU with other runs of the harness. :func:`run_isolated_all` keeps up 
 searches, bounce tests).
 
 No child outlives its parent: each one asks the kernel for SIGKILL when its parent dies
-(Linux, :func:`truestep.execution.oscalls.die_with_parent`), ignores SIGINT (the parent decides)
+(Linux, :func:`truestep.runtime.oscalls.die_with_parent`), ignores SIGINT (the parent decides)
 and takes SIGTERM by default; the parent kills the live ones when it is interrupted
-(:func:`kill_children`, :mod:`truestep.execution.interrupts`).
+(:func:`kill_children`, :mod:`truestep.runtime.interrupts`).
 
 What runs in a child is contained: the child leads a process group of its own and
-adopts every orphaned process below it (:func:`truestep.execution.oscalls.become_subreaper`), and
+adopts every orphaned process below it (:func:`truestep.runtime.oscalls.become_subreaper`), and
 whatever the adapter started there (helpers, a daemon that left the group with
 ``setsid``) is killed when the call ends, after a normal finish, a crash, a timeout or
-an interruption (:func:`truestep.execution.process_tree.kill_tree`). Its standard output and error
+an interruption (:func:`truestep.runtime.process_tree.kill_tree`). Its standard output and error
 (the file descriptors, so its own subprocesses' too) go to a pipe whose last
 :data:`OUTPUT_TAIL` bytes come back in :attr:`Outcome.output`, never to truestep's own
 output; standard input is ``/dev/null``. Its result comes back as data
-(:func:`truestep.execution.plain_data.loads`): arrays, plain values and truestep's own
+(:func:`truestep.runtime.plain_data.loads`): arrays, plain values and truestep's own
 records, never an object that runs code of its own while it is read here.
 """
 
@@ -43,9 +43,9 @@ from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import Any, Protocol
 
-from truestep.execution import faults, plain_data
-from truestep.execution.oscalls import become_subreaper, die_with_parent
-from truestep.execution.process_tree import has_children, kill_group, kill_tree, reap_children
+from truestep.runtime import faults, plain_data
+from truestep.runtime.oscalls import become_subreaper, die_with_parent
+from truestep.runtime.process_tree import has_children, kill_group, kill_tree, reap_children
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
 An adapter may start processes of its own (a solver server, a helper, a daemon that
 double-forks and calls ``setsid`` to leave its process group). Each isolated run is a
-subreaper (:func:`truestep.execution.oscalls.become_subreaper`), so every such process stays below
+subreaper (:func:`truestep.runtime.oscalls.become_subreaper`), so every such process stays below
 it in the process tree even when its own parent exits; :func:`kill_tree` stops them all
 (so none can fork meanwhile), then kills them, until none is left. The tree is read
 from ``/proc`` (each process's parent), which works without ``/proc/PID/task/*/children``.

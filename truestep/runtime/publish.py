@@ -22,9 +22,9 @@ import signal
 import stat
 from pathlib import Path
 
-from truestep.execution import faults
-from truestep.execution.interrupts import HANDLED, Interrupted
-from truestep.execution.oscalls import exchange
+from truestep.runtime import faults
+from truestep.runtime.interrupts import HANDLED, Interrupted
+from truestep.runtime.oscalls import exchange
 
 EXCHANGE = True
 """Swap with ``renameat2(RENAME_EXCHANGE)`` where available; ``False`` forces the two
@@ -109,7 +109,7 @@ def _ours(path: Path) -> bool:
     process's user that holds a report's marker (a staging folder writes it first) or
     nothing at all. A user's own folder under a scratch name is never this, and never
     deleted."""
-    from truestep.reporting.folder import MARKER
+    from truestep.runtime.folder import MARKER
 
     try:
         st = os.lstat(path)
