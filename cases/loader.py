@@ -22,6 +22,7 @@ from truestep.cases.case import FAMILIES, Case, Gate, OdeSpec, Scene, StabilityS
 from truestep.cases.errors import CaseError, SelectionError
 from truestep.cases.exact import exact_named, exact_names
 from truestep.cases.fields import Fields, short
+from truestep.cases.gate_kinds import GATE_KINDS, GATE_NUMBERS, GateKind
 from truestep.cases.limits import (
     DEFAULT,
     MIN_STEP_S,
@@ -38,7 +39,6 @@ from truestep.reference_impl.system import SecondOrderSystem
 from truestep.runtime.files import FileRefused, read_regular
 from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 from truestep.runtime.visible import visible
-from truestep.tables.spec import RESULTS
 
 CASE_DIR = plugins.CASE_DIR
 """truestep's own case library (this folder)."""
@@ -46,18 +46,6 @@ CASE_DIR = plugins.CASE_DIR
 ODE_DIMENSIONS = {"circle-field": 2, "kepler": 4, "arenstorf": 4}
 """State dimension of the lecture's ODE systems (installed systems are checked by
 constructing them)."""
-GATE_KINDS = {
-    "order",
-    "error",
-    "energy_drift",
-    "status",
-    "property",
-    "stability-limit",
-    "speedup",
-    "restitution",
-    "no-worse-than",
-}
-GATE_NUMBERS = {"expect", "tol", "max", "min", "rel_tol", "factor", "bounce", "e_set"}
 MAX_FILE_BYTES = 16 * 2**20
 """The largest case or gates file read (16 MiB): a scene bigger than that is built from
 blocks, meshes and emitters, not listed particle by particle."""
@@ -660,13 +648,9 @@ def _read_gates(f: Fields) -> list[Gate]:
     return gates
 
 
-STATUS_VALUES = {"ok", "unstable"}
 GATE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,79}")
 """What a gate's ``id`` may be: a short name that reads the same in a URL, a JUnit
 report and a shell."""
-QUANTITIES = set(RESULTS.where(gate=True))
-"""The results columns a ``no-worse-than`` gate may compare (:mod:`truestep.tables.spec`)."""
-RESTITUTION_QUANTITIES = {"e_measured", "e_apex"}
 
 
 def read_gate(g: Fields, where: str) -> Gate:
@@ -690,7 +674,7 @@ def read_gate(g: Fields, where: str) -> Gate:
       ``quantity`` (default ``error``), on every ``dt`` both ran (or only ``dt``);
     - ``speedup``: ``dt``, ``over`` (engines), ``min`` (times faster).
     """
-    kind = g.string("kind", choices=GATE_KINDS)
+    kind = GATE_KINDS[g.string("kind", choices=GATE_KINDS)]
     gate_id = g.string("id", None)
     if gate_id is not None and not GATE_ID.fullmatch(gate_id):
         raise g.error("id", f"expected letters, digits, '.', '_' or '-' (at most 80), got {short(gate_id)}")
@@ -698,51 +682,27 @@ def read_gate(g: Fields, where: str) -> Gate:
     method = g.string("method")
     dt = g.number("dt", None, positive=True)
     params: dict[str, object] = {}
-    if kind == "status":
-        params["expect"] = g.string("expect", choices=STATUS_VALUES)
+    if kind.words and kind.fields is not None:
+        kind.fields(g, params)
     for key in list(g.table):
         if key in GATE_NUMBERS and key not in params:
             params[key] = g.number(key)
-    if kind == "property":
-        params["name"] = g.string("name")
-    if kind == "speedup":
-        params["over"] = g.strings("over")
-    if kind == "no-worse-than":
-        than = g.string("than")
-        other_engine, sep, other_method = than.partition("/")
-        if not sep or not other_engine or not other_method or "*" in than:
-            raise g.error("than", f"expected 'engine/method' of one run, got {than!r}")
-        params["than"] = (other_engine, other_method)
-        params["quantity"] = g.string("quantity", "error", choices=QUANTITIES)
-        params.setdefault("factor", 1.0)
-    if kind == "restitution":
-        params["quantity"] = g.string("quantity", "e_measured", choices=RESTITUTION_QUANTITIES)
+    if kind.fields is not None and not kind.words:
+        kind.fields(g, params)
     _require(g, kind, params, dt)
     g.done()
-    return Gate(kind, engine, method, dt, params, where, file=g.file, id=gate_id)
+    return Gate(kind.name, engine, method, dt, params, where, file=g.file, id=gate_id)
 
 
-def _require(g: Fields, kind: str, params: dict, dt: float | None) -> None:
-    need = {
-        "order": ("expect", "tol"),
-        "error": ("max",),
-        "energy_drift": ("max",),
-        "speedup": ("min",),
-        "restitution": ("tol",),
-    }.get(kind, ())
-    for key in need:
+def _require(g: Fields, kind: GateKind, params: dict, dt: float | None) -> None:
+    """What ``kind`` needs of a gate's numbers and step (:mod:`truestep.cases.gate_kinds`)."""
+    for key in kind.needs:
         if key not in params:
-            raise g.error(key, f"a {kind} gate needs {key}")
-    if kind in ("error", "energy_drift", "status", "property", "speedup") and dt is None:
-        raise g.error("dt", f"a {kind} gate needs the dt (or tolerance) of the row it reads")
-    if kind == "property" and "min" not in params and "max" not in params:
-        raise g.error("max", "a property gate needs min, max or both")
-    if kind == "stability-limit" and "rel_tol" not in params and "min" not in params:
-        raise g.error(
-            "rel_tol", "a stability-limit gate needs rel_tol (against the exact limit), min (s), or both"
-        )
-    if kind == "no-worse-than" and not params["factor"] > 0:
-        raise g.error("factor", f"must be positive, got {params['factor']:g}")
+            raise g.error(key, f"a {kind.name} gate needs {key}")
+    if kind.needs_dt and dt is None:
+        raise g.error("dt", f"a {kind.name} gate needs the dt (or tolerance) of the row it reads")
+    if kind.one_of is not None and not any(key in params for key in kind.one_of[0]):
+        raise g.error(kind.one_of[0][0], kind.one_of[1])
 
 
 def load_gates_file(path: str | Path) -> list[tuple[list[str], Gate]]:

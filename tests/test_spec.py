@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from truestep.cases import loader
+from truestep.cases import gate_kinds
 from truestep.ci import baseline
 from truestep.execution.runner import MACHINE_COLUMNS, RESULT_COLUMNS
 from truestep.reporting.markdown import UNITS
@@ -47,7 +47,7 @@ def test_the_readers_read_the_spec():
         assert tables_io.KEYS[name] == TABLES[name].keys
         assert set(tables_io.NUMERIC[name]) == {c.name for c in TABLES[name].columns if c.numeric}
         assert tables_io.REQUIRED[name] <= set(TABLES[name].names)
-    assert loader.QUANTITIES == {"error", "energy_drift", "energy_drift_final", "nfev"}
+    assert gate_kinds.QUANTITIES == {"error", "energy_drift", "energy_drift_final", "nfev"}
 
 
 def test_a_value_out_of_the_declared_bounds_is_refused(tmp_path):

@@ -87,3 +87,18 @@ def test_the_measured_properties_are_the_cases_vocabulary():
     assert set(PROPERTIES) == set(PROPERTY_KINDS)
     with pytest.raises(ValueError, match="not a property name"):
         register(lambda case, traj: 0.0)
+
+
+def test_every_gate_kind_has_one_record_and_one_checker():
+    """The loader validates with the kind's record, the checker dispatches on it: a kind
+    that reads results rows has a checker of its own, the other two read their tables."""
+    from truestep.cases.gate_kinds import GATE_KINDS
+    from truestep.ci.gates import CHECKS
+
+    rows = {name for name, kind in GATE_KINDS.items() if kind.reads in ("row", "sweep")}
+    assert set(CHECKS) == rows
+    assert {kind.reads for name, kind in GATE_KINDS.items() if name not in rows} == {
+        "stability",
+        "restitution",
+    }
+    assert len(GATE_KINDS) == 9

@@ -255,6 +255,7 @@ def _tables(sel: Selection):
     """The selection's run, made once per session (the stability searches and the
     restitution sweep only when a gate reads them), or read from ``results=``."""
     from truestep.api import run
+    from truestep.cases.gate_kinds import GATE_KINDS
 
     key = dataclasses.astuple(sel)
     if key not in _RUNS and sel.results is not None:
@@ -267,7 +268,7 @@ def _tables(sel: Selection):
         _RUNS[key] = _Read(read["results"], read["stability"], read["restitution"])
     if key not in _RUNS:
         cases, todo = _gates(sel)
-        analyses = any(g.kind in ("stability-limit", "restitution") for _, g in todo)
+        analyses = any(GATE_KINDS[g.kind].reads in ("stability", "restitution") for _, g in todo)
         _RUNS[key] = run(
             cases, list(sel.engines), quick=sel.quick, analyses=analyses, progress=lambda _: None
         )

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import fnmatch
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import PurePath
 
@@ -18,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case, Gate
+from truestep.cases.gate_kinds import GATE_KINDS
 from truestep.measures.metrics import CONVERGING, RISING, ROUND_OFF, fit_order, round_off_floor
 
 NOT_RUN = frozenset({"unsupported", "skipped"})
@@ -154,14 +156,16 @@ def check_gate(
     """Evaluate one gate for one engine and method (no ``*``); a gate with no row to read
     fails, saying so, and a gate whose case or engine the run left out altogether
     (``--cases``, ``--engines``) is not evaluated and says so."""
-    p = g.params
+    kind = GATE_KINDS.get(g.kind)
+    if kind is None:
+        raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
     ran = results[(results["case"] == case.name) & (results["engine"] == g.engine)]
-    if g.kind == "restitution":
+    if kind.reads == "restitution":
         return _restitution(case.name, g, restitution)
     if not len(ran):
         return GateResult(case.name, g, True, "not run", "a run of this case and engine", evaluated=False)
     rows = ran[ran["method"] == g.method]
-    if g.kind == "stability-limit":
+    if kind.reads == "stability":
         return _stability(case, g, stability)
     if not len(rows):
         return GateResult(case.name, g, False, "no result row", "a row to read")
@@ -169,47 +173,48 @@ def check_gate(
         r = rows.iloc[0]
         why = r.get("missing") if r["status"] == "unsupported" else r.get("message")
         return GateResult(case.name, g, False, f"{r['status']} ({why})", "a run to read")
-    if g.kind == "order":
-        return _order(case, g, rows)
-    if g.kind == "no-worse-than":
-        return _no_worse(case, g, results, rows)
+    if kind.reads == "sweep":
+        return CHECKS[g.kind](case, g, results, rows)
     at_dt = _at_dt(rows, g.dt)
     if not len(at_dt):
         return quick_only(case, g, results[results["case"] == case.name]) or GateResult(
             case.name, g, False, "no result row at this dt", "a row to read"
         )
-    rows = at_dt
-    row = rows.iloc[0]
+    row = at_dt.iloc[0]
     if row["status"] in BROKEN:
-        return GateResult(case.name, g, False, _broken(rows) or str(row["status"]), "a measured row")
-    if g.kind == "status":
-        return GateResult(case.name, g, row["status"] == p["expect"], str(row["status"]), str(p["expect"]))
-    if row["status"] != "ok":
+        return GateResult(case.name, g, False, _broken(at_dt) or str(row["status"]), "a measured row")
+    if not kind.any_status and row["status"] != "ok":
         return GateResult(case.name, g, False, _status(row), "status ok")
-    if g.kind in ("error", "energy_drift"):
-        value = float(_num(rows[g.kind])[0])
-        ran = results[(results["case"] == case.name) & (results["status"] == "ok")]
-        never = not np.isfinite(value) and not np.isfinite(_num(ran[g.kind])).any()
-        return GateResult(
-            case.name,
-            g,
-            _within(value, None, p["max"]),
-            f"nothing: {g.kind} is never measured on this case (no ok row of any engine has one: "
-            + (
-                "a dissipative scene whose exact solution gives no energy curve, or one without energy)"
-                if g.kind == "energy_drift"
-                else "it has no exact solution or reference run)"
-            )
-            if never
-            else f"{g.kind} {value:.3g}",
-            f"<= {p['max']:g}",
-            value=value,
+    return CHECKS[g.kind](case, g, results, at_dt)
+
+
+def _status_is(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) -> GateResult:
+    """A ``status`` gate: the row at its step has the status it expects."""
+    status = rows.iloc[0]["status"]
+    return GateResult(case.name, g, status == g.params["expect"], str(status), str(g.params["expect"]))
+
+
+def _measured(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) -> GateResult:
+    """An ``error`` or ``energy_drift`` gate: the row's value at most ``max`` (a case on
+    which no engine ever measures it says so)."""
+    value = float(_num(rows[g.kind])[0])
+    ran = results[(results["case"] == case.name) & (results["status"] == "ok")]
+    never = not np.isfinite(value) and not np.isfinite(_num(ran[g.kind])).any()
+    return GateResult(
+        case.name,
+        g,
+        _within(value, None, g.params["max"]),
+        f"nothing: {g.kind} is never measured on this case (no ok row of any engine has one: "
+        + (
+            "a dissipative scene whose exact solution gives no energy curve, or one without energy)"
+            if g.kind == "energy_drift"
+            else "it has no exact solution or reference run)"
         )
-    if g.kind == "property":
-        return _property(case, g, rows)
-    if g.kind == "speedup":
-        return _speedup(case, g, results, row)
-    raise ValueError(f"{g.file or case.file}: {g.where}.kind: unknown gate kind {g.kind!r}")
+        if never
+        else f"{g.kind} {value:.3g}",
+        f"<= {g.params['max']:g}",
+        value=value,
+    )
 
 
 QUICK_ONLY = "not in this --quick run"
@@ -603,13 +608,9 @@ def gate_id(case: str, g: Gate) -> str:
     if g.id:
         return f"{case}/{g.id}/{g.engine}/{g.method}{dt}"
     parts = [case, g.kind, g.engine, g.method]
-    p = g.params
-    if g.kind == "property":
-        parts.append(str(p.get("name", "")))
-    elif g.kind == "no-worse-than":
-        parts.append(f"{p.get('quantity', '')}-vs-{'/'.join(p.get('than', ()))}")
-    elif g.kind == "restitution":
-        parts.append(str(p.get("quantity", "")))
+    kind = GATE_KINDS.get(g.kind)
+    if kind is not None and kind.tells_apart is not None:
+        parts.append(kind.tells_apart(g.params))
     if g.where == DECLARED:
         parts.append(DECLARED)
     return "/".join(parts) + dt
@@ -622,7 +623,7 @@ def gates_to_check(
     its patterns match (a restitution gate once, as case :data:`SWEEP`)."""
     todo = [(c, g) for c in cases for g in c.gates]
     for patterns, g in extra or []:
-        if g.kind == "restitution":
+        if GATE_KINDS[g.kind].reads == "restitution":
             todo.append((_SWEEP_CASE, g))
             continue
         todo += [(c, g) for c in cases if _matches(c, g, patterns)]
@@ -645,7 +646,7 @@ def unmatched(cases: list[Case], extra: list[tuple[list[str], Gate]] | None) -> 
     run of other cases, shows."""
     out = []
     for patterns, g in extra or []:
-        if g.kind == "restitution" or any(_matches(c, g, patterns) for c in cases):
+        if GATE_KINDS[g.kind].reads == "restitution" or any(_matches(c, g, patterns) for c in cases):
             continue
         shown = ", ".join(patterns)
         out.append(
@@ -704,3 +705,18 @@ def _table_pairs(case: Case, g: Gate, table: pd.DataFrame | None) -> list[tuple[
 def verdict_table(verdicts: list[GateResult]) -> pd.DataFrame:
     """The verdicts as a table (:data:`GATE_COLUMNS`)."""
     return pd.DataFrame([v.row() for v in verdicts], columns=GATE_COLUMNS)
+
+
+Check = Callable[[Case, Gate, pd.DataFrame, pd.DataFrame], GateResult]
+CHECKS: dict[str, Check] = {
+    "order": lambda case, g, results, rows: _order(case, g, rows),
+    "no-worse-than": _no_worse,
+    "error": _measured,
+    "energy_drift": _measured,
+    "status": _status_is,
+    "property": lambda case, g, results, rows: _property(case, g, rows),
+    "speedup": lambda case, g, results, rows: _speedup(case, g, results, rows.iloc[0]),
+}
+"""The checker of each kind of gate that reads results rows (its kind's ``reads`` is
+``sweep``: every step of the engine and method; ``row``: the rows at the gate's step);
+``stability-limit`` and ``restitution`` gates read their own tables."""
