@@ -179,7 +179,11 @@ class Adapter(Protocol):
     12. optionally, ``same_steps(case, method) -> (other, why) | None``: another of its
         methods whose steps ``method`` repeats bit for bit on ``case``, and why. Both
         stay rows of the sweep; the stability search is made once, for ``other``, and
-        ``method``'s row carries its result and says so.
+        ``method``'s row carries its result and says so;
+    13. optionally, ``bounce_methods``: the methods the restitution sweep drops a ball
+        with (default: every fixed-step method), and ``warm(cases, *, say) -> int``, a
+        static method that ``truestep compile`` calls to build what the engine compiles
+        on first use (kernels) into its own cache, returning how many scenes it built.
 
     :class:`FixedStepAdapter` does 2 to 4 and 9 for an engine that steps a particle scene.
     """

@@ -19,7 +19,7 @@ outside the timed region.
   the drag, below); joint limits are off; contact margin and gap are 0.
   ``autoreset`` is disabled so that MuJoCo does not silently reset a diverging state
   to ``qpos0``: its bad-qpos/qvel/qacc warnings mark the run ``unstable`` instead
-  (:func:`unstable_warnings`).
+  (counted over the run in :meth:`MujocoAdapter.step_and_record`).
 * **Gravity** is ``<option gravity>``; the step is ``<option timestep>`` =
   ``case.steps_for(dt)[1]``; the integrator is ``<option integrator>``, one of the
   adapter's methods. ``<flag energy="enable"/>`` makes MuJoCo compute its own
@@ -487,11 +487,6 @@ def build(case: Case, method: str, dt: float, *, contact_steps: float = CONTACT_
     pinned_x = np.array([d.site(s).xpos for s in layout.pinned_sites]).reshape(-1, 3)
     applied = AppliedForces(model, layout) if has_applied_forces(model) else None
     return Scene(m, d, layout, xml, applied, pinned_x)
-
-
-def unstable_warnings(d: mujoco.MjData) -> int:
-    """How many times MuJoCo flagged a NaN, infinite or huge qpos, qvel or qacc."""
-    return sum(d.warning[w].number for w in _BAD_STATE)
 
 
 def same_steps(case: Case, method: str) -> tuple[str, str] | None:

@@ -158,6 +158,11 @@ class MujocoWarpAdapter(FixedStepAdapter):
     }
     capabilities = CAPABILITIES
 
+    @staticmethod
+    def warm(cases: list[Case], *, say: Any = print) -> int:
+        """``truestep compile``'s hook: this module's :func:`warm`."""
+        return warm(cases, say=say)
+
     def __init__(self, *, device: str = DEVICE) -> None:
         self.device = device
 

@@ -353,6 +353,11 @@ class NewtonAdapter(FixedStepAdapter):
     unsupported_notes: ClassVar[dict[Feature, str]] = REASONS
     capabilities = CAPABILITIES
 
+    @staticmethod
+    def warm(cases: list[Case], *, say: Any = print) -> int:
+        """``truestep compile``'s hook: this module's :func:`warm`."""
+        return warm(cases, say=say)
+
     def __init__(self, *, device: str = DEVICE) -> None:
         self.device = device
 

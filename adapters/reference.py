@@ -83,6 +83,10 @@ class ReferenceAdapter:
         """Each solver's own facts, read from its class attribute ``facts`` when asked."""
         return MappingProxyType({m: cls.facts for m, cls in METHODS.items()})
 
+    bounce_methods = ("lecture", "symplectic-euler", "rk4")
+    """The methods of the restitution sweep: the collision pass is the same for all, so a
+    first-order, a symplectic and a fourth-order integrator show whether the integrator
+    matters at all."""
     capabilities = frozenset(
         {
             Feature.ODE,

@@ -22,10 +22,9 @@ from pathlib import Path
 import pandas as pd
 
 from truestep.adapters import adapter_class, engine_status, registered, resolve_engine, shadowed
-from truestep.cases import Case, CaseError, load_cases
-from truestep.cases.fields import short
+from truestep.cases import Case, load_cases
 from truestep.cases.loader import load_gates_file, read_gate
-from truestep.ci.gates import GateResult, check_gates, verdict_table
+from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
 from truestep.execution.experiment import Experiment, Finished, Tables
 from truestep.numerics import own_run
 from truestep.runtime.visible import visible
@@ -191,14 +190,9 @@ def gate_results(
             )
         else:
             extra += load_gates_file(g)
-    engines = set(registered()) | set(tables.results["engine"].astype(str))
-    for _, g in extra:
-        if g.engine != "*" and g.engine not in engines:
-            raise CaseError(
-                g.file,
-                f"{g.where}.engine",
-                f"unknown engine {short(g.engine)} (not registered, not in the results)",
-            )
+    refuse_unknown_engines(
+        extra, set(registered()) | set(tables.results["engine"].astype(str)), "the results"
+    )
     cases = tables.cases if case_gates else [dataclasses.replace(c, gates=[]) for c in tables.cases]
     return check_gates(cases, tables.results, tables.stability, tables.restitution, extra=extra)
 

@@ -8,7 +8,6 @@ no traceback; nothing already written is touched).
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import os
 import shutil
@@ -536,8 +535,9 @@ def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -
     """The cases a ``truestep gate`` checks and every gate's verdict (the cases' own, the
     ``--gates`` files' and, with ``--declared-orders``, the methods' declared orders)."""
     from truestep.adapters import registered
-    from truestep.cases import CaseError, load_cases
+    from truestep.cases import load_cases
     from truestep.cases.loader import load_gates_file
+    from truestep.ci.gates import refuse_unknown_engines
 
     results = tables["results"]
     engines = set(registered()) | set(results["engine"].astype(str))
@@ -547,14 +547,9 @@ def _gate_verdicts(args: argparse.Namespace, tables: dict, results_path: Path) -
         if args.cases
         else _cases_of(results, results_path, engines, limits, args.trust_limits)
     )
-    extra = [item for f in args.gates for item in load_gates_file(f)]
-    for _, g in extra:
-        if g.engine != "*" and g.engine not in engines:
-            raise CaseError(
-                g.file,
-                f"{g.where}.engine",
-                f"unknown engine {_quoted(g.engine)} (not registered, not in {results_path})",
-            )
+    refuse_unknown_engines(
+        [item for f in args.gates for item in load_gates_file(f)], engines, str(results_path)
+    )
     return cases, _verdicts_on(args, tables, cases)
 
 
@@ -856,20 +851,17 @@ def cmd_compile(args: argparse.Namespace) -> int:
     workers = len(os.sched_getaffinity(0))
     compile_all(models, workers=workers, progress=lambda line: print(line, flush=True))
     print(f"reference loops ready in {time.perf_counter() - began:.1f} s ({workers} workers)")
-    from truestep.adapters import BUILTIN, engine_status
+    from truestep.adapters import adapter_class, engine_status, registered
 
-    for engine in WARP_ENGINES:
-        if engine_status(engine) == "installed":
-            warm = importlib.import_module(BUILTIN[engine].partition(":")[0]).warm
+    for engine in registered():
+        if engine_status(engine) != "installed":
+            continue
+        warm = getattr(adapter_class(engine), "warm", None)
+        if warm is not None:
             began = time.perf_counter()
             built = warm(cases, say=lambda line: print(line, flush=True))
             print(f"{engine} kernels ready in {time.perf_counter() - began:.1f} s ({built} scenes)")
     return 0
-
-
-WARP_ENGINES = ("mujoco-warp", "newton")
-"""Engines built on Warp, whose kernels ``truestep compile`` compiles into Warp's cache
-(each adapter module's ``warm``)."""
 
 
 CASES_HELP = (

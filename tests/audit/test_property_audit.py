@@ -2263,7 +2263,7 @@ RESTITUTION_RUNS = [(0.5, 1 / 240), (0.8, 1 / 240), (0.0, 1 / 240), (0.8, 1 / 10
 
 
 def _restitution_params():
-    from truestep.execution.analyses import REFERENCE_BOUNCE_METHODS, bounce_case
+    from truestep.execution.analyses import bounce_case
 
     out = []
     probe = bounce_case(0.5, 1 / 240)
@@ -2271,9 +2271,7 @@ def _restitution_params():
         if not _installed(engine):
             continue
         adapter = get_adapter(engine)
-        for method in adapter.methods:
-            if engine == "reference" and method not in REFERENCE_BOUNCE_METHODS:
-                continue
+        for method in getattr(adapter, "bounce_methods", None) or adapter.methods:
             if adapter.missing(probe, method) or method in adapter.adaptive_methods:
                 continue
             for e, dt in RESTITUTION_RUNS:

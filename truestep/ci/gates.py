@@ -616,6 +616,22 @@ def gate_id(case: str, g: Gate) -> str:
     return "/".join(parts) + dt
 
 
+def refuse_unknown_engines(extra: list[tuple[list[str], Gate]], engines: set[str], results: str) -> None:
+    """A gates-file gate must name one of ``engines`` (registered, or in the run's
+    ``results``) or ``*``: :class:`~truestep.cases.CaseError` naming its file and field
+    otherwise (``truestep gate``, :func:`truestep.check` and the pytest plugin alike)."""
+    from truestep.cases.errors import CaseError
+    from truestep.cases.fields import short
+
+    for _, g in extra:
+        if g.engine != "*" and g.engine not in engines:
+            raise CaseError(
+                g.file,
+                f"{g.where}.engine",
+                f"unknown engine {short(g.engine)} (not registered, not in {results})",
+            )
+
+
 def gates_to_check(
     cases: list[Case], extra: list[tuple[list[str], Gate]] | None = None
 ) -> list[tuple[Case, Gate]]:

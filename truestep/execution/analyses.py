@@ -34,10 +34,6 @@ RESTITUTION_SET = (0.0, 0.5, 0.8, 0.9, 1.0)
 RESTITUTION_DTS = (1 / 240, 1 / 1000)
 QUICK_RESTITUTION_SET = (0.5,)
 QUICK_RESTITUTION_DTS = (1 / 240,)
-REFERENCE_BOUNCE_METHODS = ("lecture", "symplectic-euler", "rk4")
-"""Reference methods in the bounce test: the collision pass is the same for all, so a
-first-order, a symplectic and a fourth-order integrator show whether the integrator
-matters at all."""
 BOUNCES = 3
 SCALING_BUDGET_S = 12.0
 """Seconds of timed runs for the scaling table of a full run (``truestep bench`` takes
@@ -559,9 +555,7 @@ def restitution_part(
     for engine in engines:
         adapter = get_adapter(engine)
         probe = bounce_case(0.5, dts[0])
-        for method in adapter.methods:
-            if engine == "reference" and method not in REFERENCE_BOUNCE_METHODS:
-                continue
+        for method in getattr(adapter, "bounce_methods", None) or adapter.methods:
             try:
                 missing = plugin_answer(engine, "missing()", adapter.missing, probe, method)
             except PluginFailed as err:
