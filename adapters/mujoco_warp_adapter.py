@@ -51,10 +51,9 @@ import mujoco
 import numpy as np
 
 from truestep.adapters import mujoco_adapter as mj
-from truestep.adapters import warp_runtime
-from truestep.adapters.base import FactsSpec, FixedStepAdapter
+from truestep.adapters.base import FactsSpec
 from truestep.adapters.quiet import without_banner
-from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, host_copy, host_view, wp
+from truestep.adapters.warp_runtime import BANNER, DEVICE, WarpAdapter, host_copy, host_view, wp
 from truestep.cases.case import Case
 from truestep.reference_impl.features import Feature
 
@@ -127,7 +126,7 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE) -> Scene:
     return Scene(host, m, d, layout, capture.graph, pinned_x, model.n, device, list(layout.notes), views)
 
 
-class MujocoWarpAdapter(FixedStepAdapter):
+class MujocoWarpAdapter(WarpAdapter):
     """MuJoCo Warp's four integrators on particle scenes (see the module docstring).
 
     Parameters
@@ -138,8 +137,7 @@ class MujocoWarpAdapter(FixedStepAdapter):
 
     name = "mujoco-warp"
     methods = tuple(mj.INTEGRATORS)
-    precision: ClassVar[str] = PRECISION
-    """The state's floating-point type: order fits and baselines use its round-off floor."""
+    cpu_note: ClassVar[str] = CPU_NOTE
     correctness_peer_of: ClassVar[str] = "mujoco"
     """The engine whose physics this one reimplements (compared in the tests, not timed)."""
     method_notes: ClassVar = {
@@ -162,9 +160,6 @@ class MujocoWarpAdapter(FixedStepAdapter):
     def warm(cases: list[Case], *, say: Any = print) -> int:
         """``truestep compile``'s hook: this module's :func:`warm`."""
         return warm(cases, say=say)
-
-    def __init__(self, *, device: str = DEVICE) -> None:
-        self.device = device
 
     @property
     def speed_claim(self) -> bool:
@@ -190,17 +185,6 @@ class MujocoWarpAdapter(FixedStepAdapter):
         (:func:`truestep.adapters.mujoco_adapter.same_steps`), which holds here too (tested)."""
         return mj.same_steps(case, method)
 
-    def prepare(self, case: Case, method: str) -> None:
-        """Before the sweep's process is forked: the scene built once here, so that the
-        process finds Warp's kernels loaded (:func:`truestep.adapters.warp_runtime.prepare`)."""
-        warp_runtime.prepare(self, case, method)
-
-    def advance(self, scene: Scene, k: int, steps: int, h: float) -> None:
-        """Launch the captured one-step graph ``steps`` times."""
-        launch, graph = wp.capture_launch, scene.graph
-        for _ in range(steps):
-            launch(graph)
-
     def read(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         """Positions and velocities (n, 3), float64 copies of the device's float32 state."""
         lay = scene.layout
@@ -224,8 +208,11 @@ class MujocoWarpAdapter(FixedStepAdapter):
         return x, v
 
     def notes(self, case: Case, method: str, scene: Scene) -> list[str]:
-        device = CPU_NOTE if scene.device == "cpu" else f"Warp device {scene.device}, float32"
-        return [f"{mj.EVALUATIONS_PER_STEP[method]} force evaluation(s) per step", device, *scene.notes]
+        return [
+            f"{mj.EVALUATIONS_PER_STEP[method]} force evaluation(s) per step",
+            self.device_note(scene),
+            *scene.notes,
+        ]
 
 
 def warm(cases: list[Case], *, say: Any = print) -> int:

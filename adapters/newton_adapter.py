@@ -71,10 +71,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from truestep.adapters import contact_law, warp_runtime
-from truestep.adapters.base import FixedStepAdapter, Trajectory
+from truestep.adapters import contact_law
+from truestep.adapters.base import Trajectory
 from truestep.adapters.quiet import without_banner
-from truestep.adapters.warp_runtime import BANNER, DEVICE, PRECISION, host_copy, host_view, wp
+from truestep.adapters.warp_runtime import BANNER, DEVICE, WarpAdapter, host_copy, host_view, wp
 from truestep.cases.case import Case
 from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
@@ -324,7 +324,7 @@ def _solver(sim: Any, method: str) -> Any:
     return cls(sim)
 
 
-class NewtonAdapter(FixedStepAdapter):
+class NewtonAdapter(WarpAdapter):
     """Newton's particle solvers on particle scenes (see the module docstring).
 
     Parameters
@@ -335,8 +335,7 @@ class NewtonAdapter(FixedStepAdapter):
 
     name = "newton"
     methods = tuple(SOLVERS)
-    precision: ClassVar[str] = PRECISION
-    """The state's floating-point type: order fits and baselines use its round-off floor."""
+    cpu_note: ClassVar[str] = CPU_NOTE
     method_notes: ClassVar = {
         "semi-implicit": "Newton's SolverSemiImplicit: symplectic Euler, penalty contact (float32)",
         "xpbd": f"Newton's SolverXPBD: position-based, {XPBD_ITERATIONS} iterations a step (float32)",
@@ -358,22 +357,8 @@ class NewtonAdapter(FixedStepAdapter):
         """``truestep compile``'s hook: this module's :func:`warm`."""
         return warm(cases, say=say)
 
-    def __init__(self, *, device: str = DEVICE) -> None:
-        self.device = device
-
     def build(self, case: Case, method: str, h: float) -> Scene:
         return build(case, method, h, device=self.device)
-
-    def prepare(self, case: Case, method: str) -> None:
-        """Before the sweep's process is forked: the scene built once here, so that the
-        process finds Warp's kernels loaded (:func:`truestep.adapters.warp_runtime.prepare`)."""
-        warp_runtime.prepare(self, case, method)
-
-    def advance(self, scene: Scene, k: int, steps: int, h: float) -> None:
-        """Launch the captured step ``steps`` times."""
-        launch, graph = wp.capture_launch, scene.graph
-        for _ in range(steps):
-            launch(graph)
 
     def read(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         """Positions and velocities (n, 3), float64 copies of the float32 state."""
@@ -406,8 +391,7 @@ class NewtonAdapter(FixedStepAdapter):
         return traj
 
     def notes(self, case: Case, method: str, scene: Scene) -> list[str]:
-        device = CPU_NOTE if scene.device == "cpu" else f"Warp device {scene.device}, float32"
-        return [device, "one captured Warp graph per step", *scene.notes]
+        return [self.device_note(scene), "one captured Warp graph per step", *scene.notes]
 
 
 def warm(cases: list[Case], *, say: Any = print) -> int:

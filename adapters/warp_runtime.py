@@ -9,8 +9,9 @@ kernels compiled for a generic target (:data:`GENERIC_CPU`) unless
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, ClassVar
 
+from truestep.adapters.base import FixedStepAdapter
 from truestep.adapters.quiet import without_banner
 from truestep.numerics import OPT_OUT
 
@@ -82,4 +83,46 @@ def prepare(adapter: Any, case: Any, method: str) -> None:
     adapter.build(case, method, case.sweep(adaptive=False, quick=True)[0])
 
 
-__all__ = ["BANNER", "DEVICE", "GENERIC_CPU", "PRECISION", "host_copy", "host_view", "prepare", "wp"]
+class WarpAdapter(FixedStepAdapter):
+    """What the adapters of Warp's engines share: the device (the CPU unless one is
+    asked), float32 state, the scene built before the sweep's processes are forked
+    (:func:`prepare`), one launch of the scene's captured step graph per step, and the
+    device's note on every row. A subclass builds a scene with ``graph`` (a captured
+    Warp graph of one step) and ``device``, and says what its rows note on the CPU
+    (:attr:`cpu_note`)."""
+
+    precision: ClassVar[str] = PRECISION
+    """The state's floating-point type: order fits and baselines use its round-off floor."""
+    cpu_note: ClassVar[str] = "Warp CPU device, float32"
+    """The note of every row on the CPU device."""
+
+    def __init__(self, *, device: str = DEVICE) -> None:
+        self.device = device
+
+    def prepare(self, case: Any, method: str) -> None:
+        """Before the sweep's process is forked: the scene built once here, so that the
+        process finds Warp's kernels loaded (:func:`prepare`)."""
+        prepare(self, case, method)
+
+    def advance(self, scene: Any, k: int, steps: int, h: float) -> None:
+        """Launch the scene's captured one-step graph ``steps`` times."""
+        launch, graph = wp.capture_launch, scene.graph
+        for _ in range(steps):
+            launch(graph)
+
+    def device_note(self, scene: Any) -> str:
+        """The row's note on the device it ran on."""
+        return self.cpu_note if scene.device == "cpu" else f"Warp device {scene.device}, float32"
+
+
+__all__ = [
+    "BANNER",
+    "DEVICE",
+    "GENERIC_CPU",
+    "PRECISION",
+    "WarpAdapter",
+    "host_copy",
+    "host_view",
+    "prepare",
+    "wp",
+]
