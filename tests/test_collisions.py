@@ -170,7 +170,7 @@ def test_contact_case_gates_hold_for_the_lecture_update(case_named, name):
 
 
 # --------------------------------------------------------------------------------------
-# The numpy collision pass against closed forms (mutation testing, benchmarks/mutation/README.md).
+# The numpy collision pass against closed forms (mutation testing, tools/campaigns/mutation/README.md).
 #
 # One pass at a time on a hand-made state: a bounce gives ``V_N' = -e V_N`` exactly with
 # ``V_T`` kept; a penetrating particle is lifted onto the plane with the normal speed it

@@ -355,7 +355,7 @@ def test_method_facts_choose_the_step():
     assert list(rk4.terms) == [0, 1, 1, 1] and list(rk4.cols[1:, 0]) == [0, 1, 2]
 
 
-# What the kernels' mutation sample (benchmarks/mutation, 40 mutants of 46eb984) found
+# What the kernels' mutation sample (tools/campaigns/mutation, 40 mutants of 46eb984) found
 # untested: a collision pass that skips a flag of a run of eight, contact forces read from
 # the wrong component, contact flags not cleared, a blow-up between records not kept.
 # Each test below is the compiled path against the numpy oracle on a scene made for it.

@@ -218,7 +218,7 @@ def test_impulse_on_the_triangle_gives_f_dt_with_the_lecture_update():
 
 
 # --------------------------------------------------------------------------------------
-# The numpy force objects against closed forms (mutation testing, benchmarks/mutation/README.md).
+# The numpy force objects against closed forms (mutation testing, tools/campaigns/mutation/README.md).
 #
 # Springs: ``f_1 = -k (|d| - L) d^ - c (v . d^) d^`` at chosen points, ``f_2 = -f_1``;
 # their Jacobians against central differences of the forces; energies ``k (|d| - L)^2 / 2``

@@ -1,4 +1,4 @@
-"""The metrics on hand-made trajectories (mutation testing, benchmarks/mutation/README.md).
+"""The metrics on hand-made trajectories (mutation testing, tools/campaigns/mutation/README.md).
 
 Each number is worked out here from its definition: the distance to the exact positions
 at shared times, the relative energy error, the least-squares slope of log(error)

@@ -198,7 +198,7 @@ def test_a_blow_up_stops_the_run_and_records_where_it_happened(max_records):
 
 
 # --------------------------------------------------------------------------------------
-# The numpy solvers against closed forms (mutation testing, benchmarks/mutation/README.md).
+# The numpy solvers against closed forms (mutation testing, tools/campaigns/mutation/README.md).
 #
 # Every check is a closed form or an independent recomputation: one step of a Runge-Kutta
 # method on ``y' = A y`` is the method's stability polynomial in ``h A`` (the Taylor

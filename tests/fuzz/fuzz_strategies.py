@@ -3,7 +3,7 @@
 Two layers over one implementation:
 
 * plain generators driven by a :class:`random.Random` (:func:`case_mutant`,
-  :func:`table_mutant`): ``benchmarks/fuzz_campaign.py`` calls them with ``Random(seed, i)``
+  :func:`table_mutant`): ``tools/campaigns/fuzz_campaign.py`` calls them with ``Random(seed, i)``
   so a campaign is the same file for file on every checkout it runs against;
 * hypothesis strategies (:func:`case_mutants`, :func:`table_mutants`) that draw a seed
   and run the same generators on ``Random(seed)``: hypothesis replays a failure (its

@@ -3,7 +3,7 @@ through :func:`truestep.tables.io.read_table`.
 
 The bounded tests run with every ``pytest`` (a few hundred examples, well under 30 s, the
 same ones every run).
-Case files are loaded in a separate worker process (``benchmarks/fuzz_campaign.py``'s
+Case files are loaded in a separate worker process (``tools/campaigns/fuzz_campaign.py``'s
 :class:`LoadWorker`) with an address-space cap and a per-file timeout, so that a file
 that makes the loader hang or allocate without bound fails the test instead of stalling
 or swapping the suite. Shrinking is off (a hang would be retried for every shrink step);
@@ -59,7 +59,9 @@ NEEDS = {
 
 
 def _campaign() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fuzz_campaign", ROOT / "benchmarks" / "fuzz_campaign.py")
+    spec = importlib.util.spec_from_file_location(
+        "fuzz_campaign", ROOT / "tools" / "campaigns" / "fuzz_campaign.py"
+    )
     assert spec and spec.loader
     module = importlib.util.module_from_spec(spec)
     sys.modules.setdefault("fuzz_campaign", module)

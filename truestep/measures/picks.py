@@ -44,7 +44,7 @@ spread of one row's repeats shows. Wall times closer than their noise bands are 
 TIMER_FLOOR_S = 1e-5
 """The least absolute noise of a wall time, s: timings of a few microseconds moved by up to
 6 us between two runs of one revision (3x on a 3 us row: caches, interrupts, the call
-around the stepping; ``benchmarks/aa_timing.py``), whatever their spread within a run."""
+around the stepping; ``tools/experiments/aa_timing.py``), whatever their spread within a run."""
 
 
 def _num(frame: pd.DataFrame, column: str) -> np.ndarray:

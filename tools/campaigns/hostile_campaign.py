@@ -3,7 +3,7 @@ cases that ask for the machine, hostile adapters, concurrent runs, hostile names
 damaged tables, each against a checkout's ``truestep``, every attack counted as held or
 broken.
 
-    python benchmarks/hostile_campaign.py [--repo PATH] [--python PATH] [--only 1,2,...]
+    python tools/campaigns/hostile_campaign.py [--repo PATH] [--python PATH] [--only 1,2,...]
         [--json FILE] [--work DIR]
 
 ``--repo`` is the checkout to attack (default: this one) and ``--python`` an interpreter
@@ -52,7 +52,7 @@ class Summary:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--repo", type=Path, default=HERE.parent, help="checkout to attack")
+    parser.add_argument("--repo", type=Path, default=HERE.parents[1], help="checkout to attack")
     parser.add_argument("--python", type=Path, default=None, help="interpreter that imports that checkout")
     parser.add_argument("--only", default="", help="groups to run, comma-separated (default all)")
     parser.add_argument("--json", type=Path, default=None, help="write the summary here")

@@ -4,7 +4,7 @@ the ``soft_contact_gap = 1e4`` truestep sets and with Newton's default (issue 35
 finding 4: every engine setting truestep changes is listed with its measured effect on
 ``docs/engines/newton.md``)::
 
-    python benchmarks/newton_contact_gap.py
+    python tools/experiments/newton_contact_gap.py
 """
 
 from __future__ import annotations

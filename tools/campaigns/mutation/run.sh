@@ -1,16 +1,16 @@
 #!/usr/bin/env bash
 # Mutation testing of the numpy physics and of the compiled kernels with cosmic-ray (see
-# README.md beside this file; CONFIG=benchmarks/mutation/cosmic-ray-kernels.toml for the
+# README.md beside this file; CONFIG=tools/campaigns/mutation/cosmic-ray-kernels.toml for the
 # kernels' session).
 #
-#   bash benchmarks/mutation/run.sh all        # setup, init, before (BEFORE=1 exec), after (rerun)
-#   bash benchmarks/mutation/run.sh setup      # a copy of HEAD in $MUT and a venv in $VENV
-#   bash benchmarks/mutation/run.sh init       # the session: every mutant, filtered, sampled
-#   bash benchmarks/mutation/run.sh exec       # run the pending mutants (nice 19, one worker)
-#   BEFORE=1 bash benchmarks/mutation/run.sh exec   # the same without the kill tests ("before")
-#   bash benchmarks/mutation/run.sh rerun OLD NEW  # NEW = OLD with its survivors run again
-#   bash benchmarks/mutation/run.sh report [SESSION]
-#   bash benchmarks/mutation/run.sh tests      # the per-mutant test command (cosmic-ray runs it)
+#   bash tools/campaigns/mutation/run.sh all        # setup, init, before (BEFORE=1 exec), after (rerun)
+#   bash tools/campaigns/mutation/run.sh setup      # a copy of HEAD in $MUT and a venv in $VENV
+#   bash tools/campaigns/mutation/run.sh init       # the session: every mutant, filtered, sampled
+#   bash tools/campaigns/mutation/run.sh exec       # run the pending mutants (nice 19, one worker)
+#   BEFORE=1 bash tools/campaigns/mutation/run.sh exec   # the same without the kill tests ("before")
+#   bash tools/campaigns/mutation/run.sh rerun OLD NEW  # NEW = OLD with its survivors run again
+#   bash tools/campaigns/mutation/run.sh report [SESSION]
+#   bash tools/campaigns/mutation/run.sh tests      # the per-mutant test command (cosmic-ray runs it)
 #
 # cosmic-ray mutates files in place, so everything runs in a copy of the committed tree
 # ($MUT, default /tmp/truestep-mut), never in the checkout this script lives in.
@@ -22,13 +22,13 @@ set -euo pipefail
 shopt -s nullglob
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-REPO="$(cd "$HERE/../.." && pwd)"
+REPO="$(cd "$HERE/../../.." && pwd)"
 MUT="${MUT:-/tmp/truestep-mut}"
 VENV="${VENV:-$MUT/.venv}"
 SESSION="${SESSION:-$MUT/session.sqlite}"
 SAMPLE="${SAMPLE:-40}"
 OFFSET="${OFFSET:-0}"
-CONFIG="${CONFIG:-benchmarks/mutation/cosmic-ray.toml}"  # cosmic-ray-kernels.toml: the kernels
+CONFIG="${CONFIG:-tools/campaigns/mutation/cosmic-ray.toml}"  # cosmic-ray-kernels.toml: the kernels
 export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-$MUT/.numba-cache}"
 
 # The per-mutant tests: the kill tests first, then the existing tests that reach the numpy

@@ -6,9 +6,9 @@ of conditions and counts the non-timing cells of ``results.csv``, ``stability.cs
 report (the cheapest run per case and accuracy, the family recommendations) that change.
 It reads only the files a run writes, so it measures old and new code alike::
 
-    python benchmarks/determinism.py --truestep .venv/bin/truestep --out /tmp/det \\
+    python tools/experiments/determinism.py --truestep .venv/bin/truestep --out /tmp/det \\
         --cases spring-chain,hanging-cloth,earth-orbit --pairs threads,load,cluster,again
-    python benchmarks/determinism.py --truestep .venv/bin/truestep --out /tmp/det \\
+    python tools/experiments/determinism.py --truestep .venv/bin/truestep --out /tmp/det \\
         --pairs published     # a full run against the committed reports/
 
 Pairs: ``threads`` (OPENBLAS_NUM_THREADS=1 against 2), ``load`` (idle against two busy

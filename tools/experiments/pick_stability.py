@@ -5,9 +5,9 @@ differ, and how many tie groups (the named run and the runs tied with it within 
 noise). Between full runs whose non-timing cells are identical, only timing can move
 them. A timing check, so a benchmark, never a unit test::
 
-    python benchmarks/pick_stability.py                 # the last 3 commits of reports/results.csv
-    python benchmarks/pick_stability.py REV REV [REV ...]
-    python benchmarks/pick_stability.py --files A.csv B.csv   # results tables from anywhere
+    python tools/experiments/pick_stability.py                 # the last 3 commits of reports/results.csv
+    python tools/experiments/pick_stability.py REV REV [REV ...]
+    python tools/experiments/pick_stability.py --files A.csv B.csv   # results tables from anywhere
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _published(rev: str) -> pd.DataFrame:

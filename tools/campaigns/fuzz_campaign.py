@@ -1,7 +1,7 @@
 """The long fuzz campaign: generated case files through the loader and ``truestep run``,
 damaged tables through ``truestep gate``, every outcome counted.
 
-    python benchmarks/fuzz_campaign.py --loader 10000 --run 200 --gate 100 --seed 1 \\
+    python tools/campaigns/fuzz_campaign.py --loader 10000 --run 200 --gate 100 --seed 1 \\
         [--repo PATH] [--python PATH] [--json FILE]
 
 ``--repo`` is the checkout to attack (default: this one); its ``cases/*.toml`` and
@@ -55,7 +55,7 @@ from pathlib import Path
 from typing import Any
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests" / "fuzz"))  # fuzz_strategies lives beside the fuzz tests
+sys.path.insert(0, str(HERE.parents[1] / "tests" / "fuzz"))  # fuzz_strategies lives beside the fuzz tests
 
 import fuzz_strategies as fs  # noqa: E402
 
@@ -588,7 +588,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--run", type=int, default=20, help="accepted mutants through truestep run")
     parser.add_argument("--gate", type=int, default=20, help="damaged tables through truestep gate")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--repo", type=Path, default=HERE.parent, help="checkout to attack")
+    parser.add_argument("--repo", type=Path, default=HERE.parents[1], help="checkout to attack")
     parser.add_argument("--python", type=Path, default=None, help="interpreter that imports that checkout")
     parser.add_argument("--json", type=Path, default=None, help="write the summary here")
     parser.add_argument("--work", type=Path, default=None, help="keep the generated files here")

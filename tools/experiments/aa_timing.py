@@ -4,7 +4,7 @@ engine stepped from Python) run twice, unchanged, then compared with ``truestep 
 an unchanged solver must not report it slower (issue 36, item 6). A timing check, so a
 benchmark, never a unit test; run it on a quiet and on a loaded machine::
 
-    python benchmarks/aa_timing.py [--runs 2]
+    python tools/experiments/aa_timing.py [--runs 2]
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "leapfrog-lab"
 CASES = (
     "free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball,"

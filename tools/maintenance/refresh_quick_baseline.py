@@ -5,7 +5,7 @@
 must give the same numbers on any machine. Run this after a change that moves numbers on
 purpose, and commit the result::
 
-    python benchmarks/refresh_quick_baseline.py
+    python tools/maintenance/refresh_quick_baseline.py
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BASELINE = ROOT / "tests" / "baselines" / "quick"
 KEPT = ("results.csv", "stability.csv", "restitution.csv", "run.json")
 

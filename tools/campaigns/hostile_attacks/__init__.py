@@ -1,4 +1,4 @@
-"""The attacks of ``benchmarks/hostile_campaign.py``, one module per finding of issue 20.
+"""The attacks of ``tools/campaigns/hostile_campaign.py``, one module per finding of issue 20.
 
 Each module's ``ATTACKS`` lists its attacks: functions ``(campaign, folder) -> (held,
 note)`` whose docstring says what they do and what holding means."""

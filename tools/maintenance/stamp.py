@@ -1,8 +1,8 @@
 """Run a command and print each line of its output (standard output and error merged)
 with the seconds since it started: how long a first run waits before its first row.
 
-Usage: ``python benchmarks/stamp.py CMD ARGS...``, e.g.
-``NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/stamp.py truestep run --quick --out DIR``.
+Usage: ``python tools/maintenance/stamp.py CMD ARGS...``, e.g.
+``NUMBA_CACHE_DIR=$(mktemp -d) python tools/maintenance/stamp.py truestep run --quick --out DIR``.
 Lines end at ``\\n`` or ``\\r``, so progress bars show too.
 """
 

@@ -371,7 +371,7 @@ def shipped_tables(where: Path) -> Path:
     """A copy of this checkout's published tables (the same input for every target)."""
     where.mkdir(parents=True, exist_ok=True)
     for name in ("results", "stability", "restitution"):
-        shutil.copy(HERE.parent / "reports" / f"{name}.csv", where / f"{name}.csv")
+        shutil.copy(HERE.parents[1] / "reports" / f"{name}.csv", where / f"{name}.csv")
     return where
 
 
