@@ -697,3 +697,81 @@ def test_an_energy_drift_gate_on_a_case_that_never_measures_it_says_so(tmp_path,
     )
     out = capsys.readouterr().out
     assert "measured nothing: energy_drift is never measured on this case" in out
+
+
+def test_declared_orders_of_an_engine_not_installed_here_are_read_from_its_run(copy, capsys):
+    """Issue 38, item 2: the facts a run recorded in its ``run.json`` (``method_facts``) make
+    the declared-order gates of an engine the judging machine does not have: the same
+    verdicts as where it is installed, and a run unstable where its recorded facts say it is
+    stable still fails (the recorded name resolves to the reference method's whole facts)."""
+    from truestep.measures import engine_facts
+
+    d, results = copy
+    record = json.loads((d / "run.json").read_text())
+    assert record["method_facts"]["reference"]["rk4"] == {"like": "rk4"}
+    record["method_facts"]["elsewhere"] = record["method_facts"]["reference"]
+    record["engines"] = ["elsewhere"]
+    (d / "run.json").write_text(json.dumps(record))
+    results.assign(engine="elsewhere").to_csv(d / "results.csv", index=False)
+    try:
+        code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-v"])
+        out = capsys.readouterr().out
+        assert code == 0, out
+        assert "ok   harmonic-oscillator/order/elsewhere/rk4/declared" in out
+        assert "cannot be read" not in out
+        steps = results[(results["method"] == "symplectic-euler") & (results["dt_kind"] == "step")]
+        planted = results.assign(engine="elsewhere")
+        planted.loc[steps.index, ["status", "error"]] = ["unstable", np.nan]
+        planted.to_csv(d / "results.csv", index=False)
+        code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-v"])
+        out = capsys.readouterr().out
+        line = next(x for x in out.splitlines() if "order/elsewhere/symplectic-euler/declared" in x)
+        assert code == 1 and line.startswith("FAIL") and "where its facts say it is stable" in line, line
+    finally:
+        engine_facts.RECORDED_FACTS.pop("elsewhere", None)
+
+
+def test_recorded_facts_values_round_trip():
+    """Facts an adapter declares as values (not a reference method's name) are recorded
+    and read back equal, infinities included; a damaged entry reads as no facts."""
+    from truestep.measures import engine_facts
+    from truestep.reference_impl.solvers import MethodFacts
+    from truestep.reference_impl.solvers.facts import Stability
+
+    facts = MethodFacts(
+        order=3, evaluations_per_step=None, symplectic=False, stability=Stability(2.5, np.inf)
+    )
+    rec = json.loads(json.dumps(engine_facts._facts_record(facts, facts)))
+    assert rec["stability"] == {"imaginary": 2.5, "real": "inf", "a_stable": False}
+    back = engine_facts._facts_from(rec)
+    assert back == facts and back.stability == facts.stability
+    assert engine_facts._facts_from({"order": "x"}) is None
+    assert engine_facts._facts_from({"like": "no-such-method"}) is None
+
+
+def test_every_built_in_engine_s_recorded_facts_read_back_as_its_adapter_declares_them():
+    """What ``run.json`` records of each method's facts (through JSON) is what the installed
+    adapter declares, the stability region included wherever a reference method's is shared
+    (``like``, with the values that differ: Newton's XPBD is implicit Euler at 2 evaluations)."""
+    from truestep.adapters import get_adapter
+    from truestep.adapters.base import facts_of
+    from truestep.measures import engine_facts
+    from truestep.reference_impl.solvers import MethodFacts
+    from truestep.reference_impl.solvers.facts import NAMED
+
+    engines = ["reference", "scipy", "pymunk", "pybullet", "mujoco", "drake", "mujoco-warp", "newton"]
+    recorded = json.loads(json.dumps(engine_facts.record(engines)))
+    assert set(recorded["method_facts"]) == set(engines)
+    for engine in engines:
+        adapter = get_adapter(engine)
+        for method in adapter.methods:
+            declared = facts_of(adapter, method)
+            back = engine_facts._facts_from(recorded["method_facts"][engine][method])
+            assert back == declared, (engine, method)
+            if declared is not None and declared.stability is not None and back is not None:
+                assert back.stability == declared.stability, (engine, method)
+    changed = MethodFacts.like("implicit-euler", evaluations_per_step=2)
+    rec = engine_facts._facts_record(changed, changed)
+    assert rec == {"like": "implicit-euler", "evaluations_per_step": 2}
+    back = engine_facts._facts_from(rec)
+    assert back == changed and back.stability is NAMED["implicit-euler"].stability

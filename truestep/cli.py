@@ -310,22 +310,31 @@ def _cases_of(
 def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
     """The declared-order gates (:mod:`truestep.measures.declared`) of the installed engines that
     ran, each on its own case (:func:`unreadable_facts` names the others)."""
-    from truestep.measures.declared import declared_order_pairs
+    from truestep.measures.declared import declared_order_pairs, recorded_order_pairs
+    from truestep.measures.engine_facts import RECORDED_FACTS
 
-    unreadable = unreadable_facts(results)
+    unreadable = unreadable_facts(results, recorded=False)
     ran = [e for e in dict.fromkeys(results["engine"].astype(str)) if e not in unreadable]
-    return declared_order_pairs(cases, ran)
+    pairs = declared_order_pairs(cases, ran)
+    for engine in unreadable:
+        if engine in RECORDED_FACTS:
+            pairs += recorded_order_pairs(cases, results, engine)
+    return pairs
 
 
-def unreadable_facts(results: pd.DataFrame) -> dict[str, str]:
+def unreadable_facts(results: pd.DataFrame, *, recorded: bool = True) -> dict[str, str]:
     """The engines that ran (``results``) whose declared facts this process cannot read, each
     with why: not registered here (an adapter run by ``module:Class``, which ``--engines``
-    can name again) or not installed. ``--declared-orders`` fails naming them: their order
-    gates would otherwise be missing without a word."""
+    can name again) or not installed; with ``recorded``, not those whose run recorded
+    them (its ``run.json``, :mod:`truestep.measures.engine_facts`). ``--declared-orders``
+    fails naming them: their order gates would otherwise be missing without a word."""
     from truestep.adapters import engine_status, registered
+    from truestep.measures.engine_facts import RECORDED_FACTS
 
     out = {}
     for engine in dict.fromkeys(results["engine"].astype(str)):
+        if recorded and engine in RECORDED_FACTS:
+            continue
         if engine not in registered():
             out[engine] = (
                 "it is not registered here: name its adapter with --engines module:Class, or "
@@ -422,15 +431,15 @@ def _check_identical(comparison, baseline: dict, current: dict, base_dir: Path, 
 
 
 def cmd_gate(args: argparse.Namespace) -> int:
-    from truestep.measures.metrics import recorded_precision
+    from truestep.measures.engine_facts import take
     from truestep.reporting.report import read_run_record
 
     results_path = Path(args.results)
     tables = _run_tables(results_path)
     args.engines = _engine_names(args.engines)
     if args.baseline:  # the facts each run was made with, this run's last (they win)
-        recorded_precision(read_run_record(Path(args.baseline)))
-    recorded_precision(read_run_record(results_path.parent))
+        take(read_run_record(Path(args.baseline)))
+    take(read_run_record(results_path.parent))
     asked = _asked_engines(args)
     # every row stays for the gates to read (a no-worse-than gate's other run, the rows a
     # --time-against ratio divides by); --engines chooses whose verdicts count

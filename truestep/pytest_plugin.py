@@ -260,10 +260,10 @@ def _tables(sel: Selection):
     key = dataclasses.astuple(sel)
     if key not in _RUNS and sel.results is not None:
         from truestep.ci.baseline import read_tables
-        from truestep.measures.metrics import recorded_precision
+        from truestep.measures.engine_facts import take
         from truestep.reporting.report import read_run_record
 
-        recorded_precision(read_run_record(Path(sel.results).parent))
+        take(read_run_record(Path(sel.results).parent))
         read = read_tables(Path(sel.results).parent)
         _RUNS[key] = _Read(read["results"], read["stability"], read["restitution"])
     if key not in _RUNS:

@@ -348,18 +348,22 @@ def _unstable_where_stable(case: Case, g: Gate, rows: pd.DataFrame) -> GateResul
     the exact limit, :func:`truestep.cases.exact.stability_limit`): failed, naming the step
     and the limit. Such a sweep shows no order, and saying "not evaluated" would let the
     bug that made it unstable through (a damper's sign flipped). ``None`` otherwise: no
-    such run, or no exact limit known (a nonlinear scene, an engine not installed here)."""
+    such run, or no exact limit known (a nonlinear scene, an engine neither installed here
+    nor with facts recorded by its run, :mod:`truestep.measures.engine_facts`)."""
     unstable = rows[(rows["status"] == "unstable") & (rows["dt_kind"] == "step")]
     if not len(unstable):
         return None
     from truestep.adapters import EngineNotInstalled, UnknownEngine, get_adapter
     from truestep.adapters.base import facts_of
     from truestep.cases.exact import stability_limit
+    from truestep.measures.engine_facts import recorded_facts
 
-    try:
-        facts = facts_of(get_adapter(g.engine), g.method)
-    except (EngineNotInstalled, UnknownEngine):
-        return None
+    known, facts = recorded_facts(g.engine, g.method)  # the judged run's facts win
+    if not known:
+        try:
+            facts = facts_of(get_adapter(g.engine), g.method)
+        except (EngineNotInstalled, UnknownEngine):
+            return None
     exact = stability_limit(case, facts) if facts is not None else None
     if exact is None or not (np.isfinite(exact) or exact == np.inf) or exact <= 0:
         return None

@@ -21,11 +21,13 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 import numpy as np
+import pandas as pd
 
 from truestep.adapters import PluginFailed, get_adapter, plugin_answer
 from truestep.adapters.base import duplicate_of, facts_of
 from truestep.adapters.reference import build_system
 from truestep.cases.case import Case, Gate
+from truestep.measures.engine_facts import recorded_facts
 from truestep.reference_impl.solvers import MethodFacts
 from truestep.reference_impl.system import SecondOrderSystem
 
@@ -171,22 +173,46 @@ def declared_order_pairs(
                     or same is not None
                 ):
                     continue
-                facts = facts_of(adapter, method)
+                known, facts = recorded_facts(engine, method)  # the judged run's facts win
+                if not known:
+                    facts = facts_of(adapter, method)
                 order = None if facts is None else declared_order(facts, case)
                 if order is None:
                     continue
-                out.append(
-                    (
-                        [case.name],
-                        Gate(
-                            kind="order",
-                            engine=engine,
-                            method=method,
-                            dt=None,
-                            params={"expect": float(order), "tol": DECLARED_ORDER_TOL},
-                            where=DECLARED_WHERE,
-                            file=DECLARED_FILE,
-                        ),
-                    )
-                )
+                out.append(([case.name], _order_gate(engine, method, order)))
     return out
+
+
+def recorded_order_pairs(
+    cases: Iterable[Case], results: pd.DataFrame, engine: str, *, quick: bool = False
+) -> list[tuple[list[str], Gate]]:
+    """:func:`declared_order_pairs` for an engine not installed here, from the facts its run
+    recorded (:mod:`truestep.measures.engine_facts`) and the rows it ran: a method that ran
+    a case at fixed steps (a row neither unsupported nor skipped, which is how the run
+    left out what the installed adapter's ``missing``, ``duplicate`` and the case's
+    ``skip`` leave out) gets the case's gate."""
+    out: list[tuple[list[str], Gate]] = []
+    mine = results[(results["engine"].astype(str) == engine) & (results["dt_kind"] == "step")]
+    ran = mine[~mine["status"].isin(("unsupported", "skipped"))]
+    for case in cases:
+        if not smooth_with_exact(case) or len(case.sweep(adaptive=False, quick=quick)) < 2:
+            continue
+        for method in dict.fromkeys(ran.loc[ran["case"] == case.name, "method"].astype(str)):
+            _, facts = recorded_facts(engine, method)
+            order = None if facts is None else declared_order(facts, case)
+            if order is not None:
+                out.append(([case.name], _order_gate(engine, method, order)))
+    return out
+
+
+def _order_gate(engine: str, method: str, order: int) -> Gate:
+    """The declared-order gate of ``engine``'s ``method`` at ``order``."""
+    return Gate(
+        kind="order",
+        engine=engine,
+        method=method,
+        dt=None,
+        params={"expect": float(order), "tol": DECLARED_ORDER_TOL},
+        where=DECLARED_WHERE,
+        file=DECLARED_FILE,
+    )

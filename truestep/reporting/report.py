@@ -403,6 +403,8 @@ def run_record(
     revision, two runs' non-timing columns are equal bit for bit; and, where given, the
     ``precision`` of each engine's state (the facts a verdict on these tables reads, also
     where that engine is not installed: :func:`truestep.measures.metrics.recorded_precision`);
+    each method's declared facts, peers and glossary notes (``method_facts``, ``peers``,
+    ``method_notes``: :mod:`truestep.measures.engine_facts`, read back the same way);
     wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``;
     ``compile``, the part of the sweep spent compiling ahead of the first timed run;
     ``sweep <engine>``, the seconds each engine's sweep processes ran, which overlap where
@@ -415,6 +417,7 @@ def run_record(
     a table cut short at the end of a row is refused)."""
     from truestep import __version__
     from truestep.adapters import shadowed
+    from truestep.measures import engine_facts
     from truestep.measures.metrics import precision_of
     from truestep.numerics import fingerprint
 
@@ -429,6 +432,7 @@ def run_record(
         "precision": {e: precision_of(e) for e in dict.fromkeys(results["engine"].astype(str))}
         if len(results)
         else {},
+        **engine_facts.record(dict.fromkeys(results["engine"].astype(str)) if len(results) else []),
         **({"shadowed": shadowed()} if shadowed() else {}),
         **({"refined": list(results.attrs["refined"])} if results.attrs.get("refined") else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
