@@ -27,6 +27,7 @@ from truestep.cases.loader import load_gates_file, read_gate
 from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
 from truestep.execution.experiment import Experiment, Finished, Tables
 from truestep.numerics import own_run
+from truestep.runtime import collector
 from truestep.runtime.visible import visible
 
 
@@ -41,6 +42,11 @@ def select_engines(
     :class:`~truestep.adapters.EngineNotInstalled` for a named engine whose library is
     missing.
     """
+    with collector.paused():  # the engines' imports: a million objects that stay
+        return _select_engines(engines, say)
+
+
+def _select_engines(engines: str | Iterable[str] | None, say: Callable[[str], None] | None) -> list[str]:
     if say is not None:
         for line in shadowed():
             say(line)
@@ -101,31 +107,37 @@ def run(
     time budget, s; ``lecture_figures``: also draw the lecture's figures; ``argv``: the
     command line the report says reproduces the run.
     """
+    say = progress or (lambda msg: print(visible(msg), file=sys.stderr))
+    with collector.paused() as collecting:  # the engines' imports, until they are frozen
+        chosen = _cases(cases)
+        names = select_engines(engines, say=say)
+        if out is None and resume is not None:
+            out = resume
+        exp = Experiment(
+            chosen,
+            names,
+            quick=quick,
+            analyses=analyses,
+            out=None if out is None else Path(out),
+            resume=None if resume is None else Path(resume),
+            scheduler=scheduler,
+            budget=budget,
+            argv=argv or ["run"],
+            lecture_figures=lecture_figures,
+            rows=progress,
+            say=say,
+        )
+        with collector.frozen(collecting=collecting):
+            return _run_locked(exp)
+
+
+def _run_locked(exp: Experiment) -> Tables:
+    """:func:`run`'s experiment, with its report folder checked and locked when it has one."""
     from truestep.execution.experiment import run_experiment
 
-    say = progress or (lambda msg: print(visible(msg), file=sys.stderr))
-    chosen = _cases(cases)
-    names = select_engines(engines, say=say)
-    if out is None and resume is not None:
-        out = resume
-    exp = Experiment(
-        chosen,
-        names,
-        quick=quick,
-        analyses=analyses,
-        out=None if out is None else Path(out),
-        resume=None if resume is None else Path(resume),
-        scheduler=scheduler,
-        budget=budget,
-        argv=argv or ["run"],
-        lecture_figures=lecture_figures,
-        rows=progress,
-        say=say,
-    )
-    if exp.out is not None:
-        exp.report = functools.partial(_publish, exp)
     if exp.out is None:
         return run_experiment(exp)
+    exp.report = functools.partial(_publish, exp)
     from truestep.runtime.folder import check_out
     from truestep.runtime.run_lock import RunLock
 
@@ -138,7 +150,7 @@ def run(
             lock.acquire()
         for lock in locks:
             if lock.took_over is not None:
-                say(f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which is gone")
+                exp.say(f"{lock.out}: took over the lock of truestep run pid {lock.took_over}, which is gone")
         return run_experiment(exp)
     finally:
         for lock in locks:

@@ -175,13 +175,16 @@ def _run(args: argparse.Namespace) -> int:
     from truestep.api import run, select_engines
     from truestep.execution.cluster import ClusterError
     from truestep.execution.journal import JournalError
+    from truestep.runtime import collector
     from truestep.runtime.folder import OutRefused
     from truestep.runtime.run_lock import LockBusy
 
     args.out = args.out or args.resume or "reports"
     if not 0 < args.budget < float("inf"):
         raise UsageError(f"--budget: must be a positive number of seconds, got {args.budget:g}")
-    engines = select_engines(args.engines, say=_say)
+    with collector.paused():
+        engines = select_engines(args.engines, say=_say)
+        collector.settle()  # the command's process: its engines live to its end
     if not engines:
         raise UsageError("--engines: no engine is installed")
     cases = _load(args.cases, args.limit, trust_limits=args.trust_limits)

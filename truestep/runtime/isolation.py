@@ -30,6 +30,7 @@ import contextlib
 import ctypes
 import fcntl
 import functools
+import gc
 import itertools
 import multiprocessing as mp
 import os
@@ -163,6 +164,7 @@ def _kill_below() -> None:
 
 
 def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
+    gc.freeze()  # what the child inherited: its collector never walks (and copies) those pages
     die_with_parent(parent)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
