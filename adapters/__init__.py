@@ -134,7 +134,7 @@ def _import_guarded(engine: str, module: str) -> ModuleType:
     calls ``sys.exit`` while it loads, or does not load within
     :data:`~truestep.cases.plugins.IMPORT_S` seconds, is an :class:`UnknownEngine` that
     says so."""
-    from truestep.cases.plugins import IMPORT_S, import_within
+    from truestep.cases.plugins import IMPORT_S, ImportEndedProcess, import_within
     from truestep.runtime.time_limit import TimeLimitExceeded
 
     cwd = os.getcwd()
@@ -144,6 +144,8 @@ def _import_guarded(engine: str, module: str) -> ModuleType:
             return import_within(module, f"importing {module}")
     except SystemExit as err:
         raise UnknownEngine(f"engine {engine!r}: importing {module} called sys.exit({err.code!r})") from None
+    except ImportEndedProcess as err:
+        raise UnknownEngine(f"engine {engine!r}: {err}") from None
     except TimeLimitExceeded:
         raise UnknownEngine(
             f"engine {engine!r}: importing {module} gave no answer within {IMPORT_S:g} s"

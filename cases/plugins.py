@@ -17,6 +17,9 @@ from __future__ import annotations
 
 import functools
 import importlib
+import re
+import signal
+import sys
 from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
@@ -49,13 +52,71 @@ class PluginError(ValueError):
     """An entry point that cannot be used; ``str()`` names the group, the entry and why."""
 
 
+class ImportEndedProcess(Exception):
+    """A module of another package whose import, tried first in a forked process, ended
+    that process (``os._exit``, a signal, a crash) or interrupted it: imported here, it
+    would have ended truestep's. ``str()`` says which."""
+
+
 def import_within(module: str, what: str) -> ModuleType:
     """``importlib.import_module(module)`` within :data:`IMPORT_S` seconds (a
-    :class:`~truestep.runtime.time_limit.TimeLimitExceeded` past it, naming ``what``)."""
+    :class:`~truestep.runtime.time_limit.TimeLimitExceeded` past it, naming ``what``).
+
+    A module of another package, not imported yet, is first imported in a forked process
+    (:func:`_tried_apart`): one whose import ends its process is an
+    :class:`ImportEndedProcess`, and truestep's process goes on. Its import's side effects
+    (a file it writes, a line it prints) therefore happen twice; truestep's own modules
+    are imported once."""
     from truestep.runtime.time_limit import time_limit
 
+    if module not in sys.modules and module.partition(".")[0] != "truestep":
+        _tried_apart(module, what)
     with time_limit(IMPORT_S, what):
         return importlib.import_module(module)
+
+
+def _tried_apart(module: str, what: str) -> None:
+    """Import ``module`` in a forked process first (within :data:`IMPORT_S` seconds):
+    :class:`ImportEndedProcess` where that ends or interrupts the process. An import that
+    raises is left to the import here, which raises the same, as its callers say."""
+    from truestep.runtime.isolation import run_isolated
+    from truestep.runtime.time_limit import TimeLimitExceeded
+
+    out = run_isolated(_import_here, (module,), IMPORT_S)
+    if out.status == "timeout":
+        raise TimeLimitExceeded(what)
+    if out.status != "ok":
+        raise ImportEndedProcess(f"{what} ended the process it was first tried in ({_how(out.message)})")
+    if out.value != "ok":
+        raise ImportEndedProcess(f"{what} {out.value}")
+
+
+def _how(message: str) -> str:
+    """``exit status N`` or ``killed by SIGNAME`` from an isolated call's message about
+    its process's end (else the message)."""
+    found = re.search(r"exit code (-?\d+)", message)
+    if found is None:
+        return message
+    code = int(found.group(1))
+    if code >= 0:
+        return f"exit status {code}"
+    try:
+        return f"killed by {signal.Signals(-code).name}"
+    except ValueError:
+        return f"killed by signal {-code}"
+
+
+def _import_here(module: str) -> str:
+    """In a forked process: import ``module``; ``"ok"`` when it loads or raises (the
+    caller's own import says why), else what it did to the process."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        importlib.import_module(module)
+    except KeyboardInterrupt:
+        return "interrupted its own process (SIGINT)"
+    except BaseException:  # the caller's own import raises the same and says so
+        pass
+    return "ok"
 
 
 @functools.cache
@@ -75,6 +136,8 @@ def _load(group: str, name: str, value: str) -> Any:
         raise PluginError(
             f"entry point {group} {name} = {value!r}: importing {module} gave no answer within {IMPORT_S:g} s"
         ) from None
+    except ImportEndedProcess as err:
+        raise PluginError(f"entry point {group} {name} = {value!r}: {err}") from None
     except (Exception, SystemExit) as err:  # a broken plugin is a clear error, not a traceback
         raise PluginError(f"entry point {group} {name} = {value!r}: {type(err).__name__}: {err}") from None
     return obj

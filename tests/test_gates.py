@@ -75,13 +75,21 @@ def run_dir(tmp_path_factory) -> Path:
 def copy(run_dir, tmp_path):
     """A copy of the run's tables, to alter into another run's: returns (dir, results). Its
     ``run.json`` keeps no row counts (those of the run copied would refuse the altered
-    tables as cut short or changed, :func:`truestep.tables.io.check_recorded_rows`)."""
+    tables as cut short or changed, :func:`truestep.tables.io.check_recorded_rows`); a test
+    that makes the rows another engine's records that engine (:func:`_record_engines`)."""
     dest = tmp_path / "copy"
     shutil.copytree(run_dir, dest, ignore=shutil.ignore_patterns("figures", "index.*"))
     record = json.loads((dest / "run.json").read_text())
     record.pop("rows", None)
     (dest / "run.json").write_text(json.dumps(record))
     return dest, pd.read_csv(dest / "results.csv")
+
+
+def _record_engines(d: Path, *engines: str) -> None:
+    """Make the ``run.json`` of ``d`` name ``engines``, as a run of them would."""
+    record = json.loads((d / "run.json").read_text())
+    record["engines"] = list(engines)
+    (d / "run.json").write_text(json.dumps(record))
 
 
 def _gates_file(tmp_path: Path, text: str = GATES) -> str:
@@ -111,6 +119,7 @@ def test_strict_nothing_evaluated_fails(copy, capsys):
     results[results["engine"] == "reference"].assign(engine="someone-else").to_csv(
         d / "results.csv", index=False
     )
+    _record_engines(d, "someone-else")
     code = main(["gate", "--results", str(d / "results.csv")])
     out = capsys.readouterr().out
     assert code == 1
@@ -460,12 +469,14 @@ def test_declared_orders_of_an_engine_that_cannot_be_read_here_fail_and_module_c
     engine and what to do, and ``--engines module:Class`` reads its facts."""
     d, results = copy
     results.assign(engine="mystery").to_csv(d / "results.csv", index=False)
+    _record_engines(d, "mystery")
     code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "-q"])
     out = capsys.readouterr().out
     assert code == 1
     assert "FAIL --declared-orders: engine mystery ran, but its declared orders cannot be read" in out
     assert "--engines module:Class" in out
     results.to_csv(d / "results.csv", index=False)
+    _record_engines(d, "reference")
     spec = "truestep.adapters.reference:ReferenceAdapter"
     code = main(["gate", "--results", str(d / "results.csv"), "--declared-orders", "--engines", spec, "-v"])
     out = capsys.readouterr().out
@@ -541,6 +552,7 @@ def test_a_baseline_comparison_that_compares_nothing_fails(copy, run_dir, capsys
     for name in ("results", "stability", "restitution"):
         table = pd.read_csv(d / f"{name}.csv")
         table.assign(engine="other").to_csv(d / f"{name}.csv", index=False)
+    _record_engines(d, "other")
     code = main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(d), "-q"])
     out = capsys.readouterr().out
     assert code == 1, out

@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from truestep.cli import main
@@ -241,3 +242,43 @@ def test_a_table_cut_at_the_end_of_a_row_is_refused_by_its_recorded_row_count(tm
         assert len(err) == 1 and f"{rows // 2} rows, but the run that wrote it recorded {rows}" in err[0]
     with pytest.raises(TableError, match="cut short or changed since"):
         truestep.compare(out, out)
+
+
+def test_a_table_without_an_engine_its_run_published_is_refused(tmp_path, capsys):
+    """The run records the engines whose rows it published; a results table changed since
+    (an engine's rows dropped, its row count recorded anew; or another engine's rows added)
+    would compare none of that engine's rows as a baseline and say nothing. ``gate`` (on
+    the run, and on it as a baseline) and :func:`truestep.compare` refuse it: exit 2, one
+    line naming the engine."""
+    import json
+
+    import truestep
+    from truestep.tables.io import TableError
+
+    run = tmp_path / "run"
+    truestep.run("free-fall", ["reference", "pymunk"], quick=True, out=run, progress=lambda _: None)
+    base = tmp_path / "base"
+    shutil.copytree(run, base)
+    table = pd.read_csv(base / "results.csv", dtype=str, keep_default_na=False)
+    kept = table[table["engine"] != "pymunk"]
+    kept.to_csv(base / "results.csv", index=False)
+    record = json.loads((base / "run.json").read_text())
+    record["rows"]["results"] = len(kept)
+    (base / "run.json").write_text(json.dumps(record))
+    capsys.readouterr()
+    for argv in (
+        ["--results", str(base / "results.csv")],
+        ["--results", str(run / "results.csv"), "--baseline", str(base)],
+    ):
+        assert main(["gate", *argv, "-q"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "no row of pymunk, which the run published" in err[0]
+    with pytest.raises(TableError, match="no row of pymunk"):
+        truestep.compare(base, run)
+    record["engines"] = ["reference"]
+    (base / "run.json").write_text(json.dumps(record))
+    table.to_csv(base / "results.csv", index=False)
+    record["rows"]["results"] = len(table)
+    (base / "run.json").write_text(json.dumps(record))
+    assert main(["gate", "--results", str(run / "results.csv"), "--baseline", str(base), "-q"]) == 2
+    assert "rows of pymunk, which the run did not publish" in capsys.readouterr().err

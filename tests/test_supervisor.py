@@ -26,6 +26,18 @@ PLUGINS = {
         import sys
         sys.exit(0)
     """,
+    "os_exit_at_import": """
+        import os
+        os._exit(0)
+    """,
+    "crashes_at_import": """
+        import ctypes
+        ctypes.string_at(0)
+    """,
+    "interrupts_at_import": """
+        import os, signal
+        os.kill(os.getpid(), signal.SIGINT)
+    """,
     "exits_in_missing": """
         import os
         from truestep.adapters.reference import ReferenceAdapter
@@ -191,6 +203,40 @@ def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):
     assert proc.returncode == 0, err
     rows = (plugins / "rep" / "results.csv").read_text()
     assert "sys-exit-in-missing: missing() raised SystemExit: 0" in rows
+
+
+KILLERS = {
+    "os_exit_at_import": "ended the process it was first tried in (exit status 0)",
+    "crashes_at_import": "ended the process it was first tried in (killed by SIGSEGV)",
+    "interrupts_at_import": "interrupted its own process (SIGINT)",
+}
+"""A plugin module whose import ends its process, and how truestep says so."""
+
+
+def test_a_plugin_whose_import_ends_its_process_is_left_out_and_the_command_goes_on(plugins):
+    """Issue 37, item 5: another package's module is imported first in a forked process;
+    one whose import ends or interrupts that process is an engine left out, in one line,
+    and truestep's process goes on: ``list`` lists every engine, naming those; a run that
+    names one is exit 2 with that line, never exit 0 without a report or 130."""
+    info = plugins / "killers-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: killers\nVersion: 1.0\n")
+    entries = "".join(f"{name.replace('_', '-')} = {name}:X\n" for name in KILLERS)
+    (info / "entry_points.txt").write_text(f"[truestep.adapters]\n{entries}")
+    proc = _start(plugins, "list")
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    for name, said in KILLERS.items():
+        line = next(x for x in out.splitlines() if x.strip().startswith(name.replace("_", "-")))
+        assert f"importing {name} {said}" in line, out
+    assert "reference" in out and "Traceback" not in err
+    for name, said in KILLERS.items():
+        proc = _start(plugins, *RUN, "--engines", f"{name}:X,reference", "--out", "rep")
+        _, err = proc.communicate(timeout=300)
+        assert proc.returncode == 2, err
+        (line,) = _lines(err)
+        assert f"importing {name} {said}" in line and "Traceback" not in err
+        assert not (plugins / "rep").exists()
 
 
 def test_a_plugin_cannot_take_the_signals_the_directory_or_standard_output(plugins):

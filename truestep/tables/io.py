@@ -292,29 +292,47 @@ RUN_RECORD = "run.json"
 count of each table the run wrote."""
 
 
-def recorded_rows(directory: Path) -> dict[str, int]:
-    """The row count of each table, as the run that wrote ``directory`` recorded it (the
-    ``rows`` of its ``run.json``); empty where it records none (no record, a record of an
-    older truestep, or one that cannot be read: its own readers say why)."""
+def _run_record(directory: Path) -> dict:
+    """The ``run.json`` of ``directory`` as a dictionary; empty where there is none or it
+    cannot be read (its own readers say why)."""
     import json
 
     from truestep.runtime.files import read_regular
 
-    path = Path(directory) / RUN_RECORD
     try:
-        record = json.loads(read_regular(path, 1 << 20).decode("utf-8"))
+        record = json.loads(read_regular(Path(directory) / RUN_RECORD, 1 << 20).decode("utf-8"))
     except (OSError, ValueError):
         return {}
-    rows = record.get("rows") if isinstance(record, dict) else None
+    return record if isinstance(record, dict) else {}
+
+
+def recorded_rows(directory: Path) -> dict[str, int]:
+    """The row count of each table, as the run that wrote ``directory`` recorded it (the
+    ``rows`` of its ``run.json``); empty where it records none (no record, a record of an
+    older truestep, or one that cannot be read: its own readers say why)."""
+    rows = _run_record(directory).get("rows")
     if not isinstance(rows, dict):
         return {}
     return {str(k): v for k, v in rows.items() if isinstance(v, int) and not isinstance(v, bool)}
 
 
+def recorded_engines(directory: Path) -> list[str] | None:
+    """The engines whose rows the run that wrote ``directory`` published (the ``engines``
+    of its ``run.json``, written from the results table itself), or ``None`` where it
+    records none."""
+    engines = _run_record(directory).get("engines")
+    if not isinstance(engines, list) or not all(isinstance(e, str) for e in engines):
+        return None
+    return engines
+
+
 def check_recorded_rows(directory: Path, tables: dict[str, pd.DataFrame | None]) -> None:
-    """Refuse (:class:`TableError`) a table of ``directory`` whose rows are not as many as
-    its run recorded (:func:`recorded_rows`): one cut short at the end of a row, or changed
-    after the run, reads as a table of fewer runs and nothing else would tell."""
+    """Refuse (:class:`TableError`) a table of ``directory`` that is not the one its run
+    recorded: rows not as many as recorded (:func:`recorded_rows`), or a results table
+    without a row of an engine the run published, or with rows of one it did not
+    (:func:`recorded_engines`). One cut short at the end of a row, or changed after the
+    run, reads as a table of fewer runs and nothing else would tell; a baseline whose
+    table lacks an engine would compare none of that engine's rows."""
     counts = recorded_rows(directory)
     for name, table in tables.items():
         want = counts.get(name)
@@ -323,6 +341,24 @@ def check_recorded_rows(directory: Path, tables: dict[str, pd.DataFrame | None])
                 f"{Path(directory) / f'{name}.csv'}: {len(table)} rows, but the run that wrote it "
                 f"recorded {want} ({RUN_RECORD}): the table was cut short or changed since"
             )
+    results, engines = tables.get("results"), recorded_engines(directory)
+    if results is None or engines is None or "engine" not in results:
+        return
+    have = set(results["engine"].astype(str))
+    lacking, extra = [e for e in engines if e not in have], sorted(have - set(engines))
+    if lacking or extra:
+        said = "; ".join(
+            part
+            for part in (
+                f"no row of {', '.join(lacking)}, which the run published" if lacking else "",
+                f"rows of {', '.join(extra)}, which the run did not publish" if extra else "",
+            )
+            if part
+        )
+        raise TableError(
+            f"{Path(directory) / 'results.csv'}: {said} ({RUN_RECORD} names {', '.join(engines) or 'none'}): "
+            "the table was changed since the run"
+        )
 
 
 def read_run_tables(directory: Path) -> dict[str, pd.DataFrame | None]:
