@@ -3,9 +3,9 @@ blind to what was alive before the run's first process is forked.
 
 Importing every engine makes about a million objects that live as long as the process. A
 full collection walks all of them and finds nearly nothing: the collector starts one each
-time the long-lived objects have grown by a quarter, so the imports of a quick run paid
-for eleven of them, 2.3 s of a 5.4 s start on a 2-core AMD EPYC, and the run two more of
-0.5 to 0.6 s each. With the collector off during the imports and those objects frozen
+time the long-lived objects have grown by a quarter, so a quick run paid for ten of them
+before its first row, 1.7 to 1.8 s of a 5.4 s start on a 2-core AMD EPYC, and two more of
+0.5 to 0.7 s each later. With the collector off during the imports and those objects frozen
 (:func:`gc.freeze`) for the run, no collection walks them again, in the run's process or in
 the processes it forks (which would also copy every page of them that a collection touches).
 
