@@ -10,6 +10,7 @@ The public API (everything else is internal and may change)::
     truestep.run_matrix(cases, engines)            # -> the results table only
     truestep.check(tables, gates="gates.toml")     # -> one row per gate verdict
     truestep.compare("baseline-dir", tables)       # -> what got worse or better
+    truestep.gate("reports/results.csv", baseline="dir")  # -> truestep gate's report
 
     class MyEngine(truestep.FixedStepAdapter): ...   # see README, "Writing an adapter"
 
@@ -51,6 +52,10 @@ _EXPORTS: dict[str, str] = {
     "run": "truestep.api",
     "check": "truestep.api",
     "compare": "truestep.api",
+    "gate": "truestep.api",
+    "GateReport": "truestep.ci.gate_report",
+    "GateRequest": "truestep.ci.gate_report",
+    "GateInputError": "truestep.ci.gate_report",
     "select_engines": "truestep.api",
     "run_matrix": "truestep.execution.runner",
 }
@@ -63,6 +68,9 @@ __all__ = [
     "Feature",
     "FixedStepAdapter",
     "Gate",
+    "GateInputError",
+    "GateReport",
+    "GateRequest",
     "MethodFacts",
     "OdeSpec",
     "ParticleModel",
@@ -78,6 +86,7 @@ __all__ = [
     "check",
     "compare",
     "exact_solution",
+    "gate",
     "get_adapter",
     "load_case",
     "load_cases",
@@ -103,11 +112,12 @@ if TYPE_CHECKING:
     from truestep.adapters import get_adapter
     from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
     from truestep.adapters.reference import build_system
-    from truestep.api import Tables, check, compare, run, select_engines
+    from truestep.api import Tables, check, compare, gate, run, select_engines
     from truestep.cases.case import Case, Gate, OdeSpec
     from truestep.cases.errors import CaseError, SelectionError
     from truestep.cases.exact import Exact, exact_solution
     from truestep.cases.loader import load_case, load_cases
+    from truestep.ci.gate_report import GateInputError, GateReport, GateRequest
     from truestep.execution.runner import run_matrix
     from truestep.reference_impl.features import Feature
     from truestep.reference_impl.model import ParticleModel

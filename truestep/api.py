@@ -24,6 +24,7 @@ import pandas as pd
 from truestep.adapters import adapter_class, engine_status, registered, resolve_engine, shadowed
 from truestep.cases import Case, load_cases
 from truestep.cases.loader import load_gates_file, read_gate
+from truestep.ci.gate_report import GateReport, GateRequest
 from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
 from truestep.execution.experiment import Experiment, Finished, Tables
 from truestep.numerics import own_run
@@ -207,6 +208,33 @@ def gate_results(
     )
     cases = tables.cases if case_gates else [dataclasses.replace(c, gates=[]) for c in tables.cases]
     return check_gates(cases, tables.results, tables.stability, tables.restitution, extra=extra)
+
+
+def gate(request: GateRequest | str | Path, **options: object) -> GateReport:
+    """Everything ``truestep gate`` checks on a run written to disk, as one
+    :class:`~truestep.ci.gate_report.GateReport` (its verdicts, its baseline comparison, why
+    it fails, and the console lines, JUnit, markdown and JSON ``truestep gate`` writes).
+
+    ``request``: a :class:`~truestep.ci.gate_report.GateRequest`, or the run's
+    ``results.csv`` with the request's other fields as keywords (``baseline=``, ``gates=``,
+    ``declared_orders=`` ...). Raises :class:`~truestep.ci.gate_report.GateInputError` for
+    a table or option that cannot be used (``truestep gate`` exits 2 on it)::
+
+        report = truestep.gate("reports/results.csv", baseline="tests/baselines/quick")
+        assert report.passed, "\n".join(report.console())
+    """
+    if not isinstance(request, GateRequest):
+        fields = dict(options)
+        if fields.get("baseline") is not None:
+            fields["baseline"] = Path(str(fields["baseline"]))
+        for name in ("gates", "tolerances", "limits"):
+            if name in fields:
+                value = fields[name]
+                fields[name] = (value,) if isinstance(value, str | Path) else tuple(value)  # type: ignore[arg-type]
+        request = GateRequest(Path(request), **fields)  # type: ignore[arg-type]
+    from truestep.ci.gate_report import gate as check_request
+
+    return check_request(request)
 
 
 def check(

@@ -224,7 +224,8 @@ class BaselineCheck:
 def _comparison(sel: Selection):
     """The marker's run compared with its baseline, in its cases and engines (made once)."""
     from truestep.adapters import resolve_engine
-    from truestep.ci.baseline import compare, narrow, read_tables
+    from truestep.ci.baseline import narrow, read_tables
+    from truestep.ci.gate_report import compare_with
 
     key = ("baseline", *dataclasses.astuple(sel))
     if key not in _RUNS:
@@ -235,10 +236,11 @@ def _comparison(sel: Selection):
             "restitution": tables.restitution,
         }
         current = {k: v if v is None or len(v.columns) else None for k, v in current.items()}
-        cases = {c.name for c in _gates(sel)[0]}
+        cases = _gates(sel)[0]
+        names = {c.name for c in cases}
         engines = {resolve_engine(e) for e in sel.engines}
-        before = narrow(read_tables(Path(str(sel.baseline))), cases=cases, engines=engines)
-        _RUNS[key] = compare(before, narrow(current, cases=cases, engines=engines))
+        before = narrow(read_tables(Path(str(sel.baseline))), cases=names, engines=engines)
+        _RUNS[key] = compare_with(before, narrow(current, cases=names, engines=engines), cases, engines)
     return _RUNS[key]
 
 

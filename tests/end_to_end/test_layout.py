@@ -30,7 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("reporting",),
     ("ci",),
     ("api",),
-    ("cli", "command", "pytest_plugin", "__main__"),
+    ("cli", "commands", "command", "pytest_plugin", "__main__"),
 )
 """The package's layers, bottom first, by the part of a module's name after ``truestep.``: a
 module imports only its own layer or one below. At the bottom the leaves every part may use

@@ -44,6 +44,7 @@ from truestep.runtime.isolation import (
     untimed_workers,
 )
 from truestep.runtime.visible import visible
+from truestep.tables.spec import TABLES
 
 PACKAGES = (
     "numpy",
@@ -505,8 +506,9 @@ def write_report(
     try:
         write_marker(stage)
         results.to_csv(stage / "results.csv", index=False)
-        for name in ("stability", "restitution"):
-            tables[name].to_csv(stage / f"{name}.csv", index=False)
+        for name in ("stability", "restitution"):  # a run without analyses: a header, no rows
+            table = tables[name] if len(tables[name].columns) else TABLES[name].frame([])
+            table.to_csv(stage / f"{name}.csv", index=False)
         scaling = tables.get("scaling")
         if scaling is not None and len(scaling):
             from truestep.execution.bench import COLUMNS as SCALING_COLUMNS

@@ -1,0 +1,60 @@
+"""``truestep list``: the cases with their features and sweeps, the engines with their
+methods and capabilities (an engine not installed with the pip line that adds it)."""
+
+from __future__ import annotations
+
+import argparse
+
+from truestep.commands import common
+from truestep.runtime.visible import visible
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``list`` command's parser, under ``sub``."""
+    lst = sub.add_parser(
+        "list",
+        help="print cases, engines (installed or not), capabilities and methods",
+        description="Print the cases with their features and the engines with "
+        "their methods and capabilities; an engine that is not installed is listed "
+        "with the pip line that adds it.",
+    )
+    lst.add_argument("--cases", default="*", metavar="ITEMS", help=common.CASES_HELP)
+    lst.add_argument("--engines", default=None, metavar="NAMES", help="engine names, comma-separated")
+    lst.add_argument(
+        "--quick",
+        action="store_true",
+        help="the cases a `truestep run --quick` runs (without --cases: those marked for it) "
+        "and the steps and tolerances of their quick sweeps",
+    )
+    lst.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    from truestep.adapters import UnknownEngine, engine_status, get_adapter, registered, shadowed
+
+    cases = common.load(args.cases)
+    if args.quick and args.cases == "*":
+        cases = [c for c in cases if c.in_quick] or cases  # as `truestep run --quick` chooses
+    print("cases" + (" of a --quick run:" if args.quick else ":"))
+    for c in cases:
+        print(f"  {c.name:24s} {c.kind:9s} features: {', '.join(sorted(c.features))}")
+        steps = ", ".join(f"{h:.4g}" for h in c.sweep(adaptive=False, quick=args.quick))
+        tols = ", ".join(f"{t:g}" for t in c.sweep(adaptive=True, quick=args.quick))
+        print(f"  {'':24s} {'':9s} steps (s): {steps or '-'}; tolerances: {tols or '-'}")
+    print("engines:")
+    for line in shadowed():
+        print(visible(f"  {line}"))
+    names = list(registered()) if not args.engines else [e.strip() for e in args.engines.split(",")]
+    for name in names:
+        status = engine_status(name) if name in registered() else "unknown engine"
+        if status != "installed":
+            print(visible(f"  {name:10s} {status}"))
+            continue
+        try:
+            a = get_adapter(name)
+        except UnknownEngine as err:  # its adapter could not be made: one line, the list goes on
+            print(visible(f"  {name:10s} unusable: {err}"))
+            continue
+        print(visible(f"  {name:10s} methods: {', '.join(map(str, a.methods))}"))
+        print(visible(f"  {'':10s} capabilities: {', '.join(sorted(map(str, a.capabilities)))}"))
+    return 0
