@@ -241,18 +241,29 @@ def plugin_answer(
     fn: Callable[..., Any],
     *args: Any,
     limit_s: float | None = None,
+    apart: bool = True,
     **kwargs: Any,
 ) -> Any:
-    """``fn(*args, **kwargs)``, a call truestep makes to an adapter in its own process
-    (``missing``, ``duplicate``, ``skip``, ``same_steps``, ``prepare``, ``prepare_all``): an exception
-    it raises (``SystemExit`` too), or a call still running after ``limit_s`` seconds
-    (default :data:`ANSWER_S`), becomes :class:`PluginFailed`, whose text names the
-    engine and the call ``what``. The limit interrupts Python code and numpy between its
-    C loops (:func:`truestep.runtime.time_limit.time_limit`); compiled code that never
-    returns to Python is not interrupted."""
+    """``fn(*args, **kwargs)``, a call truestep makes to an adapter (``missing``,
+    ``duplicate``, ``skip``, ``same_steps``, ``prepare``, ``prepare_all``): an exception it
+    raises (``SystemExit`` too), or a call still running after ``limit_s`` seconds (default
+    :data:`ANSWER_S`), becomes :class:`PluginFailed`, whose text names the engine and the
+    call ``what``.
+
+    A question (``apart``, the default) to an adapter of another package than truestep is
+    asked in a forked process (:func:`truestep.runtime.isolation.run_isolated`), once per
+    engine, call and arguments: plugin code that ends or crashes its process is then a
+    :class:`PluginFailed` saying how ("ended the process it was asked in (exit status 0)"),
+    and truestep's process goes on; its answer comes back as data. ``apart=False`` (a
+    ``prepare``, whose work the runs forked later inherit) and truestep's own adapters are
+    called here: the limit then interrupts Python code and numpy between its C loops
+    (:func:`truestep.runtime.time_limit.time_limit`), not compiled code that never returns
+    to Python."""
     from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 
     limit_s = ANSWER_S if limit_s is None else limit_s
+    if apart and not _own_code(engine):
+        return _answer_apart(engine, what, fn, args, kwargs, limit_s)
     try:
         with time_limit(limit_s, f"{engine}: {what}"):
             return fn(*args, **kwargs)
@@ -260,6 +271,43 @@ def plugin_answer(
         raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s") from None
     except (Exception, SystemExit) as err:
         raise PluginFailed(f"{engine}: {what} raised {type(err).__name__}: {str(err)[:300]}") from None
+
+
+_ANSWERS: dict[tuple, tuple[tuple, Any]] = {}
+"""Answers of plugin adapters asked apart, by engine, call and its arguments (a string by
+value, anything else by identity: the arguments are kept beside the answer)."""
+
+
+def _own_code(engine: str) -> bool:
+    """Whether engine ``engine``'s adapter is truestep's own code (a built-in engine)."""
+    try:
+        return adapter_class(engine).__module__.split(".")[0] == "truestep"
+    except Exception:
+        return False
+
+
+def _answer_apart(
+    engine: str, what: str, fn: Callable[..., Any], args: tuple, kwargs: dict, limit_s: float
+) -> Any:
+    """:func:`plugin_answer` of a plugin's question, asked in a forked process (memoized)."""
+    from truestep.runtime.isolation import how_it_ended, run_isolated
+
+    key = (engine, what, fn, *(a if isinstance(a, str) else id(a) for a in args), *sorted(kwargs.items()))
+    if key in _ANSWERS:
+        return _ANSWERS[key][1]
+    out = run_isolated(functools.partial(fn, **kwargs), args, limit_s)
+    if out.status == "timeout":
+        raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s")
+    if out.status != "ok":
+        ended = "exit code" in out.message and "died" in out.message
+        said = (
+            f"ended the process it was asked in ({how_it_ended(out.message)})"
+            if ended
+            else f"raised {out.message[:300]}"
+        )
+        raise PluginFailed(f"{engine}: {what} {said}")
+    _ANSWERS[key] = (args, out.value)
+    return out.value
 
 
 class PluginFailed(Exception):

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import functools
 import importlib
-import re
 import signal
 import sys
 from collections.abc import Callable
@@ -79,31 +78,17 @@ def _tried_apart(module: str, what: str) -> None:
     """Import ``module`` in a forked process first (within :data:`IMPORT_S` seconds):
     :class:`ImportEndedProcess` where that ends or interrupts the process. An import that
     raises is left to the import here, which raises the same, as its callers say."""
-    from truestep.runtime.isolation import run_isolated
+    from truestep.runtime.isolation import how_it_ended, run_isolated
     from truestep.runtime.time_limit import TimeLimitExceeded
 
     out = run_isolated(_import_here, (module,), IMPORT_S)
     if out.status == "timeout":
         raise TimeLimitExceeded(what)
     if out.status != "ok":
-        raise ImportEndedProcess(f"{what} ended the process it was first tried in ({_how(out.message)})")
+        ended = how_it_ended(out.message)
+        raise ImportEndedProcess(f"{what} ended the process it was first tried in ({ended})")
     if out.value != "ok":
         raise ImportEndedProcess(f"{what} {out.value}")
-
-
-def _how(message: str) -> str:
-    """``exit status N`` or ``killed by SIGNAME`` from an isolated call's message about
-    its process's end (else the message)."""
-    found = re.search(r"exit code (-?\d+)", message)
-    if found is None:
-        return message
-    code = int(found.group(1))
-    if code >= 0:
-        return f"exit status {code}"
-    try:
-        return f"killed by {signal.Signals(-code).name}"
-    except ValueError:
-        return f"killed by signal {-code}"
 
 
 def _import_here(module: str) -> str:

@@ -91,11 +91,18 @@ def test_a_missing_that_raises_makes_its_rows_crashed_and_the_run_goes_on(tmp_pa
     results = pd.read_csv(tmp_path / "rep" / "results.csv")
     mine = results[results.engine == "missing-raises-test"]
     assert len(mine) == 4 and set(mine.status) == {"crashed"}
-    assert set(mine.message) == {"missing-raises-test: missing() raised RuntimeError: missing() broke"}
+    said = "missing-raises-test: missing() raised RuntimeError: missing() broke at test_plugin_calls.py:"
+    assert all(m.startswith(said) for m in mine.message), set(mine.message)  # where it raised, too
     assert (results[results.engine == "reference"].status == "ok").all()
     stability = pd.read_csv(tmp_path / "rep" / "stability.csv")
     searched = stability[stability.engine == "missing-raises-test"]
     assert len(searched) == 2 and set(searched.status) == {"crashed"}
+    # what run wrote, gate reads: a crashed row with no step (refused before: "column dt:
+    # empty ... a run's step must be positive and finite", exit 2)
+    capsys.readouterr()
+    engines = "test_plugin_calls:MissingRaises,reference"
+    assert main(["gate", "--results", str(tmp_path / "rep" / "results.csv"), "--engines", engines, "-q"]) == 0
+    assert "error" not in capsys.readouterr().err
 
 
 def test_a_missing_that_never_answers_makes_its_rows_crashed_within_the_limit(tmp_path, monkeypatch):

@@ -93,6 +93,16 @@ def test_only_truestep_s_dataclasses_are_built_not_its_functions():
     assert dataclasses.is_dataclass(plain_data.loads(pickle.dumps(TimedRuns([1.0], []))))
 
 
+def test_truestep_s_enumeration_members_come_back_by_value():
+    """An adapter's ``missing()`` answers with :class:`~truestep.Feature` members, asked in a
+    forked process when the adapter is a plugin's: they come back as the same members."""
+    from truestep.reference_impl.features import Feature
+
+    asked = {Feature.POINT_MASSES, Feature.ODE}
+    back = plain_data.loads(pickle.dumps(asked))
+    assert back == asked and all(type(f) is Feature for f in back)
+
+
 class _Named:
     """Pickles as a call of ``module.name(*args)``."""
 

@@ -14,6 +14,7 @@ import textwrap
 import time
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from kill_helpers import still_running
 
@@ -47,6 +48,16 @@ PLUGINS = {
 
             def missing(self, case, method):
                 os._exit(0)
+    """,
+    "crashes_in_skip": """
+        import os, signal
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "crashes-in-skip"
+
+            def skip(self, case, method):
+                os.kill(os.getpid(), signal.SIGSEGV)
     """,
     "sys_exit_in_missing": """
         import sys
@@ -180,13 +191,26 @@ def _lines(stderr: str) -> list[str]:
     return [line for line in stderr.splitlines() if line.startswith("truestep:")]
 
 
-def test_os_exit_in_plugin_code_is_no_success(plugins):
-    proc = _start(plugins, *RUN, "--engines", "exits_in_missing:X,reference", "--out", "rep")
+def test_a_plugin_that_ends_its_process_when_asked_what_it_runs_makes_crashed_rows(plugins):
+    """Issue 37, item 5: an adapter of another package is asked ``missing``, ``duplicate``
+    and ``skip`` in a forked process; where that process ends (``os._exit(0)``, a crash),
+    every row of the engine is ``crashed``, saying how, and the run goes on. Before,
+    ``os._exit(0)`` in ``missing()`` ended the command: exit 3 and no report."""
+    said = {
+        "exits-in-missing": "ended the process it was asked in (exit status 0)",
+        "crashes-in-skip": "ended the process it was asked in (killed by SIGSEGV)",
+    }
+    proc = _start(
+        plugins, *RUN, "--engines", "exits_in_missing:X,crashes_in_skip:X,reference", "--out", "rep"
+    )
     _, err = proc.communicate(timeout=300)
-    assert proc.returncode == DID_NOT_FINISH, err
-    (line,) = _lines(err)
-    assert "exited with status 0 before it finished" in line
-    assert not (plugins / "rep").exists()
+    assert proc.returncode == 0, err
+    rows = pd.read_csv(plugins / "rep" / "results.csv")
+    for engine, how in said.items():
+        mine = rows[rows["engine"] == engine]
+        assert len(mine) and (mine["status"] == "crashed").all(), mine
+        assert mine["message"].str.contains(how, regex=False).all(), mine["message"].tolist()
+    assert (rows.loc[rows["engine"] == "reference", "status"] == "ok").all()
 
 
 def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):

@@ -169,8 +169,18 @@ def _gates(sel: Selection) -> tuple[list, list]:
 def _plan(sel: Selection) -> list[GateCheck | BaselineCheck]:
     """Every gate of the selection, ``*`` expanded to the engine/method pairs that can
     model the case (what the run will simulate), then each baseline table to compare."""
-    from truestep.adapters import get_adapter
+    from truestep.adapters import PluginFailed, get_adapter, plugin_answer
     from truestep.api import select_engines
+
+    def models(engine: str, adapter, case, method: str) -> bool:
+        """Whether the adapter runs ``case`` with ``method`` (one that cannot say: it is
+        checked, and its run's row says why)."""
+        try:
+            return not hasattr(case, "model") or not plugin_answer(
+                engine, "missing()", adapter.missing, case, method
+            )
+        except PluginFailed:
+            return True
 
     engines = select_engines(list(sel.engines))
     checks: list[GateCheck] = []
@@ -181,7 +191,7 @@ def _plan(sel: Selection) -> list[GateCheck | BaselineCheck]:
                 continue
             adapter = get_adapter(engine)
             methods = (
-                [m for m in adapter.methods if not hasattr(case, "model") or not adapter.missing(case, m)]
+                [m for m in adapter.methods if models(engine, adapter, case, m)]
                 if g.method == "*"
                 else [g.method]
             )

@@ -104,7 +104,9 @@ def _peer_of(adapter, case: Case, method: str) -> PeerSearch | None:
         return None
     try:
         other = get_adapter(peer)
-        if method not in other.methods or method in other.adaptive_methods or other.missing(case, method):
+        if method not in other.methods or method in other.adaptive_methods:
+            return None
+        if plugin_answer(peer, "missing()", other.missing, case, method):
             return None
     except Exception:  # not installed, or an adapter that cannot answer: no hint
         return None

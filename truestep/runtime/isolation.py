@@ -34,6 +34,7 @@ import gc
 import itertools
 import multiprocessing as mp
 import os
+import re
 import signal
 import sys
 import threading
@@ -548,6 +549,21 @@ def finish_isolated(run: Running) -> Outcome:
     """Wait for a started call until its result arrives or its time runs out."""
     ready = wait([run.conn], timeout=max(0.0, run.deadline - time.monotonic()))
     return _finish(run, timed_out=not ready)
+
+
+def how_it_ended(message: str) -> str:
+    """``exit status N`` or ``killed by SIGNAME`` from the message of an isolated call whose
+    process ended before it answered (else the message)."""
+    found = re.search(r"exit code (-?\d+)", message)
+    if found is None:
+        return message
+    code = int(found.group(1))
+    if code >= 0:
+        return f"exit status {code}"
+    try:
+        return f"killed by {signal.Signals(-code).name}"
+    except ValueError:
+        return f"killed by signal {-code}"
 
 
 def run_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Outcome:

@@ -6,13 +6,15 @@ whatever callable the bytes name: an engine's result object whose ``__reduce__``
 ``os._exit`` ends truestep with status 0 and no report, one that names ``time.sleep``
 hangs it past every timeout. :func:`loads` resolves only the names of :data:`ALLOWED`
 and the dataclasses of truestep's own modules (:class:`~truestep.adapters.base.Trajectory`,
-:class:`~truestep.execution.timing.TimedRuns`, ...), built field by field; any other name
+:class:`~truestep.execution.timing.TimedRuns`, ...), built field by field, and members of its
+enumerations (:class:`~truestep.reference_impl.features.Feature`), looked up by value; any other name
 is :class:`Refused`, and the call's row says which name it was.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import enum
 import importlib
 import io
 import pickle
@@ -60,8 +62,8 @@ class _Unpickler(pickle.Unpickler):
             return super().find_class(module, name)
         if module.startswith(OWN_PACKAGE) and "." not in name:
             found = getattr(importlib.import_module(module), name, None)
-            if isinstance(found, type) and dataclasses.is_dataclass(found):
-                return found
+            if isinstance(found, type) and (dataclasses.is_dataclass(found) or issubclass(found, enum.Enum)):
+                return found  # a record built field by field, or a member looked up by value
         raise Refused(f"{module}.{name}")
 
 

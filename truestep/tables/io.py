@@ -210,7 +210,8 @@ def _numbers(table: pd.DataFrame, col: str) -> np.ndarray:
 
 def check_rows(path: Path, kind: str, table: pd.DataFrame) -> None:
     """Refuse rows no run writes (:class:`TableError`): two rows with the same key; a run
-    row without a positive, finite step; counts and errors that are negative or
+    row without a positive, finite step (a ``crashed`` row may have none: the adapter's
+    answer to what it runs failed before any step); counts and errors that are negative or
     infinite; an ``ok`` row without its evaluation count or with a wall time that is not
     positive; a results table whose ``ok`` rows hold no measurement at all."""
     keys = [k for k in KEYS.get(kind, ()) if k in table]
@@ -226,6 +227,8 @@ def check_rows(path: Path, kind: str, table: pd.DataFrame) -> None:
     if "dt" in table:
         dt = _numbers(table, "dt")
         bad = ran & ~(np.isfinite(dt) & (dt > 0))
+        if "status" in table:  # a question to the adapter failed before any step: no step
+            bad &= ~((table["status"] == "crashed").to_numpy() & np.isnan(dt))
         if bad.any():
             raise TableError(
                 f"{path}: column dt: {_value(table, 'dt', bad)} (row {_row(table, bad)}): "
