@@ -244,8 +244,9 @@ def _in(dt: float, steps: list[float]) -> bool:
     return any(abs(dt - s) <= 1e-9 * s for s in steps)
 
 
-def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
-    """An ``order`` gate on one method's sweep: the order fitted to its measured rows."""
+def _order(case: Case, g: Gate, rows: pd.DataFrame, results: pd.DataFrame | None = None) -> GateResult:
+    """An ``order`` gate on one method's sweep: the order fitted to its measured rows
+    (``results``: the whole run, whose other methods a declared-order gate compares with)."""
     p = g.params
     broken = _broken(rows)
     if broken:
@@ -254,7 +255,11 @@ def _order(case: Case, g: Gate, rows: pd.DataFrame) -> GateResult:
     floor = round_off_floor(str(rows["engine"].iloc[0])) if len(rows) else ROUND_OFF
     order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale, floor=floor)
     if g.where == DECLARED:
-        return _unstable_where_stable(case, g, rows) or _declared_order(case, g, ok, order)
+        return (
+            _unstable_where_stable(case, g, rows)
+            or (_unstable_unexplained(case, g, rows, results) if not np.isfinite(order) else None)
+            or _declared_order(case, g, ok, order)
+        )
     return GateResult(
         case.name,
         g,
@@ -380,6 +385,69 @@ def _unstable_where_stable(case: Case, g: Gate, rows: pd.DataFrame) -> GateResul
         "linear scene): no order to fit, and the instability is the finding",
         f">= {g.params['expect']:g} - {g.params['tol']:g}",
     )
+
+
+def _judged_facts(g: Gate):
+    """``(known, facts)`` of the gate's engine and method: the judged run's recorded facts,
+    else the installed adapter's; ``known`` is false where neither can be read."""
+    from truestep.adapters import EngineNotInstalled, UnknownEngine, get_adapter
+    from truestep.adapters.base import facts_of
+    from truestep.measures.engine_facts import recorded_facts
+
+    known, facts = recorded_facts(g.engine, g.method)
+    if known:
+        return True, facts
+    try:
+        return True, facts_of(get_adapter(g.engine), g.method)
+    except (EngineNotInstalled, UnknownEngine):
+        return False, None
+
+
+def _unstable_unexplained(
+    case: Case, g: Gate, rows: pd.DataFrame, results: pd.DataFrame | None
+) -> GateResult | None:
+    """A declared-order gate's verdict where its sweep shows no order because its finest
+    step is ``unstable`` though a method no more stable than it ran ``ok`` on the same case
+    at that step or a larger one: failed, naming both. Where the scene's exact stability
+    limit is unknown (a spring with a rest length, a nonlinear scene), that is the
+    evidence left that the instability is not the step's: a method whose declared reach
+    on undamped modes (:attr:`~truestep.reference_impl.solvers.Stability.imaginary`) is at
+    most this one's stays stable there (a flipped damper, which saying "not evaluated"
+    would let through). ``None`` otherwise: the finest step is not unstable; the method's
+    facts cannot be read, declare no stability or say it is unstable on every undamped
+    mode (explicit Euler); or no such method ran stable (a chaotic close encounter, where
+    the methods of less reach go unstable too)."""
+    steps = rows[rows["dt_kind"] == "step"]
+    dts = _num(steps["dt"])
+    if results is None or not len(steps) or not np.isfinite(dts).any():
+        return None
+    finest = steps.iloc[int(np.nanargmin(dts))]
+    known, facts = _judged_facts(g)
+    mine = facts.stability if known and facts is not None else None
+    if finest["status"] != "unstable" or mine is None or mine.imaginary == 0:
+        return None
+    dt = float(finest["dt"])
+    ran = results[
+        (results["case"] == case.name) & (results["dt_kind"] == "step") & (results["status"] == "ok")
+    ]
+    ran = ran[_num(ran["dt"]) >= dt * (1 - 1e-9)]
+    for (engine, method), done in ran.groupby(["engine", "method"], sort=True):
+        if (engine, method) == (g.engine, g.method):
+            continue
+        seen, other = _judged_facts(dataclasses.replace(g, engine=str(engine), method=str(method)))
+        theirs = other.stability if seen and other is not None else None
+        if theirs is not None and 0 < theirs.imaginary <= mine.imaginary:
+            step = float(_num(done["dt"]).max())
+            return GateResult(
+                case.name,
+                g,
+                False,
+                f"unstable at the sweep's finest step, dt {dt:.6g} s, where {engine}/{method}, no more "
+                f"stable on undamped modes (its reach {theirs.imaginary:.3g} against {mine.imaginary:.3g}), "
+                f"ran ok up to dt {step:.6g} s: no order to fit, and the instability is the finding",
+                f">= {g.params['expect']:g} - {g.params['tol']:g}",
+            )
+    return None
 
 
 def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> GateResult:
@@ -729,7 +797,7 @@ def verdict_table(verdicts: list[GateResult]) -> pd.DataFrame:
 
 Check = Callable[[Case, Gate, pd.DataFrame, pd.DataFrame], GateResult]
 CHECKS: dict[str, Check] = {
-    "order": lambda case, g, results, rows: _order(case, g, rows),
+    "order": lambda case, g, results, rows: _order(case, g, rows, results),
     "no-worse-than": _no_worse,
     "error": _measured,
     "energy_drift": _measured,
