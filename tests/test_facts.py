@@ -633,17 +633,21 @@ def test_declared_orders_hold_on_a_quick_run(quick_run):
 
 
 def test_declared_gates_follow_the_facts_not_method_names():
-    """Free fall: the methods exact under constant acceleration get no gate, the others
-    the declared order; a damper drops Verlet to first order, an orbit keeps it second."""
+    """Free fall: the methods exact under constant acceleration get a gate of exactness,
+    the others the declared order; a damper drops Verlet to first order, an orbit keeps it
+    second."""
     cases = {c.name: c for c in load_cases("free-fall,projectile-drag,earth-orbit")}
     pairs = declared_order_pairs(cases.values(), ["reference"], quick=True)
-    got = {(names[0], g.method): g.params["expect"] for names, g in pairs}
+    got = {(names[0], g.method): g.params["expect"] for names, g in pairs if not g.params.get("exact")}
+    exact = {(names[0], g.method) for names, g in pairs if g.params.get("exact")}
     assert all(
         g.kind == "order" and g.dt is None and g.where == "declared" and g.params["tol"] == DECLARED_ORDER_TOL
         for _, g in pairs
     )
     free = {m for c, m in got if c == "free-fall"}
     assert free == {"euler", "symplectic-euler", "implicit-euler"}
+    assert {m for c, m in exact if c == "free-fall"} == {"midpoint", "heun", "rk4", "verlet", "lecture"}
+    assert {c for c, _ in exact} == {"free-fall"}
     assert got[("projectile-drag", "verlet")] == 1.0
     assert got[("earth-orbit", "verlet")] == 2.0
     assert got[("earth-orbit", "rk4")] == RK4.facts.order

@@ -254,6 +254,8 @@ def _order(case: Case, g: Gate, rows: pd.DataFrame, results: pd.DataFrame | None
     ok = rows[(rows["status"] == "ok") & (rows["dt_kind"] == "step")]
     floor = round_off_floor(str(rows["engine"].iloc[0])) if len(rows) else ROUND_OFF
     order = fit_order(_num(ok["dt"]), _num(ok["error"]), scale=case.error_scale, floor=floor)
+    if g.where == DECLARED and g.params.get("exact"):
+        return _declared_exact(case, g, rows, floor)
     if g.where == DECLARED:
         return (
             _unstable_where_stable(case, g, rows)
@@ -448,6 +450,34 @@ def _unstable_unexplained(
                 f">= {g.params['expect']:g} - {g.params['tol']:g}",
             )
     return None
+
+
+def _declared_exact(case: Case, g: Gate, rows: pd.DataFrame, floor: float) -> GateResult:
+    """A declared-order gate of a method its facts make exact on the case (a constant
+    acceleration, integrated exactly by every Runge-Kutta method of order 2 or more and by
+    the lecture's update): every fixed-step run ``ok`` with its error at round-off (below
+    ``floor`` of the case's scale, :func:`~truestep.measures.metrics.round_off_floor`). Such
+    a sweep has no order to fit; a bug that breaks the exactness (a lost half step) is an
+    error above round-off, which fails it."""
+    need = f"exact: every error below {floor:g} of the scale (its facts: exact under a constant acceleration)"
+    steps = rows[rows["dt_kind"] == "step"]
+    if not len(steps):
+        return GateResult(case.name, g, True, "no run at a fixed step", need, evaluated=False)
+    bad = steps[steps["status"] != "ok"]
+    if len(bad):
+        row = bad.iloc[0]
+        return GateResult(case.name, g, False, f"{row['status']} at dt {float(row['dt']):.6g} s", need)
+    errors = _num(steps["error"])
+    worst = float(np.max(errors)) if np.isfinite(errors).all() else float("nan")
+    relative = worst / case.error_scale
+    return GateResult(
+        case.name,
+        g,
+        bool(relative <= floor),
+        f"largest error {worst:.3g} ({relative:.3g} of the scale) over {len(steps)} steps",
+        need,
+        value=relative,
+    )
 
 
 def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> GateResult:

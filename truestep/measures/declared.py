@@ -13,7 +13,8 @@ Which order is declared for a case follows from the facts and the scene alone:
   probing the case's acceleration (:func:`velocity_dependent`);
 - a constant acceleration (uniform gravity alone) is integrated exactly by a method
   that declares it (every method of order 2 or more, and the lecture's update): its
-  error is round-off, which has no order, so no gate is made (:func:`constant_acceleration`).
+  error is round-off, which has no order: its gate asks for exactness instead, every
+  run's error below the round-off floor (:func:`constant_acceleration`).
 """
 
 from __future__ import annotations
@@ -132,8 +133,9 @@ def declared_order_gates(cases: Iterable[Case], engines: Iterable[str], *, quick
     the case or as a duplicate) with declared facts (:func:`truestep.adapters.base.facts_of`)
     gets ``Gate(kind="order", engine, method, dt=None, params={"expect": p, "tol":
     DECLARED_ORDER_TOL}, where="declared", file="<declared order>")`` with ``p`` from
-    :func:`declared_order`; a method exact on the case gets none. Methods without
-    declared facts get none either.
+    :func:`declared_order`; a method exact on the case gets one whose ``params`` also hold
+    ``exact = True`` (every run's error at round-off). Methods without declared facts get
+    none.
 
     A gate does not name its case (a :class:`~truestep.cases.case.Gate` cannot), and the
     declared order differs between cases (Verlet: 2 on an orbit, 1 with a damper): check
@@ -176,10 +178,9 @@ def declared_order_pairs(
                 known, facts = recorded_facts(engine, method)  # the judged run's facts win
                 if not known:
                     facts = facts_of(adapter, method)
-                order = None if facts is None else declared_order(facts, case)
-                if order is None:
-                    continue
-                out.append(([case.name], _order_gate(engine, method, order)))
+                gate = None if facts is None else _declared_gate(engine, method, facts, case)
+                if gate is not None:
+                    out.append(([case.name], gate))
     return out
 
 
@@ -199,10 +200,22 @@ def recorded_order_pairs(
             continue
         for method in dict.fromkeys(ran.loc[ran["case"] == case.name, "method"].astype(str)):
             _, facts = recorded_facts(engine, method)
-            order = None if facts is None else declared_order(facts, case)
-            if order is not None:
-                out.append(([case.name], _order_gate(engine, method, order)))
+            gate = None if facts is None else _declared_gate(engine, method, facts, case)
+            if gate is not None:
+                out.append(([case.name], gate))
     return out
+
+
+def _declared_gate(engine: str, method: str, facts: MethodFacts, case: Case) -> Gate:
+    """The declared-order gate of ``engine``'s ``method`` on ``case``: its declared order,
+    or, where its facts make it exact on the case (a constant acceleration), exactness:
+    every run's error at round-off (``params["exact"]``), not a silent skip."""
+    order = declared_order(facts, case)
+    if order is None:
+        gate = _order_gate(engine, method, facts.order)
+        gate.params["exact"] = True
+        return gate
+    return _order_gate(engine, method, order)
 
 
 def _order_gate(engine: str, method: str, order: int) -> Gate:
