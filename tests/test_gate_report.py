@@ -102,3 +102,43 @@ def test_a_run_written_without_analyses_is_gated(tmp_path, capsys):
         assert lines == [",".join(TABLES[name].names)], (name, lines)
     assert main(["gate", "--results", str(out / "results.csv"), "--declared-orders", "-q"]) == 0
     assert capsys.readouterr().out.splitlines()[-1].endswith("failed, 0 not evaluated")
+
+
+def test_a_timing_comparison_says_how_many_ratios_it_compared():
+    report = truestep.gate(QUICK / "results.csv", baseline=QUICK, time_against="reference/rk4")
+    assert report.comparison.timed > 0
+    assert report.summary().endswith(
+        f"; {report.comparison.timed} wall-time ratios to reference/rk4 compared"
+    )
+
+
+def test_an_order_gate_on_unstable_runs_says_they_were_unstable(tmp_path):
+    """It said "measured order nan"."""
+    import json
+
+    import pandas as pd
+
+    run = tmp_path / "run"
+    shutil.copytree(QUICK, run)
+    record = json.loads((run / "run.json").read_text())
+    record.pop("rows", None)
+    (run / "run.json").write_text(json.dumps(record))
+    results = pd.read_csv(run / "results.csv")
+    rows = (
+        (results["case"] == "harmonic-oscillator")
+        & (results["engine"] == "reference")
+        & (results["method"] == "verlet")
+    )
+    results.loc[rows, ["status", "error"]] = ["unstable", float("nan")]
+    results.to_csv(run / "results.csv", index=False)
+    gates = tmp_path / "gates.toml"
+    gates.write_text(
+        '[[gates]]\ncases = "harmonic-oscillator"\nkind = "order"\nengine = "reference"\n'
+        'method = "verlet"\nexpect = 2.0\ntol = 0.1\n'
+    )
+    report = truestep.gate(run / "results.csv", gates=[str(gates)], engines="reference")
+    (verdict,) = [v for v in report.verdicts if v.gate.method == "verlet" and v.gate.file == str(gates)]
+    assert (
+        verdict.verdict == "fail"
+        and verdict.measured == f"no order: {int(rows.sum())} of {int(rows.sum())} runs unstable"
+    )

@@ -106,6 +106,11 @@ class GateReport:
             f"; baseline: {self.comparison.compared} rows compared, {n['worse']} worse, "
             f"{n['better']} better, {n['appeared']} appeared, {n['vanished']} vanished"
             + (f", {n['differs']} cells differ" if self.identical else "")
+            + (
+                f"; {self.comparison.timed} wall-time ratios to {self.comparison.time_against} compared"
+                if self.comparison.time_against
+                else ""
+            )
         )
 
     def console(self, *, verbose: bool = False, quiet: bool = False) -> list[str]:

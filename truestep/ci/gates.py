@@ -262,6 +262,14 @@ def _order(case: Case, g: Gate, rows: pd.DataFrame, results: pd.DataFrame | None
             or (_unstable_unexplained(case, g, rows, results) if not np.isfinite(order) else None)
             or _declared_order(case, g, ok, order)
         )
+    if not np.isfinite(order):
+        unstable = int((rows["status"] == "unstable").sum())
+        why = (
+            f"{unstable} of {len(rows)} runs unstable"
+            if unstable
+            else "fewer than two errors in the asymptotic range"
+        )
+        return GateResult(case.name, g, False, f"no order: {why}", f"{p['expect']:g} +- {p['tol']:g}")
     return GateResult(
         case.name,
         g,
