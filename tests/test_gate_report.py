@@ -4,12 +4,14 @@ every CI output, and refuse the same input with the same line."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
 import pytest
 
 import truestep
+from truestep.adapters.reference import ReferenceAdapter
 from truestep.cli import main
 
 QUICK = Path(__file__).parent / "baselines" / "quick"
@@ -114,8 +116,6 @@ def test_a_timing_comparison_says_how_many_ratios_it_compared():
 
 def test_an_order_gate_on_unstable_runs_says_they_were_unstable(tmp_path):
     """It said "measured order nan"."""
-    import json
-
     import pandas as pd
 
     run = tmp_path / "run"
@@ -142,3 +142,33 @@ def test_an_order_gate_on_unstable_runs_says_they_were_unstable(tmp_path):
         verdict.verdict == "fail"
         and verdict.measured == f"no order: {int(rows.sum())} of {int(rows.sum())} runs unstable"
     )
+
+
+class Pinned(ReferenceAdapter):
+    """A user's solver: the reference under another name, in another module than truestep."""
+
+    name = "pinned-test"
+    methods = ("rk4",)
+    adaptive_methods = ()
+
+
+def test_capabilities_no_case_of_the_run_exercises_are_named(tmp_path, capsys):
+    """A new user's solver whose pinned particles did not stay pinned passed every channel:
+    no quick case has a pinned particle. The gate now says which of a user engine's declared
+    capabilities no case it ran has (truestep's own engines are left out)."""
+    out = tmp_path / "run"
+    engines = "reference,test_gate_report:Pinned"
+    assert main(["run", "--quick", "--cases", "free-fall", "--engines", engines, "--out", str(out)]) == 0
+    capsys.readouterr()
+    report = truestep.gate(out / "results.csv", engines=engines)
+    from truestep.cases import library, load_case
+
+    have = set(map(str, load_case(library()["free-fall"]).features))
+    idle = sorted(set(map(str, Pinned.capabilities)) - have)
+    assert "pinned-particles" in idle
+    assert report.notes == [
+        f"note: engine pinned-test declares {', '.join(idle)}, which no case it ran here has: "
+        "no verdict of this run checks those (add a case that needs them)"
+    ]
+    assert report.notes[0] in report.console() and report.notes[0] in report.markdown()
+    assert json.loads(report.as_json())["notes"] == report.notes

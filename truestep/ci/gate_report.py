@@ -134,10 +134,14 @@ class GateReport:
         return outputs.junit(self.verdicts, self.comparison, self.reasons)
 
     def markdown(self) -> str:
-        return outputs.markdown(self.verdicts, self.comparison, self.reasons, passed=self.passed)
+        return outputs.markdown(
+            self.verdicts, self.comparison, self.reasons, passed=self.passed, notes=self.notes
+        )
 
     def as_json(self) -> str:
-        return outputs.as_json(self.verdicts, self.comparison, self.reasons, passed=self.passed)
+        return outputs.as_json(
+            self.verdicts, self.comparison, self.reasons, passed=self.passed, notes=self.notes
+        )
 
     def write(
         self,
@@ -182,7 +186,39 @@ def gate(request: GateRequest) -> GateReport:
     if asked is not None:
         report.verdicts = [v for v in report.verdicts if v.gate.engine in asked or v.gate.engine == "*"]
     report.reasons = _reasons(request, report, tables["results"], asked)
+    report.notes += unexercised(cases, tables["results"], asked)
     return report
+
+
+def unexercised(cases: list[Case], results: pd.DataFrame, asked: set[str] | None = None) -> list[str]:
+    """A line for each engine of another package than truestep (a user's solver) that
+    declares capabilities no case it ran here has (a row run, whatever became of it):
+    nothing in these verdicts checks those code paths (a solver whose pinned particles move
+    passes every gate of a run without a pinned particle). truestep's own engines are left
+    out: the full run exercises them."""
+    from truestep.adapters import adapter_class, registered
+    from truestep.tables.io import RAN
+
+    lines = []
+    features = {c.name: set(map(str, c.features)) for c in cases}
+    for engine in dict.fromkeys(results["engine"].astype(str)):
+        if (asked is not None and engine not in asked) or engine not in registered():
+            continue
+        try:
+            cls = adapter_class(engine)
+        except Exception:  # not installed here: its capabilities cannot be read
+            continue
+        if cls.__module__.split(".")[0] == "truestep":
+            continue
+        ran = results[(results["engine"].astype(str) == engine) & results["status"].isin(RAN)]
+        used = set().union(*(features.get(c, set()) for c in ran["case"].astype(str).unique()))
+        idle = sorted(set(map(str, getattr(cls, "capabilities", ()))) - used)
+        if idle:
+            lines.append(
+                f"note: engine {engine} declares {', '.join(idle)}, which no case it ran here has: "
+                "no verdict of this run checks those (add a case that needs them)"
+            )
+    return lines
 
 
 def _reasons(

@@ -115,9 +115,14 @@ def _cell(value: object) -> str:
 
 
 def markdown(
-    verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str], *, passed: bool
+    verdicts: list[GateResult],
+    comparison: Comparison | None,
+    reasons: list[str],
+    *,
+    passed: bool,
+    notes: list[str] | tuple[str, ...] = (),
 ) -> str:
-    """A markdown summary: counts, failed gates, regressions."""
+    """A markdown summary: counts, why the check fails, notes, failed gates, regressions."""
     c = _counts(verdicts)
     lines = [
         f"### truestep gate: {'passed' if passed else 'FAILED'}",
@@ -125,6 +130,7 @@ def markdown(
         f"{c['pass']} gates held, {c['fail']} failed, {c['skip']} not evaluated.",
     ]
     lines += [f"- **{text(r)}**" for r in reasons]
+    lines += [f"- {text(n)}" for n in notes]
     failed = [v for v in verdicts if v.verdict == "fail"]
     if failed:
         lines += [
@@ -199,13 +205,19 @@ def _gate_json(v: GateResult) -> dict:
 
 
 def as_json(
-    verdicts: list[GateResult], comparison: Comparison | None, reasons: list[str], *, passed: bool
+    verdicts: list[GateResult],
+    comparison: Comparison | None,
+    reasons: list[str],
+    *,
+    passed: bool,
+    notes: list[str] | tuple[str, ...] = (),
 ) -> str:
     """Everything as one JSON document."""
     doc = {
         "passed": passed,
         "counts": _counts(verdicts),
         "reasons": reasons,
+        "notes": list(notes),
         "gates": [_gate_json(v) for v in verdicts],
     }
     if comparison is not None:
