@@ -211,3 +211,49 @@ def test_a_marker_item_no_system_can_look_up_is_passed_on_as_a_name(tmp_path):
         str(tmp_path / "mine.toml"),
         "harmonic-oscillator",
     )
+
+
+DECLARED_TEST = """
+import pytest
+
+
+@pytest.mark.truestep(
+    engines="reference", cases="harmonic-oscillator", quick=True, results="{results}", declared_orders=True
+)
+def test_physics(truestep_gate):
+    truestep_gate.check()
+"""
+
+
+def test_the_pytest_mark_gates_declared_orders_on_request(project, tmp_path):
+    """``declared_orders=True`` gives the mark ``truestep gate --declared-orders``'s gates, one
+    test each (a new user found the mark had no such option): they hold on the run, and the
+    rk4 one fails where its error at the larger step is an eighth (an order of 1, not 4)."""
+    import sys
+
+    _, out = project
+
+    def session(results: Path) -> subprocess.CompletedProcess:
+        (tmp_path / "test_physics.py").write_text(DECLARED_TEST.format(results=results))
+        return subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", str(tmp_path)],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+
+    same = session(out / "results.csv")
+    assert same.returncode == 0, same.stdout[-3000:]
+    assert (
+        "PASSED test_physics.py::test_physics[harmonic-oscillator/order/reference/rk4/declared]"
+        in same.stdout
+    )
+    bad = session(_worse_rk4(out, tmp_path / "first-order", 1 / 8) / "results.csv")
+    assert bad.returncode == 1, bad.stdout[-3000:]
+    failed = [line for line in bad.stdout.splitlines() if line.startswith("FAILED")]
+    assert [line.split(" - ")[0] for line in failed] == [  # the case file's own rk4 gate too
+        "FAILED test_physics.py::test_physics[harmonic-oscillator/order/reference/rk4]",
+        "FAILED test_physics.py::test_physics[harmonic-oscillator/order/reference/rk4/declared]",
+    ], bad.stdout[-3000:]
+    assert "measured order 0.995, required >= 4 - 0.25" in bad.stdout

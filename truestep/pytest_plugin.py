@@ -16,7 +16,9 @@ paths are read from the test file's directory first), ``gates`` (a gates file or
 list of them, same), ``quick`` (default false), ``case_gates`` (also check the gates
 written in the case files; default true), ``results`` (a run's ``results.csv``, with its
 other tables beside it: the gates read it instead of running the cases again, as a CI
-that has just run ``truestep run`` wants) and ``baseline`` (a baseline's folder,
+that has just run ``truestep run`` wants), ``declared_orders`` (also gate every fixed-step
+method's declared order, or exactness, on every smooth case with an exact solution, as
+``truestep gate --declared-orders`` does; default false) and ``baseline`` (a baseline's folder,
 ``truestep baseline save``: one more test per table, ``baseline/results``,
 ``baseline/orders``, ``baseline/stability``, ``baseline/restitution``, failing with every
 row of the marker's cases and engines that got worse or vanished). The cases run once
@@ -45,8 +47,9 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
         f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True, results=None, "
-        "baseline=None): run truestep cases on these engines (or read results=), and compare "
-        "with baseline=; the test takes `truestep_gate`, once per gate and baseline table",
+        "baseline=None, declared_orders=False): run truestep cases on these engines (or read "
+        "results=), and compare with baseline=; the test takes `truestep_gate`, once per gate "
+        "and baseline table",
     )
 
 
@@ -61,6 +64,7 @@ class Selection:
     case_gates: bool
     results: str | None = None
     baseline: str | None = None
+    declared_orders: bool = False
 
 
 def _paths(value: Any, base: Path) -> tuple[str, ...]:
@@ -86,7 +90,16 @@ def _exists(path: Path) -> bool:
 
 def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
     kw = dict(mark.kwargs)
-    unknown = set(kw) - {"engines", "cases", "gates", "quick", "case_gates", "results", "baseline"}
+    unknown = set(kw) - {
+        "engines",
+        "cases",
+        "gates",
+        "quick",
+        "case_gates",
+        "results",
+        "baseline",
+        "declared_orders",
+    }
     if unknown:
         raise pytest.UsageError(f"@pytest.mark.{MARKER}: unknown argument {sorted(unknown)[0]!r}")
     if "engines" not in kw or "cases" not in kw:
@@ -104,6 +117,7 @@ def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
         case_gates=bool(kw.get("case_gates", True)),
         results=_one_path(kw.get("results"), base, "results"),
         baseline=_one_path(kw.get("baseline"), base, "baseline"),
+        declared_orders=bool(kw.get("declared_orders", False)),
     )
 
 
@@ -163,7 +177,13 @@ def _gates(sel: Selection) -> tuple[list, list]:
 
     cases = load_cases(list(sel.cases))
     own = cases if sel.case_gates else [dataclasses.replace(c, gates=[]) for c in cases]
-    return cases, gates_to_check(own, [item for f in sel.gates for item in load_gates_file(f)])
+    extra = [item for f in sel.gates for item in load_gates_file(f)]
+    if sel.declared_orders:
+        from truestep.api import select_engines
+        from truestep.measures.declared import declared_order_pairs
+
+        extra += declared_order_pairs(cases, select_engines(list(sel.engines)), quick=sel.quick)
+    return cases, gates_to_check(own, extra)
 
 
 def _plan(sel: Selection) -> list[GateCheck | BaselineCheck]:
