@@ -50,11 +50,12 @@ def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type | None]]
 
 
 def _prepare_each(
-    pairs: list[tuple], progress: Callable[[str], None] | None, parent: int | None = None
+    pairs: list[tuple], progress: Callable[[str], None] | None, parent: int | None = None, who: str = ""
 ) -> None:
     """Prepare each (model, method) of ``pairs``; the lines of a slow one (``progress``,
     standard error by default) carry how many of ``pairs`` are done and, from the pace so
-    far, the seconds left: ``[3/12, ~40 s left] compiling ...``. In a forked helper,
+    far, the seconds left: ``[3/12, ~40 s left] compiling ...``, after ``who`` does them
+    (``worker 2 of 2: ``, where several processes share the work). In a forked helper,
     ``parent`` is the pid that started it: the helper is killed when that process ends
     (killed, interrupted), mid-compile too, instead of compiling on for nobody (a cache
     file cut short is compiled again by the next run: :mod:`truestep.reference_impl.cache_guard`)."""
@@ -67,20 +68,22 @@ def _prepare_each(
     for i, (model, method) in enumerate(pairs):
         if parent is not None and os.getppid() != parent:
             os._exit(1)
-        counted = _counted(say, i, len(pairs), began)
+        counted = _counted(say, i, len(pairs), began, who)
         if method is DERIVATIVE:
             compiled.derivative_for(model, progress=counted)
         else:
             compiled.prepared(model, method, progress=counted)
 
 
-def _counted(say: Callable[[str], None], done: int, total: int, began: float) -> Callable[[str], None]:
-    """``say`` with ``[done + 1/total, ~ETA]`` before each line (``done`` finished so far)."""
+def _counted(
+    say: Callable[[str], None], done: int, total: int, began: float, who: str = ""
+) -> Callable[[str], None]:
+    """``say`` with ``[who done + 1/total, ~ETA]`` before each line (``done`` finished so far)."""
 
     def counted(line: str) -> None:
         spent = time.perf_counter() - began
         eta = f", ~{spent / done * (total - done):.0f} s left" if done else ""
-        say(f"[{done + 1}/{total}{eta}] {line}")
+        say(f"[{who}{done + 1}/{total}{eta}] {line}")
 
     return counted
 
@@ -117,12 +120,16 @@ def compile_all(
     if workers > 1 and not numba.config.DISABLE_JIT:
         context = multiprocessing.get_context("fork")
         children = [
-            context.Process(target=_prepare_each, args=(needed[k::workers], None, os.getpid()), daemon=True)
+            context.Process(
+                target=_prepare_each,
+                args=(needed[k::workers], None, os.getpid(), f"worker {k + 1} of {workers}: "),
+                daemon=True,
+            )
             for k in range(1, workers)
         ]
         for child in children:
             child.start()
-        _prepare_each(needed[0::workers], progress)
+        _prepare_each(needed[0::workers], progress, None, f"worker 1 of {workers}: ")
         for child in children:
             child.join()
     _prepare_each(needed, progress)
