@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,10 @@ def build_system(case: Case) -> System:
     one, :func:`truestep.cases.plugins.ode_system`) or its particles."""
     match case.scene:
         case OdeSpec() as ode:
-            return ode_system(ode.system)(ode.y0, **ode.params)
+            system = ode_system(ode.system)
+            if system is None:  # the loader refuses an unknown name; a case built by hand may not
+                raise ValueError(f"{case.name}: no ODE system is registered as {ode.system!r}")
+            return system(ode.y0, **ode.params)
         case ParticleModel() as model:
             return ParticleSystem(model, passes_for(model))
 
@@ -171,7 +175,8 @@ class ReferenceAdapter:
             raise TypeError(f"{method} needs a position/velocity split, {case.name} has none")
         samples = None
         if cls.adaptive:
-            solver = cls(system, rtol=dt, atol=dt)
+            adaptive: Any = cls  # an adaptive solver takes its tolerances (Solver, ``adaptive = True``)
+            solver = adaptive(system, rtol=dt, atol=dt)
             step = case.duration
             samples = np.linspace(0.0, case.duration, case.max_records + 1)
         else:

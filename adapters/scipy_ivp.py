@@ -6,6 +6,7 @@ import math
 import time
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -154,7 +155,9 @@ class ScipyAdapter:
             message=message,
             step_t=step_t,
             step_energy=step_energy,
-            extremes=None if step_energy is None else EnergyExtremes.of(step_t, step_energy),
+            extremes=None
+            if step_t is None or step_energy is None
+            else EnergyExtremes.of(step_t, step_energy),
         )
 
 
@@ -191,7 +194,9 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float, optio
     system.rest_height = tol
     grid = np.linspace(0.0, case.duration, case.max_records + 1)
     t, x = 0.0, system.get_state()
-    ts, ys, nfev, steps, ok, message = [], [], 0, 0, True, ""
+    ts: list[np.ndarray] = []
+    ys: list[np.ndarray] = []
+    nfev, steps, ok, message = 0, 0, True, ""
     step_ts, step_ys = [np.array([t])], [x[:, None]]
     slack = 1e-12 * max(1.0, case.duration)
     while case.duration - t > slack:
@@ -205,7 +210,8 @@ def _with_impacts(case: Case, system, derivative, method: str, tol: float, optio
             g = watch(y)[watched]
             return float(np.min(g)) + EVENT_DEPTH if len(g) else 1.0
 
-        event.terminal, event.direction = True, -1
+        marked: Any = event  # solve_ivp reads these attributes of an event function
+        marked.terminal, marked.direction = True, -1
         sol = solve_ivp(
             derivative,
             (t, case.duration),

@@ -43,6 +43,7 @@ def fig_springs(path: Path) -> str:
     measured = []
     for col, case in enumerate(cases):
         traj = run_reference(case, method, dt)
+        assert case.exact is not None and traj.energy is not None  # the library's oscillators
         exact = EXACT[case.exact](case, traj.t)
         x = traj.x[:, 0, 0]
         measured.append((traj.energy, decay_rate(traj.t, x), np.max(np.abs(traj.x - exact.x))))
