@@ -164,13 +164,24 @@ def timed_case(adapter, case: Case, method: str) -> Case:
 
 
 def timed_runs(
-    adapter, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool, lean: bool = False
+    adapter,
+    case: Case,
+    method: str,
+    dt: float,
+    timing: Timing,
+    *,
+    warm_up: bool,
+    lean: bool = False,
+    known_s: float | None = None,
 ) -> tuple[Trajectory, TimedRuns]:
     """The timed runs of one row (:meth:`Timing.runs_after`), none of them watched, after a
     short warm-up when ``warm_up`` (:attr:`Timing.warmup_fraction` of the duration: JIT
     compilation, caches, first-call costs); the first run's trajectory and all of them.
     A run that did not finish is not repeated. ``lean``: the row is measured from another
-    run, and the timed runs keep few records (:func:`timed_case`)."""
+    run, and the timed runs keep few records (:func:`timed_case`). ``known_s``: the wall
+    time of that run (the same steps, watched, so no faster), s: how many runs to time is
+    decided from the faster of it and the first timed run, so that a first run the machine
+    held up (a 50 us row timed at 10 ms on a busy CI) is not the row's only sample."""
     if lean:
         case = timed_case(adapter, case, method)
     if warm_up:
@@ -181,7 +192,7 @@ def timed_runs(
     first = adapter.simulate(case, method, dt)
     runs = TimedRuns([first.wall_s], [end_of(first)], first.path)
     if first.status == "ok":
-        for _ in range(timing.runs_after(first.wall_s) - 1):
+        for _ in range(timing.runs_after(min(first.wall_s, known_s or np.inf)) - 1):
             again = adapter.simulate(case, method, dt)
             runs.walls.append(again.wall_s)
             runs.ends.append(end_of(again))
@@ -233,5 +244,14 @@ def simulate_timed(
         return once
     monitor = watches_every_step(adapter)
     traj = measured_run(adapter, case, method, dt) if monitor else None
-    first, runs = timed_runs(adapter, case, method, dt, timing, warm_up=warm_up and not monitor, lean=monitor)
+    first, runs = timed_runs(
+        adapter,
+        case,
+        method,
+        dt,
+        timing,
+        warm_up=warm_up and not monitor,
+        lean=monitor,
+        known_s=None if traj is None else traj.wall_s,
+    )
     return merged(first if traj is None else traj, runs)
