@@ -13,16 +13,18 @@ code before a change and once after, with the same command. Every input an attac
 command runs in a process of its own, niced, in its own session, with its address space
 capped and a wall timeout.
 
-The attacks (``hostile_attacks/``, a module per group) are grouped by the eight findings
+The attacks (``hostile_attacks/``, a module per group) are grouped by the findings
 of issue 20 (:data:`~hostile_attacks.common.GROUPS`): 1 planted checkpoints under
 ``--resume``, 2 hostile ``--out`` folders, 3 special files where a file is read, 4 case
 files that raise their own limits, 5 hostile adapters (``hostile_attacks/
 hostile_adapters.py``), 6 two runs on one ``--out``, 7 hostile names and texts in every
 output, 8 damaged tables, a full disk and gates that the API and the command line judge
-differently. An attack *holds* when truestep does what the issue asks (refuses with
-exit 2 and one line, ignores the planted data, contains the adapter, escapes the text
-...) and *breaks* otherwise; what it checks is in each attack's docstring and its
-verdict's note.
+differently; and 9 the failures of issue 37 (round three: plugins that end their process,
+files beside ``--out`` that are the user's, what ``run`` writes that ``gate`` must read),
+each run through ``python -m truestep``, the command as a user starts it. An attack
+*holds* when truestep does what the issue asks (refuses with exit 2 and one line, ignores
+the planted data, contains the adapter, escapes the text ...) and *breaks* otherwise;
+what it checks is in each attack's docstring and its verdict's note.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The attacks of ``tools/campaigns/hostile_campaign.py``, one module per finding of issue 20.
+"""The attacks of ``tools/campaigns/hostile_campaign.py``, one module per finding of issue 20
+(groups 1-8) and one for the fixes of issue 37 (group 9).
 
 Each module's ``ATTACKS`` lists its attacks: functions ``(campaign, folder) -> (held,
 note)`` whose docstring says what they do and what holding means."""
@@ -10,6 +11,7 @@ from hostile_attacks import (
     names,
     one_run,
     out_folders,
+    round_three,
     special_files,
     tables,
 )
@@ -23,5 +25,6 @@ BY_GROUP = {
     6: one_run.ATTACKS,
     7: names.ATTACKS,
     8: tables.ATTACKS,
+    9: round_three.ATTACKS,
 }
 """Every attack, by the number of the finding it attacks (:data:`common.GROUPS`)."""

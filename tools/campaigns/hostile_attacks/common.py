@@ -45,6 +45,7 @@ GROUPS = {
     6: "one run per --out",
     7: "every name and text escaped in every output",
     8: "damaged tables refused cleanly; full disk; load_case = CLI",
+    9: "round three: the failures of issue 37 stay fixed",
 }
 RUN_TIMEOUT = 240.0
 """Seconds a ``truestep run`` of an attack may take (its own runs take 5 to 20 s)."""
