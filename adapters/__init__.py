@@ -241,7 +241,7 @@ def plugin_answer(
     fn: Callable[..., Any],
     *args: Any,
     limit_s: float | None = None,
-    apart: bool = True,
+    apart: bool | str = True,
     **kwargs: Any,
 ) -> Any:
     """``fn(*args, **kwargs)``, a call truestep makes to an adapter (``missing``,
@@ -254,16 +254,20 @@ def plugin_answer(
     asked in a forked process (:func:`truestep.runtime.isolation.run_isolated`), once per
     engine, call and arguments: plugin code that ends or crashes its process is then a
     :class:`PluginFailed` saying how ("ended the process it was asked in (exit status 0)"),
-    and truestep's process goes on; its answer comes back as data. ``apart=False`` (a
-    ``prepare``, whose work the runs forked later inherit) and truestep's own adapters are
-    called here: the limit then interrupts Python code and numpy between its C loops
+    and truestep's process goes on; its answer comes back as data. ``apart="first"`` (a
+    ``prepare``, whose work the runs forked later inherit, so it must also run here): a
+    plugin's call is made in a forked process first, and here only where that process lived
+    through it. ``apart=False`` and truestep's own adapters: called here, where the limit
+    interrupts Python code and numpy between its C loops
     (:func:`truestep.runtime.time_limit.time_limit`), not compiled code that never returns
     to Python."""
     from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 
     limit_s = ANSWER_S if limit_s is None else limit_s
     if apart and not _own_code(engine):
-        return _answer_apart(engine, what, fn, args, kwargs, limit_s)
+        answer = _answer_apart(engine, what, fn, args, kwargs, limit_s, keep=apart != "first")
+        if apart != "first":
+            return answer
     try:
         with time_limit(limit_s, f"{engine}: {what}"):
             return fn(*args, **kwargs)
@@ -271,6 +275,12 @@ def plugin_answer(
         raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s") from None
     except (Exception, SystemExit) as err:
         raise PluginFailed(f"{engine}: {what} raised {type(err).__name__}: {str(err)[:300]}") from None
+
+
+def _lived(fn: Callable[..., Any], kwargs: dict, *args: Any) -> None:
+    """``fn(*args, **kwargs)``, its answer dropped (in a forked process: only whether the
+    call lived through matters)."""
+    fn(*args, **kwargs)
 
 
 _ANSWERS: dict[tuple, tuple[tuple, Any]] = {}
@@ -287,15 +297,24 @@ def _own_code(engine: str) -> bool:
 
 
 def _answer_apart(
-    engine: str, what: str, fn: Callable[..., Any], args: tuple, kwargs: dict, limit_s: float
+    engine: str,
+    what: str,
+    fn: Callable[..., Any],
+    args: tuple,
+    kwargs: dict,
+    limit_s: float,
+    *,
+    keep: bool = True,
 ) -> Any:
-    """:func:`plugin_answer` of a plugin's question, asked in a forked process (memoized)."""
+    """:func:`plugin_answer` of a plugin's call, made in a forked process (memoized);
+    ``keep=False``: only whether it lives through it (its answer is not sent back)."""
     from truestep.runtime.isolation import how_it_ended, run_isolated
 
     key = (engine, what, fn, *(a if isinstance(a, str) else id(a) for a in args), *sorted(kwargs.items()))
     if key in _ANSWERS:
         return _ANSWERS[key][1]
-    out = run_isolated(functools.partial(fn, **kwargs), args, limit_s)
+    call = functools.partial(fn, **kwargs) if keep else functools.partial(_lived, fn, kwargs)
+    out = run_isolated(call, args, limit_s)
     if out.status == "timeout":
         raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s")
     if out.status != "ok":

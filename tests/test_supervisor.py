@@ -59,6 +59,16 @@ PLUGINS = {
             def skip(self, case, method):
                 os.kill(os.getpid(), signal.SIGSEGV)
     """,
+    "exits_in_prepare": """
+        import os
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "exits-in-prepare"
+
+            def prepare(self, case, method):
+                os._exit(0)
+    """,
     "sys_exit_in_missing": """
         import sys
         from truestep.adapters.reference import ReferenceAdapter
@@ -211,6 +221,19 @@ def test_a_plugin_that_ends_its_process_when_asked_what_it_runs_makes_crashed_ro
         assert len(mine) and (mine["status"] == "crashed").all(), mine
         assert mine["message"].str.contains(how, regex=False).all(), mine["message"].tolist()
     assert (rows.loc[rows["engine"] == "reference", "status"] == "ok").all()
+
+
+def test_a_plugin_whose_prepare_ends_its_process_is_let_go_and_its_runs_go_on(plugins):
+    """A plugin's ``prepare`` runs in a forked process first, and in truestep's own (whose
+    forked runs inherit what it loaded) only where that process lived through it; one that
+    ends it is let go, as one that raises is, and the runs prepare in their own processes
+    (here they need nothing: the reference's rows). Before, exit 3 and no report."""
+    proc = _start(plugins, *RUN, "--engines", "exits_in_prepare:X,reference", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    rows = pd.read_csv(plugins / "rep" / "results.csv")
+    mine = rows[rows["engine"] == "exits-in-prepare"]
+    assert len(mine) and (mine["status"] == "ok").all(), mine[["method", "status", "message"]]
 
 
 def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):

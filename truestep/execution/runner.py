@@ -387,7 +387,7 @@ def prepare_here(engine: str, case: Case, method: str) -> None:
     prepare = getattr(get_adapter(engine), "prepare", None)
     if prepare is not None:
         with contextlib.suppress(PluginFailed):
-            plugin_answer(engine, "prepare()", prepare, case, method, limit_s=PREPARE_S, apart=False)
+            plugin_answer(engine, "prepare()", prepare, case, method, limit_s=PREPARE_S, apart="first")
 
 
 def sweep_rows(
@@ -448,7 +448,7 @@ def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
                 wanted,
                 workers=workers or len(os.sched_getaffinity(0)),
                 limit_s=PREPARE_ALL_S,
-                apart=False,
+                apart="first",
             )
         except PluginFailed as err:
             print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)
