@@ -164,7 +164,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar, cast
 
 import mujoco
 import numpy as np
@@ -220,7 +220,9 @@ METHOD_FACTS: dict[str, FactsSpec] = {
 for springs and their dampers (tendon damping is explicit in it; only joint damping, the
 drag here, is implicit). ``RK4`` is the classical RK4, with every force at every stage."""
 
-EVALUATIONS_PER_STEP = {m: resolve_facts(f).evaluations_per_step for m, f in METHOD_FACTS.items()}
+EVALUATIONS_PER_STEP = {
+    m: cast(MethodFacts, resolve_facts(f)).evaluations_per_step for m, f in METHOD_FACTS.items()
+}
 """Force evaluations MuJoCo makes per step (from :data:`METHOD_FACTS`): ``nfev`` is steps
 times this."""
 
@@ -313,6 +315,7 @@ def mjcf(
     for i in layout.pinned:
         world.append(f'<site name="s{i}" pos="{_vec(model.x0[i])}"/>')
         layout.pinned_sites.append(f"s{i}")
+    a: Any  # an anchor's index, then (below) the anchors
     for a, (point, i) in enumerate(zip(model.anchors.point, model.anchors.i, strict=True)):
         if not fixed[i]:
             world.append(f'<site name="anchor{a}" pos="{_vec(point)}"/>')
@@ -632,6 +635,7 @@ def _step(
     Returns ``t`` (T,), ``x`` and ``v`` (T, n, 3), the steps taken, the wall time (s)
     of the stepping and reading back, and whether it stopped on a warning.
     """
+    applied: Any  # scene.applied: AppliedForces or None (never None where ``held``)
     m, d, lay, applied = scene.model, scene.data, scene.layout, scene.applied
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     nstate = mujoco.mj_stateSize(m, spec)

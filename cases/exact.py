@@ -10,6 +10,7 @@ those times alone.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
@@ -405,12 +406,12 @@ class ReferencePath:
         system: System
         match case.scene:
             case OdeSpec() as ode:
-                system, n = ode_system(ode.system)(ode.y0, **ode.params), None
+                system, n = cast(type[System], ode_system(ode.system))(ode.y0, **ode.params), None
             case ParticleModel() as model:
                 system, n = ParticleSystem(model, passes_for(model)), model.n
         if cls_.adaptive:
             tol = float(case.exact_params.get("rtol", 1e-12))
-            solver = cls_(system, rtol=tol, atol=tol)
+            solver = cast(Any, cls_)(system, rtol=tol, atol=tol)  # an adaptive solver, with dense
             dense: list = []
             run = integrate(
                 solver, case.duration, case.duration, on_step=lambda: dense.append(solver.dense())
@@ -419,7 +420,7 @@ class ReferencePath:
         else:
             steps = max(1, round(case.duration / float(case.exact_params["dt"])))
             per_state = 8 * (system.dim + (n or 0))
-            keep = steps if steps * per_state <= STORE_BYTES else None
+            keep: int | np.ndarray | None = steps if steps * per_state <= STORE_BYTES else None
             if keep is None:  # only the steps the rows record, and the even grid
                 marks = [record_indices(steps, PATH_RECORDS)]
                 for dt in case.dts + case.quick_dts:
@@ -469,7 +470,7 @@ class ReferencePath:
             return self.dense[j](t)
         j = int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2))
         t0, t1 = self.t[j], self.t[j + 1]
-        if self.n is None or not np.isclose(t1 - t0, self.h, rtol=1e-9):
+        if self.n is None or not np.isclose(t1 - t0, cast(float, self.h), rtol=1e-9):  # fixed steps
             return np.full(self.states.shape[1], np.nan)
         a, b = self.states[j], self.states[j + 1]
         n3 = 3 * self.n

@@ -31,6 +31,7 @@ import threading
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
+from typing import Any, TypeAlias, cast
 
 import numpy as np
 from numba import typeof
@@ -60,6 +61,9 @@ CompiledRun = DrivenRun
 SLOW_S = 0.5
 """Compiling (or loading from numba's cache) that takes longer than this is shown."""
 
+_Vec3: TypeAlias = tuple[float, float, float]
+"""A point, direction or acceleration as the compiled kinds hold it."""
+
 
 def method_kind(method: str | type):
     """The compiled step of a fixed-step method, from its facts on its solver class: its
@@ -84,7 +88,7 @@ def method_kind(method: str | type):
     )
 
 
-def compiled_reason(model: ParticleModel | None, method: str) -> str | None:
+def compiled_reason(model: ParticleModel | None, method: str | type) -> str | None:
     """Why ``method`` on ``model`` cannot take the compiled path, or ``None`` if it can."""
     if model is not None and method_kind(method) is None:
         return f"{method} is not a fixed-step explicit method"
@@ -122,7 +126,7 @@ def forces_of(m: ParticleModel) -> tuple:
     """The force kinds ``m`` declares, in the order of :func:`forces.add_model_forces`."""
     kinds: list = []
     if np.any(m.gravity):
-        kinds.append(Gravity(tuple(float(g) for g in m.gravity)))
+        kinds.append(Gravity(cast(_Vec3, tuple(float(g) for g in m.gravity))))
     if m.drag:
         kinds.append(Drag(float(m.drag)))
     s, a = m.springs, m.anchors
@@ -181,8 +185,8 @@ def pack(m: ParticleModel) -> Scene:
     )
     planes = tuple(
         Plane(
-            tuple(float(c) for c in p.point),
-            tuple(float(c) for c in p.normal),
+            cast(_Vec3, tuple(float(c) for c in p.point)),
+            cast(_Vec3, tuple(float(c) for c in p.normal)),
             float(p.restitution),
             float(p.friction),
             float(p.thickness),
@@ -231,7 +235,7 @@ def stages(kind) -> int:
     return kind.stages if isinstance(kind, (Tableau, AnyMethod)) else 0
 
 
-_PREPARED: dict[tuple, object] = {}
+_PREPARED: dict[tuple, Any] = {}
 """The compiled loops of this process, by :func:`composition`."""
 
 
@@ -240,7 +244,7 @@ def composition(held, layout, scene: Scene) -> tuple:
     whether it has impulses, its number of planes, the layout and the steps the loop holds
     (``held``, :func:`loop_kind`; fused, its tableaux' patterns of non-zero entries). Runs
     that agree on it share one loop."""
-    planes = len(scene.planes) if scene.planes is not None else 0
+    planes = len(cast(tuple, scene.planes)) if scene.planes is not None else 0
     kinds = (tuple(type(k) for k in scene.forces), scene.impulses is not None, planes, type(layout))
     if isinstance(layout, Fused):
         return (*kinds, tuple((field, pattern(k) if field == "tableau" else ()) for field, k in held))
@@ -253,7 +257,7 @@ def describe(held, layout, scene: Scene) -> str:
     if scene.impulses is not None:
         parts.append("impulses")
     if scene.planes is not None:
-        parts.append(f"{len(scene.planes)} plane(s)")
+        parts.append(f"{len(cast(tuple, scene.planes))} plane(s)")
     return f"{', '.join(parts) or 'no forces'} / every method / {type(layout).__name__.lower()}"
 
 

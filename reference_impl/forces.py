@@ -9,6 +9,8 @@ and adds into ``f`` in place. Potential energies (J) sit beside the forces that 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from truestep.reference_impl.forces_kernels import (
@@ -192,7 +194,7 @@ def field_force(field: ForceField, x: np.ndarray, v: np.ndarray, mass: np.ndarra
     that drags particles toward it, ``f = k (w(t) - v)``, parameters ``direction`` (3,),
     ``speed`` (m/s), ``gust`` (m/s), ``freq`` (Hz), ``k`` (N s/m).
     """
-    p = field.params
+    p: dict[str, Any] = field.params  # each kind's numbers (float) and vectors (list)
     if field.kind == "vortex":
         center = np.asarray(p.get("center", [0.0, 0.0, 0.0]), float)
         axis = np.asarray(p.get("axis", [0.0, 1.0, 0.0]), float)

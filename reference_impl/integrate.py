@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
@@ -151,7 +152,7 @@ def _run_adaptive(
     sample_at: np.ndarray | None,
 ) -> Ending:
     """The adaptive solver's steps to ``t_end`` (see :func:`integrate`)."""
-    system = solver.system
+    system: Any = solver.system  # a system that may take ``located`` and ``rest_height``
     t = system.get_time()
     slack = 1e-12 * max(1.0, abs(t_end))  # a remainder below this is round-off in t
     locate = callable(getattr(solver, "dense", None))
@@ -174,7 +175,7 @@ def _run_adaptive(
             on_step()
         full = h
         if watch is not None:
-            h = _stop_at_event(system, solver, watch, g0, t, h)
+            h = _stop_at_event(system, solver, watch, cast(np.ndarray, g0), t, h)
         if grid is not None:  # the run between steps, by the solver's continuous extension
             next_sample = _sample_between(solver, rec, grid, next_sample, t, t + h, slack)
         system.between_steps(h)
@@ -195,7 +196,7 @@ def _sample_between(
 ) -> int:
     """Record the samples of ``grid`` from index ``k`` inside the step ``(t0, t1)`` (s), by the
     solver's continuous extension; returns the index of the first sample after the step."""
-    dense = solver.dense()
+    dense = cast(Any, solver).dense()  # an adaptive solver with a continuous extension
     while k < len(grid) and grid[k] < t1 - slack:
         if grid[k] > t0 + slack:
             rec.add(solver.system, float(grid[k]), dense(grid[k]))

@@ -13,6 +13,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterable
+from typing import cast
 
 import numba
 
@@ -28,18 +29,19 @@ def loops_needed(pairs: Iterable[tuple[ParticleModel | None, str | type | None]]
     """One (model, method) of ``pairs`` for each loop they need that this process has not
     prepared, in order of first need (pairs the compiled path cannot run are left out); a
     pair whose method is :data:`DERIVATIVE` needs the model's compiled derivative."""
+    needed: list[tuple]
     seen, needed = set(compiled._PREPARED), []
     for model, method in pairs:
         if method is DERIVATIVE:
             if compiled.derivative_reason(model) is not None:
                 continue
-            if (key := compiled.derivative_key(model)) not in seen:
+            if (key := compiled.derivative_key(cast(ParticleModel, model))) not in seen:  # None has a reason
                 seen.add(key)
                 needed.append((model, method))
             continue
         if compiled.compiled_reason(model, method) is not None:
             continue
-        scene = compiled.pack(model)
+        scene = compiled.pack(cast(ParticleModel, model))  # None has a reason
         kind = compiled.method_kind(method)
         layout = compiled.layout_for(kind, scene)
         key = compiled.composition(compiled.loop_kind(kind, layout, scene)[1], layout, scene)
@@ -117,7 +119,7 @@ def compile_all(
     wanted = [(model, method) for model in models for method in names] + list(pairs)
     needed = loops_needed(wanted)[share[0] :: share[1]]
     workers = max(1, min(workers, len(needed)))
-    if workers > 1 and not numba.config.DISABLE_JIT:
+    if workers > 1 and not numba.config.DISABLE_JIT:  # type: ignore[attr-defined]  # set at import
         context = multiprocessing.get_context("fork")
         children = [
             context.Process(

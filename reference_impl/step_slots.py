@@ -11,6 +11,8 @@ the driver compiled with them.
 
 from __future__ import annotations
 
+from typing import Any, cast
+
 from truestep.reference_impl import compose, integrate_kernels, particles_kernels, tiles
 from truestep.reference_impl.compose import (
     cache_name,
@@ -103,7 +105,7 @@ def cut_glue(scene: Scene):
             parts.append(f"{name_of(cut)}(scene.forces[{i}], lo, hi)")
     impulses = "scene.impulses"
     if scene.impulses is not None:
-        names["impulses_cut"] = type(scene.impulses).cut
+        names["impulses_cut"] = type(cast(Any, scene.impulses)).cut  # set by @carries
         impulses = "impulses_cut(scene.impulses, lo, hi)"
     kinds = "".join(f"{part}, " for part in parts)
     return glue(
@@ -123,7 +125,9 @@ def plane_slots(layout, scene: Scene) -> dict:
             "near_planes": nothing(T.near_planes, "False"),
             "collisions": nothing(T.collisions, "False"),
         }
-    near = " | ".join(f"near_plane(scene.planes[{k}], x, radius)" for k in range(len(scene.planes)))
+    near = " | ".join(
+        f"near_plane(scene.planes[{k}], x, radius)" for k in range(len(cast(tuple, scene.planes)))
+    )
     return {
         "add_contact": particles_kernels.add_contact_forces,
         "point_contact": glue(
@@ -156,7 +160,7 @@ def fused_slots(slots: dict, steps: tuple) -> dict:
     given; the special particles' steps (a tableau's in a loop, a splitting's) alike."""
     smooth = {**slots, "point_accel": tiles.smooth_accel}
     special = {**slots, "point_accel": tiles.special_accel}
-    names = {"TABLEAU": TABLEAU, "KICK_DRIFT": KICK_DRIFT, "FRESH": tiles.FRESH}
+    names: dict[str, object] = {"TABLEAU": TABLEAU, "KICK_DRIFT": KICK_DRIFT, "FRESH": tiles.FRESH}
     lines, specials = [], []
     for i, (field, kind) in enumerate(steps):
         shape = f"method.shape == {field.upper()}"

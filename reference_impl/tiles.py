@@ -85,7 +85,7 @@ class Tile(NamedTuple):
     flags: np.ndarray
     special: np.ndarray
     visited: np.ndarray
-    count: np.ndarray
+    count: np.ndarray  # type: ignore[assignment]  # a field named like tuple.count, as numba reads it
 
 
 def scratch(size: int, stages: int, planes: int) -> Tile:
@@ -94,7 +94,7 @@ def scratch(size: int, stages: int, planes: int) -> Tile:
     nothing (it is compiled without numba's reference counting, see :mod:`compose`)."""
     size = max(size, 1)
     f = [np.zeros(3 * size) for _ in range(6)]
-    return Tile(
+    return Tile(  # type: ignore[call-arg]  # mypy drops the field count (see Tile)
         *f,
         np.zeros(stages * 3 * size),
         np.zeros(stages * 3 * size),

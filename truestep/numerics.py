@@ -192,11 +192,11 @@ def fingerprint() -> dict[str, Any]:
     from threadpoolctl import threadpool_info
 
     try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__  # type: ignore[import-not-found]  # private, no stubs
 
         simd = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
     except ImportError:  # numpy 1.x spells the module without the underscore
-        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__  # type: ignore[no-redef]  # numpy 1.x
 
         simd = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
     blas = sorted(
@@ -222,7 +222,7 @@ def _baseline() -> list[str]:
     try:
         from numpy._core._multiarray_umath import __cpu_baseline__
     except ImportError:
-        from numpy.core._multiarray_umath import __cpu_baseline__
+        from numpy.core._multiarray_umath import __cpu_baseline__  # type: ignore[no-redef]  # numpy 1.x
     return list(__cpu_baseline__)
 
 

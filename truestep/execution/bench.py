@@ -63,6 +63,7 @@ import time
 import tomllib
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -308,7 +309,7 @@ def _static_reason(adapter, case: Case, engine: str, method: str) -> tuple[str, 
     where the adapter's ``missing`` or ``duplicate`` raised)."""
     try:
         missing = plugin_answer(engine, "missing()", adapter.missing, case, method)
-        duplicate = getattr(adapter, "duplicate", None)
+        duplicate: Any = getattr(adapter, "duplicate", None)  # called only where not None
         asked = duplicate is not None and not missing
         same = plugin_answer(engine, "duplicate()", duplicate, case, method) if asked else None
     except PluginFailed as err:
@@ -520,7 +521,7 @@ def scaling_table(
             )
             warmups_s += pair.spent
             for n in ns:
-                row = {"engine": engine, "method": method, "n": n}
+                row: dict[str, Any] = {"engine": engine, "method": method, "n": n}
                 if warm.status != "ok" and not pair.stop:
                     what = "timed out" if warm.status == "timeout" else "crashed"
                     row.update(
@@ -639,7 +640,10 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
     ax.set_ylim(lo, max(hi, per_s * 2.5))
     ax.set_xlabel("particles n")
     ax.set_ylabel("particle-steps per second\n(n x steps / median timed wall time)")
-    right = ax.secondary_yaxis("right", functions=(lambda y: y / per_s, lambda f: f * per_s))
+    right = ax.secondary_yaxis(
+        "right",
+        functions=(lambda y: y / per_s, lambda f: f * per_s),  # type: ignore[operator]  # stubs: y any ArrayLike
+    )
     right.set_ylabel("fraction of the copy bandwidth")
     ax.grid(True, which="major", alpha=0.3)
     ax.set_title(

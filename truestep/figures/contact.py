@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, cast
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -47,9 +48,11 @@ def floor_bounces(case: Case, traj: Trajectory) -> list[PlaneBounce]:
         if g_n < -1e-12:
             continue
         g_n = max(g_n, 0.0)
-        h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, float(m.radius[0]))
+        h, vn = heights(
+            traj.x[:, 0], cast(np.ndarray, traj.v)[:, 0], plane.point, plane.normal, float(m.radius[0])
+        )
         for b in bounces(traj.t, h, vn, g_n):
-            out.append(PlaneBounce(k, b, traj.v[int(np.searchsorted(traj.t, b.t)), 0]))
+            out.append(PlaneBounce(k, b, cast(np.ndarray, traj.v)[int(np.searchsorted(traj.t, b.t)), 0]))
     return sorted(out, key=lambda pb: pb.bounce.t)
 
 
@@ -77,7 +80,7 @@ def _collision_diagram(ax: plt.Axes, vb: np.ndarray, v_out: float, n: np.ndarray
     t_dir /= np.linalg.norm(t_dir)
     b_t, b_n = vb @ t_dir, vb @ n  # before: along the wall (> 0) and along N (< 0)
     a_t, a_n = b_t, v_out  # after: the response keeps V_T
-    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.01}
+    arrow: dict[str, Any] = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.01}
     c_v, c_n, c_t, c_after = "black", SCENE_COLOURS[2], SCENE_COLOURS[3], SCENE_COLOURS[1]
     ax.quiver(-b_t, -b_n, b_t, b_n, color=c_v, **arrow)
     ax.quiver(-b_t, -b_n, b_t, 0, color=c_t, **arrow)
@@ -225,7 +228,7 @@ def fig_contact(path: Path) -> str:
     angle = float(np.arccos(-(gravity @ normal) / g))
     dt = case.dts[0]
     traj = run_reference(case, "lecture")
-    t, x, v = traj.t, traj.x[:, 0], traj.v[:, 0]
+    t, x, v = traj.t, traj.x[:, 0], cast(np.ndarray, traj.v)[:, 0]
     d, vn = heights(x, v, plane.point, normal, float(m.radius[0]))
     s_down = (x - x[0]) @ down
     drop = float(d[0])
@@ -273,7 +276,7 @@ def fig_contact(path: Path) -> str:
     ax.plot(
         *np.stack([q - 0.3 * down, q + 0.3 * down])[:, :2].T, color="black", linewidth=0.8, linestyle="--"
     )
-    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.007, "zorder": 5}
+    arrow: dict[str, Any] = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.007, "zorder": 5}
     ax.quiver(*q[:2], *(sc * f[:2]), color="black", **arrow)
     ax.quiver(*q[:2], *(sc * fn[:2]), color=SCENE_COLOURS[2], **arrow)
     ax.quiver(*q[:2], *(sc * (f - fn)[:2]), color=SCENE_COLOURS[3], **arrow)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import matplotlib.colors as mcolors
 import matplotlib.pyplot as plt
@@ -22,6 +23,9 @@ from truestep.figures.style import SCENE_COLOURS, save_figure
 from truestep.reference_impl import forces
 from truestep.reference_impl.meshes import signed_volume
 
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d import Axes3D
+
 CUBE_CASES = {"edges": "pushed-cube-edges", "volume": "pushed-cube-braced"}
 """The cube figure's case for each bracing of :func:`truestep.reference_impl.meshes.cube`."""
 
@@ -33,7 +37,7 @@ def fig_triangle(path: Path) -> str:
     model, springs = case.particles, case.particles.springs
     dt = case.dts[0]
     traj = run_reference(case, "lecture")
-    x, v = traj.x, traj.v
+    x, v = traj.x, cast(np.ndarray, traj.v)
     n_show = len(traj.t)
     ((pushed, force, _, _),) = model.impulses
     fig, axes = plt.subplots(2, n_show // 2, figsize=(13, 7.0), sharex=True, sharey=True)
@@ -169,7 +173,7 @@ def _up(x: np.ndarray) -> np.ndarray:
     return x[..., [0, 2, 1]]
 
 
-def _draw_cube(ax: plt.Axes, case: Case, x: np.ndarray, colour: str) -> None:
+def _draw_cube(ax: Axes3D, case: Case, x: np.ndarray, colour: str) -> None:
     """The cube of ``case`` at positions ``x`` (8, 3): faces, springs by kind, pinned
     vertices as squares, the push as arrows."""
     m, p = case.particles, _up(x)

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import replace
 from itertools import pairwise
 from pathlib import Path
+from typing import Any, cast
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -73,7 +74,7 @@ def _exact_circle(case, points: int = 400) -> np.ndarray:
 def fig_vector_field(path: Path) -> str:
     """The circle field as arrows, and integral curves followed by the adaptive solver."""
     case = figure_case("integral-curves")
-    field = ode_system(case.ode_spec.system)(case.ode_spec.y0)
+    field = cast(type[System], ode_system(case.ode_spec.system))(case.ode_spec.y0)
     g = np.linspace(-2.0, 2.0, 15)
     gx, gy = np.meshgrid(g, g)
     pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
@@ -218,13 +219,13 @@ def fig_euler_instability(path: Path) -> str:
     steps = sorted(case.dts)
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.0))
     t = np.linspace(0, case.duration, 800)
-    exact = EXACT[case.exact](case, t).v[:, 0, 0]
+    exact = cast(np.ndarray, EXACT[cast(str, case.exact)](case, t).v)[:, 0, 0]
     for ax in axes:
         ax.plot(t, exact, label="exact v0 e^(−kt)", **exact_style())
     said = []
     for i, dt in enumerate(steps):
         traj = run_reference(case, "euler", dt)
-        v = traj.v[:, 0, 0]
+        v = cast(np.ndarray, traj.v)[:, 0, 0]
         kh = k_rate * step_taken(case, dt)
         factor = float(v[1] / v[0])
         said.append((kh, factor, _decay_verdict(factor)))
@@ -272,14 +273,14 @@ def _midpoint_diagram(ax: plt.Axes, case) -> None:
     """One midpoint step of :data:`DIAGRAM_STEP` from the case's start, taken apart."""
     hs = DIAGRAM_STEP
     x0 = case.ode_spec.y0
-    field = ode_system(case.ode_spec.system)(x0)
+    field = cast(type[System], ode_system(case.ode_spec.system))(x0)
     dx = hs * field.derivative(x0, 0.0)
     xm = x0 + dx / 2
     f_mid = field.derivative(xm, hs / 2)
     x_mid = ode_states(run_reference(replace(case, duration=hs), "midpoint", hs))[-1]
     arc = np.linspace(-0.2, 1.25, 100)
     ax.plot(np.cos(arc), np.sin(arc), label="exact integral curve", **exact_style())
-    arrow = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.012}
+    arrow: dict[str, Any] = {"angles": "xy", "scale_units": "xy", "scale": 1.0, "width": 0.012}
     euler_c, mid_c = series_colour("reference", "euler"), series_colour("reference", "midpoint")
     ax.quiver(*x0, *dx, color=euler_c, **arrow)
     ax.quiver(*xm, *(0.5 * hs * f_mid), color=SCENE_COLOURS[0], **arrow)

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING, cast
 
 import matplotlib.colors as mcolors
 import matplotlib.pyplot as plt
@@ -27,6 +28,11 @@ from truestep.figures.style import NIGHT, SCENE_COLOURS, exact_style, save_figur
 from truestep.reference_impl.emitters import Emitter, lifetime_values, spawn_count_moments, spawn_mean
 from truestep.reference_impl.model import EmitterSpec
 from truestep.reference_impl.strands import Strands, collect_strands
+
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d import Axes3D
+
+    from truestep.reference_impl.particles import ParticleSystem
 
 FOUNTAIN_TARGET = 5000
 """The fountain is drawn at the first frame with this many live particles (the slide's 5000)."""
@@ -102,7 +108,8 @@ def _render_attributes(
     emitter = Emitter(spec, 0, -gravity)
     emitter.age[:], emitter.lifespan[:] = age, np.maximum(lifespan, 1)
     emitter.size[:] = spec.particle_size
-    state = SimpleNamespace(positions=x, velocities=v, alive=alive)
+    # the fields of a ParticleSystem that the colours and shapes read
+    state = cast("ParticleSystem", SimpleNamespace(positions=x, velocities=v, alive=alive))
     return emitter.colors(state), emitter.shapes(state)
 
 
@@ -115,7 +122,7 @@ def simulate_fountain(case: Case | None = None, *, target: int = FOUNTAIN_TARGET
     case = figure_case("cube-emitter-5000") if case is None else case
     (spec,) = case.particles.emitters
     traj = run_reference(case, "lecture", spec.frame_dt)
-    alive = traj.alive
+    alive = cast(np.ndarray, traj.alive)  # an emitter scene's run
     born, lifespan = _lives(case, alive)
     population = alive.sum(axis=1)
     if population.max() >= spec.capacity:
@@ -129,7 +136,7 @@ def simulate_fountain(case: Case | None = None, *, target: int = FOUNTAIN_TARGET
         raise RuntimeError(f"{case.name}: particles the figures draw outlive the run; lengthen it")
     spawned = np.bincount(born[born >= 0], minlength=len(traj.t))
     colors, shapes = _render_attributes(
-        spec, case.particles.gravity, s - born, lifespan, traj.x[s], traj.v[s], alive[s]
+        spec, case.particles.gravity, s - born, lifespan, traj.x[s], cast(np.ndarray, traj.v)[s], alive[s]
     )
     return Fountain(
         case,
@@ -137,7 +144,7 @@ def simulate_fountain(case: Case | None = None, *, target: int = FOUNTAIN_TARGET
         EmitterCounts(population, spawned, 0),
         traj.t,
         traj.x,
-        traj.v,
+        cast(np.ndarray, traj.v),
         alive,
         born,
         lifespan,
@@ -161,7 +168,7 @@ def _up(x: np.ndarray) -> np.ndarray:
     return x[..., [0, 2, 1]]
 
 
-def _add_night_3d(fig: plt.Figure, spec: object) -> plt.Axes:
+def _add_night_3d(fig: plt.Figure, spec: object) -> Axes3D:
     """A dark 3-D box with y up (scene coordinates drawn through :func:`_up`)."""
     with plt.rc_context({"grid.color": (1.0, 1.0, 1.0, 0.15)}):
         ax = fig.add_subplot(spec, projection="3d")
@@ -296,12 +303,18 @@ def _strand_segments(st: Strands) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _draw_strands(ax: plt.Axes, seg: np.ndarray, thick: np.ndarray, colours: np.ndarray) -> None:
     """Strand segments in x-y with their thickness in metres turned into points on this axes."""
-    fig = ax.figure
+    fig = cast(plt.Figure, ax.figure)
     ax.apply_aspect()
     width_in = ax.get_position().width * fig.get_figwidth()
     pt_per_m = width_in * 72 / np.ptp(ax.get_xlim())
     ax.add_collection(
-        LineCollection(seg[:, :, :2], linewidths=thick * pt_per_m, colors=colours, alpha=0.6, capstyle="butt")
+        LineCollection(
+            seg[:, :, :2],  # type: ignore[arg-type]  # stubs: segments as a sequence, not an array
+            linewidths=thick * pt_per_m,
+            colors=colours,
+            alpha=0.6,
+            capstyle="butt",
+        )
     )
 
 

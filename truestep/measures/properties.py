@@ -10,6 +10,7 @@ measures never happened (a bounce that was never seen).
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import cast
 
 import numpy as np
 
@@ -66,7 +67,7 @@ def momentum_drift(case: Case, traj: Trajectory) -> float:
     if m.drag or len(m.anchors) or m.planes or m.fields or m.emitters or np.any(m.fixed):
         return float("nan")
     live = _alive(case, traj)
-    p = np.einsum("tn,n,tni->ti", live, m.mass, traj.v)
+    p = np.einsum("tn,n,tni->ti", live, m.mass, cast(np.ndarray, traj.v))
     t0 = max((end for _, _, _, end in m.impulses), default=0.0)
     k0 = int(np.searchsorted(traj.t, t0 - 1e-9 * max(1.0, t0)))
     if k0 >= len(traj.t):
@@ -76,7 +77,7 @@ def momentum_drift(case: Case, traj: Trajectory) -> float:
     mass = np.where(live[k0], m.mass, 0.0)
     scale = max(
         float(np.max(np.linalg.norm(exact, axis=1))),
-        float(mass @ np.linalg.norm(traj.v[k0], axis=1)),
+        float(mass @ np.linalg.norm(cast(np.ndarray, traj.v)[k0], axis=1)),
         float(mass.sum()) * float(case.exact_params.get("v_scale", 0.0)),
     )
     return float(np.max(np.linalg.norm(p[k0:] - exact, axis=1)) / (scale or 1.0))
@@ -115,7 +116,7 @@ def max_penetration(case: Case, traj: Trajectory) -> float:
 def final_speed(case: Case, traj: Trajectory) -> float:
     """Largest speed of any live particle at the last record, m/s (a settled scene: ~0)."""
     live = _alive(case, traj)[-1]
-    speed = np.linalg.norm(traj.v[-1], axis=1)
+    speed = np.linalg.norm(cast(np.ndarray, traj.v)[-1], axis=1)
     return float(np.max(speed[live], initial=0.0))
 
 
@@ -159,7 +160,9 @@ def _arcs(case: Case, traj: Trajectory) -> tuple[np.ndarray, np.ndarray, float]:
     g = float(-(m.gravity @ plane.normal))
     if traj.steps and len(traj.t) < traj.steps + 1:
         return np.full(0, np.nan), np.full(0, np.nan), float("nan")
-    h, vn = heights(traj.x[:, 0], traj.v[:, 0], plane.point, plane.normal, float(m.radius[0]))
+    h, vn = heights(
+        traj.x[:, 0], cast(np.ndarray, traj.v)[:, 0], plane.point, plane.normal, float(m.radius[0])
+    )
     flights = [b for b in bounces(traj.t, h, vn, g) if b.v_out > 0]
     return (np.array([b.apex for b in flights]), np.array([b.t_low for b in flights]), g)
 
@@ -291,7 +294,7 @@ def strand_error(case: Case, traj: Trajectory) -> float:
     m = case.particles
     if traj.alive is None or not m.emitters:
         return float("nan")
-    strands = collect_strands(traj.t, traj.x, traj.v, traj.alive)
+    strands = collect_strands(traj.t, traj.x, cast(np.ndarray, traj.v), traj.alive)
     if not len(strands):
         return float("nan")
     dev = ballistic_deviation(strands, m.gravity, m.drag, m.emitters[0].particle_mass)
@@ -303,7 +306,7 @@ def strand_count(case: Case, traj: Trajectory) -> float:
     """Number of strands (particle lives) recorded: every spawned particle gives one."""
     if traj.alive is None:
         return float("nan")
-    return float(len(collect_strands(traj.t, traj.x, traj.v, traj.alive)))
+    return float(len(collect_strands(traj.t, traj.x, cast(np.ndarray, traj.v), traj.alive)))
 
 
 @register
