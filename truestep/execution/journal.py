@@ -89,7 +89,10 @@ def code_digest(engines: list[str]) -> dict[str, str]:
     module, the version of the distribution that holds it, and, for truestep's own
     engines, every source file of truestep (the reference's kernels, the harness that
     measures). A fix to an adapter changes it, so ``--resume`` never reuses sweeps the
-    buggy code made."""
+    buggy code made. truestep's own version is in the fingerprint already
+    (:func:`fingerprint`): the installed distributions are looked up (some 0.2 s) only for
+    an engine whose adapter lives in another package."""
+    import functools
     import inspect
     from importlib import metadata
 
@@ -100,7 +103,7 @@ def code_digest(engines: list[str]) -> dict[str, str]:
     for path in sorted(package.rglob("*.py")):
         own.update(path.relative_to(package).as_posix().encode())
         own.update(path.read_bytes())
-    owners = metadata.packages_distributions()
+    owners = functools.cache(metadata.packages_distributions)
     out = {}
     for engine in engines:
         h = hashlib.sha256()
@@ -113,8 +116,10 @@ def code_digest(engines: list[str]) -> dict[str, str]:
             h.update(Path(source).read_bytes())
             if Path(source).resolve().is_relative_to(package):
                 h.update(own.digest())
+                out[engine] = h.hexdigest()[:16]
+                continue
         top = module.__name__.split(".")[0] if module is not None else ""
-        for dist in owners.get(top, []):
+        for dist in owners().get(top, []) if top else []:
             h.update(f"{dist} {metadata.version(dist)}".encode())
         out[engine] = h.hexdigest()[:16]
     return out
