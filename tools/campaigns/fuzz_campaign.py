@@ -146,7 +146,11 @@ class Target:
 
     @property
     def cli(self) -> list[str]:
-        """The command that runs this target's ``truestep``."""
+        """The command that runs this target's ``truestep`` as a user starts it: ``python -m
+        truestep`` (the console script's entry point, with its supervisor) where the checkout
+        has one, else its ``truestep.cli.main`` (a checkout older than the supervisor)."""
+        if (self.repo / "truestep" / "__main__.py").is_file():
+            return [str(self.python), "-m", "truestep"]
         return [str(self.python), "-c", "import sys; from truestep.cli import main; sys.exit(main())"]
 
 

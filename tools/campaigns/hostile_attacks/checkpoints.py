@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import signal
 from pathlib import Path
 
 from hostile_attacks.common import (
@@ -22,7 +21,7 @@ def interrupted(c: Campaign, where: Path) -> Path:
     shutil.copytree(c.base_report(), where / "rep")
     result = c.quick_run(where, "rep", env=c.env(TRUESTEP_KILL_AT="sweep:20"))
     journal = where / ".rep.partial"
-    if result.code != -signal.SIGKILL or not journal.is_dir():
+    if not result.killed or not journal.is_dir():
         raise RuntimeError(f"the interrupted run did not leave a journal: {result.why()}")
     return journal
 
@@ -37,7 +36,7 @@ def resumed(c: Campaign, where: Path, mark: Path) -> tuple[bool, str]:
         return False, f"hung: {result.why()}"
     if "Traceback" in result.err:
         return False, f"traceback: {result.why()}"
-    if result.clean_refusal:
+    if result.clean_refusal or result.run_refusal:  # the latter after saying it took over the dead run's lock
         return True, f"refused: {result.err.strip()[:200]}"
     if result.code != 0:
         return False, result.why()

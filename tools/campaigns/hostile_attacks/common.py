@@ -83,6 +83,12 @@ class Result:
     peak_mib: float = float("nan")
 
     @property
+    def killed(self) -> bool:
+        """Ended by SIGKILL: the process itself (a target run as ``truestep.cli.main``), or
+        the worker of the command's supervisor, which then exits 128 + 9 as a shell would."""
+        return self.code in (-signal.SIGKILL, 128 + signal.SIGKILL)
+
+    @property
     def clean_refusal(self) -> bool:
         """Exit 2 with one short line on standard error and no traceback."""
         lines = [x for x in self.err.strip().splitlines() if x.strip()]
@@ -290,7 +296,8 @@ def payload(mark: Path) -> bytes:
 
 
 def tables_without_timing(folder: Path) -> dict[str, list[list[str]]]:
-    """The rows of results, stability and restitution without the timing columns."""
+    """The rows of results, stability and restitution without the columns that depend on the
+    machine and its load (the timings, their spread and count, the host)."""
     out = {}
     for name in ("results", "stability", "restitution"):
         path = folder / f"{name}.csv"
@@ -298,7 +305,7 @@ def tables_without_timing(folder: Path) -> dict[str, list[list[str]]]:
             out[name] = []
             continue
         rows = list(csv.reader(io.StringIO(path.read_text())))
-        drop = {i for i, c in enumerate(rows[0]) if c in ("wall_s", "repeats", "host")}
+        drop = {i for i, c in enumerate(rows[0]) if c in ("wall_s", "wall_s_spread", "repeats", "host")}
         out[name] = [[c for i, c in enumerate(r) if i not in drop] for r in rows]
     return out
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import time
 from pathlib import Path
 
@@ -72,7 +71,7 @@ def attack_resume_after_a_kill(c: Campaign, where: Path) -> tuple[bool, str]:
     """A run killed (SIGKILL) mid-sweep, so whatever lock it held is stale: ``--resume``
     finishes it."""
     result = c.quick_run(where, "rep", env=c.env(TRUESTEP_KILL_AT="sweep:20"))
-    if result.code != -signal.SIGKILL:
+    if not result.killed:
         return False, f"the run was not killed: {result.why()}"
     again = c.quick_run(where, "rep", "--resume")
     same = tables_without_timing(where / "rep") == tables_without_timing(c.base_report())
@@ -82,7 +81,7 @@ def attack_resume_after_a_kill(c: Campaign, where: Path) -> tuple[bool, str]:
 def attack_new_run_after_a_kill(c: Campaign, where: Path) -> tuple[bool, str]:
     """A run killed (SIGKILL) mid-sweep, then a new run (no --resume) on the same folder."""
     result = c.quick_run(where, "rep", env=c.env(TRUESTEP_KILL_AT="sweep:10"))
-    if result.code != -signal.SIGKILL:
+    if not result.killed:
         return False, f"the run was not killed: {result.why()}"
     again = c.quick_run(where, "rep")
     return again.code == 0, again.why()

@@ -1,14 +1,12 @@
 """Round three (issue 37): each attack repeats one failure the project has since fixed,
 with the input its own unit test uses (named in each docstring), against the target's
 ``truestep`` command as a user starts it (``python -m truestep``: the console script's
-``truestep.command.main``, its supervisor and its standard-output handling included, where
-the other groups call ``truestep.cli.main``)."""
+``truestep.command.main``, its supervisor and its standard-output handling included), as
+every group's attacks do (:attr:`Target.cli`)."""
 
 from __future__ import annotations
 
-import copy
 import csv
-import functools
 import os
 import textwrap
 import time
@@ -18,35 +16,12 @@ from hostile_attacks.common import (
     RUN_TIMEOUT,
     Campaign,
     Result,
-    Target,
     gate,
     refused,
     shipped_tables,
     snapshot,
     user_folder,
 )
-
-
-class Command(Target):
-    """A target whose ``truestep`` is the command a user runs."""
-
-    @property
-    def cli(self) -> list[str]:
-        return [str(self.python), "-m", "truestep"]
-
-
-def _as_command(fn):
-    """Run the attack on a copy of the campaign whose target is :class:`Command`."""
-
-    @functools.wraps(fn)
-    def attack(c: Campaign, where: Path) -> tuple[bool, str]:
-        real = copy.copy(c)
-        t = c.target
-        real.target = Command(t.repo, t.python, t.layout, t.commit)
-        return fn(real, where)
-
-    return attack
-
 
 DEAD_PID = 2**22 + 12345
 """A pid above any this machine hands out: the run that made a folder of it is gone."""
@@ -261,15 +236,15 @@ def attack_api_run_without_analyses_then_gate(c: Campaign, where: Path) -> tuple
 
 
 ATTACKS = [
-    _as_command(attack_hard_link_in_the_locks_place),
-    _as_command(attack_empty_out),
-    _as_command(attack_users_folder_under_a_staging_name),
-    _as_command(attack_users_folder_under_the_journals_name),
-    _as_command(attack_adapter_import_ends_its_process),
-    _as_command(attack_adapter_missing_ends_its_process),
-    _as_command(attack_second_package_registers_reference),
-    _as_command(attack_gates_file_gate_matching_no_case),
-    _as_command(attack_results_table_cut_inside_its_last_row),
-    _as_command(attack_list_into_a_reader_that_stops),
-    _as_command(attack_api_run_without_analyses_then_gate),
+    attack_hard_link_in_the_locks_place,
+    attack_empty_out,
+    attack_users_folder_under_a_staging_name,
+    attack_users_folder_under_the_journals_name,
+    attack_adapter_import_ends_its_process,
+    attack_adapter_missing_ends_its_process,
+    attack_second_package_registers_reference,
+    attack_gates_file_gate_matching_no_case,
+    attack_results_table_cut_inside_its_last_row,
+    attack_list_into_a_reader_that_stops,
+    attack_api_run_without_analyses_then_gate,
 ]
