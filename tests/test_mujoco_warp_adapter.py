@@ -100,6 +100,29 @@ def test_the_captured_graph_steps_as_plain_calls_do_bit_for_bit(case_named):
     assert not np.array_equal(graphed.data.qpos.numpy(), build(case, "RK4", 0.01).data.qpos.numpy())
 
 
+@pytest.mark.parametrize("name", ["spring-chain", "hanging-cloth", "bouncing-ball"])
+def test_a_run_after_a_run_at_another_step_is_the_run_of_a_scene_built_afresh(warp_mj, case_named, name):
+    """A sweep's runs reuse the scene built for its first step where the model differs by
+    its step alone (no contact): each run at the second step, after one at the first (the
+    same scene, reset), ends in the bits of a run whose scene was built afresh; a scene
+    with plane contacts (its step in their solref) is built afresh."""
+    from truestep.adapters import mujoco_warp_adapter as module
+
+    case = _short(case_named(name), 0.3)
+    for method in INTEGRATORS:
+        h1, h2 = case.sweep(adaptive=False, quick=False)[:2]
+        module._LAST.clear()
+        warp_mj.simulate(case, method, h1)
+        first = module._LAST["scene"].data
+        after = warp_mj.simulate(case, method, h2)
+        assert (module._LAST["scene"].data is first) == (name != "bouncing-ball")
+        module._LAST.clear()
+        afresh = warp_mj.simulate(case, method, h2)
+        assert after.status == afresh.status == "ok"
+        for a, b in ((after.t, afresh.t), (after.x, afresh.x), (after.v, afresh.v)):
+            assert np.array_equal(a, b), (name, method)
+
+
 def test_a_snapshot_is_the_state_of_its_step_and_stays_so(warp_mj, case_named):
     """On the CPU the state is read through views of the device's memory made once: a
     snapshot equals Warp's own ``numpy()`` copy at its step, and later steps leave it as it
