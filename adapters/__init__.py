@@ -22,7 +22,7 @@ import threading
 from collections.abc import Callable
 from importlib import metadata
 from types import ModuleType
-from typing import Any
+from typing import Any, Literal
 
 from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
 
@@ -241,7 +241,7 @@ def plugin_answer(
     fn: Callable[..., Any],
     *args: Any,
     limit_s: float | None = None,
-    apart: bool | str = True,
+    apart: bool | Literal["only"] = True,
     **kwargs: Any,
 ) -> Any:
     """``fn(*args, **kwargs)``, a call truestep makes to an adapter (``missing``,
@@ -254,10 +254,14 @@ def plugin_answer(
     asked in a forked process (:func:`truestep.runtime.isolation.run_isolated`), once per
     engine, call and arguments: plugin code that ends or crashes its process is then a
     :class:`PluginFailed` saying how ("ended the process it was asked in (exit status 0)"),
-    and truestep's process goes on; its answer comes back as data. ``apart="first"`` (a
-    ``prepare``, whose work the runs forked later inherit, so it must also run here): a
-    plugin's call is made in a forked process first, and here only where that process lived
-    through it. ``apart=False`` and truestep's own adapters: called here, where the limit
+    and truestep's process goes on; its answer comes back as data. ``apart="only"`` (a
+    ``prepare``, whose answer is nothing): a plugin's call is made in a forked process
+    only, never in truestep's own, so that plugin code cannot end truestep's process on a
+    later call either; what it leaves on disk (a compiled cache) is there for the runs, and
+    what it leaves in memory dies with that process (the runs prepare it in their own
+    processes, outside their timed runs). truestep's own adapters' ``prepare`` runs here,
+    where the runs forked later inherit its work. ``apart=False`` and truestep's own
+    adapters: called here, where the limit
     interrupts Python code and numpy between its C loops
     (:func:`truestep.runtime.time_limit.time_limit`), not compiled code that never returns
     to Python."""
@@ -265,9 +269,7 @@ def plugin_answer(
 
     limit_s = ANSWER_S if limit_s is None else limit_s
     if apart and not _own_code(engine):
-        answer = _answer_apart(engine, what, fn, args, kwargs, limit_s, keep=apart != "first")
-        if apart != "first":
-            return answer
+        return _answer_apart(engine, what, fn, args, kwargs, limit_s, keep=apart != "only")
     try:
         with time_limit(limit_s, f"{engine}: {what}"):
             return fn(*args, **kwargs)

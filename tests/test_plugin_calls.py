@@ -57,6 +57,20 @@ class PrepareHangs(ReferenceAdapter):
         time.sleep(3600)  # a kernel cache on a network disk that never answers
 
 
+class PrepareLives(ReferenceAdapter):
+    name = "prepare-lives-test"
+    methods = ("rk4",)
+    adaptive_methods = ()
+    asked: list[tuple[str, str]] = []  # noqa: RUF012 (the calls made in this process)
+
+    def prepare(self, case, method):
+        import os
+
+        PrepareLives.asked.append((case.name, method))
+        with open(os.environ["PREPARE_ASKED"], "a") as said:
+            said.write(f"{case.name} {method}\n")
+
+
 class PrepareAllRaises(ReferenceAdapter):
     name = "prepare-all-raises-test"
     methods = ("rk4",)
@@ -123,10 +137,11 @@ def test_a_missing_that_never_answers_makes_its_rows_crashed_within_the_limit(tm
 
 
 def test_a_prepare_that_never_answers_holds_up_nothing_past_its_limit(tmp_path, monkeypatch):
-    """``prepare(case, method)``, which truestep calls in its own process before it forks
-    a sweep's or a search's runs, has a time limit too (:data:`truestep.adapters.PREPARE_S`,
-    1 s here): one that never answers is let go, and the runs, which prepare what they need
-    in their own processes, give their rows and searches (issue 37)."""
+    """``prepare(case, method)``, which truestep calls before it forks a sweep's or a
+    search's runs (a plugin's in a forked process), has a time limit too
+    (:data:`truestep.adapters.PREPARE_S`, 1 s here): one that never answers is let go, and
+    the runs, which prepare what they need in their own processes, give their rows and
+    searches (issue 37)."""
     from truestep.execution import runner
 
     monkeypatch.setattr(runner, "PREPARE_S", 1.0)
@@ -137,11 +152,24 @@ def test_a_prepare_that_never_answers_holds_up_nothing_past_its_limit(tmp_path, 
     assert len(results) > 0 and (results.status == "ok").all()
     stability = pd.read_csv(tmp_path / "rep" / "stability.csv")
     assert len(stability) == 2 and set(stability.status) == {"ok"}
-    # a plugin's prepare is tried in a forked process first: there it ran out of time for
-    # each pair, so it was never called in truestep's own process
+    # a plugin's prepare runs in a forked process only: there it ran out of time for each
+    # pair, and it was never called in truestep's own process
     said = {tuple(line.split()) for line in asked.read_text().splitlines()}
     assert said == {("harmonic-oscillator", "rk4"), ("harmonic-oscillator", "euler")}
     assert PrepareHangs.asked == []
+
+
+def test_a_plugins_prepare_that_answers_runs_in_a_forked_process_only(tmp_path, monkeypatch):
+    """Issue 37: a plugin's ``prepare`` that answers is not called again in truestep's
+    own process (where a later call could end it): it ran, once for each scene and
+    method, in a forked process, and the runs give their rows."""
+    asked = tmp_path / "asked.txt"
+    monkeypatch.setenv("PREPARE_ASKED", str(asked))
+    assert _run(tmp_path, "test_plugin_calls:PrepareLives") == 0
+    assert set(asked.read_text().splitlines()) == {"free-fall rk4"}
+    assert PrepareLives.asked == []
+    results = pd.read_csv(tmp_path / "rep" / "results.csv")
+    assert len(results) > 0 and (results.status == "ok").all()
 
 
 def test_a_prepare_all_that_raises_is_a_line_and_the_runs_prepare_themselves(tmp_path, capsys):

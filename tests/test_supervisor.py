@@ -69,6 +69,20 @@ PLUGINS = {
             def prepare(self, case, method):
                 os._exit(0)
     """,
+    "exits_in_a_later_prepare": """
+        import os
+        from pathlib import Path
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "exits-in-a-later-prepare"
+
+            def prepare(self, case, method):
+                mark = Path("prepared-once")
+                if mark.exists():
+                    os._exit(0)
+                mark.write_text("")
+    """,
     "sys_exit_in_missing": """
         import sys
         from truestep.adapters.reference import ReferenceAdapter
@@ -121,7 +135,7 @@ PLUGINS = {
             methods = ("rk4",)
             adaptive_methods = ()
 
-            def prepare(self, case, method):  # in the command's own process
+            def __init__(self):  # in the command's own process
                 signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
             def simulate(self, case, method, dt, **kw):
@@ -129,17 +143,17 @@ PLUGINS = {
                 Path("helper.pid").write_text(str(helper.pid))
                 time.sleep(120)
     """,
-    "daemon_in_prepare": """
+    "daemon_at_construction": """
         import os, time
         from pathlib import Path
         from truestep.adapters.reference import ReferenceAdapter
 
         class X(ReferenceAdapter):
-            name = "daemon-in-prepare"
+            name = "daemon-at-construction"
             methods = ("rk4",)
             adaptive_methods = ()
 
-            def prepare(self, case, method):  # in the command's own process
+            def __init__(self):  # in the command's own process
                 if Path("daemon.pid").exists():
                     return
                 if os.fork() == 0:
@@ -236,6 +250,21 @@ def test_a_plugin_whose_prepare_ends_its_process_is_let_go_and_its_runs_go_on(pl
     assert len(mine) and (mine["status"] == "ok").all(), mine[["method", "status", "message"]]
 
 
+def test_a_plugin_whose_prepare_ends_its_process_on_a_later_call_is_let_go_too(plugins):
+    """Issue 37, item 5: a plugin's ``prepare`` runs in a forked process only, never in
+    truestep's own, so one that lives through its first call and ends its process on a
+    later one (here: once a file it wrote is there) ends that forked process alone; the
+    run goes on and every row is ``ok``. Before, the first call was a forked probe and the
+    second ran in truestep's process: exit 3 and no report."""
+    proc = _start(plugins, *RUN, "--engines", "exits_in_a_later_prepare:X,reference", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert (plugins / "prepared-once").exists()
+    rows = pd.read_csv(plugins / "rep" / "results.csv")
+    mine = rows[rows["engine"] == "exits-in-a-later-prepare"]
+    assert len(mine) and (mine["status"] == "ok").all(), mine[["method", "status", "message"]]
+
+
 def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):
     proc = _start(plugins, *RUN, "--engines", "exits_at_import:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
@@ -311,7 +340,7 @@ def test_a_worker_that_ignores_sigterm_is_killed_after_the_grace_with_what_it_st
 
 
 def test_a_daemon_started_in_the_command_s_own_process_does_not_outlive_it(plugins):
-    proc = _start(plugins, *RUN, "--engines", "daemon_in_prepare:X", "--out", "rep")
+    proc = _start(plugins, *RUN, "--engines", "daemon_at_construction:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err
     assert still_running([int((plugins / "daemon.pid").read_text())]) == []

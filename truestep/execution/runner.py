@@ -379,15 +379,17 @@ def sweep_call(
 
 
 def prepare_here(engine: str, case: Case, method: str) -> None:
-    """The adapter's optional ``prepare(case, method)`` (compile, load kernels), here in
-    truestep's own process before it forks the runs that need it, within
-    :data:`~truestep.adapters.PREPARE_S` seconds (:func:`~truestep.adapters.plugin_answer`).
+    """The adapter's optional ``prepare(case, method)`` (compile, load kernels) before
+    truestep forks the runs that need it, within :data:`~truestep.adapters.PREPARE_S`
+    seconds (:func:`~truestep.adapters.plugin_answer`): here in truestep's own process for
+    its own adapters (the runs inherit the work), in a forked process for a plugin's
+    (plugin code never runs in truestep's process; the runs find what it left on disk).
     A prepare that raises or gives no answer is let go: the runs then prepare in their own
     processes, which fail or run out of time alike, and their rows say why."""
     prepare = getattr(get_adapter(engine), "prepare", None)
     if prepare is not None:
         with contextlib.suppress(PluginFailed):
-            plugin_answer(engine, "prepare()", prepare, case, method, limit_s=PREPARE_S, apart="first")
+            plugin_answer(engine, "prepare()", prepare, case, method, limit_s=PREPARE_S, apart="only")
 
 
 def sweep_rows(
@@ -448,7 +450,7 @@ def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
                 wanted,
                 workers=workers or len(os.sched_getaffinity(0)),
                 limit_s=PREPARE_ALL_S,
-                apart="first",
+                apart="only",
             )
         except PluginFailed as err:
             print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)

@@ -136,6 +136,42 @@ def attack_adapter_missing_ends_its_process(c: Campaign, where: Path) -> tuple[b
     return ok, f"its rows {sorted(mine)}, reference {sorted(ref)}; {result.why()}"
 
 
+EXITS_IN_A_LATER_PREPARE = """
+import os
+from pathlib import Path
+from truestep.adapters.reference import ReferenceAdapter
+
+class X(ReferenceAdapter):
+    name = "exits-in-a-later-prepare"
+
+    def prepare(self, case, method):
+        mark = Path("prepared-once")
+        if mark.exists():
+            os._exit(0)
+        mark.write_text("")
+"""
+
+
+def attack_adapter_prepare_ends_its_process_on_a_later_call(c: Campaign, where: Path) -> tuple[bool, str]:
+    """An adapter whose ``prepare()`` lives through its first call and calls
+    ``os._exit(0)`` on every later one: the run goes on, exit 0, its rows and the
+    reference's ``ok`` (tests/test_supervisor.py; it used to end the command, exit 3,
+    no report: the first call was a forked probe, the second ran in truestep's process)."""
+    (where / "exits_in_a_later_prepare.py").write_text(EXITS_IN_A_LATER_PREPARE)
+    result = c.quick_run(
+        where,
+        "rep",
+        cases="free-fall",
+        engines="exits_in_a_later_prepare:X,reference",
+        env=_plugin_env(c, where),
+    )
+    rows = _rows(where / "rep")
+    mine = {r["status"] for r in rows if r["engine"] == "exits-in-a-later-prepare"}
+    ref = {r["status"] for r in rows if r["engine"] == "reference"}
+    ok = result.code == 0 and mine == {"ok"} and ref == {"ok"}
+    return ok, f"its rows {sorted(mine)}, reference {sorted(ref)}; {result.why()}"
+
+
 IMPOSTOR = """
 from truestep.adapters.reference import ReferenceAdapter
 
@@ -242,6 +278,7 @@ ATTACKS = [
     attack_users_folder_under_the_journals_name,
     attack_adapter_import_ends_its_process,
     attack_adapter_missing_ends_its_process,
+    attack_adapter_prepare_ends_its_process_on_a_later_call,
     attack_second_package_registers_reference,
     attack_gates_file_gate_matching_no_case,
     attack_results_table_cut_inside_its_last_row,
