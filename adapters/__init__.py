@@ -192,6 +192,8 @@ def get_adapter(name: str) -> Adapter:
     it), and :class:`EngineNotInstalled` when the engine's library is missing.
     """
     cls = adapter_class(name)
+    if cls.__module__.split(".")[0] != "truestep" and cls not in _MADE_APART:
+        _made_apart(name, cls)
     try:
         adapter = cls()
     except (Exception, SystemExit) as err:
@@ -201,6 +203,44 @@ def get_adapter(name: str) -> Adapter:
         ) from None
     _check_methods(name, adapter)
     return adapter
+
+
+_MADE_APART: set[type] = set()
+"""Adapter classes of other packages already made once in a forked process."""
+
+
+def _made_apart(name: str, cls: type) -> None:
+    """Make an adapter of another package first in a forked process (once per class, as
+    its module is first imported in one): one whose ``__init__`` ends or interrupts that
+    process is an :class:`UnknownEngine` saying so, and truestep's process goes on. A
+    construction that raises is left to the one here, which raises the same."""
+    from truestep.cases.plugins import IMPORT_S
+    from truestep.runtime.isolation import how_it_ended, run_isolated
+
+    what = f"making its adapter {cls.__module__}.{cls.__qualname__}"
+    out = run_isolated(_make_here, (cls,), IMPORT_S)
+    if out.status == "timeout":
+        raise UnknownEngine(f"engine {name!r}: {what} gave no answer within {IMPORT_S:g} s")
+    if out.status != "ok":
+        raise UnknownEngine(
+            f"engine {name!r}: {what} ended the process it was first tried in ({how_it_ended(out.message)})"
+        )
+    if out.value != "ok":
+        raise UnknownEngine(f"engine {name!r}: {what} {out.value}")
+    _MADE_APART.add(cls)
+
+
+def _make_here(cls: type) -> str:
+    """In a forked process: make an adapter of ``cls``; ``"ok"`` when that returns or
+    raises (the caller's own construction says why), else what it did to the process."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        cls()
+    except KeyboardInterrupt:
+        return "interrupted its own process (SIGINT)"
+    except BaseException:  # the caller's own construction raises the same and says so
+        pass
+    return "ok"
 
 
 def _check_methods(name: str, adapter: Any) -> None:

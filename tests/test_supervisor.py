@@ -69,6 +69,16 @@ PLUGINS = {
             def prepare(self, case, method):
                 os._exit(0)
     """,
+    "exits_when_made": """
+        import os
+        from truestep.adapters.reference import ReferenceAdapter
+
+        class X(ReferenceAdapter):
+            name = "exits-when-made"
+
+            def __init__(self):
+                os._exit(0)
+    """,
     "exits_in_a_later_prepare": """
         import os
         from pathlib import Path
@@ -263,6 +273,22 @@ def test_a_plugin_whose_prepare_ends_its_process_on_a_later_call_is_let_go_too(p
     rows = pd.read_csv(plugins / "rep" / "results.csv")
     mine = rows[rows["engine"] == "exits-in-a-later-prepare"]
     assert len(mine) and (mine["status"] == "ok").all(), mine[["method", "status", "message"]]
+
+
+def test_a_plugin_whose_adapter_ends_its_process_when_made_is_one_line(plugins):
+    """Issue 37, item 5: an adapter of another package is made first in a forked process
+    (as its module is first imported in one): one whose ``__init__`` ends that process is
+    exit 2 with one line naming it, nothing written. Before, the command's process ended:
+    exit 3, with a line that named no plugin."""
+    proc = _start(plugins, *RUN, "--engines", "exits_when_made:X,reference", "--out", "rep")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 2, err
+    (line,) = _lines(err)
+    assert line == (
+        "truestep: error: engine 'exits-when-made': making its adapter exits_when_made.X ended "
+        "the process it was first tried in (exit status 0)"
+    ), err
+    assert "Traceback" not in err and not (plugins / "rep").exists()
 
 
 def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):

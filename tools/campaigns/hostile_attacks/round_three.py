@@ -136,6 +136,32 @@ def attack_adapter_missing_ends_its_process(c: Campaign, where: Path) -> tuple[b
     return ok, f"its rows {sorted(mine)}, reference {sorted(ref)}; {result.why()}"
 
 
+EXITS_WHEN_MADE = """
+import os
+from truestep.adapters.reference import ReferenceAdapter
+
+class X(ReferenceAdapter):
+    name = "exits-when-made"
+
+    def __init__(self):
+        os._exit(0)
+"""
+
+
+def attack_adapter_construction_ends_its_process(c: Campaign, where: Path) -> tuple[bool, str]:
+    """An adapter whose ``__init__`` calls ``os._exit(0)``: exit 2 with one line naming
+    it, no report (tests/test_supervisor.py; it used to end the command: exit 3, a line
+    that named no plugin)."""
+    (where / "exits_when_made.py").write_text(EXITS_WHEN_MADE)
+    result = c.quick_run(
+        where, "rep", cases="free-fall", engines="exits_when_made:X,reference", env=_plugin_env(c, where)
+    )
+    lines = _lines(result)
+    named = len(lines) == 1 and "making its adapter exits_when_made.X ended the process" in lines[0]
+    ok = result.code == 2 and named and not (where / "rep").exists() and "Traceback" not in result.err
+    return ok, result.why()
+
+
 EXITS_IN_A_LATER_PREPARE = """
 import os
 from pathlib import Path
@@ -279,6 +305,7 @@ ATTACKS = [
     attack_adapter_import_ends_its_process,
     attack_adapter_missing_ends_its_process,
     attack_adapter_prepare_ends_its_process_on_a_later_call,
+    attack_adapter_construction_ends_its_process,
     attack_second_package_registers_reference,
     attack_gates_file_gate_matching_no_case,
     attack_results_table_cut_inside_its_last_row,
