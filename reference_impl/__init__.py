@@ -2,9 +2,12 @@
 
 Imports no physics engine and nothing of the harness. numba's on-disk cache is read so
 that a damaged file is compiled again rather than raised
-(:mod:`~truestep.reference_impl.cache_guard`).
+(:mod:`~truestep.reference_impl.cache_guard`), and its inliner copies a function's IR as
+one object (:mod:`~truestep.reference_impl.inline_copy`).
 """
 
 from truestep.reference_impl.cache_guard import guard as _guard_numba_cache
+from truestep.reference_impl.inline_copy import install as _copy_inlined_ir_once
 
 _guard_numba_cache()
+_copy_inlined_ir_once()

@@ -14,7 +14,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Compile the reference implementation's loops for every "
         "case of the library and of the figures and every fixed-step method, "
         "on every core, into numba's on-disk cache, as a first `truestep run` "
-        "does before its first timed run (about 80 s on 2 cores when the cache "
+        "does before its first timed run (about 70 s on 2 cores when the cache "
         "is empty; a second call only loads them); with MuJoCo Warp installed, "
         "also its kernels for every scene it runs, into Warp's kernel cache "
         "(about 60 s on one core when empty).",
