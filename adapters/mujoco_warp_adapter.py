@@ -184,6 +184,7 @@ class MujocoWarpAdapter(WarpAdapter):
     name = "mujoco-warp"
     methods = tuple(mj.INTEGRATORS)
     cpu_note: ClassVar[str] = CPU_NOTE
+    kernel_package: ClassVar[str] = "mujoco_warp"
     correctness_peer_of: ClassVar[str] = "mujoco"
     """The engine whose physics this one reimplements (compared in the tests, not timed)."""
     method_notes: ClassVar = {

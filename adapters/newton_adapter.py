@@ -336,6 +336,7 @@ class NewtonAdapter(WarpAdapter):
     name = "newton"
     methods = tuple(SOLVERS)
     cpu_note: ClassVar[str] = CPU_NOTE
+    kernel_package: ClassVar[str] = "newton"
     method_notes: ClassVar = {
         "semi-implicit": "Newton's SolverSemiImplicit: symplectic Euler, penalty contact (float32)",
         "xpbd": f"Newton's SolverXPBD: position-based, {XPBD_ITERATIONS} iterations a step (float32)",

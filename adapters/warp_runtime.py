@@ -8,7 +8,10 @@ kernels compiled for a generic target (:data:`GENERIC_CPU`) unless
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing
 import os
+from collections.abc import Iterable
 from typing import Any, ClassVar
 
 from truestep.adapters.base import FixedStepAdapter
@@ -83,6 +86,55 @@ def prepare(adapter: Any, case: Any, method: str) -> None:
     adapter.build(case, method, case.sweep(adaptive=False, quick=True)[0])
 
 
+WARMING_S = 900.0
+"""Seconds :func:`settle` waits for an engine's kernels to compile in the background before
+it stops that process (the runs then compile what they need themselves)."""
+
+_WARMING: dict[str, Any] = {}
+"""The process compiling each engine's kernels in the background (:meth:`WarpAdapter.prepare_all`)."""
+
+
+def cold_cache(package: str) -> bool:
+    """Whether Warp's kernel cache holds no module of ``package`` (its directory's entries
+    are named ``wp_<module>_<hash>``): the engine's kernels were never compiled here."""
+    folder = wp.config.kernel_cache_dir
+    if not folder or not os.path.isdir(folder):
+        return True
+    prefix = f"wp_{package}."
+    with os.scandir(folder) as entries:
+        return not any(entry.name.startswith(prefix) for entry in entries)
+
+
+def _build_each(adapter: Any, pairs: list[tuple[Any, str]], parent: int) -> None:
+    """In a forked process: :func:`prepare` each (case, method), so that Warp compiles
+    their kernels into its on-disk cache; dies with ``parent``. A scene that fails to build
+    is left for the run that needs it to report."""
+    from truestep.runtime.oscalls import die_with_parent
+
+    die_with_parent(parent)
+    for case, method in pairs:
+        with contextlib.suppress(Exception):  # the run that needs the scene builds it and says why
+            prepare(adapter, case, method)
+
+
+def settle(engine: str, limit_s: float = WARMING_S) -> None:
+    """Wait for the background compile of ``engine``'s kernels, if one runs (at most
+    ``limit_s`` seconds, then it is stopped)."""
+    proc = _WARMING.pop(engine, None)
+    if proc is None:
+        return
+    proc.join(limit_s)
+    if proc.is_alive():
+        proc.kill()
+        proc.join()
+
+
+def settle_all() -> None:
+    """Wait for every background compile of Warp kernels (:func:`settle`)."""
+    for engine in list(_WARMING):
+        settle(engine)
+
+
 class WarpAdapter(FixedStepAdapter):
     """What the adapters of Warp's engines share: the device (the CPU unless one is
     asked), float32 state, the scene built before the sweep's processes are forked
@@ -96,12 +148,45 @@ class WarpAdapter(FixedStepAdapter):
     cpu_note: ClassVar[str] = "Warp CPU device, float32"
     """The note of every row on the CPU device."""
 
+    kernel_package: ClassVar[str] = ""
+    """The Python package whose Warp kernels the engine compiles (:func:`cold_cache`)."""
+    prepares_apart: ClassVar[bool] = True
+    """:meth:`prepare_all` compiles in a process of its own and returns at once: the run
+    starts it before the other engines' (:func:`truestep.execution.runner.compile_ahead`)
+    and waits for it after them."""
+
     def __init__(self, *, device: str = DEVICE) -> None:
         self.device = device
 
+    def prepare_all(self, pairs: Iterable[tuple[Any, str]], *, workers: int = 1) -> None:
+        """Where Warp's kernel cache holds none of this engine's kernels (a first run on
+        the machine, on the CPU device), start compiling them for ``pairs`` (case, method)
+        in a forked process: one scene built for each kind (:func:`prepare`), beside the
+        reference's compile on the other cores, instead of one at a time in truestep's
+        process while the runs wait. Returns at once; :func:`settle` waits for it. Nothing
+        a run measures depends on it: a run finds the kernels in the cache, or compiles
+        them."""
+        if (
+            self.device != "cpu"
+            or not self.kernel_package
+            or self.name in _WARMING
+            or not cold_cache(self.kernel_package)
+        ):
+            return
+        context = multiprocessing.get_context("fork")
+        proc = context.Process(target=_build_each, args=(self, list(pairs), os.getpid()), daemon=True)
+        proc.start()
+        _WARMING[self.name] = proc
+
+    def prepared(self) -> None:
+        """Wait for :meth:`prepare_all`'s background compile, if one runs (:func:`settle`)."""
+        settle(self.name)
+
     def prepare(self, case: Any, method: str) -> None:
         """Before the sweep's process is forked: the scene built once here, so that the
-        process finds Warp's kernels loaded (:func:`prepare`)."""
+        process finds Warp's kernels loaded (:func:`prepare`), after the background
+        compile of :meth:`prepare_all`, if one runs."""
+        settle(self.name)
         prepare(self, case, method)
 
     def advance(self, scene: Any, k: int, steps: int, h: float) -> None:
@@ -124,5 +209,7 @@ __all__ = [
     "host_copy",
     "host_view",
     "prepare",
+    "settle",
+    "settle_all",
     "wp",
 ]

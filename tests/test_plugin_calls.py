@@ -71,6 +71,35 @@ class PrepareLives(ReferenceAdapter):
             said.write(f"{case.name} {method}\n")
 
 
+class PreparesApart(ReferenceAdapter):
+    name = "prepares-apart-test"
+    methods = ("rk4",)
+    adaptive_methods = ()
+    prepares_apart = True
+
+    def prepare_all(self, pairs, workers=1):
+        _said("apart: started")
+
+    def prepared(self):
+        _said("apart: awaited")
+
+
+class PreparesHere(ReferenceAdapter):
+    name = "prepares-here-test"
+    methods = ("rk4",)
+    adaptive_methods = ()
+
+    def prepare_all(self, pairs, workers=1):
+        _said("here: done")
+
+
+def _said(line: str) -> None:
+    import os
+
+    with open(os.environ["PREPARE_ASKED"], "a") as said:
+        said.write(line + "\n")
+
+
 class PrepareAllRaises(ReferenceAdapter):
     name = "prepare-all-raises-test"
     methods = ("rk4",)
@@ -170,6 +199,24 @@ def test_a_plugins_prepare_that_answers_runs_in_a_forked_process_only(tmp_path, 
     assert PrepareLives.asked == []
     results = pd.read_csv(tmp_path / "rep" / "results.csv")
     assert len(results) > 0 and (results.status == "ok").all()
+
+
+def test_an_engine_that_prepares_apart_is_started_first_and_awaited_last(tmp_path, monkeypatch, case_named):
+    """``compile_ahead``: an adapter whose ``prepares_apart`` is true (Warp's engines, whose
+    ``prepare_all`` compiles in a process of its own and returns at once) is started
+    before the others, so that it compiles beside them, and its ``prepared()`` is
+    awaited after them, before any run."""
+    from truestep.adapters import resolve_engine
+    from truestep.execution.runner import compile_ahead
+
+    asked = tmp_path / "asked.txt"
+    monkeypatch.setenv("PREPARE_ASKED", str(asked))
+    here = resolve_engine("test_plugin_calls:PreparesHere")
+    apart = resolve_engine("test_plugin_calls:PreparesApart")
+    case = case_named("free-fall")
+    entries = [("rk4", 0.01, False, "")]
+    compile_ahead([(case, here, "rk4", entries), (case, apart, "rk4", entries)], workers=1)
+    assert asked.read_text().splitlines() == ["apart: started", "here: done", "apart: awaited"]
 
 
 def test_a_prepare_all_that_raises_is_a_line_and_the_runs_prepare_themselves(tmp_path, capsys):

@@ -10,7 +10,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -431,29 +431,38 @@ def preload() -> None:
 def compile_ahead(planned: list[tuple], workers: int | None = None) -> None:
     """Compile what the planned sweeps (case, engine, method, entries) will run before the
     first is timed, for each engine that can (``prepare_all(pairs, workers=...)``), on
-    ``workers`` cores (default: all). Nothing a run measures depends on it: a
-    ``prepare_all`` that raises is one line on standard error, and each run then prepares
-    what it needs itself (and fails in its own row if that fails too)."""
+    ``workers`` cores (default: all). An adapter whose ``prepares_apart`` is true compiles
+    in a process of its own and returns at once: it is started first, so that it compiles
+    beside the others, and its ``prepared()`` is awaited after them, before any run.
+    Nothing a run measures depends on it: a ``prepare_all`` that raises is one line on
+    standard error, and each run then prepares what it needs itself (and fails in its own
+    row if that fails too)."""
     pairs: dict[str, list[tuple]] = {}
     for case, engine, method, entries in planned:
         if not entries[0][3]:
             pairs.setdefault(engine, []).append((case, method))
-    for engine, wanted in pairs.items():
-        ahead = getattr(get_adapter(engine), "prepare_all", None)
-        if ahead is None:
-            continue
-        try:
-            plugin_answer(
-                engine,
-                "prepare_all()",
-                ahead,
-                wanted,
-                workers=workers or len(os.sched_getaffinity(0)),
-                limit_s=PREPARE_ALL_S,
-                apart="only",
-            )
-        except PluginFailed as err:
-            print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)
+    adapters = {engine: get_adapter(engine) for engine in pairs}
+    apart = [e for e in pairs if getattr(adapters[e], "prepares_apart", False) is True]
+    for engine in [*apart, *(e for e in pairs if e not in apart)]:
+        ahead = getattr(adapters[engine], "prepare_all", None)
+        if ahead is not None:
+            _prepare_ahead(engine, "prepare_all()", ahead, pairs[engine], workers=workers)
+    for engine in apart:
+        done = getattr(adapters[engine], "prepared", None)
+        if done is not None:
+            _prepare_ahead(engine, "prepared()", done)
+
+
+def _prepare_ahead(engine: str, what: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+    """``fn(*args)``, one of an adapter's calls of :func:`compile_ahead` (``workers``, where
+    given, defaulting to every core), within :data:`~truestep.adapters.PREPARE_ALL_S`
+    seconds; a call that fails is one line on standard error."""
+    if "workers" in kwargs:
+        kwargs["workers"] = kwargs["workers"] or len(os.sched_getaffinity(0))
+    try:
+        plugin_answer(engine, what, fn, *args, limit_s=PREPARE_ALL_S, apart="only", **kwargs)
+    except PluginFailed as err:
+        print(f"truestep: {err}; its runs prepare what they need themselves", file=sys.stderr)
 
 
 def left_out(adapter, case: Case, method: str) -> str | None:
