@@ -15,9 +15,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "case of the library and of the figures and every fixed-step method, "
         "on every core, into numba's on-disk cache, as a first `truestep run` "
         "does before its first timed run (about 70 s on 2 cores when the cache "
-        "is empty; a second call only loads them); with MuJoCo Warp installed, "
-        "also its kernels for every scene it runs, into Warp's kernel cache "
-        "(about 60 s on one core when empty).",
+        "is empty; a second call only loads them); with MuJoCo Warp or Newton "
+        "installed, also their kernels for every scene they run, into Warp's "
+        "kernel cache, each in a process of its own beside the reference's "
+        "(about 40 s of one core each when empty).",
     )
     comp.set_defaults(func=main)
 
@@ -25,28 +26,59 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     """``truestep compile``: compile the reference's loops for every case file of the library
     and of the figures, every fixed-step method, on every core, into numba's cache (what a
-    first ``truestep run`` does before its first timed run): a build step for a fresh
-    machine."""
+    first ``truestep run`` does before its first timed run), and the kernels of each
+    installed engine that has a ``warm`` hook (Warp's engines) into its own cache, each
+    engine in a forked process beside the reference's compile: a build step for a fresh
+    machine. Exit 1 where an engine's kernels failed to compile (one line says which)."""
+    import multiprocessing
     import time
 
+    from truestep.adapters import adapter_class, engine_status, registered
     from truestep.cases import load_case, load_cases
     from truestep.figures.scenes import FIGURE_CASE_DIR
     from truestep.reference_impl.precompile import compile_all
 
     began = time.perf_counter()
     cases = [*load_cases("*"), *(load_case(p) for p in sorted(FIGURE_CASE_DIR.glob("*.toml")))]
+    hooks = [
+        (engine, warm)
+        for engine in registered()
+        if engine_status(engine) == "installed"
+        and (warm := getattr(adapter_class(engine), "warm", None)) is not None
+    ]
+    context = multiprocessing.get_context("fork")
+    apart = [
+        (engine, context.Process(target=_warm_apart, args=(engine, warm, cases, os.getpid()), daemon=True))
+        for engine, warm in hooks
+    ]
+    for _, proc in apart:
+        proc.start()
     models = [c.model for c in cases if c.model is not None]
     workers = len(os.sched_getaffinity(0))
     compile_all(models, workers=workers, progress=lambda line: print(line, flush=True))
-    print(f"reference loops ready in {time.perf_counter() - began:.1f} s ({workers} workers)")
-    from truestep.adapters import adapter_class, engine_status, registered
+    print(f"reference loops ready in {time.perf_counter() - began:.1f} s ({workers} workers)", flush=True)
+    failed = 0
+    for engine, proc in apart:
+        proc.join()
+        if proc.exitcode != 0:
+            failed += 1
+            print(f"truestep: {engine} kernels: the compile ended with exit code {proc.exitcode}", flush=True)
+    return 1 if failed else 0
 
-    for engine in registered():
-        if engine_status(engine) != "installed":
-            continue
-        warm = getattr(adapter_class(engine), "warm", None)
-        if warm is not None:
-            began = time.perf_counter()
-            built = warm(cases, say=lambda line: print(line, flush=True))
-            print(f"{engine} kernels ready in {time.perf_counter() - began:.1f} s ({built} scenes)")
-    return 0
+
+def _warm_apart(engine: str, warm, cases: list, parent: int) -> None:
+    """In a forked process: ``warm(cases)`` (an engine's kernels into its cache), its lines
+    printed as they come; dies with ``parent``; exit 1, with one line, if it raises."""
+    import sys
+    import time
+
+    from truestep.runtime.oscalls import die_with_parent
+
+    die_with_parent(parent)
+    began = time.perf_counter()
+    try:
+        built = warm(cases, say=lambda line: print(line, flush=True))
+    except Exception as err:
+        print(f"truestep: {engine} kernels: {type(err).__name__}: {str(err)[:300]}", flush=True)
+        sys.exit(1)
+    print(f"{engine} kernels ready in {time.perf_counter() - began:.1f} s ({built} scenes)", flush=True)
