@@ -229,28 +229,69 @@ def _plane_motion(case: Case) -> tuple[ParticleModel, np.ndarray, float, float, 
 def bounce_path(
     x0: np.ndarray, v0: np.ndarray, radius: float, plane, g: float, t: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and velocities (T, 3) of one ball bouncing on a frictionless plane.
+    """Positions and velocities (T, 3) of one ball bouncing on a frictionless plane: the
+    one-ball case of :func:`bounce_paths`."""
+    x, v = bounce_paths(x0[None], v0[None], np.array([radius], float), plane, g, t)
+    return x[:, 0], v[:, 0]
 
-    The height of its contact point is a chain of parabolas between the bounce times of
-    :func:`bounce_schedule`; after the last bounce (``e < 1``) the ball rests on the plane
-    (its centre at height r). Tangential motion is uniform. ``g`` (m/s^2) is gravity
-    along the plane's inward normal.
+
+def bounce_paths(
+    x0: np.ndarray, v0: np.ndarray, radius: np.ndarray, plane, g: float, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities (T, N, 3) of N balls bouncing on one frictionless plane,
+    each on its own: starts ``x0`` and ``v0`` (N, 3), radii (N,), at times ``t`` (T,).
+
+    The height of a ball's contact point is a chain of parabolas between the bounce times
+    of :func:`bounce_schedule`; after the last bounce (``e < 1``) the ball rests on the
+    plane (its centre at height r). Tangential motion is uniform. ``g`` (m/s^2) is gravity
+    along the plane's inward normal. Every ball's schedule is the recurrence of
+    :func:`bounce_schedule`, run for all balls at once (bounce by bounce, each ball until
+    its own stop), so each number is the one that function gives; memory and work grow
+    with T N and the bounces, not with a grid per ball.
     """
     n, e = plane.normal, plane.restitution
-    u0 = float((x0 - plane.point) @ n - radius)
-    w0 = float(v0 @ n)
-    times, launches = bounce_schedule(u0, w0, g, e, float(np.max(t, initial=0.0)))
-    k = np.searchsorted(times, t, side="right")  # bounces so far
-    since = t - np.where(k > 0, times[np.maximum(k - 1, 0)], 0.0)
-    start_u = np.where(k > 0, 0.0, u0)
-    start_w = np.where(k > 0, launches[np.maximum(k - 1, 0)], w0)
+    t = np.asarray(t, float)
+    u0 = (x0 - plane.point) @ n - radius
+    w0 = v0 @ n
+    speed = np.sqrt(w0**2 + 2 * g * u0)
+    first = (w0 + speed) / g
+    t_max = float(np.max(t, initial=0.0))
+    order = np.argsort(t, kind="stable")
+    bounced = np.zeros((len(t), len(u0)), bool)  # a bounce at or before t[j]
+    at = np.zeros((len(t), len(u0)))  # the time of the last such bounce (s)
+    leave = np.zeros((len(t), len(u0)))  # and the normal speed it left with (m/s)
+    alive, time, launch, count = np.arange(len(u0)), first, e * speed, 1
+    while alive.size:
+        go = (time <= t_max) & (launch > 1e-300) & (count < 100000)
+        after = np.where(go, time + 2 * launch / g, np.inf)
+        # the times from this bounce to the next: this bounce is the last before them
+        lo, hi = np.searchsorted(t[order], time), np.searchsorted(t[order], after)
+        rows, which = _ranges(lo, hi)
+        cols = alive[which]
+        bounced[order[rows], cols] = True
+        at[order[rows], cols], leave[order[rows], cols] = time[which], launch[which]
+        alive, time, launch = alive[go], after[go], launch[go] * e
+        count += 1
+    since = t[:, None] - np.where(bounced, at, 0.0)
+    start_u = np.where(bounced, 0.0, u0)
+    start_w = np.where(bounced, leave, w0)
     u = start_u + start_w * since - 0.5 * g * since**2
     w = start_w - g * since
     if e < 1:
-        rest = t >= times[0] + 2 * e * np.sqrt(w0**2 + 2 * g * u0) / (g * (1 - e))
+        rest = t[:, None] >= first + 2 * e * np.sqrt(w0**2 + 2 * g * u0) / (g * (1 - e))
         u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
-    vt = v0 - w0 * n
-    return x0 + vt * t[:, None] + (u - u0)[:, None] * n, vt + w[:, None] * n
+    vt = v0 - w0[:, None] * n
+    x = x0 + vt * t[:, None, None] + (u - u0)[..., None] * n
+    return x, vt + w[..., None] * n
+
+
+def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The integers of every range ``[lo[i], hi[i])``, one after another, and the ``i`` of
+    each."""
+    counts = np.maximum(hi - lo, 0)
+    which = np.repeat(np.arange(len(lo)), counts)
+    starts = np.cumsum(counts) - counts
+    return np.arange(int(counts.sum())) - np.repeat(starts - lo, counts), which
 
 
 @exact_solution("bouncing-ball", params={}, kind="particles")
@@ -315,13 +356,10 @@ def bouncing_rain(case: Case, t: np.ndarray) -> Exact:
         case,
         "gravity along the plane's inward normal",
     )
-    x = np.empty((len(t), m.n, 3))
-    v = np.empty((len(t), m.n, 3))
-    for i in range(m.n):
-        _require(
-            float((m.x0[i] - plane.point) @ n - m.radius[i]) >= 0,
-            case,
-            "every particle to start on or above the plane",
-        )
-        x[:, i], v[:, i] = bounce_path(m.x0[i], m.v0[i], float(m.radius[i]), plane, g, t)
+    _require(
+        bool(np.all((m.x0 - plane.point) @ n - m.radius >= 0)),
+        case,
+        "every particle to start on or above the plane",
+    )
+    x, v = bounce_paths(m.x0, m.v0, m.radius, plane, g, t)
     return Exact(t, x, v, None)

@@ -40,6 +40,10 @@ ZOOMS = 6
 """A refinement reads :data:`ZOOM_POINTS` times across the two grid intervals about an
 extreme, then across the two about the best of those, :data:`ZOOMS` times: the extreme's
 time to ``(2 / 32)^6`` of the grid's spacing, its value to round-off where it is smooth."""
+CHUNK = 2_000_000
+"""Particle-times of the path read at once: the times are read in blocks of
+``CHUNK // n``, so that the memory the scale takes grows with the particles, not with
+the particles times :data:`GRID` (each time's energies are the same either way)."""
 _CACHE: dict[int, tuple[Case, float]] = {}
 
 Energies = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None, np.ndarray]]
@@ -156,8 +160,15 @@ def path_energies(case: Case) -> Energies | None:
                 return None
 
             def particles(t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-                ex, alive = at(t)
-                return (ex.t, *_particle_energies(case, ex.x, ex.v, alive))
+                block = max(1, CHUNK // max(1, case.particles.n))
+                parts = []
+                for k in range(0, len(t), block):
+                    ex, alive = at(t[k : k + block])
+                    parts.append((ex.t, *_particle_energies(case, ex.x, ex.v, alive)))
+                if not parts:
+                    return t, np.zeros(0), np.zeros(0)
+                times, kinetic, potential = (np.concatenate(p) for p in zip(*parts, strict=True))
+                return times, kinetic, potential
 
             return particles
     return None
