@@ -1,5 +1,6 @@
 """The attacks of ``tools/campaigns/hostile_campaign.py``, one module per finding of issue 20
-(groups 1-8) and one for the fixes of issue 37 (group 9).
+(groups 1-8) and two for the fixes of issue 37 (group 9: ``round_three`` and
+``round_three_more``, every failure of the issue that has an attack).
 
 Each module's ``ATTACKS`` lists its attacks: functions ``(campaign, folder) -> (held,
 note)`` whose docstring says what they do and what holding means."""
@@ -12,6 +13,7 @@ from hostile_attacks import (
     one_run,
     out_folders,
     round_three,
+    round_three_more,
     special_files,
     tables,
 )
@@ -25,6 +27,6 @@ BY_GROUP = {
     6: one_run.ATTACKS,
     7: names.ATTACKS,
     8: tables.ATTACKS,
-    9: round_three.ATTACKS,
+    9: round_three.ATTACKS + round_three_more.ATTACKS,
 }
 """Every attack, by the number of the finding it attacks (:data:`common.GROUPS`)."""
