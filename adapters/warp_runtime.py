@@ -109,9 +109,9 @@ def _build_each(adapter: Any, pairs: list[tuple[Any, str]], parent: int) -> None
     """In a forked process: :func:`prepare` each (case, method), so that Warp compiles
     their kernels into its on-disk cache; dies with ``parent``. A scene that fails to build
     is left for the run that needs it to report."""
-    from truestep.runtime.oscalls import die_with_parent
+    from truestep.runtime.oscalls import helper_of
 
-    die_with_parent(parent)
+    helper_of(parent)
     for case, method in pairs:
         with contextlib.suppress(Exception):  # the run that needs the scene builds it and says why
             prepare(adapter, case, method)

@@ -62,9 +62,9 @@ def _prepare_each(
     (killed, interrupted), mid-compile too, instead of compiling on for nobody (a cache
     file cut short is compiled again by the next run: :mod:`truestep.reference_impl.cache_guard`)."""
     if parent is not None:
-        from truestep.runtime.oscalls import die_with_parent
+        from truestep.runtime.oscalls import helper_of
 
-        die_with_parent(parent)
+        helper_of(parent)
     say = progress or _stderr
     began = time.perf_counter()
     for i, (model, method) in enumerate(pairs):

@@ -44,3 +44,33 @@ def test_a_compile_whose_parent_is_gone_does_not_start():
     """After a SIGKILL of ``truestep compile``, an engine's compile stops with it (issue
     37): here its parent is this process, not the pid it was given."""
     assert _run(_builds, parent=os.getppid()).exitcode == 1
+
+
+def _interrupted_helper(parent: int) -> None:
+    import signal
+
+    from truestep.runtime.interrupts import Interrupted
+
+    def raising(signum, frame):  # truestep's own handler, as a forked helper inherits it
+        raise Interrupted(signum)
+
+    signal.signal(signal.SIGTERM, raising)
+    from truestep.runtime.oscalls import helper_of
+
+    helper_of(parent)
+    os.kill(os.getpid(), signal.SIGTERM)
+    raise AssertionError("still running after SIGTERM")
+
+
+def test_a_helper_ends_on_sigterm_without_a_word(capfd):
+    """Issue 37: SIGTERM of a run while its loops compile ahead: the compile helpers end at
+    once, printing nothing (before, each printed the traceback of the handler it had
+    inherited after the run's one line)."""
+    import signal
+
+    proc = multiprocessing.get_context("fork").Process(target=_interrupted_helper, args=(os.getpid(),))
+    proc.start()
+    proc.join(60)
+    assert proc.exitcode == -signal.SIGTERM
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""

@@ -72,9 +72,9 @@ def _warm_apart(engine: str, warm, cases: list, parent: int) -> None:
     import sys
     import time
 
-    from truestep.runtime.oscalls import die_with_parent
+    from truestep.runtime.oscalls import helper_of
 
-    die_with_parent(parent)
+    helper_of(parent)
     began = time.perf_counter()
     try:
         built = warm(cases, say=lambda line: print(line, flush=True))

@@ -58,6 +58,20 @@ def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
         os._exit(1)
 
 
+QUIET_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+"""The signals a forked helper ends on at once, without a word (:func:`helper_of`)."""
+
+
+def helper_of(parent: int) -> None:
+    """In a forked helper (a compile beside the run): die with ``parent``
+    (:func:`die_with_parent`), and end at once, printing nothing, on any of
+    :data:`QUIET_SIGNALS`, where it would otherwise run the handler it inherited (truestep's,
+    which raises, and a traceback of the helper follows the parent's one line)."""
+    for sig in QUIET_SIGNALS:
+        signal.signal(sig, signal.SIG_DFL)
+    die_with_parent(parent)
+
+
 def become_subreaper() -> bool:
     """Make this process the parent of every orphaned process below it (a descendant
     whose own parent exits, a daemon that double-forks) instead of ``init``, so that
