@@ -272,6 +272,44 @@ def attack_kill_of_compile_leaves_no_worker_compiling(c: Campaign, where: Path) 
     return True, "; ".join(notes)
 
 
+def attack_sigterm_while_the_loops_compile_ahead(c: Campaign, where: Path) -> tuple[bool, str]:
+    """``truestep run --quick`` into an empty numba cache, sent SIGTERM once it has forked
+    its compile helpers: it ends within 10 s with exit 143 and one line (``interrupted by
+    SIGTERM``), no traceback, and none of its processes alive 10 s later
+    (tests/test_compile_command.py; it took 12 s to answer, and each helper printed the
+    traceback of the handler it inherited)."""
+    env = c.env(NUMBA_CACHE_DIR=str(where / "numba"))
+    started = time.perf_counter()
+    command = ["run", "--quick", "--cases", "harmonic-oscillator,hanging-cloth", "--engines", "reference"]
+    proc = c.start([*command, "--out", "rep"], where, env=env)
+    deadline = time.monotonic() + CALL_TIMEOUT
+    members = _session(proc.pid)
+    while len(members) < 3 and time.monotonic() < deadline and proc.poll() is None:  # the command, a helper
+        time.sleep(0.2)
+        members = _session(proc.pid)
+    if len(members) < 3:
+        result = c.finish(proc, 1, started)
+        return False, f"the run forked no compile helper (processes {members}); {result.why()}"
+    time.sleep(1.0)
+    members = sorted(set(members) | set(_session(proc.pid)))
+    signalled = time.perf_counter()
+    proc.send_signal(signal.SIGTERM)
+    result = c.finish(proc, CALL_TIMEOUT, started)
+    answered = time.perf_counter() - signalled
+    left = _still_alive(sorted(set(members) | set(_session(proc.pid))))
+    lines = [x for x in result.err.splitlines() if x.startswith("truestep:")]
+    ok = (
+        result.code == 128 + signal.SIGTERM
+        and answered < 10.0
+        and not left
+        and "Traceback" not in result.err
+        and len(lines) == 1
+        and "interrupted by SIGTERM" in lines[0]
+        and "from the 0 finished sweeps" in lines[0]  # while it compiled, before any sweep
+    )
+    return ok, f"answered in {answered:.1f} s, {len(left)} of {len(members)} processes left; {result.why()}"
+
+
 DAEMON = """
 import os, time
 from pathlib import Path
@@ -924,6 +962,7 @@ ATTACKS = [
     attack_sigkill_of_run_leaves_no_helper,
     attack_sighup_of_run_leaves_no_helper,
     attack_kill_of_compile_leaves_no_worker_compiling,
+    attack_sigterm_while_the_loops_compile_ahead,
     attack_daemon_started_by_an_adapter_outlives_the_run,
     attack_plugin_ignores_sigterm_and_sigint_at_import,
     attack_scheduler_that_accepts_and_never_answers,
