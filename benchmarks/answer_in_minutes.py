@@ -4,8 +4,9 @@ Each figure is one command, run as a user would, its wall time measured around t
 process; where the command writes a report, the run's own phases (``run.json``'s
 ``seconds``) are printed beside it. Run on an idle machine; the long figures are opt-in.
 
-    python benchmarks/answer_in_minutes.py                  # quick, reference+mujoco, cold quick
-    python benchmarks/answer_in_minutes.py --full           # and the README's main job (~25 min)
+    python benchmarks/answer_in_minutes.py                  # quick, reference+mujoco, cold quick,
+                                                            # a user's CI run with cold caches
+    python benchmarks/answer_in_minutes.py --full           # and the README's main job (~13 min)
     python benchmarks/answer_in_minutes.py --suite --ci     # and the test suite idle and under
                                                             # load, and .ci/run on a fresh clone
 
@@ -31,6 +32,7 @@ TARGETS_S = {
     "truestep run --engines reference,mujoco": 90.0,
     "truestep run --quick (warm)": 20.0,
     "truestep run --quick (cold caches)": 60.0,
+    "a user's CI: run --quick, own engine (cold)": 30.0,
     "README test command (idle)": 180.0,
     "README test command (both cores busy)": 180.0,
     "bash .ci/run (fresh clone)": 480.0,
@@ -69,6 +71,26 @@ def run_figure(name: str, args: list[str], *, cold: bool = False) -> None:
         report(name, wall, code, phases(out))
 
 
+USER_CASES = "free-fall,harmonic-oscillator,damped-oscillator,spring-damper-pair,bouncing-ball"
+"""The lecture's cases of the example project's CI command (``examples/leapfrog-lab/README.md``)."""
+
+
+def user_ci() -> None:
+    """A user's CI on a fresh machine: the quick run of the example project's engine beside
+    the reference on its lecture cases, with empty caches (the example is put on the path
+    by ``PYTHONPATH``, not installed: its own cases, registered by its entry points, are
+    left out)."""
+    example = REPO / "examples" / "leapfrog-lab"
+    paths = [str(example), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+    args = ["--quick", "--engines", "leapfrog_lab.adapter:LeapfrogAdapter,reference", "--cases", USER_CASES]
+    with tempfile.TemporaryDirectory() as tmp:
+        env.update(NUMBA_CACHE_DIR=f"{tmp}/numba", WARP_CACHE_PATH=f"{tmp}/warp")
+        out = Path(tmp) / "out"
+        wall, code = timed([*TRUESTEP, "run", *args, "--out", str(out)], env=env)
+        report("a user's CI: run --quick, own engine (cold)", wall, code, phases(out))
+
+
 def report(name: str, wall: float, code: int, extra: str = "") -> None:
     target = TARGETS_S[name]
     verdict = "meets" if code == 0 and wall <= target else "MISSES"
@@ -97,13 +119,14 @@ def fresh_ci() -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--full", action="store_true", help="also the README's main job (about 25 min)")
+    parser.add_argument("--full", action="store_true", help="also the README's main job (about 13 min)")
     parser.add_argument("--suite", action="store_true", help="also the test suite, idle and under load")
-    parser.add_argument("--ci", action="store_true", help="also .ci/run on a fresh clone (about 13 min)")
+    parser.add_argument("--ci", action="store_true", help="also .ci/run on a fresh clone (about 9 min)")
     args = parser.parse_args()
     run_figure("truestep run --quick (warm)", ["--quick"])
     run_figure("truestep run --engines reference,mujoco", ["--engines", "reference,mujoco"])
     run_figure("truestep run --quick (cold caches)", ["--quick"], cold=True)
+    user_ci()
     if args.full:
         run_figure("truestep run (every engine)", [])
     if args.suite:
