@@ -4,10 +4,12 @@ engines' code, so the sweeps the buggy adapter made are never reused."""
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import pytest
 
 from truestep.adapters import resolve_engine
+from truestep.execution import journal
 from truestep.execution.journal import Journal, JournalError, code_digest, fingerprint
 
 ADAPTER = """
@@ -42,3 +44,30 @@ def test_a_fixed_adapter_does_not_resume_the_buggy_ones_sweeps(tmp_path, monkeyp
 def test_truestep_s_own_engines_carry_its_source():
     digests = code_digest(["reference", "scipy"])
     assert len(set(digests.values())) == 2 and all(len(d) == 16 for d in digests.values())
+
+
+def test_truestep_s_sources_include_the_subpackages_a_checkout_links_in():
+    package = Path(journal.__file__).resolve().parents[1]
+    names = {path.relative_to(package).as_posix() for path in journal.own_sources()}
+    assert {"adapters/reference.py", "reference_impl/integrate.py", "cases/loader.py"} <= names
+    assert "execution/journal.py" in names and not any("__pycache__" in n for n in names)
+
+
+def test_truestep_s_own_engines_need_no_lookup_of_the_installed_distributions(monkeypatch):
+    from importlib import metadata
+
+    def refuse():
+        raise AssertionError("looked up every installed distribution for an engine of truestep")
+
+    monkeypatch.setattr(metadata, "packages_distributions", refuse)
+    assert set(code_digest(["reference", "pymunk", "scipy"])) == {"reference", "pymunk", "scipy"}
+
+
+def test_the_distributions_holding_a_module_are_those_importlib_maps_it_to():
+    from importlib import metadata
+
+    from truestep.runtime.distributions import holding
+
+    owners = metadata.packages_distributions()
+    assert {top: holding(top) for top in owners} == owners
+    assert holding("no_such_module_anywhere") == []

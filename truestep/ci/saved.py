@@ -80,9 +80,9 @@ def engine_versions(engines: list[str], packages: dict[str, str]) -> dict[str, s
     holds the module its registration names (found without importing it); ``""`` where
     none does (an engine given as ``module:Class`` from a path)."""
     from truestep.adapters import registered
+    from truestep.runtime.distributions import holding
 
     targets = registered()
-    owners = metadata.packages_distributions()
     libraries = _libraries()
     out = {}
     for engine in engines:
@@ -91,7 +91,8 @@ def engine_versions(engines: list[str], packages: dict[str, str]) -> dict[str, s
             out[engine] = f"{library} {packages[library]}"
             continue
         target = targets.get(engine, engine if ":" in engine else "")
-        dists = owners.get(target.partition(":")[0].split(".")[0], [])
+        top = target.partition(":")[0].split(".")[0]
+        dists = holding(top) if top else []
         out[engine] = f"{dists[0]} {metadata.version(dists[0])}" if dists else ""
     return out
 

@@ -84,26 +84,44 @@ def _case_digest(case: Case) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def own_sources() -> list[Path]:
+    """Every ``.py`` file of the installed ``truestep`` package, sorted by its path inside it:
+    the subpackages a source checkout links in (``adapters``, ``cases``,
+    ``reference_impl``) are followed, so a fix there changes :func:`code_digest` too."""
+    package = Path(__file__).resolve().parents[1]
+    found = []
+    for folder, dirs, files in os.walk(package, followlinks=True):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        found += [Path(folder, name) for name in files if name.endswith(".py")]
+    return sorted(found, key=lambda path: path.relative_to(package).as_posix())
+
+
 def code_digest(engines: list[str]) -> dict[str, str]:
     """Per engine, a digest of the code its rows come from: the source of its adapter's
     module, the version of the distribution that holds it, and, for truestep's own
-    engines, every source file of truestep (the reference's kernels, the harness that
-    measures). A fix to an adapter changes it, so ``--resume`` never reuses sweeps the
-    buggy code made. truestep's own version is in the fingerprint already
-    (:func:`fingerprint`): the installed distributions are looked up (some 0.2 s) only for
-    an engine whose adapter lives in another package."""
+    engines (an adapter module of the ``truestep`` package), every source file of truestep
+    (:func:`own_sources`: the reference's kernels, the harness that measures). A fix to an
+    adapter changes it, so ``--resume`` never reuses sweeps the buggy code made.
+    truestep's own version is in the fingerprint already (:func:`fingerprint`): the
+    distribution that holds another engine's adapter is looked up by its top-level name
+    (:func:`truestep.runtime.distributions.holding`)."""
     import functools
     import inspect
     from importlib import metadata
 
     from truestep.adapters import adapter_class
+    from truestep.runtime.distributions import holding
 
-    own = hashlib.sha256()
     package = Path(__file__).resolve().parents[1]
-    for path in sorted(package.rglob("*.py")):
-        own.update(path.relative_to(package).as_posix().encode())
-        own.update(path.read_bytes())
-    owners = functools.cache(metadata.packages_distributions)
+
+    @functools.cache
+    def own() -> bytes:
+        digest = hashlib.sha256()
+        for path in own_sources():
+            digest.update(path.relative_to(package).as_posix().encode())
+            digest.update(path.read_bytes())
+        return digest.digest()
+
     out = {}
     for engine in engines:
         h = hashlib.sha256()
@@ -114,13 +132,12 @@ def code_digest(engines: list[str]) -> dict[str, str]:
             module, source = None, None
         if source is not None:
             h.update(Path(source).read_bytes())
-            if Path(source).resolve().is_relative_to(package):
-                h.update(own.digest())
-                out[engine] = h.hexdigest()[:16]
-                continue
         top = module.__name__.split(".")[0] if module is not None else ""
-        for dist in owners().get(top, []) if top else []:
-            h.update(f"{dist} {metadata.version(dist)}".encode())
+        if top == "truestep":
+            h.update(own())
+        else:
+            for dist in holding(top) if top else []:
+                h.update(f"{dist} {metadata.version(dist)}".encode())
         out[engine] = h.hexdigest()[:16]
     return out
 
