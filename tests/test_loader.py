@@ -357,3 +357,24 @@ def test_an_energy_drift_gate_a_case_never_measures_warns_when_the_case_loads(
     published = pd.read_csv(Path(__file__).resolve().parents[1] / "reports" / "results.csv")
     rows = published[(published["case"] == name) & (published["status"] == "ok")]
     assert len(rows) and bool(rows["energy_drift"].notna().any()) is not warned
+
+
+def test_an_exact_solution_whose_check_never_returns_is_refused_as_a_hang(monkeypatch) -> None:
+    """The check that a case's exact solution fits it ends within
+    :data:`~truestep.cases.loader.EXACT_CHECK_S` (0.5 s here): one that never returns is
+    the case's error, named a hang, not "does not fit"; the library's own checks end far
+    inside the limit (the slowest, the million-particle rain, in about a second)."""
+    from truestep.cases import loader
+
+    def never(case, t):
+        while True:
+            np.sum(np.arange(10))
+
+    monkeypatch.setattr(loader, "EXACT_CHECK_S", 0.5)
+    monkeypatch.setattr(loader, "exact_named", lambda name: never)
+    started = time.perf_counter()
+    with pytest.raises(CaseError) as err:
+        load_case(CASE_DIR / "free-fall.toml")
+    assert time.perf_counter() - started < 5.0
+    assert "did not end within 0.5 s (the guard against a check that never returns)" in str(err.value)
+    assert "does not fit" not in str(err.value)
