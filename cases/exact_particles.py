@@ -246,8 +246,9 @@ def bounce_paths(
     plane (its centre at height r). Tangential motion is uniform. ``g`` (m/s^2) is gravity
     along the plane's inward normal. Every ball's schedule is the recurrence of
     :func:`bounce_schedule`, run for all balls at once (bounce by bounce, each ball until
-    its own stop), so each number is the one that function gives; memory and work grow
-    with T N and the bounces, not with a grid per ball.
+    its own stop or the last time read before it comes to rest, whichever is first:
+    :func:`_last_time_in_flight`), so each number is the one that function gives; memory
+    and work grow with T N and the bounces before the times read, not with a grid per ball.
     """
     n, e = plane.normal, plane.restitution
     t = np.asarray(t, float)
@@ -255,14 +256,15 @@ def bounce_paths(
     w0 = v0 @ n
     speed = np.sqrt(w0**2 + 2 * g * u0)
     first = (w0 + speed) / g
-    t_max = float(np.max(t, initial=0.0))
     order = np.argsort(t, kind="stable")
+    rest_at = first + 2 * e * speed / (g * (1 - e)) if e < 1 else None
+    last = _last_time_in_flight(t[order], rest_at, len(u0))
     bounced = np.zeros((len(t), len(u0)), bool)  # a bounce at or before t[j]
     at = np.zeros((len(t), len(u0)))  # the time of the last such bounce (s)
     leave = np.zeros((len(t), len(u0)))  # and the normal speed it left with (m/s)
     alive, time, launch, count = np.arange(len(u0)), first, e * speed, 1
     while alive.size:
-        go = (time <= t_max) & (launch > 1e-300) & (count < 100000)
+        go = (time <= last[alive]) & (launch > 1e-300) & (count < 100000)
         after = np.where(go, time + 2 * launch / g, np.inf)
         # the times from this bounce to the next: this bounce is the last before them
         lo, hi = np.searchsorted(t[order], time), np.searchsorted(t[order], after)
@@ -277,12 +279,26 @@ def bounce_paths(
     start_w = np.where(bounced, leave, w0)
     u = start_u + start_w * since - 0.5 * g * since**2
     w = start_w - g * since
-    if e < 1:
-        rest = t[:, None] >= first + 2 * e * np.sqrt(w0**2 + 2 * g * u0) / (g * (1 - e))
+    if rest_at is not None:
+        rest = t[:, None] >= rest_at
         u, w = np.where(rest, 0.0, u), np.where(rest, 0.0, w)
     vt = v0 - w0[:, None] * n
     x = x0 + vt * t[:, None, None] + (u - u0)[..., None] * n
     return x, vt + w[..., None] * n
+
+
+def _last_time_in_flight(t: np.ndarray, rest: np.ndarray | None, balls: int) -> np.ndarray:
+    """Per ball (N,), the latest of the sorted times ``t`` (T,) s before it comes to rest
+    at ``rest`` (N,) s, or ``-inf`` where every time is at or after it; with ``rest``
+    ``None`` (e = 1, no rest) the latest time, at least 0, for every ball. A ball's
+    bounces after that time change nothing read (a time at or after ``rest`` reads the
+    ball at rest), so its schedule is followed no further: a ball that comes to rest inside
+    the run bounces without end before it (about 1000 times, until its launch speed is
+    under 1e-300), and the times read stop it after the few bounces before them."""
+    if rest is None:
+        return np.full(balls, float(np.max(t, initial=0.0)))
+    k = np.searchsorted(t, rest, side="left")  # t[:k] < rest
+    return np.where(k > 0, t[np.maximum(k - 1, 0)] if len(t) else -np.inf, -np.inf)
 
 
 def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

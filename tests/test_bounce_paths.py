@@ -102,3 +102,23 @@ def test_a_million_particle_rain_loads(case_named, tmp_path):
     case = load_case(path)
     assert case.particles.n == 1_000_000
     assert dataclasses.is_dataclass(case.particles)
+
+
+def test_a_ball_at_rest_before_the_times_read_is_followed_no_further(monkeypatch):
+    """The schedules are followed to the last time read before each ball comes to rest,
+    not through the thousand bounces (to a launch speed under 1e-300) that come before
+    it: the same bits as each ball's whole schedule, in a few rounds of the recurrence."""
+    from truestep.cases import exact_particles
+
+    rounds = []
+    ranges = exact_particles._ranges
+    monkeypatch.setattr(exact_particles, "_ranges", lambda lo, hi: rounds.append(1) or ranges(lo, hi))
+    rng = np.random.default_rng(3)
+    plane = Plane(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5, 0.0)
+    x0, v0, r = _balls(rng, 40, plane.normal)
+    t = np.array([0.0, 0.2, 0.45, 3.0, 5.0])  # every ball is at rest by 3 s
+    x, v = bounce_paths(x0, v0, r, plane, G, t)
+    assert len(rounds) < 40
+    for i in range(len(r)):
+        xi, vi = _one_ball(x0[i], v0[i], float(r[i]), plane, G, t)
+        assert x[:, i].tobytes() == xi.tobytes() and v[:, i].tobytes() == vi.tobytes(), i
