@@ -11,6 +11,9 @@ The public API (everything else is internal and may change)::
     truestep.check(tables, gates="gates.toml")     # -> one row per gate verdict
     truestep.compare("baseline-dir", tables)       # -> what got worse or better
     truestep.gate("reports/results.csv", baseline="dir")  # -> truestep gate's report
+    truestep.engines(), truestep.save_baseline(results, dir), truestep.history_add(results),
+    truestep.history(quantity, case, engine, method), truestep.benchmark_json(results),
+    truestep.lecture_figures(out), truestep.environment()  # truestep list, baseline, ...
 
     class MyEngine(truestep.FixedStepAdapter): ...   # see README, "Writing an adapter"
 
@@ -57,6 +60,15 @@ _EXPORTS: dict[str, str] = {
     "GateRequest": "truestep.ci.gate_report",
     "GateInputError": "truestep.ci.gate_report",
     "select_engines": "truestep.api",
+    "engines": "truestep.api",
+    "EngineInfo": "truestep.api",
+    "save_baseline": "truestep.api",
+    "history_add": "truestep.api",
+    "history": "truestep.api",
+    "History": "truestep.api",
+    "benchmark_json": "truestep.api",
+    "lecture_figures": "truestep.api",
+    "environment": "truestep.api",
     "run_matrix": "truestep.execution.runner",
 }
 
@@ -64,6 +76,7 @@ __all__ = [
     "Adapter",
     "Case",
     "CaseError",
+    "EngineInfo",
     "Exact",
     "Feature",
     "FixedStepAdapter",
@@ -71,6 +84,7 @@ __all__ = [
     "GateInputError",
     "GateReport",
     "GateRequest",
+    "History",
     "MethodFacts",
     "OdeSpec",
     "ParticleModel",
@@ -82,16 +96,23 @@ __all__ = [
     "Tables",
     "Trajectory",
     "__version__",
+    "benchmark_json",
     "build_system",
     "check",
     "compare",
+    "engines",
+    "environment",
     "exact_solution",
     "gate",
     "get_adapter",
+    "history",
+    "history_add",
+    "lecture_figures",
     "load_case",
     "load_cases",
     "run",
     "run_matrix",
+    "save_baseline",
     "select_engines",
 ]
 

@@ -1,4 +1,7 @@
-"""The functions behind ``truestep run`` and ``truestep gate``, for use from Python.
+"""The functions behind every ``truestep`` command, for use from Python: each command is a
+parser and a call into this module (``run``, ``gate``, ``engines`` for ``list``,
+``save_baseline``, ``history_add``, ``history``, ``benchmark_json``, ``lecture_figures``,
+``environment``).
 
 Everything here takes and returns plain values and pandas tables::
 
@@ -26,10 +29,38 @@ from truestep.cases import Case, load_cases
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.ci.gate_report import GateReport, GateRequest
 from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
+from truestep.ci.history import HistoryError
+from truestep.ci.saved import BaselineRefused
 from truestep.execution.experiment import Experiment, Finished, Tables
 from truestep.numerics import own_run
 from truestep.runtime import collector
+from truestep.runtime.folder import OutRefused
 from truestep.runtime.visible import visible
+from truestep.tables.io import TableError
+
+__all__ = [
+    "BaselineRefused",
+    "EngineInfo",
+    "History",
+    "HistoryError",
+    "OutRefused",
+    "TableError",
+    "Tables",
+    "benchmark_json",
+    "check",
+    "compare",
+    "engines",
+    "environment",
+    "gate",
+    "gate_results",
+    "history",
+    "history_add",
+    "lecture_figures",
+    "run",
+    "save_baseline",
+    "select_engines",
+    "shadowed",
+]
 
 
 def select_engines(
@@ -272,3 +303,122 @@ def compare(
     return _compare(
         tables_of(baseline), tables_of(current), tolerances=tolerances, time_against=time_against
     ).table()
+
+
+@dataclasses.dataclass(frozen=True)
+class EngineInfo:
+    """What ``truestep list`` says of an engine: its ``status`` (``installed``, or why it
+    cannot run here, with the pip line that adds it), and, installed, its ``methods`` and
+    ``capabilities`` (empty where its adapter could not be made: ``status`` says why)."""
+
+    name: str
+    status: str
+    methods: tuple[str, ...] = ()
+    capabilities: tuple[str, ...] = ()
+
+
+def engines(names: Iterable[str] | None = None) -> list[EngineInfo]:
+    """:class:`EngineInfo` of each engine of ``names`` (default: every registered one), in
+    that order; a name nothing registers is ``unknown engine``."""
+    from truestep.adapters import UnknownEngine, get_adapter
+
+    out = []
+    for name in list(registered()) if names is None else list(names):
+        status = engine_status(name) if name in registered() else "unknown engine"
+        if status != "installed":
+            out.append(EngineInfo(name, status))
+            continue
+        try:
+            adapter = get_adapter(name)
+        except UnknownEngine as err:  # its adapter could not be made
+            out.append(EngineInfo(name, f"unusable: {err}"))
+            continue
+        out.append(
+            EngineInfo(
+                name,
+                status,
+                tuple(map(str, adapter.methods)),
+                tuple(sorted(map(str, adapter.capabilities))),
+            )
+        )
+    return out
+
+
+def save_baseline(results: str | Path, dest: str | Path) -> dict:
+    """Keep a run's tables as a baseline in the folder ``dest`` (``truestep baseline
+    save``): its provenance (:func:`truestep.ci.saved.save`). Raises
+    :class:`~truestep.ci.saved.BaselineRefused` for a folder that is not new, empty or a
+    baseline saved before, or a run that cannot be read."""
+    from truestep.ci.saved import save
+
+    return save(Path(results), Path(dest))
+
+
+@dataclasses.dataclass(frozen=True)
+class History:
+    """One row's quantity over the commits of a history (``truestep history show``): the
+    saved ``points`` (:class:`truestep.ci.history.Point`, oldest first), the indices of
+    those where it ``stepped``, and the relative ``tolerance`` a step exceeds."""
+
+    points: list
+    stepped: list[int]
+    tolerance: float
+
+
+def history_add(results: str | Path, store: str | Path = ".truestep-history") -> dict:
+    """Save a run into the history ``store`` under the project's git revision
+    (``truestep history add``): the entry written. Raises
+    :class:`~truestep.ci.history.HistoryError` for a run or store that cannot be used."""
+    from truestep.ci import history
+
+    return history.add(Path(results), Path(store))
+
+
+def history(
+    quantity: str,
+    case: str,
+    engine: str,
+    method: str,
+    *,
+    dt: float | None = None,
+    store: str | Path = ".truestep-history",
+    tolerance: float | None = None,
+) -> History:
+    """A row's ``quantity`` over the saved commits and where it stepped (``truestep history
+    show``; ``tolerance`` defaults to the baseline comparison's for the quantity, else
+    0.1). Raises :class:`~truestep.ci.history.HistoryError` for a store that cannot be
+    read."""
+    from truestep.ci import history as kept
+    from truestep.ci.baseline import TOLERANCES
+
+    points = kept.series(Path(store), quantity, case, engine, method, dt)
+    tol = tolerance if tolerance is not None else TOLERANCES.get(quantity, 0.1)
+    return History(points, sorted(set(kept.steps([p.value for p in points], tol))), tol)
+
+
+def benchmark_json(results: str | Path) -> list[dict]:
+    """A run's ``results.csv`` as the JSON github-action-benchmark reads
+    (``customSmallerIsBetter``; ``truestep history export``). Raises
+    :class:`~truestep.tables.io.TableError` for a table that cannot be read."""
+    from truestep.ci import history
+    from truestep.tables.io import read_table
+
+    return history.benchmark_json(read_table(Path(results), "results", set()))
+
+
+def lecture_figures(out: str | Path = "reports") -> list[tuple[Path, str]]:
+    """Draw the lecture's figures into ``out/figures`` (``truestep figures``): each
+    figure's path and caption, in slide order. Raises
+    :class:`~truestep.runtime.folder.OutRefused` for a folder truestep may not write."""
+    from truestep.figures.lecture import write_lecture_figures
+    from truestep.runtime.folder import prepare
+
+    return write_lecture_figures(prepare(Path(out)) / "figures")
+
+
+def environment() -> dict[str, str]:
+    """The variables that give this machine truestep's numbers (``truestep env``): each
+    one's value here where it is set, else the value truestep's own processes set."""
+    from truestep.numerics import environment as wanted
+
+    return {key: os.environ.get(key, value) for key, value in wanted().items()}

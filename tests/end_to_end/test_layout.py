@@ -186,3 +186,27 @@ def test_the_leaves_import_nothing_above_them(graph):
     for m in graph.modules:
         if _layer(m) == 0:
             assert all(_layer(w) == 0 for w in graph.find_modules_directly_imported_by(m)), m
+
+
+THIN_COMMANDS = ("baseline", "env", "figures", "history", "listing")
+"""Commands that are a parser and calls into :mod:`truestep.api` alone. ``run``, ``gate``,
+``bench`` and ``compile`` call the API too but still reach below it: ``run`` for its
+journal, signal handling and run budget, ``gate`` for the gate request's types and the
+column spec, ``bench`` for its sizes and table writer, ``compile`` for the compile
+helpers it forks (issue 38, item 4)."""
+COMMAND_VOCABULARY = {
+    "truestep.api",
+    "truestep.commands",
+    "truestep.commands.common",
+    "truestep.runtime.visible",
+}
+"""What a thin command may import of truestep: the API, the commands' shared parser
+helpers, and the escaping of what it prints."""
+
+
+@pytest.mark.parametrize("command", THIN_COMMANDS)
+def test_a_thin_command_imports_nothing_of_truestep_but_the_api(graph, command):
+    module = f"truestep.commands.{command}"
+    imported = {m for m in graph.find_modules_directly_imported_by(module) if m.startswith("truestep")}
+    assert "truestep.api" in imported, f"{module} does not call truestep.api"
+    assert imported <= COMMAND_VOCABULARY, f"{module} imports {sorted(imported - COMMAND_VOCABULARY)}"

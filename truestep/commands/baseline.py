@@ -36,11 +36,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``truestep baseline save DIR``: a run's tables kept as a baseline
-    (:func:`truestep.ci.saved.save`)."""
-    from truestep.ci.saved import BaselineRefused, save
+    (:func:`truestep.api.save_baseline`)."""
+    from truestep.api import BaselineRefused, save_baseline
 
     try:
-        provenance = save(Path(args.results), common.folder(args.dir, "DIR"))
+        provenance = save_baseline(Path(args.results), common.folder(args.dir, "DIR"))
     except BaselineRefused as err:
         raise UsageError(str(err)) from None
     except OSError as err:

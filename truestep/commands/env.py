@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -24,8 +23,8 @@ def main(args: argparse.Namespace) -> int:
     ``export`` lines (for processes truestep does not start itself: Dask workers)."""
     import shlex
 
-    from truestep.numerics import environment
+    from truestep.api import environment
 
     for key, value in environment().items():
-        print(f"export {key}={shlex.quote(os.environ.get(key, value))}")
+        print(f"export {key}={shlex.quote(value)}")
     return 0

@@ -20,13 +20,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from truestep.figures.lecture import write_lecture_figures
-    from truestep.runtime.folder import OutRefused, prepare
+    """``truestep figures``: the lecture's figures (:func:`truestep.api.lecture_figures`)."""
+    from truestep.api import OutRefused, lecture_figures
 
     try:
-        out = prepare(common.folder(args.out, "--out"))
+        drawn = lecture_figures(common.folder(args.out, "--out"))
     except OutRefused as err:
         raise UsageError(str(err)) from None
-    for path, caption in write_lecture_figures(out / "figures"):
+    for path, caption in drawn:
         print(f"{path}: {caption}")
     return 0

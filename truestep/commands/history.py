@@ -54,38 +54,42 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``truestep history add | show | export`` (:mod:`truestep.ci.history`)."""
+    """``truestep history add | show | export`` (:func:`truestep.api.history_add`,
+    :func:`truestep.api.history`, :func:`truestep.api.benchmark_json`)."""
     import json
 
-    from truestep.ci import history
+    from truestep import api
 
     try:
         if args.action == "add":
-            entry = history.add(Path(args.results), Path(args.store))
+            entry = api.history_add(args.results, args.store)
             print(f"added {args.results} to {args.store} as {entry['folder']}")
             return 0
         if args.action == "export":
-            from truestep.tables.io import TableError, read_table
-
             try:
-                results = read_table(Path(args.results), "results", set())
-            except TableError as err:
+                runs = api.benchmark_json(args.results)
+            except api.TableError as err:
                 raise UsageError(str(err)) from None
-            text = json.dumps(history.benchmark_json(results), indent=1) + "\n"
+            text = json.dumps(runs, indent=1) + "\n"
             if args.out == "-":
                 sys.stdout.write(text)
             else:
                 Path(args.out).write_text(text)
             return 0
-        points = history.series(Path(args.store), args.quantity, args.case, args.engine, args.method, args.dt)
-    except history.HistoryError as err:
+        kept = api.history(
+            args.quantity,
+            args.case,
+            args.engine,
+            args.method,
+            dt=args.dt,
+            store=args.store,
+            tolerance=args.tolerance,
+        )
+    except api.HistoryError as err:
         raise UsageError(str(err)) from None
+    points, found, tol = kept.points, set(kept.stepped), kept.tolerance
     if not points:
         raise UsageError(f"{args.store}: no saved run (truestep history add first)")
-    from truestep.ci.baseline import TOLERANCES
-
-    tol = args.tolerance if args.tolerance is not None else TOLERANCES.get(args.quantity, 0.1)
-    found = set(history.steps([p.value for p in points], tol))
     for k, p in enumerate(points):
         mark = ""
         if k in found:

@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from truestep.adapters import UnknownEngine, engine_status, get_adapter, registered, shadowed
+    from truestep.api import engines, shadowed
 
     cases = common.load(args.cases)
     if args.quick and args.cases == "*":
@@ -44,17 +44,11 @@ def main(args: argparse.Namespace) -> int:
     print("engines:")
     for line in shadowed():
         print(visible(f"  {line}"))
-    names = list(registered()) if not args.engines else [e.strip() for e in args.engines.split(",")]
-    for name in names:
-        status = engine_status(name) if name in registered() else "unknown engine"
-        if status != "installed":
-            print(visible(f"  {name:10s} {status}"))
+    names = None if not args.engines else [e.strip() for e in args.engines.split(",")]
+    for info in engines(names):
+        if info.status != "installed":  # one line each, the list goes on
+            print(visible(f"  {info.name:10s} {info.status}"))
             continue
-        try:
-            a = get_adapter(name)
-        except UnknownEngine as err:  # its adapter could not be made: one line, the list goes on
-            print(visible(f"  {name:10s} unusable: {err}"))
-            continue
-        print(visible(f"  {name:10s} methods: {', '.join(map(str, a.methods))}"))
-        print(visible(f"  {'':10s} capabilities: {', '.join(sorted(map(str, a.capabilities)))}"))
+        print(visible(f"  {info.name:10s} methods: {', '.join(info.methods)}"))
+        print(visible(f"  {'':10s} capabilities: {', '.join(info.capabilities)}"))
     return 0

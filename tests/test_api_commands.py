@@ -1,0 +1,62 @@
+"""Every command is a call into :mod:`truestep.api` (issue 38, item 4): what the API
+returns is what the command prints, read back from the command's own output."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+import truestep
+from truestep.cli import main
+
+QUICK = Path(__file__).resolve().parent / "baselines" / "quick"
+
+
+def test_engines_are_what_list_prints(capsys):
+    names = ["reference", "pymunk", "no-such-engine"]
+    assert main(["list", "--cases", "free-fall", "--engines", ",".join(names)]) == 0
+    printed = capsys.readouterr().out.split("engines:\n", 1)[1].splitlines()
+    infos = truestep.engines(names)
+    assert [i.name for i in infos] == names
+    assert infos[2].status == "unknown engine" and infos[2].methods == ()
+    for info in infos[:2]:
+        assert info.status == "installed"
+        line = next(k for k, text in enumerate(printed) if text.split()[:1] == [info.name])
+        assert printed[line].split("methods: ", 1)[1] == ", ".join(info.methods)
+        assert printed[line + 1].split("capabilities: ", 1)[1] == ", ".join(info.capabilities)
+        assert info.methods == tuple(truestep.get_adapter(info.name).methods)
+
+
+def test_the_environment_is_what_env_exports(capsys):
+    assert main(["env"]) == 0
+    exported = dict(
+        line.removeprefix("export ").split("=", 1) for line in capsys.readouterr().out.splitlines()
+    )
+    assert {k: v.strip("'") for k, v in exported.items()} == truestep.environment()
+
+
+def test_a_baseline_and_a_history_through_the_api(tmp_path, monkeypatch, capsys):
+    root = tmp_path / "project"
+    root.mkdir()
+    for args in (["init", "-q"], ["config", "user.email", "t@t"], ["config", "user.name", "t"]):
+        subprocess.run(["git", *args], cwd=root, check=True)
+    (root / "a.txt").write_text("a\n")
+    subprocess.run(["git", "add", "a.txt"], cwd=root, check=True)
+    subprocess.run(["git", "commit", "-q", "-m", "one"], cwd=root, check=True)
+    monkeypatch.chdir(root)
+    provenance = truestep.save_baseline(QUICK / "results.csv", root / "base")
+    assert (root / "base" / "results.csv").is_file() and provenance["project"]["revision"]
+    with pytest.raises(truestep.api.BaselineRefused):
+        truestep.save_baseline(QUICK / "results.csv", root)  # a folder holding other files
+    entry = truestep.history_add(QUICK / "results.csv", root / "store")
+    assert entry["folder"]
+    store = root / "store"
+    kept = truestep.history("error", "harmonic-oscillator", "reference", "rk4", dt=0.002, store=store)
+    assert len(kept.points) == 1 and kept.stepped == [] and kept.tolerance > 0
+    assert main(["history", "export", "--results", str(QUICK / "results.csv")]) == 0
+    assert json.loads(capsys.readouterr().out) == truestep.benchmark_json(QUICK / "results.csv")
+    with pytest.raises(truestep.api.HistoryError):
+        truestep.history_add(root / "nothing.csv", root / "store")
