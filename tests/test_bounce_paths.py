@@ -122,3 +122,58 @@ def test_a_ball_at_rest_before_the_times_read_is_followed_no_further(monkeypatch
     for i in range(len(r)):
         xi, vi = _one_ball(x0[i], v0[i], float(r[i]), plane, G, t)
         assert x[:, i].tobytes() == xi.tobytes() and v[:, i].tobytes() == vi.tobytes(), i
+
+
+def _rain(case, restitution, seed):
+    """``case`` (the particle rain) with ``restitution`` and random start velocities."""
+    rng = np.random.default_rng(seed)
+    m = case.particles
+    plane = dataclasses.replace(m.planes[0], restitution=restitution)
+    v0 = rng.normal(0.0, 1.0, m.v0.shape) * np.array([1.0, 1.0, 0.0])
+    return dataclasses.replace(case, scene=dataclasses.replace(m, planes=[plane], v0=v0))
+
+
+def test_the_compiled_rain_energies_are_the_states_energies(case_named):
+    """The compiled sums (no states written) against ``total_energy`` of the states
+    ``bounce_paths`` gives, at unsorted and repeated times before, across and after the
+    balls come to rest: the same to 1e-12 of the energy moved."""
+    from truestep.cases.bounce_energies import rain_energies
+
+    t = np.concatenate([np.linspace(0.0, 3.0, 301), [2.9, 0.0, 1.7, 0.61, 0.61]])
+    for e in (0.0, 0.5, 0.9, 1.0):
+        case = _rain(case_named("particle-rain"), e, seed=int(10 * e))
+        m = case.particles
+        x, v = bounce_paths(m.x0, m.v0, m.radius, m.planes[0], 9.81, t)
+        kinetic, potential = es._particle_energies(case, x, v, None)
+        times, ke, pe = rain_energies(case, t)
+        assert times.tobytes() == t.tobytes()
+        moved = max(np.ptp(kinetic), np.ptp(potential))
+        np.testing.assert_allclose(ke, kinetic, rtol=0, atol=1e-12 * moved, err_msg=f"e={e}")
+        np.testing.assert_allclose(pe, potential, rtol=0, atol=1e-12 * moved, err_msg=f"e={e}")
+
+
+def test_elastic_balls_keep_their_energy_in_the_compiled_sums(case_named):
+    """The physics, not the formula: with e = 1 the rain's kinetic plus potential energy
+    stays its start's at every time."""
+    from truestep.cases.bounce_energies import rain_energies
+
+    case = _rain(case_named("particle-rain"), 1.0, seed=4)
+    _, ke, pe = rain_energies(case, np.linspace(0.0, 5.0, 1001))
+    total = ke + pe
+    np.testing.assert_allclose(total, total[0], rtol=0, atol=1e-12 * np.ptp(ke))
+
+
+def test_a_large_rain_s_energy_scale_is_read_from_the_compiled_sums(case_named, monkeypatch):
+    """From :data:`~truestep.measures.energy_scale.COMPILED_RAIN` balls the scale is read
+    from the compiled sums, with no state written; it is the scale the states give."""
+    from truestep.cases import exact_particles
+
+    case = _rain(case_named("particle-rain"), 0.5, seed=6)
+    es._CACHE.clear()
+    general = es.energy_scale(case)
+    es._CACHE.clear()
+    monkeypatch.setattr(es, "COMPILED_RAIN", case.particles.n)
+    monkeypatch.setattr(exact_particles, "bounce_paths", None)  # no states are read
+    compiled = es.energy_scale(case)
+    es._CACHE.clear()
+    assert np.isfinite(general) and abs(compiled - general) <= 1e-12 * general
