@@ -19,7 +19,7 @@ def test_engines_are_what_list_prints(capsys):
     names = ["reference", "pymunk", "no-such-engine"]
     assert main(["list", "--cases", "free-fall", "--engines", ",".join(names)]) == 0
     printed = capsys.readouterr().out.split("engines:\n", 1)[1].splitlines()
-    infos = truestep.engines(names)
+    infos = list(truestep.engines(names))
     assert [i.name for i in infos] == names
     assert infos[2].status == "unknown engine" and infos[2].methods == ()
     for info in infos[:2]:

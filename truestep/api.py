@@ -19,7 +19,7 @@ import dataclasses
 import functools
 import os
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -317,31 +317,25 @@ class EngineInfo:
     capabilities: tuple[str, ...] = ()
 
 
-def engines(names: Iterable[str] | None = None) -> list[EngineInfo]:
+def engines(names: Iterable[str] | None = None) -> Iterator[EngineInfo]:
     """:class:`EngineInfo` of each engine of ``names`` (default: every registered one), in
-    that order; a name nothing registers is ``unknown engine``."""
+    that order, one at a time as each is looked at (``truestep list`` prints each line
+    before it imports the next engine); a name nothing registers is ``unknown engine``."""
     from truestep.adapters import UnknownEngine, get_adapter
 
-    out = []
     for name in list(registered()) if names is None else list(names):
         status = engine_status(name) if name in registered() else "unknown engine"
         if status != "installed":
-            out.append(EngineInfo(name, status))
+            yield EngineInfo(name, status)
             continue
         try:
             adapter = get_adapter(name)
         except UnknownEngine as err:  # its adapter could not be made
-            out.append(EngineInfo(name, f"unusable: {err}"))
+            yield EngineInfo(name, f"unusable: {err}")
             continue
-        out.append(
-            EngineInfo(
-                name,
-                status,
-                tuple(map(str, adapter.methods)),
-                tuple(sorted(map(str, adapter.capabilities))),
-            )
+        yield EngineInfo(
+            name, status, tuple(map(str, adapter.methods)), tuple(sorted(map(str, adapter.capabilities)))
         )
-    return out
 
 
 def save_baseline(results: str | Path, dest: str | Path) -> dict:
