@@ -263,10 +263,17 @@ def _check_methods(name: str, adapter: Any) -> None:
         )
 
 
-ANSWER_S = 30.0
-"""Seconds an adapter has to answer a question truestep asks it in its own process
-(``missing``, ``duplicate``, ``skip``, ``same_steps``: each reads a scene and answers at
-once)."""
+ANSWER_S = 300.0
+"""Seconds within which an adapter must answer a question truestep asks it (``missing``,
+``duplicate``, ``skip``, ``same_steps``: each reads a scene and answers at once): a guard
+against a question that never returns (a licence server that never answers), not a
+bound on its cost, so that no row's verdict depends on how fast the machine is. A
+question that hangs is asked once: the engine's later questions of that name fail at
+once (:data:`_HUNG`)."""
+_HUNG: dict[tuple[str, str], float] = {}
+"""The questions (engine, call) that gave no answer within their limit in this process,
+with the limit: asked again, with other arguments, they fail at once, saying so, instead
+of holding the run up for another limit each."""
 PREPARE_ALL_S = 1800.0
 """Seconds an adapter's ``prepare_all`` has to compile what a run needs (a cold cache
 compiles for minutes)."""
@@ -308,15 +315,25 @@ def plugin_answer(
     from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
 
     limit_s = ANSWER_S if limit_s is None else limit_s
+    hung = _HUNG.get((engine, what))
+    if hung is not None:
+        raise PluginFailed(f"{engine}: {what} not asked again: it gave no answer within {hung:g} s before")
     if apart and not _own_code(engine):
         return _answer_apart(engine, what, fn, args, kwargs, limit_s, keep=apart != "only")
     try:
         with time_limit(limit_s, f"{engine}: {what}"):
             return fn(*args, **kwargs)
     except TimeLimitExceeded:
-        raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s") from None
+        raise _hung(engine, what, limit_s) from None
     except (Exception, SystemExit) as err:
         raise PluginFailed(f"{engine}: {what} raised {type(err).__name__}: {str(err)[:300]}") from None
+
+
+def _hung(engine: str, what: str, limit_s: float) -> PluginFailed:
+    """The failure of a call that gave no answer within ``limit_s`` s, kept in
+    :data:`_HUNG` so that the engine's next call of that name is not made."""
+    _HUNG[(engine, what)] = limit_s
+    return PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s")
 
 
 def _lived(fn: Callable[..., Any], kwargs: dict, *args: Any) -> None:
@@ -358,7 +375,7 @@ def _answer_apart(
     call = functools.partial(fn, **kwargs) if keep else functools.partial(_lived, fn, kwargs)
     out = run_isolated(call, args, limit_s)
     if out.status == "timeout":
-        raise PluginFailed(f"{engine}: {what} gave no answer within {limit_s:g} s")
+        raise _hung(engine, what, limit_s)
     if out.status != "ok":
         ended = "exit code" in out.message and "died" in out.message
         said = (
