@@ -282,3 +282,22 @@ def test_exact_for_evaluates_and_keeps_the_last_solutions():
     assert len(metrics._EXACT_CACHE) <= metrics._EXACT_CACHE_SIZE == 32
     assert metrics.exact_for(c, t) is not ex
     assert metrics.exact_for(c, np.array([39.0])) is metrics.exact_for(c, np.array([39.0]))
+
+
+def test_the_exact_paths_kept_are_bounded_in_bytes_and_the_newest_is_always_kept(case_named, monkeypatch):
+    """A million balls' exact path at 21 records is 1 GB: the cache of exact paths is
+    bounded in bytes as well as in count, and the path just asked for stays."""
+    from truestep.measures import metrics
+
+    case = case_named("particle-rain")
+    monkeypatch.setattr(metrics, "_EXACT_CACHE", {})
+    first = metrics.exact_for(case, np.linspace(0.0, 1.0, 11))
+    size = metrics._bytes(first)
+    assert size >= 2 * 11 * case.particles.n * 3 * 8
+    monkeypatch.setattr(metrics, "_EXACT_CACHE_BYTES", size + 1)
+    second = metrics.exact_for(case, np.linspace(0.0, 1.0, 12))
+    assert [e for _, e in metrics._EXACT_CACHE.values()] == [second]
+    monkeypatch.setattr(metrics, "_EXACT_CACHE_BYTES", 0)
+    third = metrics.exact_for(case, np.linspace(0.0, 1.0, 13))
+    assert [e for _, e in metrics._EXACT_CACHE.values()] == [third]
+    assert metrics.exact_for(case, np.linspace(0.0, 1.0, 13)) is third
