@@ -1,12 +1,16 @@
 """``truestep compile`` compiles each engine's kernels (its ``warm`` hook) in a forked
-process beside the reference's loops (:func:`truestep.commands.compiling._warm_apart`)."""
+process beside the reference's loops (:func:`truestep.execution.build_step.warm_apart`)."""
 
 from __future__ import annotations
 
 import multiprocessing
 import os
 
-from truestep.commands.compiling import _warm_apart
+from truestep.execution.build_step import warm_apart
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
 
 
 def _raises(cases, say):
@@ -20,7 +24,7 @@ def _builds(cases, say):
 
 def _run(warm, parent: int | None = None) -> multiprocessing.Process:
     proc = multiprocessing.get_context("fork").Process(
-        target=_warm_apart, args=("some-engine", warm, ["a", "b"], parent or os.getpid())
+        target=warm_apart, args=("some-engine", warm, ["a", "b"], parent or os.getpid(), _say)
     )
     proc.start()
     proc.join(60)

@@ -11,9 +11,10 @@ The public API (everything else is internal and may change)::
     truestep.check(tables, gates="gates.toml")     # -> one row per gate verdict
     truestep.compare("baseline-dir", tables)       # -> what got worse or better
     truestep.gate("reports/results.csv", baseline="dir")  # -> truestep gate's report
+    # what truestep list, baseline, history, figures, env and compile do:
     truestep.engines(), truestep.save_baseline(results, dir), truestep.history_add(results),
     truestep.history(quantity, case, engine, method), truestep.benchmark_json(results),
-    truestep.lecture_figures(out), truestep.environment()  # truestep list, baseline, ...
+    truestep.lecture_figures(out), truestep.environment(), truestep.compile_ahead()
 
     class MyEngine(truestep.FixedStepAdapter): ...   # see README, "Writing an adapter"
 
@@ -69,6 +70,7 @@ _EXPORTS: dict[str, str] = {
     "benchmark_json": "truestep.api",
     "lecture_figures": "truestep.api",
     "environment": "truestep.api",
+    "compile_ahead": "truestep.api",
     "run_matrix": "truestep.execution.runner",
 }
 
@@ -100,6 +102,7 @@ __all__ = [
     "build_system",
     "check",
     "compare",
+    "compile_ahead",
     "engines",
     "environment",
     "exact_solution",

@@ -25,7 +25,7 @@ from pathlib import Path
 import pandas as pd
 
 from truestep.adapters import adapter_class, engine_status, registered, resolve_engine, shadowed
-from truestep.cases import Case, load_cases
+from truestep.cases import Case, load_case, load_cases
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.ci.gate_report import GateReport, GateRequest
 from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
@@ -49,6 +49,7 @@ __all__ = [
     "benchmark_json",
     "check",
     "compare",
+    "compile_ahead",
     "engines",
     "environment",
     "gate",
@@ -416,3 +417,16 @@ def environment() -> dict[str, str]:
     from truestep.numerics import environment as wanted
 
     return {key: os.environ.get(key, value) for key, value in wanted().items()}
+
+
+def compile_ahead(say: Callable[[str], None] = print) -> list[str]:
+    """Compile ahead what runs compile on first use (``truestep compile``): the reference's
+    loops for every case of the library and of the figures on every core, and each
+    installed engine's kernels in a forked process beside them; each line of progress
+    through ``say``. The engines whose kernels failed to compile (``truestep compile``
+    exits 1 on them)."""
+    from truestep.execution.build_step import compile_everything
+    from truestep.figures.scenes import FIGURE_CASE_DIR
+
+    figures = [load_case(path) for path in sorted(FIGURE_CASE_DIR.glob("*.toml"))]
+    return compile_everything([*load_cases("*"), *figures], say)

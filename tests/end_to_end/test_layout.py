@@ -188,12 +188,11 @@ def test_the_leaves_import_nothing_above_them(graph):
             assert all(_layer(w) == 0 for w in graph.find_modules_directly_imported_by(m)), m
 
 
-THIN_COMMANDS = ("baseline", "env", "figures", "history", "listing")
-"""Commands that are a parser and calls into :mod:`truestep.api` alone. ``run``, ``gate``,
-``bench`` and ``compile`` call the API too but still reach below it: ``run`` for its
-journal, signal handling and run budget, ``gate`` for the gate request's types and the
-column spec, ``bench`` for its sizes and table writer, ``compile`` for the compile
-helpers it forks (issue 38, item 4)."""
+THIN_COMMANDS = ("baseline", "compiling", "env", "figures", "history", "listing")
+"""Commands that are a parser and calls into :mod:`truestep.api` alone. ``run``, ``gate``
+and ``bench`` call the API too but still reach below it: ``run`` for its journal, signal
+handling and run budget, ``gate`` for the gate request's types and the column spec,
+``bench`` for its default sizes and its table writer (issue 38, item 4)."""
 COMMAND_VOCABULARY = {
     "truestep.api",
     "truestep.commands",
