@@ -11,10 +11,11 @@ The public API (everything else is internal and may change)::
     truestep.check(tables, gates="gates.toml")     # -> one row per gate verdict
     truestep.compare("baseline-dir", tables)       # -> what got worse or better
     truestep.gate("reports/results.csv", baseline="dir")  # -> truestep gate's report
-    # what truestep list, baseline, history, figures, env and compile do:
+    # what truestep list, baseline, history, figures, env, compile and bench do:
     truestep.engines(), truestep.save_baseline(results, dir), truestep.history_add(results),
     truestep.history(quantity, case, engine, method), truestep.benchmark_json(results),
-    truestep.lecture_figures(out), truestep.environment(), truestep.compile_ahead()
+    truestep.lecture_figures(out), truestep.environment(), truestep.compile_ahead(),
+    truestep.bench(engines, sizes=..., out=...)
 
     class MyEngine(truestep.FixedStepAdapter): ...   # see README, "Writing an adapter"
 
@@ -71,6 +72,7 @@ _EXPORTS: dict[str, str] = {
     "lecture_figures": "truestep.api",
     "environment": "truestep.api",
     "compile_ahead": "truestep.api",
+    "bench": "truestep.api",
     "run_matrix": "truestep.execution.runner",
 }
 
@@ -98,6 +100,7 @@ __all__ = [
     "Tables",
     "Trajectory",
     "__version__",
+    "bench",
     "benchmark_json",
     "build_system",
     "check",

@@ -26,11 +26,14 @@ import pandas as pd
 
 from truestep.adapters import adapter_class, engine_status, registered, resolve_engine, shadowed
 from truestep.cases import Case, load_case, load_cases
+from truestep.cases.limits import DEFAULT as _DEFAULT_LIMITS
 from truestep.cases.loader import load_gates_file, read_gate
 from truestep.ci.gate_report import GateReport, GateRequest
 from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
 from truestep.ci.history import HistoryError
 from truestep.ci.saved import BaselineRefused
+from truestep.execution.bench_defaults import BUDGET_S as BENCH_BUDGET_S
+from truestep.execution.bench_defaults import SIZES as BENCH_SIZES
 from truestep.execution.experiment import Experiment, Finished, Tables
 from truestep.numerics import own_run
 from truestep.runtime import collector
@@ -38,7 +41,14 @@ from truestep.runtime.folder import OutRefused
 from truestep.runtime.visible import visible
 from truestep.tables.io import TableError
 
+MAX_PARTICLES = _DEFAULT_LIMITS.particles
+"""The most particles a scene may have under the default limits (``truestep bench``'s
+largest size: the rain scene is read as a case)."""
+
 __all__ = [
+    "BENCH_BUDGET_S",
+    "BENCH_SIZES",
+    "MAX_PARTICLES",
     "BaselineRefused",
     "EngineInfo",
     "History",
@@ -46,6 +56,7 @@ __all__ = [
     "OutRefused",
     "TableError",
     "Tables",
+    "bench",
     "benchmark_json",
     "check",
     "compare",
@@ -430,3 +441,36 @@ def compile_ahead(say: Callable[[str], None] = print) -> list[str]:
 
     figures = [load_case(path) for path in sorted(FIGURE_CASE_DIR.glob("*.toml"))]
     return compile_everything([*load_cases("*"), *figures], say)
+
+
+def bench(
+    engines: Iterable[str],
+    *,
+    sizes: Iterable[float] | None = None,
+    budget_s: float | None = None,
+    out: str | Path = "bench",
+) -> pd.DataFrame:
+    """Particle-steps per second against n on the rain scene (``truestep bench``): the
+    scaling table (:func:`truestep.execution.bench.scaling_table`; its ``attrs`` hold the
+    copy bandwidth, bytes per particle-step, the time it took and its warm-ups), written
+    with its figure into ``out`` (``scaling.csv`` and ``figures/scaling.png``, whose paths
+    are ``attrs["csv"]`` and ``attrs["figure"]``). ``sizes`` default to :data:`BENCH_SIZES`, ``budget_s`` to
+    :data:`BENCH_BUDGET_S`. Raises :class:`~truestep.runtime.folder.OutRefused` for a
+    folder truestep may not write, before anything runs."""
+    from truestep.execution.bench import COLUMNS, scaling_plot, scaling_table
+    from truestep.runtime.folder import check_out, prepare
+
+    folder = Path(out)
+    check_out(folder)
+    table = scaling_table(
+        list(engines),
+        sizes=list(BENCH_SIZES if sizes is None else sizes),
+        budget_s=BENCH_BUDGET_S if budget_s is None else budget_s,
+    )
+    written = prepare(folder)
+    table.attrs["csv"] = written / "scaling.csv"
+    table.to_csv(table.attrs["csv"], index=False, columns=COLUMNS)
+    table.attrs["figure"] = scaling_plot(
+        table, table.attrs["bandwidth_bytes_per_s"], written / "figures" / "scaling.png"
+    )
+    return table

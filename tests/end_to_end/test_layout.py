@@ -189,10 +189,12 @@ def test_the_leaves_import_nothing_above_them(graph):
 
 
 THIN_COMMANDS = ("baseline", "compiling", "env", "figures", "history", "listing")
-"""Commands that are a parser and calls into :mod:`truestep.api` alone. ``run``, ``gate``
-and ``bench`` call the API too but still reach below it: ``run`` for its journal, signal
-handling and run budget, ``gate`` for the gate request's types and the column spec,
-``bench`` for its default sizes and its table writer (issue 38, item 4)."""
+"""Commands that are a parser and calls into :mod:`truestep.api` alone. ``run`` and
+``gate`` call the API too but still reach below it: ``run`` for its journal, signal
+handling and run budget, ``gate`` for the gate request's types and the column spec; and
+``bench``'s parser reads its default sizes and budget from
+``truestep.execution.bench_defaults``, so that building the parser (every command's
+start) does not import the API (issue 38, item 4)."""
 COMMAND_VOCABULARY = {
     "truestep.api",
     "truestep.commands",

@@ -17,7 +17,7 @@ overflowed the step counts it sizes, with a traceback."""
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """The ``bench`` command's parser, under ``sub``."""
-    from truestep.execution.bench_defaults import BUDGET_S, SIZES
+    from truestep.execution.bench_defaults import BUDGET_S, SIZES  # light: not the API
 
     sizes = ",".join(f"{n:.0e}".replace("e+0", "e") for n in SIZES)
     bench = sub.add_parser(
@@ -52,10 +52,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    """``truestep bench``: the sizes and budget checked, then :func:`truestep.api.bench`,
+    its table printed."""
     import pandas as pd
 
-    from truestep.api import select_engines
-    from truestep.execution.bench import COLUMNS, scaling_plot, scaling_table
+    from truestep.api import MAX_PARTICLES, OutRefused, bench, select_engines
 
     try:
         sizes = [float(s) for s in args.sizes.split(",") if s.strip()]
@@ -65,11 +66,9 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--sizes: expected particle counts of 1 or more, comma-separated, got {args.sizes!r}"
         )
-    from truestep.cases.limits import DEFAULT
-
-    if max(sizes) > DEFAULT.particles:
+    if max(sizes) > MAX_PARTICLES:
         raise UsageError(
-            f"--sizes: {max(sizes):g} particles is over the {DEFAULT.particles:g} a scene may have "
+            f"--sizes: {max(sizes):g} particles is over the {MAX_PARTICLES:g} a scene may have "
             "(the rain scene is read as a case, under the default limits)"
         )
     if not 0 < args.budget <= BENCH_BUDGET_MAX_S:
@@ -80,21 +79,12 @@ def main(args: argparse.Namespace) -> int:
     engines = select_engines(args.engines, say=common.say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
-    from truestep.runtime.folder import OutRefused, check_out, prepare
-
-    try:
-        check_out(folder)
-    except OutRefused as err:
-        raise UsageError(str(err)) from None
     start = time.perf_counter()
-    table = scaling_table(engines, sizes=sizes, budget_s=args.budget)
-    bandwidth = table.attrs["bandwidth_bytes_per_s"]
     try:
-        out = prepare(folder)
+        table = bench(engines, sizes=sizes, budget_s=args.budget, out=folder)
     except OutRefused as err:
         raise UsageError(str(err)) from None
-    table.to_csv(out / "scaling.csv", index=False, columns=COLUMNS)
-    figure = scaling_plot(table, bandwidth, out / "figures" / "scaling.png")
+    bandwidth = table.attrs["bandwidth_bytes_per_s"]
     shown = table.assign(note=table["note"].str.slice(0, 100))
     with pd.option_context(
         "display.width",
@@ -115,7 +105,7 @@ def main(args: argparse.Namespace) -> int:
     )
     warm = table.attrs["warmup_s"]
     print(
-        f"wrote {out / 'scaling.csv'} and {figure} in {time.perf_counter() - start:.1f} s: "
+        f"wrote {table.attrs['csv']} and {table.attrs['figure']} in {time.perf_counter() - start:.1f} s: "
         f"the table took {table.attrs['elapsed_s']:.1f} s of the {args.budget:g} s budget "
         f"(compiling and warm-ups {warm:.1f} s of it)"
     )
