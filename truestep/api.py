@@ -28,7 +28,7 @@ from truestep.adapters import adapter_class, engine_status, registered, resolve_
 from truestep.cases import Case, load_case, load_cases
 from truestep.cases.limits import DEFAULT as _DEFAULT_LIMITS
 from truestep.cases.loader import load_gates_file, read_gate
-from truestep.ci.gate_report import GateReport, GateRequest
+from truestep.ci.gate_report import GateInputError, GateReport, GateRequest
 from truestep.ci.gates import GateResult, check_gates, refuse_unknown_engines, verdict_table
 from truestep.ci.history import HistoryError
 from truestep.ci.saved import BaselineRefused
@@ -51,6 +51,9 @@ __all__ = [
     "MAX_PARTICLES",
     "BaselineRefused",
     "EngineInfo",
+    "GateInputError",
+    "GateReport",
+    "GateRequest",
     "History",
     "HistoryError",
     "OutRefused",

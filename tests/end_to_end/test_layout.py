@@ -188,13 +188,21 @@ def test_the_leaves_import_nothing_above_them(graph):
             assert all(_layer(w) == 0 for w in graph.find_modules_directly_imported_by(m)), m
 
 
-THIN_COMMANDS = ("baseline", "compiling", "env", "figures", "history", "listing")
-"""Commands that are a parser and calls into :mod:`truestep.api` alone. ``run`` and
-``gate`` call the API too but still reach below it: ``run`` for its journal, signal
-handling and run budget, ``gate`` for the gate request's types and the column spec; and
-``bench``'s parser reads its default sizes and budget from
-``truestep.execution.bench_defaults``, so that building the parser (every command's
-start) does not import the API (issue 38, item 4)."""
+THIN_COMMANDS = {
+    "baseline": set(),
+    "bench": {"truestep.execution.bench_defaults"},
+    "compiling": set(),
+    "env": set(),
+    "figures": set(),
+    "gate": {"truestep.tables.spec"},
+    "history": set(),
+    "listing": set(),
+}
+"""Commands that are a parser and calls into :mod:`truestep.api`, each with the light
+modules its parser reads its help from (building the parser, every command's start, must
+not import the API): ``bench``'s default sizes and budget, ``gate``'s compared columns.
+``run`` calls the API too but still reaches below it, for its journal, signal handling
+and run budget (issue 38, item 4)."""
 COMMAND_VOCABULARY = {
     "truestep.api",
     "truestep.commands",
@@ -209,5 +217,6 @@ helpers, and the escaping of what it prints."""
 def test_a_thin_command_imports_nothing_of_truestep_but_the_api(graph, command):
     module = f"truestep.commands.{command}"
     imported = {m for m in graph.find_modules_directly_imported_by(module) if m.startswith("truestep")}
+    allowed = COMMAND_VOCABULARY | THIN_COMMANDS[command]
     assert "truestep.api" in imported, f"{module} does not call truestep.api"
-    assert imported <= COMMAND_VOCABULARY, f"{module} imports {sorted(imported - COMMAND_VOCABULARY)}"
+    assert imported <= allowed, f"{module} imports {sorted(imported - allowed)}"

@@ -107,8 +107,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from truestep.api import gate
-    from truestep.ci.gate_report import GateInputError, GateRequest
+    from truestep.api import GateInputError, GateRequest, gate
 
     request = GateRequest(
         results=Path(args.results),
