@@ -212,7 +212,9 @@ class _Derivative(LeafSystem):
     def DoCalcTimeDerivatives(self, context: Any, derivatives: Any) -> None:
         self.calls += 1
         y = context.get_continuous_state_vector().CopyToVector()
-        derivatives.get_mutable_vector().SetFromVector(self.derivative(y, context.get_time()))
+        # the ContinuousState's own SetFromVector: the same values, without the Python
+        # wrapper of its vector (0.5 us of the 3 to 4 us Drake spends on each evaluation)
+        derivatives.SetFromVector(self.derivative(y, context.get_time()))
 
 
 def _bad(y: np.ndarray) -> bool:
