@@ -459,6 +459,25 @@ def test_implicit_euler_on_a_linear_system_is_the_resolvent(jac):
     )
 
 
+@pytest.mark.parametrize("dim", [1, 3, 7, 40, 300])
+def test_implicit_euler_solves_and_sizes_as_scipy_and_numpy_do_bit_for_bit(dim):
+    """The solver's lean LU solve and update size (no per-call checks, no ``np.mean``)
+    give scipy's ``lu_solve`` and the ``np.mean`` formula's numbers to the last bit."""
+    import scipy.linalg as la
+
+    rng = np.random.default_rng(dim)
+    a = rng.normal(size=(dim, dim))
+    y, b = rng.normal(size=dim) * 10.0 ** rng.integers(-3, 4, dim), rng.normal(size=dim)
+    system = Linear(a, y, 0.0, jac=True)
+    solver = ImplicitEuler(system)
+    h = 0.01
+    solve = solver._factorise(y, 0.0, system.derivative(y, 0.0), h)
+    expected = la.lu_solve(la.lu_factor(np.eye(dim) - h * a), b)
+    assert np.array_equal(solve(b), expected)
+    size = solver._size(b, y)
+    assert size == float(np.sqrt(np.mean((b / (1.0 + np.abs(y))) ** 2)))
+
+
 @pytest.mark.parametrize("jac", [True, False])
 def test_implicit_euler_on_riccati_solves_the_quadratic(jac):
     y0, h = 2.0, 0.1
