@@ -65,6 +65,7 @@ order fits and baselines use the float32 floor
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -82,6 +83,41 @@ from truestep.reference_impl.solvers import MethodFacts
 
 with without_banner(BANNER):
     import newton
+
+NARROW_PHASE_FACTORIES = ("create_narrow_phase_primitive_kernel", "create_narrow_phase_kernel_gjk_mpr")
+"""The functions of Newton's ``geometry.narrow_phase`` module that make its collision
+pipeline's kernels (:func:`share_narrow_phase_kernels`)."""
+
+
+def share_narrow_phase_kernels() -> int:
+    """Let every collision pipeline of this process share its narrow-phase kernels; returns
+    how many of :data:`NARROW_PHASE_FACTORIES` it now shares.
+
+    Each ``newton.CollisionPipeline`` makes its shape-against-shape kernels afresh: the
+    same Warp code from the same arguments (the contact writer, the support function,
+    flags), but new kernel objects, which Warp parses again (0.2 s on the CPU device) and
+    whose module it hashes and loads again at their first launch (0.1 to 0.2 s more). A
+    sweep builds a scene for every run, two or more at each step, so on the scenes with a
+    plane (a pipeline each) that was most of a run's cost. Made once per argument set and
+    handed to every pipeline, the kernels are the same code, launched on each scene's
+    own arrays: no number changes (tested against scenes built without the sharing, bit
+    for bit). A Newton without these functions is left as it is."""
+    try:
+        from newton._src.geometry import narrow_phase
+    except ImportError:
+        return 0
+    shared = 0
+    for name in NARROW_PHASE_FACTORIES:
+        make = getattr(narrow_phase, name, None)
+        if make is None or not callable(make):
+            continue
+        if not hasattr(make, "cache_info"):
+            setattr(narrow_phase, name, functools.cache(make))
+        shared += 1
+    return shared
+
+
+share_narrow_phase_kernels()
 
 SOLVERS = {
     "semi-implicit": "SolverSemiImplicit",

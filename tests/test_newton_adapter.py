@@ -12,7 +12,15 @@ pytest.importorskip("newton", reason='Newton is not installed: pip install "true
 
 from truestep.adapters import get_adapter
 from truestep.adapters.base import Adapter
-from truestep.adapters.newton_adapter import NewtonAdapter, build, contact_constants, restitution_of, wp
+from truestep.adapters.newton_adapter import (
+    NARROW_PHASE_FACTORIES,
+    NewtonAdapter,
+    build,
+    contact_constants,
+    restitution_of,
+    share_narrow_phase_kernels,
+    wp,
+)
 from truestep.execution.analyses import _bounce_rows
 from truestep.execution.runner import plan, unsupported_message
 from truestep.measures.metrics import ROUND_OFF_FLOAT32, round_off_floor
@@ -172,6 +180,26 @@ def test_the_captured_graph_steps_as_plain_calls_do_bit_for_bit(case_named):
     for name in ("particle_q", "particle_qd"):
         mine, theirs = getattr(graphed.states[0], name).numpy(), getattr(plain.states[0], name).numpy()
         assert np.array_equal(mine, theirs)
+
+
+@pytest.mark.parametrize("method", ["semi-implicit", "xpbd", "vbd"])
+def test_scenes_sharing_narrow_phase_kernels_step_as_with_their_own_bit_for_bit(
+    newton_adapter, case_named, monkeypatch, method
+):
+    """Every collision pipeline of a process shares the narrow-phase kernels made for its
+    arguments (:func:`share_narrow_phase_kernels`): a scene with a plane, built after
+    others have made and launched those kernels, moves as one whose pipeline made its own."""
+    from newton._src.geometry import narrow_phase
+
+    assert share_narrow_phase_kernels() == len(NARROW_PHASE_FACTORIES)
+    case = _short(case_named("bouncing-ball"), 1.0)
+    shared = [newton_adapter.simulate(case, method, dt) for dt in (4e-3, 2e-3, 4e-3)]
+    for name in NARROW_PHASE_FACTORIES:
+        monkeypatch.setattr(narrow_phase, name, getattr(narrow_phase, name).__wrapped__)
+    own = newton_adapter.simulate(case, method, 4e-3)
+    assert own.status == "ok" and np.ptp(own.x[:, 0], axis=0).max() > 0.1  # it fell and bounced
+    for run in (shared[0], shared[2]):
+        assert np.array_equal(run.x, own.x) and np.array_equal(run.v, own.v)
 
 
 def test_a_snapshot_is_the_state_of_its_step_and_stays_so(newton_adapter, case_named):
