@@ -44,6 +44,7 @@ baselines judge this engine against what float32 can reach
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -60,6 +61,29 @@ from truestep.reference_impl.features import Feature
 
 with without_banner(BANNER):
     import mujoco_warp as mjw
+
+
+def remember_versions() -> bool:
+    """Let MuJoCo Warp look each package version up once per process; returns whether it
+    now does.
+
+    ``put_model`` and ``put_data`` ask ``util_pkg.check_version("mujoco>=...")`` some four
+    times a scene, and each asks ``importlib.metadata`` afresh: a scan of the installed
+    distributions and a parse of one's metadata, 6 ms a call, a fifth of a small scene's
+    build, paid at every run of a stability search. The installed versions do not change
+    while a process runs, so the answer to each question is kept. A MuJoCo Warp without
+    that function is left as it is."""
+    try:
+        from mujoco_warp._src import util_pkg
+    except ImportError:
+        return False
+    check = getattr(util_pkg, "check_version", None)
+    if check is None or not callable(check):
+        return False
+    if not hasattr(check, "cache_info"):
+        util_pkg.check_version = functools.cache(check)
+    return True
+
 
 APPLIED = (Feature.UNIVERSAL_GRAVITATION, Feature.FORCE_FIELDS, Feature.IMPULSES)
 """Features the MuJoCo adapter adds through MuJoCo C's passive-force callback."""
@@ -117,7 +141,9 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE, reuse: bo
     that one, reset. It steps the same bits as a scene built afresh, without MuJoCo
     Warp's ``put_model`` and the graph capture (0.1 to 0.15 s a run on the CPU device). A
     scene with plane contacts has its step in the contacts' ``solref`` too, so it is
-    built afresh at every step."""
+    built afresh at every step. MuJoCo Warp's version checks are answered once per process
+    (:func:`remember_versions`)."""
+    remember_versions()
     model = case.particles
     h = case.steps_for(dt)[1]
     xml, layout = mj.mjcf(model, method, h, autoreset_flag=False)

@@ -117,8 +117,6 @@ def share_narrow_phase_kernels() -> int:
     return shared
 
 
-share_narrow_phase_kernels()
-
 SOLVERS = {
     "semi-implicit": "SolverSemiImplicit",
     "xpbd": "SolverXPBD",
@@ -293,7 +291,10 @@ def _builder(model: ParticleModel) -> Any:
 
 
 def build(case: Case, method: str, dt: float, *, device: str = DEVICE) -> Scene:
-    """Build ``case`` for ``method`` at nominal step ``dt`` on ``device`` and capture one step."""
+    """Build ``case`` for ``method`` at nominal step ``dt`` on ``device`` and capture one step
+    (its collision pipeline sharing the process's narrow-phase kernels:
+    :func:`share_narrow_phase_kernels`)."""
+    share_narrow_phase_kernels()
     model = case.particles
     h = case.steps_for(dt)[1]
     builder = _builder(model)

@@ -18,6 +18,7 @@ from truestep.adapters.mujoco_warp_adapter import (
     MujocoWarpAdapter,
     build,
     mjw,
+    remember_versions,
     wp,
 )
 from truestep.execution.analyses import _bounce_rows
@@ -265,3 +266,16 @@ def test_a_scene_without_constraints_steps_the_same_bits_without_contact_and_sol
             wp.capture_launch(full.graph)
         for a, b in ((lean.data.qpos, full.data.qpos), (lean.data.qvel, full.data.qvel)):
             assert np.array_equal(a.numpy(), b.numpy()), method
+
+
+def test_package_versions_are_looked_up_once_and_answer_as_before():
+    """MuJoCo Warp's version checks (four a scene build) keep their answers for the
+    process (:func:`remember_versions`): the same answers as a fresh lookup."""
+    from mujoco_warp._src import util_pkg
+
+    assert remember_versions()
+    check = util_pkg.check_version
+    assert hasattr(check, "cache_info") and remember_versions()  # applied once, not wrapped again
+    assert not hasattr(check.__wrapped__, "cache_info")
+    for spec in ("mujoco>=3.0", "mujoco>=999.0", "numpy!=0.0.1", "warp-lang>=1.0"):
+        assert check(spec) == check.__wrapped__(spec)
