@@ -105,3 +105,35 @@ def test_every_built_in_series_has_a_colour_of_its_own():
     colours = [c.lower() for c in SERIES_COLOURS.values()]
     assert len(set(colours)) == len(colours)
     assert not set(colours) & {c.lower() for c in MORE_COLOURS}
+
+
+def test_a_saved_figure_has_the_pixels_savefig_draws(tmp_path):
+    """:func:`truestep.style.save` draws on the figure's Agg canvas and reduces those
+    pixels: the same picture, pixel for pixel, as ``savefig`` at the report's resolution
+    reduced alike, at the figure's own dpi and at another."""
+    import numpy as np
+    from PIL import Image
+
+    def figure(dpi: float):
+        fig, axes = plt.subplots(1, 2, figsize=(8, 3), dpi=dpi, sharey=True)
+        for k in range(6):
+            for ax in axes:
+                ax.loglog([1e-3, 1e-2, 1e-1], [1e-6 * (k + 1), 1e-4, 1e-2], marker="o", label=f"s{k}")
+        fig.suptitle("work against precision")
+        fig.legend(loc="center left", bbox_to_anchor=(0.79, 0.5))
+        fig.tight_layout(rect=(0, 0, 0.79, 1))
+        return fig
+
+    for dpi in (style.REPORT_DPI, 72):
+        theirs_path = tmp_path / f"savefig-{dpi}.png"
+        fig = figure(dpi)
+        fig.savefig(theirs_path, dpi=style.REPORT_DPI)
+        plt.close(fig)
+        with Image.open(theirs_path) as img:
+            theirs = img.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE).convert("RGB")
+        mine_path = style.save(figure(dpi), tmp_path / f"save-{dpi}.png")
+        with Image.open(mine_path) as img:
+            assert img.mode == "P"
+            mine = img.convert("RGB")
+        assert mine.size == theirs.size
+        assert np.array_equal(np.asarray(mine), np.asarray(theirs))

@@ -114,14 +114,23 @@ def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
     Line plots use a few dozen colours (one per series, and their anti-aliased edges), so
     the palette keeps each series' own colour and the file (inlined in the HTML report)
     shrinks about threefold.
+
+    The figure is drawn once on its Agg canvas at ``dpi`` and its pixels reduced from
+    there: the pixels ``savefig`` would write (tested), without encoding a full-colour PNG
+    and reading it back (some 0.1 s of a report figure's 0.3 s).
     """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    if fig.dpi != dpi:
+        fig.set_dpi(dpi)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    width, height = canvas.get_width_height()
+    pixels = Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+    small = pixels.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE)
     plt.close(fig)
-    with Image.open(path) as img:
-        small = img.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE)
     small.save(path, optimize=True)
     return path
 
