@@ -60,3 +60,45 @@ def test_a_baseline_and_a_history_through_the_api(tmp_path, monkeypatch, capsys)
     assert json.loads(capsys.readouterr().out) == truestep.benchmark_json(QUICK / "results.csv")
     with pytest.raises(truestep.api.HistoryError):
         truestep.history_add(root / "nothing.csv", root / "store")
+
+
+def test_a_report_folder_is_checked_as_run_checks_it(tmp_path, capsys):
+    """``truestep.check_report_folder`` refuses what ``truestep run --out`` refuses, with
+    the same line, before any work; a new folder's parent is made and its path returned."""
+    from truestep.api import OutRefused
+
+    new = tmp_path / "a" / "new"
+    assert truestep.check_report_folder(new) == new.resolve() and new.parent.is_dir()
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine")
+    with pytest.raises(OutRefused) as refused:
+        truestep.check_report_folder(theirs)
+    assert str(refused.value).startswith("--out: ") and "not a report truestep wrote" in str(refused.value)
+    with pytest.raises(OutRefused, match=r"^--dest: .* is a file"):
+        truestep.check_report_folder(theirs / "notes.txt", flag="--dest")
+    run = ["run", "--quick", "--cases", "free-fall", "--engines", "reference", "--out", str(theirs)]
+    assert main(run) == 2
+    assert str(refused.value) in capsys.readouterr().err
+    assert (theirs / "notes.txt").read_text() == "mine"
+
+
+def test_engines_for_a_run_are_the_installed_ones_asked():
+    assert truestep.engines_for_run("reference, pymunk,reference") == ["reference", "pymunk"]
+    assert "reference" in truestep.engines_for_run(None)
+
+
+def test_a_signal_inside_interruptible_is_an_interruption_and_the_handler_comes_back(tmp_path):
+    import os
+    import signal
+    import time
+
+    from truestep.api import Interrupted
+
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(Interrupted) as stopped, truestep.interruptible():
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(10)  # the handler raises at once
+    assert stopped.value.signum == signal.SIGTERM and not stopped.value.published
+    assert signal.getsignal(signal.SIGTERM) == before
+    assert truestep.resumable(tmp_path / "never-run") is None

@@ -73,6 +73,10 @@ _EXPORTS: dict[str, str] = {
     "environment": "truestep.api",
     "compile_ahead": "truestep.api",
     "bench": "truestep.api",
+    "check_report_folder": "truestep.api",
+    "engines_for_run": "truestep.api",
+    "interruptible": "truestep.api",
+    "resumable": "truestep.api",
     "run_matrix": "truestep.execution.runner",
 }
 
@@ -104,18 +108,22 @@ __all__ = [
     "benchmark_json",
     "build_system",
     "check",
+    "check_report_folder",
     "compare",
     "compile_ahead",
     "engines",
+    "engines_for_run",
     "environment",
     "exact_solution",
     "gate",
     "get_adapter",
     "history",
     "history_add",
+    "interruptible",
     "lecture_figures",
     "load_case",
     "load_cases",
+    "resumable",
     "run",
     "run_matrix",
     "save_baseline",
@@ -139,7 +147,18 @@ if TYPE_CHECKING:
     from truestep.adapters import get_adapter
     from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
     from truestep.adapters.reference import build_system
-    from truestep.api import Tables, check, compare, gate, run, select_engines
+    from truestep.api import (
+        Tables,
+        check,
+        check_report_folder,
+        compare,
+        engines_for_run,
+        gate,
+        interruptible,
+        resumable,
+        run,
+        select_engines,
+    )
     from truestep.cases.case import Case, Gate, OdeSpec
     from truestep.cases.errors import CaseError, SelectionError
     from truestep.cases.exact import Exact, exact_solution

@@ -15,6 +15,7 @@ Everything here takes and returns plain values and pandas tables::
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -34,10 +35,14 @@ from truestep.ci.history import HistoryError
 from truestep.ci.saved import BaselineRefused
 from truestep.execution.bench_defaults import BUDGET_S as BENCH_BUDGET_S
 from truestep.execution.bench_defaults import SIZES as BENCH_SIZES
+from truestep.execution.cluster import ClusterError
 from truestep.execution.experiment import Experiment, Finished, Tables
+from truestep.execution.journal import JournalError
 from truestep.numerics import own_run
 from truestep.runtime import collector
 from truestep.runtime.folder import OutRefused
+from truestep.runtime.interrupts import Interrupted
+from truestep.runtime.run_lock import LockBusy
 from truestep.runtime.visible import visible
 from truestep.tables.io import TableError
 
@@ -50,27 +55,35 @@ __all__ = [
     "BENCH_SIZES",
     "MAX_PARTICLES",
     "BaselineRefused",
+    "ClusterError",
     "EngineInfo",
     "GateInputError",
     "GateReport",
     "GateRequest",
     "History",
     "HistoryError",
+    "Interrupted",
+    "JournalError",
+    "LockBusy",
     "OutRefused",
     "TableError",
     "Tables",
     "bench",
     "benchmark_json",
     "check",
+    "check_report_folder",
     "compare",
     "compile_ahead",
     "engines",
+    "engines_for_run",
     "environment",
     "gate",
     "gate_results",
     "history",
     "history_add",
+    "interruptible",
     "lecture_figures",
+    "resumable",
     "run",
     "save_baseline",
     "select_engines",
@@ -114,6 +127,51 @@ def _select_engines(engines: str | Iterable[str] | None, say: Callable[[str], No
         if name not in names:
             names.append(name)
     return names
+
+
+def engines_for_run(
+    engines: str | Iterable[str] | None = None, *, say: Callable[[str], None] | None = None
+) -> list[str]:
+    """:func:`select_engines` for a run in this process: the engines' modules are imported
+    with the garbage collector paused and frozen after (they live to the process's end,
+    so its later collections do not walk them again)."""
+    with collector.paused():
+        names = select_engines(engines, say=say)
+        collector.settle()
+    return names
+
+
+@contextlib.contextmanager
+def interruptible() -> Iterator[None]:
+    """Inside, SIGTERM, SIGINT and SIGHUP stop what runs: the isolated children are killed
+    and :class:`Interrupted` is raised (its ``signum``; ``published`` once the new report
+    is in place). Main thread only; the previous handlers are restored on the way out.
+    ``truestep run`` runs :func:`run` inside it."""
+    from truestep.runtime.interrupts import handled
+
+    with handled():
+        yield
+
+
+def resumable(out: str | Path) -> tuple[int, Path] | None:
+    """What a run interrupted while writing its report to ``out`` left for ``resume``: the
+    sweeps it finished and the journal's folder (``.<name>.partial`` beside ``out``), or
+    ``None`` where there is no journal to continue."""
+    from truestep.execution.journal import Journal
+
+    kept = Journal(Path(out))
+    return (kept.finished(), kept.dir) if kept.holds_run() else None
+
+
+def check_report_folder(out: str | Path, *, flag: str = "--out") -> Path:
+    """The folder ``out`` leads to, if :func:`run` can publish its report there; raises
+    :class:`OutRefused` (one line that starts with ``flag``) before any work if not: a
+    folder that is not a report truestep wrote, a mount point, a place this process cannot
+    write, or too little free space beside it
+    (:func:`truestep.runtime.folder.check_publishable`)."""
+    from truestep.runtime.folder import check_publishable
+
+    return check_publishable(Path(out), flag=flag)
 
 
 def _cases(cases: str | Iterable[str] | Iterable[Case]) -> list[Case]:

@@ -197,12 +197,12 @@ THIN_COMMANDS = {
     "gate": {"truestep.tables.spec"},
     "history": set(),
     "listing": set(),
+    "run": set(),
 }
 """Commands that are a parser and calls into :mod:`truestep.api`, each with the light
 modules its parser reads its help from (building the parser, every command's start, must
 not import the API): ``bench``'s default sizes and budget, ``gate``'s compared columns.
-``run`` calls the API too but still reaches below it, for its journal, signal handling
-and run budget (issue 38, item 4)."""
+Every command is one."""
 COMMAND_VOCABULARY = {
     "truestep.api",
     "truestep.commands",

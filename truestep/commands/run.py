@@ -3,19 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
 import signal
-import tempfile
 from pathlib import Path
 
 from truestep.commands import common
 from truestep.commands.common import UsageError
 from truestep.runtime.visible import visible
 
-REPORT_SPACE_MB = 64
-"""Room a new report needs beside ``--out`` besides twice the old one's size, MiB (the
-published report is about 10 MiB with its figures)."""
 RUN_BUDGET_S = 6 * 3600.0
 """The default wall-clock budget of a whole ``truestep run``, s."""
 
@@ -81,16 +75,13 @@ def main(args: argparse.Namespace) -> int:
     SIGTERM or SIGINT stops the run: the children are killed, the staging folder is
     removed, the previous report stays as it was, and the exit code is 128 + the signal
     with one line that says so. Finished sweeps (and the analyses, once done) stay in the
-    journal beside ``--out`` (:mod:`truestep.execution.journal`) until the report is published.
+    journal beside ``--out`` (:func:`truestep.api.resumable`) until the report is published.
     """
-    from truestep.runtime.interrupts import Interrupted, handled
-    from truestep.runtime.isolation import set_run_budget
-
     if args.out is not None:  # `--out "$OUTDIR"`, unset: not reports/
         common.folder(args.out, "--out")
-    from truestep.execution.journal import Journal
+    from truestep.api import Interrupted, interruptible, resumable
 
-    with handled():
+    with interruptible():
         try:
             return _run(args)
         except Interrupted as err:
@@ -100,11 +91,10 @@ def main(args: argparse.Namespace) -> int:
                 if err.published
                 else f"{out}/ holds the previous report, untouched"
             )
-            kept = Journal(Path(args.resume or out))
+            kept = resumable(Path(args.resume or out))
             then = (
-                f"; the same command with --resume continues from the {kept.finished()} "
-                f"finished sweeps in {kept.dir}"
-                if kept.holds_run()
+                f"; the same command with --resume continues from the {kept[0]} finished sweeps in {kept[1]}"
+                if kept is not None
                 else ""
             )
             common.say(f"truestep: interrupted by {signal.Signals(err.signum).name}: {where}{then}")
@@ -117,34 +107,33 @@ def main(args: argparse.Namespace) -> int:
                 "previous report, untouched (finished sweeps are kept for "
                 "--resume)"
             ) from None
-        finally:
-            set_run_budget(None)
 
 
 def _run(args: argparse.Namespace) -> int:
     """``truestep run`` once its arguments are checked: :func:`truestep.run` (the one
     experiment driver, :mod:`truestep.execution.experiment`) with the report in ``--out``."""
-    from truestep.api import run, select_engines
-    from truestep.execution.cluster import ClusterError
-    from truestep.execution.journal import JournalError
-    from truestep.runtime import collector
-    from truestep.runtime.folder import OutRefused
-    from truestep.runtime.run_lock import LockBusy
+    from truestep.api import (
+        ClusterError,
+        JournalError,
+        LockBusy,
+        OutRefused,
+        check_report_folder,
+        engines_for_run,
+        run,
+    )
 
     args.out = args.out or args.resume or "reports"
     if not 0 < args.budget < float("inf"):
         raise UsageError(f"--budget: must be a positive number of seconds, got {args.budget:g}")
-    with collector.paused():
-        engines = select_engines(args.engines, say=common.say)
-        collector.settle()  # the command's process: its engines live to its end
+    engines = engines_for_run(args.engines, say=common.say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
     cases = common.load(args.cases, args.limit, trust_limits=args.trust_limits)
     if args.quick and args.cases == "*":
         cases = [c for c in cases if c.in_quick] or cases
     out = Path(args.out)
-    _check_out(out)
     try:
+        check_report_folder(out)
         tables = run(
             cases,
             engines,
@@ -186,34 +175,3 @@ def _reproduce(args: argparse.Namespace) -> list[str]:
     if args.out != "reports":
         argv += ["--out", args.out]
     return argv
-
-
-def _check_out(out: Path) -> None:
-    """Fail before the sweep if the report cannot be published at ``out``: a folder that
-    is not a report truestep wrote (:func:`truestep.runtime.folder.check_out`: a file, a
-    folder of other things, a link elsewhere), a mount point (the report is put in place
-    by renaming a directory), a parent where this process cannot create the staging
-    folder and the journal, or too little space beside it."""
-    from truestep.runtime.folder import OutRefused, check_out
-
-    try:
-        real = check_out(out)
-    except OutRefused as err:
-        raise UsageError(str(err)) from None
-    if real.exists() and os.path.ismount(real):
-        raise UsageError(f"--out: {visible(out)} is a mount point; name a directory inside it")
-    try:
-        real.parent.mkdir(parents=True, exist_ok=True)
-        for where in (real.parent, real) if real.exists() else (real.parent,):
-            probe = tempfile.NamedTemporaryFile(dir=where, prefix=".truestep-probe-")
-            probe.close()
-    except OSError as err:
-        raise UsageError(f"--out: cannot write in {visible(out)}: {err.strerror or err}") from None
-    old = sum(f.stat().st_size for f in real.rglob("*") if f.is_file()) if real.exists() else 0
-    need = 2 * old + REPORT_SPACE_MB * 2**20  # the staged report beside the old one
-    free = shutil.disk_usage(real.parent).free
-    if free < need:
-        raise UsageError(
-            f"--out: {free / 2**20:.0f} MiB free beside {out}; staging the report "
-            f"there needs about {need / 2**20:.0f} MiB"
-        )

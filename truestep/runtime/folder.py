@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import stat
+import tempfile
 from pathlib import Path
 
 from truestep.runtime.files import FileRefused, read_regular
@@ -139,4 +141,37 @@ def prepare(out: Path, *, flag: str = "--out") -> Path:
     real.mkdir(parents=True, exist_ok=True)
     if not _marked(real):
         write_marker(real)
+    return real
+
+
+REPORT_SPACE_MB = 64
+"""Room a new report needs beside its folder besides twice the old one's size, MiB (the
+published report is about 10 MiB with its figures)."""
+
+
+def check_publishable(out: Path, *, flag: str = "--out", space_mb: float = REPORT_SPACE_MB) -> Path:
+    """The folder ``out`` leads to, if a run can publish its report there; raises
+    :class:`OutRefused` (one line) before any work if not: a folder that is not a report
+    truestep wrote (:func:`check_out`), a mount point (the report is put in place by
+    renaming a directory), a parent where this process cannot create the staging folder
+    and the journal, or too little space beside it (twice the old report and
+    ``space_mb`` MiB)."""
+    real = check_out(out, flag=flag)
+    if real.exists() and os.path.ismount(real):
+        raise OutRefused(f"{flag}: {visible(out)} is a mount point; name a directory inside it")
+    try:
+        real.parent.mkdir(parents=True, exist_ok=True)
+        for where in (real.parent, real) if real.exists() else (real.parent,):
+            probe = tempfile.NamedTemporaryFile(dir=where, prefix=".truestep-probe-")
+            probe.close()
+    except OSError as err:
+        raise OutRefused(f"{flag}: cannot write in {visible(out)}: {err.strerror or err}") from None
+    old = sum(f.stat().st_size for f in real.rglob("*") if f.is_file()) if real.exists() else 0
+    need = 2 * old + space_mb * 2**20  # the staged report beside the old one
+    free = shutil.disk_usage(real.parent).free
+    if free < need:
+        raise OutRefused(
+            f"{flag}: {free / 2**20:.0f} MiB free beside {out}; staging the report "
+            f"there needs about {need / 2**20:.0f} MiB"
+        )
     return real
