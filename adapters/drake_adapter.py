@@ -212,8 +212,8 @@ class _Derivative(LeafSystem):
     def DoCalcTimeDerivatives(self, context: Any, derivatives: Any) -> None:
         self.calls += 1
         y = context.get_continuous_state_vector().CopyToVector()
-        # the ContinuousState's own SetFromVector: the same values, without the Python
-        # wrapper of its vector (0.5 us of the 3 to 4 us Drake spends on each evaluation)
+        # the ContinuousState's own SetFromVector: the same values, without a Python
+        # wrapper of its vector made at every evaluation
         derivatives.SetFromVector(self.derivative(y, context.get_time()))
 
 

@@ -67,12 +67,12 @@ def remember_versions() -> bool:
     """Let MuJoCo Warp look each package version up once per process; returns whether it
     now does.
 
-    ``put_model`` and ``put_data`` ask ``util_pkg.check_version("mujoco>=...")`` some four
-    times a scene, and each asks ``importlib.metadata`` afresh: a scan of the installed
-    distributions and a parse of one's metadata, 6 ms a call, a fifth of a small scene's
-    build, paid at every run of a stability search. The installed versions do not change
-    while a process runs, so the answer to each question is kept. A MuJoCo Warp without
-    that function is left as it is."""
+    ``put_model`` and ``put_data`` ask ``util_pkg.check_version("mujoco>=...")`` several
+    times a scene, and each asks ``importlib.metadata`` afresh (a scan of the installed
+    distributions and a parse of one's metadata), at every scene a sweep or a stability
+    search builds. The installed versions do not change while a process runs, so the
+    answer to each question is kept. A MuJoCo Warp without that function is left as it
+    is."""
     try:
         from mujoco_warp._src import util_pkg
     except ImportError:

@@ -95,13 +95,12 @@ def share_narrow_phase_kernels() -> int:
 
     Each ``newton.CollisionPipeline`` makes its shape-against-shape kernels afresh: the
     same Warp code from the same arguments (the contact writer, the support function,
-    flags), but new kernel objects, which Warp parses again (0.2 s on the CPU device) and
-    whose module it hashes and loads again at their first launch (0.1 to 0.2 s more). A
-    sweep builds a scene for every run, two or more at each step, so on the scenes with a
-    plane (a pipeline each) that was most of a run's cost. Made once per argument set and
-    handed to every pipeline, the kernels are the same code, launched on each scene's
-    own arrays: no number changes (tested against scenes built without the sharing, bit
-    for bit). A Newton without these functions is left as it is."""
+    flags), but new kernel objects, which Warp parses again and whose module it hashes and
+    loads again at their first launch. A sweep builds a scene for every run, so on the
+    scenes with a plane (a pipeline each) that was most of a run's cost. Made once per
+    argument set and handed to every pipeline, the kernels are the same code, launched on
+    each scene's own arrays: no number changes (tested against scenes built without the
+    sharing, bit for bit). A Newton without these functions is left as it is."""
     try:
         from newton._src.geometry import narrow_phase
     except ImportError:

@@ -117,7 +117,7 @@ def save(fig, path: Path, dpi: int = REPORT_DPI) -> Path:
 
     The figure is drawn once on its Agg canvas at ``dpi`` and its pixels reduced from
     there: the pixels ``savefig`` would write (tested), without encoding a full-colour PNG
-    and reading it back (some 0.1 s of a report figure's 0.3 s).
+    and reading it back.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image

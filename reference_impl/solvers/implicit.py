@@ -107,8 +107,7 @@ class ImplicitEuler(Solver):
 
     def _size(self, delta: np.ndarray, y: np.ndarray) -> float:
         """The RMS of ``delta / (1 + |y|)``: ``np.mean``'s own pairwise sum and division,
-        the same number to the last bit, without its overhead (a third of a small
-        system's step)."""
+        the same number to the last bit, without its per-call overhead."""
         scaled = delta / (1.0 + np.abs(y))
         return math.sqrt(np.add.reduce(scaled * scaled) / scaled.size)
 
