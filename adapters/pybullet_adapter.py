@@ -82,7 +82,7 @@ step it arrives: the restitution sweep's impact-phase drops (16 balls whose cont
 begin at evenly spaced points of a step), asked 0.5 at 1 ms, read 0.16 to 0.55 with
 ``default`` and 0.498 to 0.501 with ``clean`` (``restitution.csv``, ``e_phase_min`` and
 ``e_phase_max``; a raw pybullet script of the same drops agrees, in
-``tests/test_restitution_phases.py``).
+``tests/reporting/test_restitution_phases.py``).
 
 What each ``setPhysicsEngineParameter`` setting does (the pybullet quickstart guide's
 descriptions, checked against Bullet's ``btSequentialImpulseConstraintSolver::

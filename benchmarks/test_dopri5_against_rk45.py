@@ -5,7 +5,7 @@ Run: ``python -m pytest benchmarks/test_dopri5_against_rk45.py --benchmark-enabl
 Both are Dormand-Prince 5(4) with the same RMS error norm, controller and initial step,
 on the same right-hand side (the reference system's derivative), so they take the same
 steps and make the same evaluations (``nfev``; hanging-cloth is the exception: its step
-sequence is set by round-off, see ``tests/test_explicit_rk.py``) and the wall time
+sequence is set by round-off, see ``tests/reference_impl/test_explicit_rk.py``) and the wall time
 compares the integrators' own overhead. For each case and each tolerance of its sweep a
 test times, alternately (A B A B ...: machine noise hits both alike),
 

@@ -348,7 +348,7 @@ NOT_AUDITED = {
 path (the monitor's records, the counts, the bound) at a fraction of the time. MuJoCo
 Warp's implicit integrators: the adapter's path (graph, read-back, counts) is the one its
 ``Euler`` and ``RK4`` take, and their physics is held to MuJoCo C's, audited, by
-``tests/test_mujoco_warp_adapter.py``."""
+``tests/adapters/test_mujoco_warp_adapter.py``."""
 
 
 DRAKE_DENSE = ("implicit_euler", "radau1", "radau3")
@@ -1774,7 +1774,7 @@ SCHEME = {
 with the spring damper explicit; pymunk position first with the damper exact; MuJoCo's
 implicit variants implicit in the damper only; Newton's XPBD and VBD a backward Euler
 step, which one sweep solves on one linear spring; Drake's documented integrators (its
-``implicit_euler`` two backward-Euler half steps, tests/test_drake_adapter.py)."""
+``implicit_euler`` two backward-Euler half steps, tests/adapters/test_drake_adapter.py)."""
 
 
 def my_limit(case, engine: str, method: str) -> float | None:

@@ -55,7 +55,7 @@ def _untouched_run(c: Campaign, where: Path, folder: Path) -> tuple[bool, str]:
 
 def attack_hard_link_in_the_locks_place(c: Campaign, where: Path) -> tuple[bool, str]:
     """A hard link to someone's file named ``.rep.lock`` beside ``--out rep``: the file
-    keeps its bytes (tests/test_files_beside_out.py: refused, "hard link")."""
+    keeps its bytes (tests/runtime/test_files_beside_out.py: refused, "hard link")."""
     mine = where / "thesis.txt"
     mine.write_text("years of work\n")
     os.link(mine, where / ".rep.lock")
@@ -90,7 +90,7 @@ def attack_users_folder_under_the_journals_name(c: Campaign, where: Path) -> tup
 def attack_adapter_import_ends_its_process(c: Campaign, where: Path) -> tuple[bool, str]:
     """A package whose adapter module calls ``os._exit(0)`` when imported: ``list``
     names it in one line and goes on (exit 0); a run naming it is exit 2 with one line,
-    no report (tests/test_supervisor.py KILLERS)."""
+    no report (tests/runtime/test_supervisor.py KILLERS)."""
     (where / "os_exit_at_import.py").write_text("import os\nos._exit(0)\n")
     info = where / "killers-1.0.dist-info"
     info.mkdir()
@@ -123,7 +123,7 @@ class X(ReferenceAdapter):
 
 def attack_adapter_missing_ends_its_process(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter whose ``missing()`` calls ``os._exit(0)``: its rows are ``crashed``,
-    the reference's ``ok``, exit 0 (tests/test_supervisor.py, it used to end the command:
+    the reference's ``ok``, exit 0 (tests/runtime/test_supervisor.py, it used to end the command:
     exit 3, no report)."""
     (where / "exits_in_missing.py").write_text(textwrap.dedent(EXITS_IN_MISSING))
     result = c.quick_run(
@@ -150,7 +150,7 @@ class X(ReferenceAdapter):
 
 def attack_adapter_construction_ends_its_process(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter whose ``__init__`` calls ``os._exit(0)``: exit 2 with one line naming
-    it, no report (tests/test_supervisor.py; it used to end the command: exit 3, a line
+    it, no report (tests/runtime/test_supervisor.py; it used to end the command: exit 3, a line
     that named no plugin)."""
     (where / "exits_when_made.py").write_text(EXITS_WHEN_MADE)
     result = c.quick_run(
@@ -181,7 +181,7 @@ class X(ReferenceAdapter):
 def attack_adapter_prepare_ends_its_process_on_a_later_call(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter whose ``prepare()`` lives through its first call and calls
     ``os._exit(0)`` on every later one: the run goes on, exit 0, its rows and the
-    reference's ``ok`` (tests/test_supervisor.py; it used to end the command, exit 3,
+    reference's ``ok`` (tests/runtime/test_supervisor.py; it used to end the command, exit 3,
     no report: the first call was a forked probe, the second ran in truestep's process)."""
     (where / "exits_in_a_later_prepare.py").write_text(EXITS_IN_A_LATER_PREPARE)
     result = c.quick_run(
@@ -210,7 +210,7 @@ class Impostor(ReferenceAdapter):
 def attack_second_package_registers_reference(c: Campaign, where: Path) -> tuple[bool, str]:
     """A package registering the built-in engine name ``reference``: ignored (the
     reference runs, no crashed row) and named on standard error
-    (tests/test_shadowed_engine.py)."""
+    (tests/adapters/test_shadowed_engine.py)."""
     (where / "impostor.py").write_text(IMPOSTOR)
     info = where / "impostor-1.0.dist-info"
     info.mkdir()
@@ -225,7 +225,7 @@ def attack_second_package_registers_reference(c: Campaign, where: Path) -> tuple
 
 def attack_gates_file_gate_matching_no_case(c: Campaign, where: Path) -> tuple[bool, str]:
     """A gates file whose gate's ``cases`` is a typo (``harmonic-osc``) on the published
-    tables: the gate is shown not evaluated, not dropped (tests/test_gates.py)."""
+    tables: the gate is shown not evaluated, not dropped (tests/ci/test_gates.py)."""
     tables = shipped_tables(where / "tables")
     gates = where / "gates.toml"
     gates.write_text(
@@ -253,7 +253,7 @@ def attack_gates_file_gate_matching_no_case(c: Campaign, where: Path) -> tuple[b
 
 def attack_results_table_cut_inside_its_last_row(c: Campaign, where: Path) -> tuple[bool, str]:
     """The published results.csv cut off inside a row (a full disk, a copy interrupted):
-    ``truestep gate`` refuses it, exit 2, one line (tests/test_io.py)."""
+    ``truestep gate`` refuses it, exit 2, one line (tests/tables/test_io.py)."""
     whole = (shipped_tables(where / "tables") / "results.csv").read_bytes()
     half = len(whole) // 2
     if whole[half - 1 : half] == b"\n":
@@ -289,7 +289,7 @@ truestep.run("free-fall", engines=["reference"], quick=True, analyses=False, out
 
 def attack_api_run_without_analyses_then_gate(c: Campaign, where: Path) -> tuple[bool, str]:
     """``truestep.run(..., analyses=False, out=DIR)`` then ``truestep gate --results
-    DIR/results.csv``: the run is read (exit 0 or 1, never 2; tests/test_gate_report.py)."""
+    DIR/results.csv``: the run is read (exit 0 or 1, never 2; tests/ci/test_gate_report.py)."""
     made = c.python(API_RUN, where, timeout=RUN_TIMEOUT)
     if made.code != 0:
         return False, f"the API run failed: {made.why()}"

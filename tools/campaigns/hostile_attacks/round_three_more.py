@@ -112,7 +112,7 @@ def attack_result_that_ends_the_process_when_read(c: Campaign, where: Path) -> t
     """An adapter whose result at the finest quick step carries an object that calls
     ``os._exit(0)`` when unpickled: the run goes on and publishes (exit 0), that row is
     ``crashed`` naming ``posix._exit``, its others and the reference's ``ok``
-    (tests/test_result_as_data.py; it used to make ``truestep run`` exit 0 with no
+    (tests/runtime/test_result_as_data.py; it used to make ``truestep run`` exit 0 with no
     report and no line)."""
     _plugin(where, "ends_when_read", ENDS_WHEN_READ)
     result = c.quick_run(
@@ -135,7 +135,7 @@ def attack_result_that_ends_the_process_when_read(c: Campaign, where: Path) -> t
 def attack_case_library_callable_raises_system_exit(c: Campaign, where: Path) -> tuple[bool, str]:
     """A package whose ``truestep.cases`` entry point is a callable that raises
     ``SystemExit(0)``: ``list`` and ``run`` are exit 2 with one line naming the entry
-    point, no report (tests/test_plugin_calls.py, the case library that never answers;
+    point, no report (tests/adapters/test_plugin_calls.py, the case library that never answers;
     it used to end ``truestep run`` with exit 0 and no report)."""
     _plugin(where, "exits_cases", "def where():\n    raise SystemExit(0)\n")
     _registered(where, "exits-cases", "truestep.cases", {"exits": "exits_cases:where"})
@@ -156,7 +156,7 @@ def attack_case_library_callable_raises_system_exit(c: Campaign, where: Path) ->
 
 def attack_adapter_import_calls_sys_exit(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter module whose import calls ``sys.exit(0)``: a run naming it is exit 2
-    with one line saying so, no report (tests/test_supervisor.py; it used to end
+    with one line saying so, no report (tests/runtime/test_supervisor.py; it used to end
     ``truestep run`` with exit 0 and no report)."""
     _plugin(where, "exits_at_import", "import sys\nsys.exit(0)\n")
     result = c.quick_run(
@@ -209,7 +209,7 @@ def _signal_while_the_helper_runs(c: Campaign, where: Path, sig: signal.Signals)
 
 def attack_sigkill_of_run_leaves_no_helper(c: Campaign, where: Path) -> tuple[bool, str]:
     """SIGKILL of ``truestep run`` while an adapter's helper process runs: no helper is
-    alive 10 s later (tests/test_supervisor.py; 4 of 4 used to stay alive, re-parented
+    alive 10 s later (tests/runtime/test_supervisor.py; 4 of 4 used to stay alive, re-parented
     to init)."""
     result, left = _signal_while_the_helper_runs(c, where, signal.SIGKILL)
     return not left, f"{len(left)} helper(s) outlived the run; {result.why()}"
@@ -218,7 +218,7 @@ def attack_sigkill_of_run_leaves_no_helper(c: Campaign, where: Path) -> tuple[bo
 def attack_sighup_of_run_leaves_no_helper(c: Campaign, where: Path) -> tuple[bool, str]:
     """SIGHUP of ``truestep run`` (its terminal closed) while an adapter's helper runs:
     exit 129, its last line "interrupted by SIGHUP", no helper alive 10 s later
-    (tests/test_supervisor.py; there used to be no line at all, and the helpers lived)."""
+    (tests/runtime/test_supervisor.py; there used to be no line at all, and the helpers lived)."""
     result, left = _signal_while_the_helper_runs(c, where, signal.SIGHUP)
     lines = _lines(result)
     said = bool(lines) and "interrupted by SIGHUP" in lines[-1]
@@ -242,8 +242,9 @@ def _session(sid: int) -> list[int]:
 def attack_kill_of_compile_leaves_no_worker_compiling(c: Campaign, where: Path) -> tuple[bool, str]:
     """``truestep compile`` into empty caches (``NUMBA_CACHE_DIR``, ``WARP_CACHE_PATH``),
     sent SIGKILL (then, afresh, SIGTERM) once it has forked its helpers: none of its
-    processes is alive 10 s later (tests/test_compiled.py, tests/test_compile_command.py;
-    its forked worker used to keep compiling and writing the cache)."""
+    processes is alive 10 s later (tests/reference_impl/test_compiled.py,
+    tests/execution/test_compile_command.py; its forked worker used to keep compiling and
+    writing the cache)."""
     notes = []
     for sig in (signal.SIGKILL, signal.SIGTERM):
         caches = where / sig.name
@@ -276,7 +277,7 @@ def attack_sigterm_while_the_loops_compile_ahead(c: Campaign, where: Path) -> tu
     """``truestep run --quick`` into an empty numba cache, sent SIGTERM once it has forked
     its compile helpers: it ends within 10 s with exit 143 and one line (``interrupted by
     SIGTERM``), no traceback, and none of its processes alive 10 s later
-    (tests/test_compile_command.py; it took 12 s to answer, and each helper printed the
+    (tests/execution/test_compile_command.py; it took 12 s to answer, and each helper printed the
     traceback of the handler it inherited)."""
     env = c.env(NUMBA_CACHE_DIR=str(where / "numba"))
     started = time.perf_counter()
@@ -351,7 +352,7 @@ class WhenMade(ReferenceAdapter):
 def attack_daemon_started_by_an_adapter_outlives_the_run(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter that double-forks a daemon (``setsid``) from its ``prepare()``, then
     one that does so from its ``__init__``: each run is exit 0 and its daemon is not
-    alive 10 s after it (tests/test_supervisor.py; a daemon from ``prepare()``, called
+    alive 10 s after it (tests/runtime/test_supervisor.py; a daemon from ``prepare()``, called
     in truestep's own process, used to outlive the run)."""
     _plugin(where, "daemons", DAEMON)
     notes = []
@@ -397,7 +398,7 @@ def attack_plugin_ignores_sigterm_and_sigint_at_import(c: Campaign, where: Path)
     """A plugin module that ignores SIGTERM and SIGINT when imported, whose runs sleep:
     SIGTERM (then, on a second run, SIGINT) of ``truestep run`` once a run started ends
     it within 30 s, exit 128 + the signal, its last line "interrupted by SIG...", and the
-    sleeping run is not left alive (tests/test_supervisor.py rude_at_import; it used to
+    sleeping run is not left alive (tests/runtime/test_supervisor.py rude_at_import; it used to
     end with exit 0, 15 s after the SIGTERM)."""
     _plugin(where, "ignores_signals", IGNORES_SIGNALS)
     notes = []
@@ -430,7 +431,7 @@ def attack_plugin_ignores_sigterm_and_sigint_at_import(c: Campaign, where: Path)
 def attack_scheduler_that_accepts_and_never_answers(c: Campaign, where: Path) -> tuple[bool, str]:
     """``--scheduler tcp://127.0.0.1:PORT`` at a TCP server that accepts every connection
     and never says a word: exit 2 within 60 s, one line saying no scheduler answers
-    (tests/test_cluster.py; it used to run past 400 s, despite the 20 s connect
+    (tests/execution/test_cluster.py; it used to run past 400 s, despite the 20 s connect
     timeout)."""
     held: list[socket.socket] = []
     with socket.socket() as server:
@@ -486,7 +487,7 @@ def attack_resume_after_the_adapter_was_fixed(c: Campaign, where: Path) -> tuple
     """An adapter whose rk4 and midpoint (exact on free-fall) shift every position by
     1 mm, its run killed at its last row (one sweep journaled), the adapter fixed, then
     ``--resume``: refused (exit 2, one line naming the code) or every row of it as
-    exact as the fix makes it, error below 1e-9 (tests/test_resume_code.py; it used to
+    exact as the fix makes it, error below 1e-9 (tests/execution/test_resume_code.py; it used to
     reuse the buggy sweeps, error 1e-3)."""
     module = where / "mine_for_resume.py"
     module.write_text(BUGGY.format(shift="1e-3"))
@@ -523,7 +524,7 @@ def _quick_baseline(where: Path) -> Path:
 def attack_baseline_run_record_names_an_engine_its_tables_lack(c: Campaign, where: Path) -> tuple[bool, str]:
     """A baseline (the project's quick baseline) whose ``run.json`` names an engine its
     tables have no row of: ``gate --baseline`` refuses it, exit 2, one line naming the
-    engine (tests/test_io.py; it used to compare 0 rows of it, exit 0)."""
+    engine (tests/tables/test_io.py; it used to compare 0 rows of it, exit 0)."""
     base = _quick_baseline(where / "base")
     record = json.loads((base / "run.json").read_text())
     record["engines"] = [*record["engines"], "ghost-engine"]
@@ -574,7 +575,7 @@ def _odd_positions(c: Campaign, where: Path, read: str) -> tuple[bool, str]:
 
 def attack_complex_positions(c: Campaign, where: Path) -> tuple[bool, str]:
     """A fixed-step adapter whose ``read()`` gives complex positions (1 mm imaginary):
-    its rows are not ``ok`` (tests/test_result_as_data.py; a cast used to keep the real
+    its rows are not ``ok`` (tests/runtime/test_result_as_data.py; a cast used to keep the real
     part without a word, ``ok`` rows)."""
     return _odd_positions(c, where, 's["x"] + 1e-3j')
 
@@ -582,7 +583,7 @@ def attack_complex_positions(c: Campaign, where: Path) -> tuple[bool, str]:
 def attack_object_dtype_positions(c: Campaign, where: Path) -> tuple[bool, str]:
     """A fixed-step adapter whose ``read()`` gives positions of object dtype (``None``
     each): its rows are failures, the report is written, no traceback
-    (tests/test_result_as_data.py, ``_real``; it used to raise outside the try that
+    (tests/runtime/test_result_as_data.py, ``_real``; it used to raise outside the try that
     makes failures rows)."""
     return _odd_positions(c, where, 'np.full(s["x"].shape, None, dtype=object)')
 
@@ -621,7 +622,7 @@ class Garbled(ReferenceAdapter):
 def attack_lone_surrogate_in_an_adapters_message(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter whose error message holds lone surrogates (undecodable bytes): the
     report is written (exit 0), its rows ``crashed`` with the bytes escaped, and ``gate``
-    reads it (tests/test_garbled_message.py; the CSV writer used to raise, no report)."""
+    reads it (tests/tables/test_garbled_message.py; the CSV writer used to raise, no report)."""
     _plugin(where, "garbled_adapter", GARBLED)
     result = c.quick_run(
         where, "rep", cases="free-fall", engines="garbled_adapter:Garbled", env=_plugin_env(c, where)
@@ -669,7 +670,7 @@ class PrepareAllRaises(ReferenceAdapter):
 def attack_list_with_adapters_that_raise(c: Campaign, where: Path) -> tuple[bool, str]:
     """A package registering three adapters whose ``__init__``, ``missing()`` or
     ``prepare_all()`` raises: ``truestep list`` is exit 0, lists the reference and
-    names each of the three (tests/test_plugin_calls.py; it used to break ``list``
+    names each of the three (tests/adapters/test_plugin_calls.py; it used to break ``list``
     entirely)."""
     _plugin(where, "broken_adapters", BROKEN_ADAPTERS)
     names = {
@@ -696,7 +697,7 @@ def attack_list_with_adapters_that_raise(c: Campaign, where: Path) -> tuple[bool
 def attack_garbled_run_record_of_a_baseline(c: Campaign, where: Path) -> tuple[bool, str]:
     """A baseline (the project's quick baseline) whose ``run.json`` is ``{not json``,
     then ``[1, 2]``: ``gate --baseline`` and ``gate --baseline --identical`` refuse it,
-    exit 2, one line naming ``run.json`` (tests/test_hostile_inputs.py; a traceback
+    exit 2, one line naming ``run.json`` (tests/commands/test_hostile_inputs.py; a traceback
     before)."""
     base = _quick_baseline(where / "bad")
     notes = []
@@ -726,7 +727,7 @@ def attack_case_items_the_system_cannot_look_up(c: Campaign, where: Path) -> tup
 
 def attack_bench_sizes_and_budget_not_finite(c: Campaign, where: Path) -> tuple[bool, str]:
     """``bench --sizes nan``, ``--sizes 10,inf``, ``--budget inf``, ``--budget 1e308``,
-    ``--budget nan``: exit 2, one line, nothing written (tests/test_bench.py; NaN or
+    ``--budget nan``: exit 2, one line, nothing written (tests/execution/test_bench.py; NaN or
     infinity used to make a step count, a traceback)."""
     for extra in (
         ["--sizes", "nan"],
@@ -745,7 +746,7 @@ def attack_bench_sizes_and_budget_not_finite(c: Campaign, where: Path) -> tuple[
 def attack_numba_cache_files_cut_short(c: Campaign, where: Path) -> tuple[bool, str]:
     """A quick run of free-fall into an empty numba cache (``NUMBA_CACHE_DIR``), every
     ``.nbi`` and ``.nbc`` file it wrote then cut to 40 bytes, and the same run again: exit
-    0, no traceback, the same tables (tests/test_cache_guard.py; numba used to raise
+    0, no traceback, the same tables (tests/reference_impl/test_cache_guard.py; numba used to raise
     ``UnpicklingError`` on every run until the folder was deleted)."""
     env = c.env(NUMBA_CACHE_DIR=str(where / "numba-cache"))
     first = c.quick_run(where, "first", cases="free-fall", env=env)
@@ -805,7 +806,7 @@ class ListsTwice(ReferenceAdapter):
 
 def attack_method_listed_twice(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter listing ``rk4`` twice in ``methods``: exit 2, one line naming the
-    method, no report (tests/test_plugin_calls.py; ``run`` used to write a table with
+    method, no report (tests/adapters/test_plugin_calls.py; ``run`` used to write a table with
     duplicated rows that ``gate`` then refused)."""
     _plugin(where, "lists_twice", LISTS_TWICE)
     result = c.quick_run(
@@ -835,7 +836,7 @@ class OddFailure(ReferenceAdapter):
 def attack_failure_time_that_is_no_time(c: Campaign, where: Path) -> tuple[bool, str]:
     """An adapter whose runs say they blew up at ``t_fail = "soon"`` (rk4) or ``-1e300``
     (euler): the rows are ``crashed`` saying so, and ``gate`` reads the table (exit 0 or
-    1, no error; tests/test_plugin_calls.py; ``run`` used to write what ``gate``
+    1, no error; tests/adapters/test_plugin_calls.py; ``run`` used to write what ``gate``
     refused)."""
     _plugin(where, "odd_failure", ODD_FAILURE)
     result = c.quick_run(
@@ -866,7 +867,7 @@ class X(ReferenceAdapter):
 def attack_plugin_changes_directory_at_import(c: Campaign, where: Path) -> tuple[bool, str]:
     """A plugin module that changes directory (to ``elsewhere/``) when imported: the
     report is in ``rep/`` where ``--out`` says, nothing in ``elsewhere/``
-    (tests/test_supervisor.py rude_at_import; the report used to move, "wrote rep/"
+    (tests/runtime/test_supervisor.py rude_at_import; the report used to move, "wrote rep/"
     still printed)."""
     (where / "elsewhere").mkdir()
     _plugin(where, "changes_directory", CHANGES_DIRECTORY)
@@ -894,7 +895,7 @@ class X(ReferenceAdapter):
 
 def attack_plugin_prints_at_import(c: Campaign, where: Path) -> tuple[bool, str]:
     """A plugin module that prints (a fake "wrote" line too) when imported: none of it
-    on truestep's standard output, the run goes on (exit 0; tests/test_supervisor.py
+    on truestep's standard output, the run goes on (exit 0; tests/runtime/test_supervisor.py
     rude_at_import)."""
     _plugin(where, "prints_at_import", PRINTS_AT_IMPORT)
     result = c.quick_run(
@@ -908,7 +909,7 @@ def attack_plugin_prints_at_import(c: Campaign, where: Path) -> tuple[bool, str]
 
 def attack_fifo_in_the_locks_place(c: Campaign, where: Path) -> tuple[bool, str]:
     """A FIFO named ``.rep.lock`` beside ``--out rep``: exit 2, one line naming the lock
-    (tests/test_files_beside_out.py; it used to say "Invalid argument" without naming
+    (tests/runtime/test_files_beside_out.py; it used to say "Invalid argument" without naming
     it)."""
     mkfifo(where / ".rep.lock")
     result = c.quick_run(where, "rep", cases="free-fall", timeout=CALL_TIMEOUT)
@@ -921,7 +922,7 @@ def attack_fifo_in_the_locks_place(c: Campaign, where: Path) -> tuple[bool, str]
 def attack_bench_sizes_over_the_particle_limit(c: Campaign, where: Path) -> tuple[bool, str]:
     """``bench --sizes 100,1e12``: exit 2, one line about ``--sizes`` (not blaming
     ``particle-rain.toml`` nor suggesting a flag bench lacks), nothing written
-    (tests/test_hostile_inputs.py)."""
+    (tests/commands/test_hostile_inputs.py)."""
     result = c.truestep(["bench", "--sizes", "100,1e12", "--out", "bench"], where)
     held, note = refused(result)
     lines = _lines(result)

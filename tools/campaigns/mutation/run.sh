@@ -34,24 +34,24 @@ export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-$MUT/.numba-cache}"
 # The per-mutant tests: the kill tests first, then the existing tests that reach the numpy
 # path of the mutated module (which file differs from the checksums init kept tells it).
 # One slow convergence study is left out (17 s a run).
-KILLS=(tests/test_forces.py tests/test_collisions.py tests/test_solvers.py tests/test_metrics.py)
+KILLS=(tests/reference_impl/test_forces.py tests/reference_impl/test_collisions.py tests/reference_impl/test_solvers.py tests/measures/test_metrics.py)
 # The kill tests live in these files since 2026-12-02 (folded into the modules' unit tests):
 # BEFORE=1 now leaves out only the files' place at the front, not the kill tests themselves.
 if [ "${BEFORE:-0}" = 1 ]; then KILLS=(); fi
-SOLVER_TESTS=(tests/test_tableaux.py tests/test_solvers.py tests/test_explicit_rk.py
-              tests/test_restitution.py)
-FORCE_TESTS=(tests/test_forces.py tests/test_solvers.py tests/test_properties.py)
-COLLISION_TESTS=(tests/test_collisions.py tests/test_properties.py
-                 tests/test_restitution.py)
-METRIC_TESTS=(tests/test_stability.py tests/test_orders_in_run.py tests/test_reference.py)
+SOLVER_TESTS=(tests/reference_impl/test_tableaux.py tests/reference_impl/test_solvers.py tests/reference_impl/test_explicit_rk.py
+              tests/measures/test_restitution.py)
+FORCE_TESTS=(tests/reference_impl/test_forces.py tests/reference_impl/test_solvers.py tests/measures/test_properties.py)
+COLLISION_TESTS=(tests/reference_impl/test_collisions.py tests/measures/test_properties.py
+                 tests/measures/test_restitution.py)
+METRIC_TESTS=(tests/measures/test_stability.py tests/measures/test_orders_in_run.py tests/measures/test_reference.py)
 # The compiled path's kernels run as Python here (NUMBA_DISABLE_JIT=1): a mutant would
 # otherwise recompile every loop the tests use, minutes a mutant. Its kernel tests, then
 # the compiled path against the numpy oracle (less two 20 s scenes its other scenes and
 # the tiling test cover: 1000 particles of rain, and a cloth beside the stiff cloth).
-KERNEL_TESTS=(tests/test_reference_kernels.py tests/test_compiled.py)
-KERNEL_DESELECT=(--deselect "tests/test_compiled.py::test_compiled_equals_numpy[particle-rain]"
-                 --deselect "tests/test_compiled.py::test_compiled_equals_numpy[hanging-cloth]")
-DESELECT=(--deselect tests/test_collisions.py::test_bounce_times_converge_at_first_order)
+KERNEL_TESTS=(tests/reference_impl/test_reference_kernels.py tests/reference_impl/test_compiled.py)
+KERNEL_DESELECT=(--deselect "tests/reference_impl/test_compiled.py::test_compiled_equals_numpy[particle-rain]"
+                 --deselect "tests/reference_impl/test_compiled.py::test_compiled_equals_numpy[hanging-cloth]")
+DESELECT=(--deselect tests/reference_impl/test_collisions.py::test_bounce_times_converge_at_first_order)
 KERNEL_FILES=(reference_impl/forces_kernels.py reference_impl/collisions_kernels.py
               reference_impl/particles_kernels.py reference_impl/tiles.py
               reference_impl/integrate_kernels.py reference_impl/compose.py

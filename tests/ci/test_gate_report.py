@@ -14,7 +14,7 @@ import truestep
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cli import main
 
-QUICK = Path(__file__).parent / "baselines" / "quick"
+QUICK = Path(__file__).parents[1] / "baselines" / "quick"
 
 
 @pytest.fixture(scope="module")

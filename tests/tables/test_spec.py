@@ -18,7 +18,7 @@ from truestep.reporting.markdown import UNITS
 from truestep.tables import io as tables_io
 from truestep.tables.spec import DERIVED, RESULTS, TABLES, compared, labels, markdown
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 REPORTS = ROOT / "reports"
 
 

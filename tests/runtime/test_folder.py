@@ -14,7 +14,7 @@ from kill_helpers import snapshot
 from truestep.cli import main
 from truestep.runtime.folder import MARKER, MARKER_TEXT, OutRefused, check_out, prepare
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 
 
 def _report(where: Path) -> Path:

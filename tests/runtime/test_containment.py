@@ -90,7 +90,7 @@ def test_sigterm_to_truestep_kills_what_the_adapter_started(tmp_path):
         parent = subprocess.Popen(
             [sys.executable, "-c", SIGTERMED, str(pids), how],
             cwd=Path(__file__).parent,
-            env={**os.environ, "PYTHONPATH": str(Path(__file__).parent)},
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(str(p) for p in Path(__file__).parents[:2])},
         )
         deadline = time.monotonic() + 60
         while not pids.exists() and time.monotonic() < deadline:

@@ -354,7 +354,7 @@ def test_an_energy_drift_gate_a_case_never_measures_warns_when_the_case_loads(
         assert f"{case.gates[-1].where}: an energy_drift gate on a case that never measures" in str(
             said[0].message
         )
-    published = pd.read_csv(Path(__file__).resolve().parents[1] / "reports" / "results.csv")
+    published = pd.read_csv(Path(__file__).resolve().parents[2] / "reports" / "results.csv")
     rows = published[(published["case"] == name) & (published["status"] == "ok")]
     assert len(rows) and bool(rows["energy_drift"].notna().any()) is not warned
 

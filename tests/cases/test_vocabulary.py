@@ -15,7 +15,7 @@ from truestep.adapters import adapter_class
 from truestep.cases import load_cases
 from truestep.reference_impl.features import Feature
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BUILT_IN = ("reference", "scipy", "pymunk", "pybullet", "mujoco", "drake", "mujoco-warp", "newton")
 
 

@@ -19,7 +19,7 @@ from truestep.reference_impl.particles import total_energy
 
 pytestmark = pytest.mark.engine
 
-CASES = Path(__file__).resolve().parents[1] / "cases"
+CASES = Path(__file__).resolve().parents[2] / "cases"
 G = np.array([0.0, -9.81, 0.0])
 
 

@@ -18,7 +18,7 @@ from truestep.execution.checkpoint_data import DataError, load_json, tables_from
 from truestep.execution.journal import Journal, JournalError, fingerprint
 from truestep.execution.runner import MACHINE_COLUMNS, run_matrix
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 
 
 class Plant:

@@ -12,7 +12,7 @@ import pytest
 import truestep
 from truestep.cli import main
 
-QUICK = Path(__file__).resolve().parent / "baselines" / "quick"
+QUICK = Path(__file__).resolve().parents[1] / "baselines" / "quick"
 
 
 def test_engines_are_what_list_prints(capsys):

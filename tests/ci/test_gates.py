@@ -698,7 +698,7 @@ def test_an_energy_drift_gate_on_a_case_that_never_measures_it_says_so(tmp_path,
     before: that comes with a deprecation first.)"""
     from pathlib import Path
 
-    published = Path(__file__).resolve().parents[1] / "reports" / "results.csv"
+    published = Path(__file__).resolve().parents[2] / "reports" / "results.csv"
     gates = _gates_file(
         tmp_path,
         '[[gates]]\ncases = "bouncing-ball"\nkind = "energy_drift"\nengine = "reference"\n'

@@ -11,7 +11,7 @@ import pytest
 
 from truestep.cli import main
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 
 
 @pytest.fixture()
@@ -206,7 +206,7 @@ def test_a_table_cut_short_is_refused(tmp_path, capsys):
 
     from truestep.cli import main
 
-    published = (Path(__file__).resolve().parents[1] / "reports" / "results.csv").read_bytes()
+    published = (Path(__file__).resolve().parents[2] / "reports" / "results.csv").read_bytes()
     half = len(published) // 2
     if published[half - 1 : half] == b"\n":  # cut inside a row, not at its end
         half -= 1

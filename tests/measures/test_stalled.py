@@ -62,7 +62,7 @@ def test_a_stalled_row_is_read_back_and_is_a_regression_against_ok(tmp_path):
     from truestep.ci.baseline import compare
     from truestep.tables.io import read_run_tables
 
-    base = Path(__file__).parent / "baselines" / "quick"
+    base = Path(__file__).parents[1] / "baselines" / "quick"
     now = tmp_path / "now"
     shutil.copytree(base, now)
     results = pd.read_csv(now / "results.csv")

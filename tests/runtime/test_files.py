@@ -80,7 +80,7 @@ def test_load_case_and_the_cli_refuse_special_case_files(tmp_path, capsys, label
     assert len(err) == 1 and reason in err[0]
 
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 
 
 @pytest.mark.parametrize("where", ["results", "stability", "restitution", "baseline", "gates"])

@@ -12,7 +12,7 @@ import pytest
 from truestep.cases import load_cases
 from truestep.runtime.folder import REPORT_FILES
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 
 
 def _read(name: str) -> pd.DataFrame:

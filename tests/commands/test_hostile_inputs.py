@@ -12,7 +12,7 @@ import pytest
 
 from truestep.cli import main
 
-BASELINE = Path(__file__).parent / "baselines" / "quick"
+BASELINE = Path(__file__).parents[1] / "baselines" / "quick"
 
 
 def _one_line(capsys) -> str:

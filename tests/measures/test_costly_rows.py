@@ -12,7 +12,7 @@ import pytest
 
 from truestep.measures.picks import LONG_ROW_S, costly_rows
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 COLUMNS = ["case", "engine", "method", "dt", "dt_kind", "status", "error", "wall_s"]
 
 

@@ -88,7 +88,7 @@ def test_the_report_renders_the_findings_and_computes_none(tmp_path, monkeypatch
     from truestep.reporting.report import render_markdown
 
     cases = truestep.load_cases("free-fall,bouncing-ball")
-    reports = Path(__file__).resolve().parents[1] / "reports"
+    reports = Path(__file__).resolve().parents[2] / "reports"
     results = pd.read_csv(reports / "results.csv")
     results = results[results["case"].isin([c.name for c in cases])]
     tables = {n: pd.read_csv(reports / f"{n}.csv") for n in ("stability", "restitution")}

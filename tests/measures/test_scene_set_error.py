@@ -15,7 +15,7 @@ import pytest
 from truestep.adapters import get_adapter
 from truestep.measures.picks import scene_set_error
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+REPORTS = Path(__file__).resolve().parents[2] / "reports"
 
 
 @pytest.fixture(scope="module")
