@@ -25,6 +25,7 @@ from types import ModuleType
 from typing import Any, Literal
 
 from truestep.adapters.base import Adapter, FixedStepAdapter, Recording, Trajectory
+from truestep.runtime.time_limit import guard_seconds
 
 ENTRY_POINT_GROUP = "truestep.adapters"
 
@@ -263,11 +264,14 @@ def _check_methods(name: str, adapter: Any) -> None:
         )
 
 
-ANSWER_S = 300.0
+ANSWER_ENV = "TRUESTEP_ANSWER_S"
+"""The environment variable that sets :data:`ANSWER_S` (seconds, positive)."""
+ANSWER_S = guard_seconds(ANSWER_ENV, 300.0)
 """Seconds within which an adapter must answer a question truestep asks it (``missing``,
 ``duplicate``, ``skip``, ``same_steps``: each reads a scene and answers at once): a guard
 against a question that never returns (a licence server that never answers), not a
-bound on its cost, so that no row's verdict depends on how fast the machine is. A
+bound on its cost, so that no row's verdict depends on how fast the machine is. 300
+unless :data:`ANSWER_ENV` says (a CI that would rather fail a hung plugin sooner). A
 question that hangs is asked once: the engine's later questions of that name fail at
 once (:data:`_HUNG`)."""
 _HUNG: dict[tuple[str, str], float] = {}

@@ -37,7 +37,7 @@ from truestep.cases.scene import read_scene
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.system import SecondOrderSystem
 from truestep.runtime.files import FileRefused, read_regular
-from truestep.runtime.time_limit import TimeLimitExceeded, time_limit
+from truestep.runtime.time_limit import TimeLimitExceeded, guard_seconds, time_limit
 from truestep.runtime.visible import visible
 
 CASE_DIR = plugins.CASE_DIR
@@ -53,12 +53,14 @@ MAX_NESTING = 32
 """The deepest nesting of tables and arrays a case file may have."""
 MAX_SWEEP = 50
 """The most steps (or tolerances) one sweep lists: each is a row per engine and method."""
-EXACT_CHECK_S = 300.0
+EXACT_CHECK_ENV = "TRUESTEP_EXACT_CHECK_S"
+"""The environment variable that sets :data:`EXACT_CHECK_S` (seconds, positive)."""
+EXACT_CHECK_S = guard_seconds(EXACT_CHECK_ENV, 300.0)
 """Seconds within which checking that an exact solution fits its case must end: a guard
 against a check that never returns (a solution waiting on a network disk), not a bound on
 its cost. The library's own checks take at most about 1 s (the million-particle rain), so
 a case is refused for its time only when its check hangs, on any machine, not for being
-slow on a slow one."""
+slow on a slow one. 300 unless :data:`EXACT_CHECK_ENV` says."""
 REFERENCE_KEYS = {"exact", "error", "scale", "conservative", "escape_energy"}
 PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
 """``[reference]`` parameters that properties read (:mod:`truestep.measures.properties`)."""

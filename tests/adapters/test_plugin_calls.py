@@ -321,3 +321,49 @@ def test_a_plugin_module_or_case_library_that_never_answers_is_one_line(tmp_path
     err = capsys.readouterr().err
     assert "entry point truestep.cases slow = 'slow_cases:where': calling it gave no answer within 1 s" in err
     assert "Traceback" not in err
+
+
+HANGS_IN_MISSING = """
+import time
+
+from truestep.adapters.reference import ReferenceAdapter
+
+
+class Adapter(ReferenceAdapter):
+    name = "hangs-in-missing"
+    methods = ("rk4",)
+    adaptive_methods = ()
+
+    def missing(self, case, method):
+        time.sleep(3600)  # a licence server that never answers
+        return frozenset()
+"""
+
+
+def test_the_answer_limit_is_set_from_the_environment_for_the_command(tmp_path):
+    """``TRUESTEP_ANSWER_S`` sets :data:`truestep.adapters.ANSWER_S` for a command started
+    with it (a CI that would fail a hung plugin sooner than in 300 s): ``truestep run``,
+    started as a user starts it, with a plugin whose ``missing()`` never answers, writes
+    that engine's rows as ``crashed``, naming the limit, and the reference's as run."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "hangs_in_missing.py").write_text(HANGS_IN_MISSING)
+    out = tmp_path / "rep"
+    env = {**os.environ, "PYTHONPATH": str(tmp_path), adapters.ANSWER_ENV: "1.5"}
+    argv = ["run", "--quick", "--cases", "free-fall", "--engines", "hangs_in_missing:Adapter,reference"]
+    done = subprocess.run(
+        [sys.executable, "-m", "truestep", *argv, "--out", str(out)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    results = pd.read_csv(out / "results.csv")
+    mine = results[results.engine == "hangs-in-missing"]
+    assert len(mine) > 0 and set(mine.status) == {"crashed"}
+    assert any("gave no answer within 1.5 s" in m for m in mine.message)
+    assert (results[results.engine == "reference"].status == "ok").all()

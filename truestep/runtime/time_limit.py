@@ -11,6 +11,8 @@ is a no-op elsewhere (a worker thread, Windows), where the per-run process timeo
 from __future__ import annotations
 
 import contextlib
+import math
+import os
 import signal
 import threading
 import time
@@ -20,6 +22,18 @@ from collections.abc import Iterator
 class TimeLimitExceeded(BaseException):
     """A computation under :func:`time_limit` ran past its limit (a ``BaseException``, so
     that the ``except Exception`` of the code it interrupts does not swallow it)."""
+
+
+def guard_seconds(variable: str, default: float) -> float:
+    """A guard's limit, s: the environment ``variable`` where it holds a positive, finite
+    number of seconds, else ``default`` (a value that is not one is ignored, as
+    ``TRUESTEP_STOP_GRACE_S`` is). Read when the guard's module is imported: set it before
+    the command starts."""
+    try:
+        value = float(os.environ.get(variable, ""))
+    except ValueError:
+        return default
+    return value if math.isfinite(value) and value > 0 else default
 
 
 def _usable() -> bool:

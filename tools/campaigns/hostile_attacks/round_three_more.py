@@ -956,6 +956,58 @@ def attack_case_run_under_a_raised_limit_then_gated(c: Campaign, where: Path) ->
     return judged.code == 0, f"gate --limit steps=2e8: {judged.why()}"
 
 
+HANGS_IN_MISSING = """
+import time
+
+from truestep.adapters.reference import ReferenceAdapter
+
+
+class Adapter(ReferenceAdapter):
+    name = "hangs-in-missing"
+    methods = ("rk4",)
+    adaptive_methods = ()
+
+    def missing(self, case, method):
+        time.sleep(3600)  # a licence server that never answers
+        return frozenset()
+"""
+
+
+def attack_missing_that_never_answers(c: Campaign, where: Path) -> tuple[bool, str]:
+    """An adapter whose ``missing()`` never returns, with ``TRUESTEP_ANSWER_S=2`` (the
+    300 s guard, set low as a CI would): the run ends, exit 0, its rows ``crashed`` naming
+    the limit, the reference's rows run (tests/adapters/test_plugin_calls.py; issue 37,
+    item 7: ``list`` and ``run`` used to wait on it with no limit)."""
+    _plugin(where, "hangs_in_missing", HANGS_IN_MISSING)
+    env = {**_plugin_env(c, where), "TRUESTEP_ANSWER_S": "2"}
+    engines = "hangs_in_missing:Adapter,reference"
+    result = c.quick_run(where, "rep", cases="free-fall", engines=engines, env=env)
+    mine = [r for r in _rows(where / "rep") if r["engine"] == "hangs-in-missing"]
+    ran = {r["status"] for r in _rows(where / "rep") if r["engine"] == "reference"} == {"ok"}
+    named = bool(mine) and all(r["status"] == "crashed" for r in mine)
+    named = named and any("gave no answer within 2 s" in r["message"] for r in mine)
+    if result.code != 0 or not named or not ran:
+        return False, result.why()
+    return True, f"{len(mine)} rows crashed: {mine[0]['message'][:90]}"
+
+
+def attack_exact_solution_whose_check_never_returns(c: Campaign, where: Path) -> tuple[bool, str]:
+    """A case whose exact solution (a package's ``truestep.exact`` entry point) never
+    returns, with ``TRUESTEP_EXACT_CHECK_S=2``: ``run`` is exit 2 with one line that calls
+    it a hang, no traceback, no report (tests/cases/test_loader.py; issue 37, item 7)."""
+    _plugin(where, "hangs_exact", "def never(case, t):\n    while True:\n        pass\n")
+    _registered(where, "hangs-exact", "truestep.exact", {"never-returns": "hangs_exact:never"})
+    text = (HERE.parents[1] / "cases" / "free-fall.toml").read_text()
+    (where / "hangs.toml").write_text(text.replace('exact = "uniform-gravity"', 'exact = "never-returns"'))
+    env = {**_plugin_env(c, where), "TRUESTEP_EXACT_CHECK_S": "2"}
+    result = c.quick_run(where, "rep", cases=str(where / "hangs.toml"), env=env)
+    lines = _lines(result)
+    said = bool(lines) and "did not end within 2 s" in lines[-1]
+    if result.code != 2 or not said or "Traceback" in result.err or (where / "rep").exists():
+        return False, result.why()
+    return True, lines[-1][:140]
+
+
 ATTACKS = [
     attack_result_that_ends_the_process_when_read,
     attack_case_library_callable_raises_system_exit,
@@ -986,4 +1038,6 @@ ATTACKS = [
     attack_fifo_in_the_locks_place,
     attack_bench_sizes_over_the_particle_limit,
     attack_case_run_under_a_raised_limit_then_gated,
+    attack_missing_that_never_answers,
+    attack_exact_solution_whose_check_never_returns,
 ]
