@@ -186,62 +186,66 @@ def adapter_class(name: str) -> type:
 
 
 def get_adapter(name: str) -> Adapter:
-    """Instantiate the adapter of engine ``name`` (a registered name or ``module:Class``).
+    """The adapter of engine ``name`` (a registered name or ``module:Class``).
+
+    truestep's own adapters are made here. An adapter of another package is plugin code:
+    in truestep's process this is a :class:`~truestep.adapters.plugin_view.PluginView`, the
+    data of one made and read in a forked process (once per class), whose methods are
+    called in forked processes; in a process truestep forked to run it (an isolated
+    child) it is the adapter itself.
 
     Raises :class:`UnknownEngine` for a name nothing registers, and for an adapter whose
-    construction raises (its ``__init__`` is plugin code: the error is one line naming
-    it), and :class:`EngineNotInstalled` when the engine's library is missing.
+    construction raises, ends or hangs its process (the error is one line naming it), and
+    :class:`EngineNotInstalled` when the engine's library is missing.
     """
+    from truestep.runtime.isolation import in_isolated_child
+
     cls = adapter_class(name)
-    if cls.__module__.split(".")[0] != "truestep" and cls not in _MADE_APART:
-        _made_apart(name, cls)
-    try:
-        adapter = cls()
-    except (Exception, SystemExit) as err:
-        raise UnknownEngine(
-            f"engine {name!r}: its adapter {cls.__module__}.{cls.__qualname__} could not be made: "
-            f"{type(err).__name__}: {str(err)[:200]}"
-        ) from None
+    if cls.__module__.split(".")[0] != "truestep" and not in_isolated_child():
+        adapter: Any = _VIEWS.get(cls) or _view(name, cls)
+    else:
+        try:
+            adapter = cls()
+        except (Exception, SystemExit) as err:
+            raise UnknownEngine(
+                f"engine {name!r}: its adapter {cls.__module__}.{cls.__qualname__} could not be made: "
+                f"{type(err).__name__}: {str(err)[:200]}"
+            ) from None
     _check_methods(name, adapter)
     return adapter
 
 
-_MADE_APART: set[type] = set()
-"""Adapter classes of other packages already made once in a forked process."""
+_VIEWS: dict[type, Any] = {}
+"""The view of each adapter class of another package, made once (:func:`_view`)."""
 
 
-def _made_apart(name: str, cls: type) -> None:
-    """Make an adapter of another package first in a forked process (once per class, as
-    its module is first imported in one): one whose ``__init__`` ends or interrupts that
-    process is an :class:`UnknownEngine` saying so, and truestep's process goes on. A
-    construction that raises is left to the one here, which raises the same."""
+def _view(name: str, cls: type) -> Any:
+    """Make an adapter of another package, and read its public attributes, in a forked
+    process (:func:`~truestep.adapters.plugin_view.probe`), and hold what came back as data
+    (:class:`~truestep.adapters.plugin_view.PluginView`). One whose ``__init__``, or a
+    property read, ends, interrupts or hangs that process, or whose ``__init__`` raises, is
+    an :class:`UnknownEngine` saying so, and truestep's process goes on."""
+    from truestep.adapters.plugin_view import RAISED, PluginView, probe
     from truestep.cases.plugins import IMPORT_S
     from truestep.runtime.isolation import how_it_ended, run_isolated
 
-    what = f"making its adapter {cls.__module__}.{cls.__qualname__}"
-    out = run_isolated(_make_here, (cls,), IMPORT_S)
+    what = f"its adapter {cls.__module__}.{cls.__qualname__}"
+    out = run_isolated(probe, (cls,), IMPORT_S)
     if out.status == "timeout":
-        raise UnknownEngine(f"engine {name!r}: {what} gave no answer within {IMPORT_S:g} s")
+        raise UnknownEngine(f"engine {name!r}: making {what} gave no answer within {IMPORT_S:g} s")
     if out.status != "ok":
         raise UnknownEngine(
-            f"engine {name!r}: {what} ended the process it was first tried in ({how_it_ended(out.message)})"
+            f"engine {name!r}: making {what} ended the process it was first tried in "
+            f"({how_it_ended(out.message)})"
         )
-    if out.value != "ok":
+    if isinstance(out.value, str):
         raise UnknownEngine(f"engine {name!r}: {what} {out.value}")
-    _MADE_APART.add(cls)
-
-
-def _make_here(cls: type) -> str:
-    """In a forked process: make an adapter of ``cls``; ``"ok"`` when that returns or
-    raises (the caller's own construction says why), else what it did to the process."""
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        cls()
-    except KeyboardInterrupt:
-        return "interrupted its own process (SIGINT)"
-    except BaseException:  # the caller's own construction raises the same and says so
-        pass
-    return "ok"
+    for attribute in ("name", "methods", "adaptive_methods"):
+        kind, detail = out.value.get(attribute, (None, None))
+        if kind == RAISED:
+            raise UnknownEngine(f"engine {name!r}: reading {what}'s {attribute} {detail}")
+    _VIEWS[cls] = view = PluginView(name, cls, out.value, ask=plugin_answer, failed=PluginFailed)
+    return view
 
 
 def _check_methods(name: str, adapter: Any) -> None:

@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 from kill_helpers import still_running
 
-from truestep.runtime.supervisor import DID_NOT_FINISH, GRACE_ENV
+from truestep.runtime.supervisor import GRACE_ENV
 
 RUN = ["run", "--quick", "--cases", "free-fall"]
 
@@ -140,13 +140,14 @@ PLUGINS = {
         from pathlib import Path
         from truestep.adapters.reference import ReferenceAdapter
 
+        # in the command's own process, at import (its handlers are put back after the
+        # import, its signal mask is not): SIGTERM is held back until the grace ends
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+
         class X(ReferenceAdapter):
             name = "ignores-term"
             methods = ("rk4",)
             adaptive_methods = ()
-
-            def __init__(self):  # in the command's own process
-                signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
             def simulate(self, case, method, dt, **kw):
                 helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
@@ -163,7 +164,7 @@ PLUGINS = {
             methods = ("rk4",)
             adaptive_methods = ()
 
-            def __init__(self):  # in the command's own process
+            def __init__(self):  # in the process that makes the adapter's view, and in each run's
                 if Path("daemon.pid").exists():
                     return
                 if os.fork() == 0:
@@ -189,6 +190,31 @@ PLUGINS = {
                 helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
                 Path("helper.pid").write_text(str(helper.pid))
                 time.sleep(120)
+    """,
+    "made_and_read_only_apart": """
+        import os
+        from pathlib import Path
+        from truestep.adapters.reference import ReferenceAdapter
+        from truestep.runtime.isolation import in_isolated_child
+
+        def _where(what):
+            if not in_isolated_child():
+                Path(f"outside-{os.getpid()}").write_text(what)
+                os._exit(0)  # were this truestep's own process, the command would end here
+
+        class X(ReferenceAdapter):
+            name = "made-and-read-only-apart"
+            methods = ("rk4", "euler")
+            adaptive_methods = ()
+
+            def __init__(self):
+                _where("__init__")
+                super().__init__()
+
+            @property
+            def speed_claim(self):
+                _where("speed_claim")
+                return True
     """,
 }
 
@@ -295,9 +321,15 @@ def test_sys_exit_at_import_or_in_a_call_is_one_line(plugins):
     proc = _start(plugins, *RUN, "--engines", "exits_at_import:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 2 and "importing exits_at_import called sys.exit(0)" in err, err
+    # a property read in the forked process that makes the adapter's view (issue 37, item 5)
     proc = _start(plugins, *RUN, "--engines", "sys_exit_in_methods:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
-    assert proc.returncode == DID_NOT_FINISH and "called sys.exit(0)" in err, err
+    assert proc.returncode == 2, err
+    (line,) = _lines(err)
+    assert line == (
+        "truestep: error: engine 'sys-exit-in-methods': reading its adapter sys_exit_in_methods.X's "
+        "methods called sys.exit(0)"
+    ), err
     assert "Traceback" not in err and not (plugins / "rep").exists()
     # in a call whose answer makes rows, the rows say so and the run goes on
     proc = _start(plugins, *RUN, "--engines", "sys_exit_in_missing:X,reference", "--out", "rep")
@@ -365,7 +397,35 @@ def test_a_worker_that_ignores_sigterm_is_killed_after_the_grace_with_what_it_st
     assert still_running([helper]) == []
 
 
-def test_a_daemon_started_in_the_command_s_own_process_does_not_outlive_it(plugins):
+def test_a_plugin_s_adapter_is_made_and_read_only_in_forked_processes(plugins):
+    """Issue 37, item 5: truestep's process holds only data of a plugin's adapter, read in
+    a forked process (a view); its construction and its properties run in forked
+    processes only, never in truestep's own, through a whole run with its stability
+    searches. The plugin here ends any process that is not an isolated child and leaves a
+    file saying so: before, every later ``get_adapter`` made it in truestep's process, and
+    a construction or a property that ended that process ended the command (exit 3)."""
+    proc = _start(
+        plugins,
+        "run",
+        "--quick",
+        "--cases",
+        "free-fall,harmonic-oscillator",
+        "--engines",
+        "made_and_read_only_apart:X,reference",
+        "--out",
+        "rep",
+    )
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert sorted(p.read_text() for p in plugins.glob("outside-*")) == []
+    rows = pd.read_csv(plugins / "rep" / "results.csv")
+    mine = rows[rows["engine"] == "made-and-read-only-apart"]
+    assert set(mine["method"]) == {"rk4", "euler"} and (mine["status"] == "ok").all(), mine
+    limits = pd.read_csv(plugins / "rep" / "stability.csv")
+    assert (limits["engine"] == "made-and-read-only-apart").any(), limits
+
+
+def test_a_daemon_started_when_the_adapter_is_made_does_not_outlive_the_run(plugins):
     proc = _start(plugins, *RUN, "--engines", "daemon_at_construction:X", "--out", "rep")
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err

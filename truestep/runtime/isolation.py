@@ -164,7 +164,18 @@ def _kill_below() -> None:
         reap_children()
 
 
+_IN_CHILD = [False]
+"""Whether this process is an isolated child (:func:`in_isolated_child`)."""
+
+
+def in_isolated_child() -> bool:
+    """Whether this process is one truestep forked to make an isolated call (or a process
+    below one): where plugin code may run, contained."""
+    return _IN_CHILD[0]
+
+
 def _child(conn, parent: int, fn: Callable[..., Any], args: tuple) -> None:
+    _IN_CHILD[0] = True
     gc.freeze()  # what the child inherited: its collector never walks (and copies) those pages
     die_with_parent(parent)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)

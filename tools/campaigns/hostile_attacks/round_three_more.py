@@ -168,6 +168,53 @@ def attack_adapter_import_calls_sys_exit(c: Campaign, where: Path) -> tuple[bool
     return ok, result.why()
 
 
+ENDS_ON_A_LATER_CALL = """
+import os
+from pathlib import Path
+from truestep.adapters.reference import ReferenceAdapter
+
+def _again(mark):
+    if Path(mark).exists():
+        os._exit(0)
+    Path(mark).write_text("")
+
+class X(ReferenceAdapter):
+    name = "ends-on-a-later-call"
+    methods = ("rk4",)
+    adaptive_methods = ()
+
+    def __init__(self):
+        _again(f"made-in-{os.getppid()}")  # once per parent: a second making ends its process
+        super().__init__()
+
+    @property
+    def speed_claim(self):
+        _again(f"read-in-{os.getpid()}")  # a second read in one process ends it
+        return True
+"""
+
+
+def attack_adapter_ends_its_process_on_a_later_making_or_read(c: Campaign, where: Path) -> tuple[bool, str]:
+    """An adapter whose ``__init__`` ends its process when made a second time below the
+    same parent, and whose ``speed_claim`` property ends its process when read a second
+    time in it: the run is exit 0 with a report, and the plugin's rows are there
+    (tests/runtime/test_supervisor.py, the adapter made and read only in forked
+    processes; it used to end ``truestep run`` with exit 3, as the adapter was made again
+    and read again in truestep's own process)."""
+    _plugin(where, "ends_on_a_later_call", ENDS_ON_A_LATER_CALL)
+    result = c.quick_run(
+        where,
+        "rep",
+        cases="free-fall",
+        engines="ends_on_a_later_call:X,reference",
+        env=_plugin_env(c, where),
+    )
+    if result.code != 0 or "Traceback" in result.err or not (where / "rep" / "results.csv").exists():
+        return False, result.why()
+    statuses = _statuses(where / "rep", "ends-on-a-later-call")
+    return bool(statuses), f"exit 0, its rows: {', '.join(sorted(statuses))}"
+
+
 # -- item 6: nothing outlives a run ---------------------------------------------------------
 
 HELPER_THEN_SLEEP = """
@@ -1012,6 +1059,7 @@ ATTACKS = [
     attack_result_that_ends_the_process_when_read,
     attack_case_library_callable_raises_system_exit,
     attack_adapter_import_calls_sys_exit,
+    attack_adapter_ends_its_process_on_a_later_making_or_read,
     attack_sigkill_of_run_leaves_no_helper,
     attack_sighup_of_run_leaves_no_helper,
     attack_kill_of_compile_leaves_no_worker_compiling,
