@@ -27,6 +27,7 @@ from typing import Any
 
 from truestep.reference_impl import odes
 from truestep.reference_impl.system import System
+from truestep.runtime.time_limit import guard_seconds
 
 CASES_GROUP, EXACT_GROUP, SYSTEMS_GROUP = "truestep.cases", "truestep.exact", "truestep.systems"
 
@@ -41,10 +42,14 @@ BUILTIN_SYSTEMS: dict[str, type[System]] = {
 """The lecture's ODE systems: ``[ode] system`` name -> class."""
 
 
-IMPORT_S = 300.0
-"""Seconds an installed package's module has to import, and a case library's callable to
-name its directory (code truestep did not write: a licence check or a network disk that
-never answers ends as an error naming the entry, not as a run that never starts)."""
+IMPORT_ENV = "TRUESTEP_IMPORT_S"
+"""The environment variable that sets :data:`IMPORT_S` (seconds, positive)."""
+IMPORT_S = guard_seconds(IMPORT_ENV, 300.0)
+"""Seconds an installed package's module has to import, a plugin's adapter to be made and
+read (:func:`truestep.adapters.get_adapter`), and a case library's callable to name its
+directory (code truestep did not write: a licence check or a network disk that never
+answers ends as an error naming the entry, not as a run that never starts). 300 unless
+:data:`IMPORT_ENV` says (a CI that would rather fail a hung plugin sooner)."""
 
 
 class PluginError(ValueError):

@@ -12,7 +12,7 @@ from types import MappingProxyType
 import numpy as np
 import pytest
 
-from truestep.adapters import PluginFailed, get_adapter, plugin_answer, resolve_engine
+from truestep.adapters import PluginFailed, UnknownEngine, get_adapter, plugin_answer, resolve_engine
 from truestep.adapters.base import facts_of
 from truestep.adapters.plugin_view import PluginView, probe
 from truestep.adapters.reference import ReferenceAdapter
@@ -99,3 +99,25 @@ def test_get_adapter_holds_a_view_of_a_plugin_and_truestep_s_own_adapters_themse
     assert isinstance(get_adapter(engine), PluginView)
     assert get_adapter(engine) is get_adapter(engine)  # made and read once
     assert isinstance(get_adapter("reference"), ReferenceAdapter)
+
+
+class NeverMade(ReferenceAdapter):
+    """An adapter whose ``__init__`` never returns (a licence server that never answers)."""
+
+    name = "never-made-test"
+
+    def __init__(self) -> None:
+        import time
+
+        time.sleep(3600)
+
+
+def test_an_adapter_whose_making_never_ends_is_one_error_naming_the_limit(monkeypatch):
+    import truestep.cases.plugins
+
+    monkeypatch.setattr(truestep.cases.plugins, "IMPORT_S", 1.0)
+    engine = resolve_engine(f"{__name__}:NeverMade")
+    with pytest.raises(
+        UnknownEngine, match=r"making its adapter test_plugin_view.NeverMade gave no answer within 1 s"
+    ):
+        get_adapter(engine)

@@ -33,13 +33,18 @@ def test_a_guard_takes_a_positive_finite_number_of_seconds_or_its_default(monkey
     assert guard_seconds("TRUESTEP_SOME_GUARD_S", 300.0) == seconds
 
 
-def test_the_exact_check_and_answer_limits_come_from_the_environment_of_the_process():
-    """The loader's exact-solution check and the adapters' answer limit read their
-    variables when imported: a command started with them set uses them."""
+def test_the_exact_check_answer_and_import_limits_come_from_the_environment_of_the_process():
+    """The loader's exact-solution check, the adapters' answer limit and the plugins'
+    import limit read their variables when imported: a command started with them set uses
+    them."""
     from truestep.adapters import ANSWER_ENV
     from truestep.cases.loader import EXACT_CHECK_ENV
+    from truestep.cases.plugins import IMPORT_ENV
 
-    env = {**os.environ, ANSWER_ENV: "7", EXACT_CHECK_ENV: "9"}
-    code = "import truestep.adapters as a, truestep.cases.loader as l; print(a.ANSWER_S, l.EXACT_CHECK_S)"
+    env = {**os.environ, ANSWER_ENV: "7", EXACT_CHECK_ENV: "9", IMPORT_ENV: "11"}
+    code = (
+        "import truestep.adapters as a, truestep.cases.loader as l, truestep.cases.plugins as p; "
+        "print(a.ANSWER_S, l.EXACT_CHECK_S, p.IMPORT_S)"
+    )
     said = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-    assert said.stdout.split() == ["7.0", "9.0"]
+    assert said.stdout.split() == ["7.0", "9.0", "11.0"]

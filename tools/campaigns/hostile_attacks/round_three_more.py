@@ -1055,6 +1055,32 @@ def attack_exact_solution_whose_check_never_returns(c: Campaign, where: Path) ->
     return True, lines[-1][:140]
 
 
+def attack_adapter_import_or_making_that_never_ends(c: Campaign, where: Path) -> tuple[bool, str]:
+    """An adapter module whose import never returns, and one whose adapter's ``__init__``
+    never returns, with ``TRUESTEP_IMPORT_S=2`` (the 300 s guard, set low as a CI would):
+    each run is exit 2 with one line naming the limit, no traceback, no report
+    (tests/adapters/test_plugin_view.py; issue 37, item 7: adapter imports and
+    constructions used to be awaited with no limit)."""
+    _plugin(where, "hangs_at_import", "import time\ntime.sleep(3600)\n")
+    _plugin(
+        where,
+        "hangs_when_made",
+        "import time\nfrom truestep.adapters.reference import ReferenceAdapter\n\n"
+        "class X(ReferenceAdapter):\n    name = 'hangs-when-made'\n\n"
+        "    def __init__(self):\n        time.sleep(3600)\n",
+    )
+    env = {**_plugin_env(c, where), "TRUESTEP_IMPORT_S": "2"}
+    notes = []
+    for module in ("hangs_at_import", "hangs_when_made"):
+        result = c.quick_run(where, "rep", cases="free-fall", engines=f"{module}:X,reference", env=env)
+        lines = _lines(result)
+        said = len(lines) == 1 and "gave no answer within 2 s" in lines[0] and module in lines[0]
+        if result.code != 2 or not said or "Traceback" in result.err or (where / "rep").exists():
+            return False, f"{module}: {result.why()}"
+        notes.append(lines[0][:110])
+    return True, "; ".join(notes)
+
+
 ATTACKS = [
     attack_result_that_ends_the_process_when_read,
     attack_case_library_callable_raises_system_exit,
@@ -1088,4 +1114,5 @@ ATTACKS = [
     attack_case_run_under_a_raised_limit_then_gated,
     attack_missing_that_never_answers,
     attack_exact_solution_whose_check_never_returns,
+    attack_adapter_import_or_making_that_never_ends,
 ]
