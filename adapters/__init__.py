@@ -130,8 +130,9 @@ GUARDED_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 def _import_guarded(engine: str, module: str) -> ModuleType:
     """Import an adapter's module as code truestep did not write: what it prints goes to
     standard error (standard output is truestep's: tables, ``list``), and the working
-    directory and the handlers of :data:`GUARDED_SIGNALS` are put back as they were (a
-    module that ignores SIGTERM would make the run impossible to stop). A module that
+    directory, the handlers of :data:`GUARDED_SIGNALS` and the signal mask are put back as
+    they were (a module that ignores or blocks SIGTERM would make the run impossible to
+    stop before the supervisor's grace ends). A module that
     calls ``sys.exit`` while it loads, or does not load within
     :data:`~truestep.cases.plugins.IMPORT_S` seconds, is an :class:`UnknownEngine` that
     says so."""
@@ -140,6 +141,8 @@ def _import_guarded(engine: str, module: str) -> ModuleType:
 
     cwd = os.getcwd()
     handlers = {s: signal.getsignal(s) for s in GUARDED_SIGNALS}
+    main = threading.current_thread() is threading.main_thread()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, []) if main else None
     try:
         with contextlib.redirect_stdout(sys.stderr):
             return import_within(module, f"importing {module}")
@@ -154,10 +157,12 @@ def _import_guarded(engine: str, module: str) -> ModuleType:
     finally:
         with contextlib.suppress(OSError):
             os.chdir(cwd)
-        if threading.current_thread() is threading.main_thread():
+        if main:
             for s, h in handlers.items():
                 if h is not None and signal.getsignal(s) is not h:
                     signal.signal(s, h)
+        if mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _load_class(engine: str, target: str) -> type:

@@ -135,23 +135,32 @@ PLUGINS = {
                 Path(HERE, "started").write_text(str(os.getpid()))
                 time.sleep(120)
     """,
-    "ignores_term_while_running": """
-        import os, signal, subprocess, sys, time
+    "stuck_in_compiled_code": """
+        import subprocess, sys
+        from pathlib import Path
+        from truestep.runtime.isolation import in_isolated_child
+
+        if not in_isolated_child():  # the command's own process, after the forked trial import
+            helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+            Path("helper.pid").write_text(str(helper.pid))
+            sum(range(10**12))  # compiled code, in which no signal handler runs
+    """,
+    "blocks_term_at_import": """
+        import signal
         from pathlib import Path
         from truestep.adapters.reference import ReferenceAdapter
 
-        # in the command's own process, at import (its handlers are put back after the
-        # import, its signal mask is not): SIGTERM is held back until the grace ends
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
 
         class X(ReferenceAdapter):
-            name = "ignores-term"
+            name = "blocks-term"
             methods = ("rk4",)
             adaptive_methods = ()
 
             def simulate(self, case, method, dt, **kw):
-                helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
-                Path("helper.pid").write_text(str(helper.pid))
+                import time
+
+                Path("started").write_text("")
                 time.sleep(120)
     """,
     "daemon_at_construction": """
@@ -245,6 +254,13 @@ def _wait_for(path: Path, timeout: float = 60.0) -> int:
         time.sleep(0.05)
     time.sleep(0.2)
     return int(path.read_text())
+
+
+def _wait_for_file(path: Path, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert time.monotonic() < deadline, f"{path.name} never appeared"
+        time.sleep(0.05)
 
 
 def _lines(stderr: str) -> list[str]:
@@ -385,8 +401,25 @@ def test_a_plugin_cannot_take_the_signals_the_directory_or_standard_output(plugi
     assert (plugins / ".rep.partial").is_dir()  # the journal beside --out, not under /
 
 
-def test_a_worker_that_ignores_sigterm_is_killed_after_the_grace_with_what_it_started(plugins):
-    proc = _start(plugins, *RUN, "--engines", "ignores_term_while_running:X", "--out", "rep", grace=2)
+def test_a_plugin_cannot_block_sigterm_at_import(plugins):
+    """A plugin module that blocks SIGTERM (its signal mask) while it is imported: the
+    mask is put back after the import, as its handlers are, and SIGTERM stops the run at
+    once, with its line. Before, it was held back until the supervisor's grace ended."""
+    proc = _start(plugins, *RUN, "--engines", "blocks_term_at_import:X", "--out", "rep", grace=60)
+    _wait_for_file(plugins / "started")
+    began = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "interrupted by SIGTERM" in _lines(err)[-1]
+    assert time.monotonic() - began < 30
+
+
+def test_a_worker_stuck_in_compiled_code_is_killed_after_the_grace_with_what_it_started(plugins):
+    """The supervisor's backstop: a worker in which no signal handler can run (a plugin's
+    import in compiled code that never returns to Python) is killed when the grace ends,
+    with every process it started, and the command says so."""
+    proc = _start(plugins, *RUN, "--engines", "stuck_in_compiled_code:X", "--out", "rep", grace=2)
     helper = _wait_for(plugins / "helper.pid")
     began = time.monotonic()
     proc.send_signal(signal.SIGTERM)

@@ -428,6 +428,7 @@ from truestep.adapters.reference import ReferenceAdapter
 
 signal.signal(signal.SIGTERM, signal.SIG_IGN)
 signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
 
 
 class X(ReferenceAdapter):
@@ -442,11 +443,13 @@ class X(ReferenceAdapter):
 
 
 def attack_plugin_ignores_sigterm_and_sigint_at_import(c: Campaign, where: Path) -> tuple[bool, str]:
-    """A plugin module that ignores SIGTERM and SIGINT when imported, whose runs sleep:
-    SIGTERM (then, on a second run, SIGINT) of ``truestep run`` once a run started ends
-    it within 30 s, exit 128 + the signal, its last line "interrupted by SIG...", and the
-    sleeping run is not left alive (tests/runtime/test_supervisor.py rude_at_import; it used to
-    end with exit 0, 15 s after the SIGTERM)."""
+    """A plugin module that ignores SIGTERM and SIGINT when imported, and blocks them
+    (its signal mask), whose runs sleep: SIGTERM (then, on a second run, SIGINT) of
+    ``truestep run`` once a run started ends it within 30 s (before the supervisor's
+    grace ends), exit 128 + the signal, its last line "interrupted by SIG...", and the
+    sleeping run is not left alive (tests/runtime/test_supervisor.py rude_at_import and
+    blocks_term_at_import; it used to end with exit 0, 15 s after the SIGTERM; blocked,
+    it was held until the grace ended)."""
     _plugin(where, "ignores_signals", IGNORES_SIGNALS)
     notes = []
     for sig in (signal.SIGTERM, signal.SIGINT):
