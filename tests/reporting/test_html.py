@@ -273,6 +273,33 @@ def test_speed_table_gives_particle_steps_per_second_and_ratios():
     tied = results.assign(wall_s=results["wall_s"].where(results["engine"] != "mujoco", 0.45))
     text = "\n".join(speed_section([case], speed_tables([case], tied)))
     assert "the fastest engines, mujoco / Euler and pymunk / default (tied within timing noise)" in text
+    assert "Contact law" not in text
+
+
+def test_the_rain_table_names_the_contact_laws_that_miss_the_asked_restitution_at_some_phase():
+    """Issue 35, item 4: under the particle-rain table, the engines and methods of the table
+    whose restitution drops leave the asked e at some impact phase are named (their errors
+    there are partly their contact law's); one the table does not show is not."""
+    from truestep.measures.restitution import phase_contact
+    from truestep.reporting.report import speed_section, speed_tables
+
+    case = load_cases("particle-rain")[0]
+    rows = [("reference", "lecture", 0.004, 2.8e-3), ("newton", "semi-implicit", 0.1, 0.38)]
+    results = pd.DataFrame(rows, columns=["engine", "method", "wall_s", "error"]).assign(
+        case=case.name, dt=1e-3, dt_kind="step", status="ok", steps=1500
+    )
+    drops = pd.DataFrame(
+        [
+            ("newton", "semi-implicit", 0.336, 0.525, 0.424),  # off by 0.164 at some phase
+            ("mujoco", "Euler", 0.3, 0.7, 0.5),  # off, but not in this table
+            ("reference", "lecture", 0.499, 0.501, 0.5),  # within the band
+        ],
+        columns=["engine", "method", "e_phase_min", "e_phase_max", "e_phase_median"],
+    ).assign(dt=1e-3, e_set=0.5, phases=16, status="ok", bounce=1)
+    text = "\n".join(speed_section([case], speed_tables([case], results), phase_contact(drops)))
+    (line,) = [x for x in text.splitlines() if x.startswith("**Contact law:**")]
+    assert "from newton / semi-implicit (the summary" in line
+    assert "mujoco" not in line and "reference" not in line
 
 
 def test_an_image_line_from_case_text_reads_nothing(tmp_path):

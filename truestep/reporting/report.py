@@ -209,7 +209,7 @@ def render_markdown(
         + (". This is a `--quick` run: short sweeps." if quick else ".")
         + "\n"
     )
-    speed = speed_section(cases, found.speed)
+    speed = speed_section(cases, found.speed, found.phase_contact)
     titles = (
         list(SECTIONS[:2])
         + [line[3:].strip() for line in speed if line.startswith("## ")]

@@ -203,9 +203,14 @@ def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
     )
 
 
-def speed_section(cases: list[Case], speed: dict[tuple[str, str], pd.DataFrame]) -> list[str]:
+def speed_section(
+    cases: list[Case], speed: dict[tuple[str, str], pd.DataFrame], phase: pd.DataFrame | None = None
+) -> list[str]:
     """For each case with a ``speedup`` gate: what modelling only what the scene needs is
-    worth, the gated method against every engine at the same steps."""
+    worth, the gated method against every engine at the same steps; under it, the engines
+    and methods of its table whose contact does not give the asked restitution at every
+    impact phase (``phase``: :func:`truestep.measures.restitution.phase_contact`), whose
+    errors there are partly their contact law's (:func:`phase_sentence`)."""
     parts: list[str] = []
     for case in cases:
         for g in (g for g in case.gates if g.kind == "speedup"):
@@ -229,6 +234,8 @@ def speed_section(cases: list[Case], speed: dict[tuple[str, str], pd.DataFrame])
             if len(others) and len(mine):
                 parts.append(speedup_sentence(g, others, mine.iloc[0]))
             parts.append(md_table(with_units(table)))
+            if phase is not None and (contact := phase_sentence(case, table, phase)):
+                parts.append(contact)
     return parts
 
 
