@@ -171,3 +171,31 @@ def test_a_contact_case_names_only_the_engines_it_ran(case_named):
     line = phase_sentence(ball, shown, found)
     assert "impact phase from c / n (the summary" in line and "b / m" not in line
     assert phase_sentence(case_named("harmonic-oscillator"), shown, found) == ""
+
+
+def test_a_row_on_a_contact_case_says_when_its_contact_law_misses_the_asked_e_at_some_phase():
+    """Issue 35, item 4 ("its rows ... say it does not"): each row that ran a contact case
+    with an engine and method whose drops leave the band gets the farthest range in its
+    message (after what it said already); rows of other cases, of pairs within the band,
+    and rows that did not run are left as they are."""
+    from truestep.measures.restitution import with_contact_notes
+
+    results = pd.DataFrame(
+        [
+            ("bouncing-ball", "b", "m", "ok", "Warp CPU device"),
+            ("bouncing-ball", "b", "m", "unsupported", "no planes"),
+            ("bouncing-ball", "a", "m", "ok", ""),
+            ("bouncing-ball", "c", "n", "unstable", np.nan),
+            ("harmonic-oscillator", "b", "m", "ok", ""),
+        ],
+        columns=["case", "engine", "method", "status", "message"],
+    )
+    with_contact_notes(results, _sweep(), {"bouncing-ball"})
+    farthest = (
+        "contact law: asked e 0.9 gives 0.100 to 0.900 over the impact phases at dt 0.001 s "
+        "(restitution.csv): its error on a contact case is partly its contact law's"
+    )
+    assert results.loc[0, "message"] == f"Warp CPU device; {farthest}"
+    assert results.loc[1, "message"] == "no planes" and results.loc[2, "message"] == ""
+    assert results.loc[3, "message"].startswith("contact law: asked e 0 gives 0.000 to 0.060")
+    assert results.loc[4, "message"] == ""

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from truestep.cases.case import Case
+from truestep.measures.restitution import with_contact_notes
 
 if TYPE_CHECKING:
     from truestep.execution.cluster import Cluster
@@ -142,6 +143,8 @@ def run_experiment(exp: Experiment) -> Tables:
                 results = _refined(exp, results, lanes)
                 laps.lap("sweep")
                 tables = _analyses(exp, results, journal, kinds, ahead, lanes)
+            contact = {c.name for c in exp.cases if getattr(c.scene, "planes", None)}
+            with_contact_notes(results, tables.get("restitution"), contact)
             found = find(exp.cases, results, tables) if exp.analyses else None
             laps.lap("analyses")
         if exp.report is not None:

@@ -208,3 +208,35 @@ def phase_contact(restitution: pd.DataFrame | None) -> pd.DataFrame:
     order = {pair: k for k, pair in enumerate(dict.fromkeys(zip(r["engine"], r["method"], strict=True)))}
     r["pair"] = [order[p] for p in zip(r["engine"], r["method"], strict=True)]
     return r.sort_values(["pair", "off"], ascending=[True, False], kind="stable")[cols].reset_index(drop=True)
+
+
+def contact_note(w: pd.Series) -> str:
+    """A row's note that its engine and method's contact does not give the asked
+    restitution at every impact phase (``w``: a row of :func:`phase_contact`)."""
+    return (
+        f"contact law: asked e {w['e_set']:g} gives {w['e_phase_min']:.3f} to {w['e_phase_max']:.3f} "
+        f"over the impact phases at dt {float(w['dt']):.4g} s (restitution.csv): its error on a "
+        "contact case is partly its contact law's"
+    )
+
+
+def with_contact_notes(results: pd.DataFrame, restitution: pd.DataFrame | None, contact: set[str]) -> None:
+    """Add :func:`contact_note` to the ``message`` of each row that ran a case of
+    ``contact`` (scenes with a plane) with an engine and method whose restitution drops
+    leave the asked e by more than :data:`PHASE_BAND` at some impact phase
+    (:func:`phase_contact`, its farthest row), in place. Rows of other cases, and rows that
+    did not run, are left as they are."""
+    from truestep.tables.io import RAN
+
+    phase = phase_contact(restitution)
+    if not len(phase) or results.empty or "message" not in results:
+        return
+    pairs = phase.groupby(["engine", "method"], sort=False)
+    notes = {(str(e), str(m)): contact_note(g.iloc[0]) for (e, m), g in pairs}
+    for k in results.index:
+        row = results.loc[k]
+        note = notes.get((str(row["engine"]), str(row["method"])))
+        if note is None or row["case"] not in contact or row["status"] not in RAN:
+            continue
+        said = row["message"] if isinstance(row["message"], str) else ""
+        results.at[k, "message"] = f"{said}; {note}" if said else note

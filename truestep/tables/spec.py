@@ -271,7 +271,14 @@ RESULTS = Table(
         Column("repeats", "count", "runs", "how many runs were timed", machine=True, least=0.0),
         Column("t_fail", "number", "s", "the simulated time at which an unstable run blew up"),
         Column("missing", "text", "", "the features an unsupported engine lacks, comma-separated"),
-        Column("message", "text", "", "what the engine or the harness said when a run did not end ok"),
+        Column(
+            "message",
+            "text",
+            "",
+            "what the engine or the harness said: why a run did not end ok, and notes on the row "
+            "(its device, its evaluations per step, a contact law that misses the asked "
+            "restitution at some impact phase)",
+        ),
         Column(
             "case_source",
             "text",
