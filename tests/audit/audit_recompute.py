@@ -1,4 +1,4 @@
-"""Independent routes to truestep's published numbers, for tests/audit/test_property_audit.py.
+"""Independent routes to truestep's published numbers, for the property audit (tests/audit/test_audit_*.py).
 
 Everything here is written from the physics and from the documented definitions of the
 quantities, not from the code that computes them: nothing of ``truestep.measures.metrics``,
