@@ -787,3 +787,47 @@ def test_every_built_in_engine_s_recorded_facts_read_back_as_its_adapter_declare
     assert rec == {"like": "implicit-euler", "evaluations_per_step": 2}
     back = engine_facts._facts_from(rec)
     assert back == changed and back.stability is NAMED["implicit-euler"].stability
+
+
+def test_a_limit_on_a_damped_mode_is_read_from_the_run_that_recorded_values(case_named):
+    """Issue 38, item 2: facts recorded as values keep no step matrix, so judged where the
+    engine is not installed, the limit on a damped mode was unknown and an unstable run
+    below it was let through. The run now records the exact limit on each linear case
+    (``stability_limits``, from its whole facts), and the verdict reads it: a damped
+    oscillator unstable at half its limit fails, as where the engine is installed. The
+    limit is recomputed here from the closed form of explicit Euler's damped reach
+    (``2 zeta / omega``, where its step matrix's spectral radius reaches 1)."""
+    from truestep.cases.exact import linear_modes
+    from truestep.ci.gates import _unstable_where_stable
+    from truestep.measures import engine_facts
+    from truestep.measures.declared import _order_gate
+    from truestep.reference_impl.solvers.facts import NAMED, MethodFacts, Stability
+
+    case = case_named("damped-oscillator")
+    euler = NAMED["euler"].stability
+    assert euler is not None
+    facts = MethodFacts(
+        order=1,
+        evaluations_per_step=1,
+        symplectic=False,
+        stability=Stability(euler.imaginary, euler.real, step_matrix=euler.step_matrix),
+    )
+    values = json.loads(json.dumps(engine_facts._facts_record(facts, facts)))
+    assert "like" not in values and "step_matrix" not in json.dumps(values)
+    limits = json.loads(json.dumps(engine_facts._limits_record(facts, values, [case])))
+    omega, zeta = linear_modes(case)
+    assert limits == {case.name: pytest.approx(2 * zeta / omega, rel=1e-6)}
+    gate = _order_gate("elsewhere-damped", "m", 1)
+    rows = pd.DataFrame(
+        {"dt": [limits[case.name] / 2], "status": ["unstable"], "dt_kind": ["step"], "error": [np.nan]}
+    )
+    try:
+        engine_facts.take({"method_facts": {"elsewhere-damped": {"m": values}}})
+        assert _unstable_where_stable(case, gate, rows) is None  # the values alone: no limit known
+        engine_facts.take({"stability_limits": {"elsewhere-damped": {"m": limits}}})
+        verdict = _unstable_where_stable(case, gate, rows)
+        assert verdict is not None and not verdict.passed
+        assert "where its facts say it is stable" in verdict.measured
+    finally:
+        engine_facts.RECORDED_FACTS.pop("elsewhere-damped", None)
+        engine_facts.RECORDED_LIMITS.pop(("elsewhere-damped", "m", case.name), None)

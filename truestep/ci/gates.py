@@ -371,7 +371,7 @@ def _unstable_where_stable(case: Case, g: Gate, rows: pd.DataFrame) -> GateResul
     from truestep.adapters import EngineNotInstalled, UnknownEngine, get_adapter
     from truestep.adapters.base import facts_of
     from truestep.cases.exact import stability_limit
-    from truestep.measures.engine_facts import recorded_facts
+    from truestep.measures.engine_facts import recorded_facts, recorded_limit
 
     known, facts = recorded_facts(g.engine, g.method)  # the judged run's facts win
     if not known:
@@ -379,7 +379,9 @@ def _unstable_where_stable(case: Case, g: Gate, rows: pd.DataFrame) -> GateResul
             facts = facts_of(get_adapter(g.engine), g.method)
         except (EngineNotInstalled, UnknownEngine):
             return None
-    exact = stability_limit(case, facts) if facts is not None else None
+    exact = recorded_limit(g.engine, g.method, case.name) if known else None
+    if exact is None:
+        exact = stability_limit(case, facts) if facts is not None else None
     if exact is None or not (np.isfinite(exact) or exact == np.inf) or exact <= 0:
         return None
     dts = np.sort(_num(unstable["dt"]))

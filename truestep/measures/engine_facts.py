@@ -10,8 +10,11 @@ orders are fitted above its round-off floor, its declared-order gates are made
 (``--declared-orders``), and a run unstable where its facts say it is stable still fails.
 
 A recorded name resolves to the reference method's whole facts (its stability region
-too); recorded values carry the stability interval but not the step matrix, so the limit
-on a damped mode stays unknown where only values were recorded.
+too). Recorded values carry the stability interval but not the step matrix (a function):
+for those methods the run also records the exact largest stable step on each of its
+linear cases (``stability_limits``, from the whole facts, step matrix included), which a
+verdict on its tables reads (:func:`recorded_limit`) before it computes one from the
+values (which knows no limit on a damped mode).
 """
 
 from __future__ import annotations
@@ -26,6 +29,9 @@ from truestep.reference_impl.solvers.facts import NAMED, Stability
 RECORDED_FACTS: dict[str, dict[str, MethodFacts | None]] = {}
 """Engine -> method -> the facts its run recorded (``None``: it declared none), set by
 :func:`take` where a run's tables are judged."""
+RECORDED_LIMITS: dict[tuple[str, str, str], float] = {}
+"""(engine, method, case) -> the exact largest stable step (s) its run recorded
+(``stability_limits``), set by :func:`take`."""
 
 
 def _number(x: float) -> float | str:
@@ -61,12 +67,33 @@ def _facts_record(spec: object, facts: MethodFacts | None) -> dict | None:
     }
 
 
-def record(engines: Iterable[str]) -> dict:
+def _limits_record(facts: MethodFacts | None, recorded: dict | None, cases: Iterable) -> dict:
+    """The exact largest stable step (s; ``"inf"``: every step) of facts recorded as
+    values whose step matrix is not recorded, on each of ``cases`` where one is known
+    (:func:`truestep.cases.exact.stability_limit`): case name -> limit."""
+    from truestep.cases.exact import stability_limit
+
+    s = None if facts is None else facts.stability
+    if recorded is None or "like" in recorded or s is None or s.step_matrix is None:
+        return {}
+    out = {}
+    for case in cases:
+        limit = stability_limit(case, facts)
+        if limit is not None and not math.isnan(limit):
+            out[case.name] = _number(limit)
+    return out
+
+
+def record(engines: Iterable[str], cases: Iterable = ()) -> dict:
     """``run.json``'s facts of ``engines`` (installed here: the run just used them):
-    ``method_facts``, ``peers`` and ``method_notes``, each engine -> method -> value."""
+    ``method_facts``, ``peers`` and ``method_notes``, each engine -> method -> value; and
+    ``stability_limits`` (engine -> method -> case -> s) on ``cases`` for the methods whose
+    step matrix the recorded values leave out (:func:`_limits_record`), where there are any."""
     from truestep.adapters import EngineNotInstalled, UnknownEngine, get_adapter
     from truestep.adapters.base import facts_of
 
+    cases = list(cases)
+    limits: dict[str, dict] = {}
     facts: dict[str, dict] = {}
     peers: dict[str, dict] = {}
     notes: dict[str, dict] = {}
@@ -81,10 +108,19 @@ def record(engines: Iterable[str]) -> dict:
         }
         with warnings.catch_warnings():  # a plugin's old ``schemes`` was warned about in its run
             warnings.simplefilter("ignore", DeprecationWarning)
-            facts[engine] = {m: _facts_record(declared.get(m), facts_of(adapter, m)) for m in adapter.methods}
+            whole = {m: facts_of(adapter, m) for m in adapter.methods}
+        facts[engine] = {m: _facts_record(declared.get(m), f) for m, f in whole.items()}
+        mine = {m: _limits_record(f, facts[engine][m], cases) for m, f in whole.items()}
+        if any(mine.values()):
+            limits[engine] = {m: v for m, v in mine.items() if v}
         peers[engine] = {str(k): str(v) for k, v in (getattr(adapter, "peers", None) or {}).items()}
         notes[engine] = {str(k): str(v) for k, v in (getattr(adapter, "method_notes", None) or {}).items()}
-    return {"method_facts": facts, "peers": peers, "method_notes": notes}
+    return {
+        "method_facts": facts,
+        "peers": peers,
+        "method_notes": notes,
+        **({"stability_limits": limits} if limits else {}),
+    }
 
 
 def _facts_from(value: object) -> MethodFacts | None:
@@ -128,6 +164,15 @@ def take(run_record: dict | None) -> None:
     for engine, methods in ((run_record or {}).get("method_facts") or {}).items():
         if isinstance(methods, dict):
             RECORDED_FACTS[str(engine)] = {str(m): _facts_from(v) for m, v in methods.items()}
+    for engine, methods in ((run_record or {}).get("stability_limits") or {}).items():
+        for method, by_case in methods.items() if isinstance(methods, dict) else ():
+            for case, value in by_case.items() if isinstance(by_case, dict) else ():
+                try:
+                    limit = float(value)
+                except (TypeError, ValueError):
+                    continue
+                if limit >= 0:
+                    RECORDED_LIMITS[(str(engine), str(method), str(case))] = limit
 
 
 def recorded_facts(engine: str, method: str) -> tuple[bool, MethodFacts | None]:
@@ -137,3 +182,9 @@ def recorded_facts(engine: str, method: str) -> tuple[bool, MethodFacts | None]:
     if methods is None or method not in methods:
         return False, None
     return True, methods[method]
+
+
+def recorded_limit(engine: str, method: str, case: str) -> float | None:
+    """The exact largest stable step (s) the judged run recorded for ``engine``'s
+    ``method`` on ``case`` (``stability_limits``), or ``None``."""
+    return RECORDED_LIMITS.get((engine, method, case))

@@ -433,7 +433,7 @@ def run_record(
         "precision": {e: precision_of(e) for e in dict.fromkeys(results["engine"].astype(str))}
         if len(results)
         else {},
-        **engine_facts.record(dict.fromkeys(results["engine"].astype(str)) if len(results) else []),
+        **engine_facts.record(dict.fromkeys(results["engine"].astype(str)) if len(results) else [], cases),
         **({"shadowed": shadowed()} if shadowed() else {}),
         **({"refined": list(results.attrs["refined"])} if results.attrs.get("refined") else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
