@@ -335,6 +335,44 @@ def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_na
     }
 
 
+def test_shares_hold_each_loop_once_and_about_equal_work(case_named, monkeypatch):
+    """A test session's workers split the loops without talking to each other: every
+    worker computes the same split, each loop lands in exactly one share, and the heaviest
+    go first, each to the lightest share (here: two fused loops of weight 2 and three of
+    weight 1 on two workers make shares of 3.5 and 3.5 or 4 and 3, never 5 and 2)."""
+    weighted = [(("a", 1), 1.0), (("b", 2), 2.0), (("c", 3), 1.0), (("d", 4), 2.0), (("e", 5), 1.0)]
+    parts = precompile.shares(weighted, 2)
+    assert parts == precompile.shares(list(weighted), 2)
+    assert sorted(p for part in parts for p in part) == sorted(p for p, _ in weighted)
+    weight = dict(weighted)
+    loads = sorted(sum(weight[p] for p in part) for part in parts)
+    assert loads == [3.0, 4.0]
+    assert parts[0][0] == ("b", 2) and parts[1][0] == ("d", 4)
+    assert precompile.longest_first(weighted) == [("b", 2), ("d", 4), ("a", 1), ("c", 3), ("e", 5)]
+    # the library's loops: a fused loop weighs more than one in passes
+    monkeypatch.setattr(compiled, "_PREPARED", {})
+    needed = precompile._needed_with_weights(
+        [(case_named("free-fall").model, "rk4"), (case_named("spring-chain").model, "rk4")]
+    )
+    assert [w for _, w in needed] == [precompile.WEIGHTS["fused"], precompile.WEIGHTS["passes"]]
+
+
+def test_workers_take_the_next_loop_when_free_and_none_is_compiled_twice(case_named, monkeypatch):
+    """With two workers, the loops are handed out from one shared counter: each index is
+    taken by exactly one process, and this process then loads every loop."""
+    import multiprocessing
+
+    queue = multiprocessing.get_context("fork").Value("i", 0)
+    mine = list(precompile._taken(5, queue))
+    assert mine == [0, 1, 2, 3, 4] and list(precompile._taken(5, queue)) == []
+    queue.value = 3
+    assert list(precompile._taken(5, queue)) == [3, 4]
+    monkeypatch.setattr(compiled, "_PREPARED", {})
+    models = [case_named(n).model for n in ("free-fall", "spring-chain", "bouncing-ball")]
+    precompile.compile_all(models, ["rk4"], workers=2, progress=lambda line: None)
+    assert len(compiled._PREPARED) == 3
+
+
 def test_one_loop_runs_every_method_in_passes(case_named):
     loops = {m: compiled.prepared(case_named("spring-chain").model, m)[0] for m in FIXED}
     assert len({id(loop) for loop in loops.values()}) == 1
