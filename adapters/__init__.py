@@ -116,6 +116,13 @@ def registered() -> dict[str, str]:
     return {n: found[n] for n in order}
 
 
+def truestep_target(engine: str) -> bool:
+    """Whether engine ``engine`` is registered as a class of one of truestep's own modules
+    (``truestep.…:Class``), read from its registration without importing it."""
+    module = registered().get(engine, "").partition(":")[0]
+    return module == "truestep" or module.startswith("truestep.")
+
+
 def pip_line(engine: str) -> str:
     """The command that installs what ``engine`` needs."""
     if engine in EXTRAS:

@@ -40,3 +40,28 @@ def test_a_verdict_reads_the_recorded_precision_of_an_engine_not_installed_here(
     main(["gate", "--results", str(ghost / "results.csv"), "-q"])
     capsys.readouterr()
     assert metrics.round_off_floor("ghost32") == metrics.ROUND_OFF_FLOAT32
+
+
+ENGINE_MODULES = ("pymunk", "pybullet", "mujoco", "mujoco_warp", "warp", "newton", "pydrake")
+"""The top-level modules of truestep's built-in engines' libraries."""
+
+
+def test_gating_a_run_that_recorded_its_facts_imports_no_engine():
+    """A run's verdicts come from what it recorded (``run.json``'s facts and its rows), so
+    ``truestep gate`` on it, declared orders included, imports none of the engines it ran
+    (seconds each: Newton's and MuJoCo Warp's about 1.5 s), and gives the same verdicts
+    whether or not they are installed. The quick baseline recorded all eight engines."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    baseline = Path(__file__).resolve().parents[1] / "baselines" / "quick" / "results.csv"
+    probe = (
+        "import sys\n"
+        "from truestep import api\n"
+        f"report = api.gate({str(baseline)!r}, declared_orders=True)\n"
+        "assert report.passed and report.held, report.console()\n"
+        f"print(sorted(m for m in {ENGINE_MODULES!r} if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -196,13 +196,15 @@ def unexercised(cases: list[Case], results: pd.DataFrame, asked: set[str] | None
     nothing in these verdicts checks those code paths (a solver whose pinned particles move
     passes every gate of a run without a pinned particle). truestep's own engines are left
     out: the full run exercises them."""
-    from truestep.adapters import adapter_class, registered
+    from truestep.adapters import adapter_class, registered, truestep_target
     from truestep.tables.io import RAN
 
     lines = []
     features = {c.name: set(map(str, c.features)) for c in cases}
     for engine in dict.fromkeys(results["engine"].astype(str)):
         if (asked is not None and engine not in asked) or engine not in registered():
+            continue
+        if truestep_target(engine):  # known without importing its engine (seconds for some)
             continue
         try:
             cls = adapter_class(engine)
@@ -373,17 +375,24 @@ def _quoted(value: object) -> str:
 
 
 def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
-    """The declared-order gates (:mod:`truestep.measures.declared`) of the installed engines that
-    ran, each on its own case (:func:`unreadable_facts` names the others)."""
+    """The declared-order gates (:mod:`truestep.measures.declared`) of the engines that ran,
+    each on its own case, case by case in the order of ``results``' engines: from the facts
+    their run recorded (``run.json``, :mod:`truestep.measures.engine_facts`) where it
+    recorded them, so that a verdict does not depend on which engines this machine has
+    (nor waits for their imports), else from the installed adapter's
+    (:func:`unreadable_facts` names engines with neither)."""
     from truestep.measures.declared import declared_order_pairs, recorded_order_pairs
     from truestep.measures.engine_facts import RECORDED_FACTS
 
-    unreadable = unreadable_facts(results, recorded=False)
-    ran = [e for e in dict.fromkeys(results["engine"].astype(str)) if e not in unreadable]
-    pairs = declared_order_pairs(cases, ran)
-    for engine in unreadable:
-        if engine in RECORDED_FACTS:
-            pairs += recorded_order_pairs(cases, results, engine)
+    unreadable = unreadable_facts(results)
+    readable = [e for e in dict.fromkeys(results["engine"].astype(str)) if e not in unreadable]
+    pairs = []
+    for case in cases:
+        for engine in readable:
+            if engine in RECORDED_FACTS:
+                pairs += recorded_order_pairs([case], results, engine)
+            else:
+                pairs += declared_order_pairs([case], [engine])
     return pairs
 
 
