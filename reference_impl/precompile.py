@@ -146,13 +146,15 @@ def _counted(
 ) -> Callable[[str], None]:
     """``say`` with ``[who started + 1/total, ~ETA]`` before each line (``started`` of
     ``total`` begun before this one). The ETA is this process's pace so far (s per loop it
-    finished, ``pace[0]`` of them; ``started`` where it does them all) over the loops not
-    yet begun, shared among the ``pace[1]`` processes that take them."""
+    finished) over the loops left: where it does them all (``pace[0]`` < 0), this one and
+    those after it; where ``pace[1]`` processes share them (``pace[0]`` finished by this
+    one), those no process has begun, shared among them."""
     done, sharing = (started, 1) if pace[0] < 0 else pace
+    left = total - started if pace[0] < 0 else max(total - started - 1, 0)
 
     def counted(line: str) -> None:
         spent = time.perf_counter() - began
-        eta = f", ~{spent / done * (total - started) / sharing:.0f} s left" if done else ""
+        eta = f", ~{spent / done * left / sharing:.0f} s left" if done else ""
         say(f"[{who}{started + 1}/{total}{eta}] {line}")
 
     return counted

@@ -373,6 +373,25 @@ def test_workers_take_the_next_loop_when_free_and_none_is_compiled_twice(case_na
     assert len(compiled._PREPARED) == 3
 
 
+def test_the_lines_of_shared_work_count_what_is_left_after_the_loop_under_way():
+    """A worker's line says how many loops are begun and, from its own pace, the seconds
+    the loops nobody has begun will take on the processes sharing them; on the last loop,
+    none (not the time of the loop it just finished)."""
+    import time
+
+    said: list[str] = []
+    began = time.perf_counter() - 10.0  # this worker finished one loop in 10 s
+    precompile._counted(said.append, 2, 4, began, "worker 2 of 2: ", (1, 2))("compiling x")
+    precompile._counted(said.append, 3, 4, began, "worker 2 of 2: ", (1, 2))("compiled y")
+    assert said == [
+        "[worker 2 of 2: 3/4, ~5 s left] compiling x",
+        "[worker 2 of 2: 4/4, ~0 s left] compiled y",
+    ]
+    alone: list[str] = []
+    precompile._counted(alone.append, 1, 3, began)("compiling z")  # one loop in 10 s, two to go
+    assert alone == ["[2/3, ~20 s left] compiling z"]
+
+
 def test_one_loop_runs_every_method_in_passes(case_named):
     loops = {m: compiled.prepared(case_named("spring-chain").model, m)[0] for m in FIXED}
     assert len({id(loop) for loop in loops.values()}) == 1
