@@ -293,7 +293,7 @@ def _tables(sel: Selection):
     if key not in _RUNS and sel.results is not None:
         from truestep.ci.baseline import read_tables
         from truestep.measures.engine_facts import take
-        from truestep.reporting.report import read_run_record
+        from truestep.reporting.run_record import read_run_record
 
         take(read_run_record(Path(sel.results).parent))
         read = read_tables(Path(sel.results).parent)

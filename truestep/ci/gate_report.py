@@ -168,7 +168,7 @@ def gate(request: GateRequest) -> GateReport:
     tables or options that cannot be used, and the loader's errors
     (:class:`~truestep.cases.CaseError`) for case and gates files."""
     from truestep.measures.engine_facts import take
-    from truestep.reporting.report import read_run_record
+    from truestep.reporting.run_record import read_run_record
 
     tables = run_tables(request.results)
     engines = engine_names(request.engines)
@@ -522,7 +522,7 @@ def _baseline_scope(
     for (its ``run.json``; else those in its results), narrowed by the request's cases and
     ``engines``. Baseline rows outside them are not "vanished": the run never asked for
     them."""
-    from truestep.reporting.report import read_run_record
+    from truestep.reporting.run_record import read_run_record
 
     record = read_run_record(request.results.parent) or {}
     ran_cases = set(record.get("cases") or results["case"].astype(str))
@@ -541,7 +541,7 @@ def _identical(comparison: Comparison, baseline: dict, current: dict, base_dir: 
     not apply and the tolerances alone decide."""
     from truestep.ci.baseline import identical
     from truestep.numerics import differences
-    from truestep.reporting.report import read_run_record
+    from truestep.reporting.run_record import read_run_record
 
     old, new = read_run_record(base_dir), read_run_record(run_dir)
     if old is None or new is None:

@@ -116,7 +116,7 @@ def save(results: Path, dest: Path, *, root: Path | None = None) -> dict:
     relative to ``root`` (default: the working directory, the project's root). Returns
     the provenance record."""
     from truestep import __version__
-    from truestep.reporting.report import read_run_record
+    from truestep.reporting.run_record import read_run_record
 
     root = Path.cwd() if root is None else root
     run_dir = results.parent

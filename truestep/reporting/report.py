@@ -24,6 +24,7 @@ from truestep.measures.picks import scorecard_table, survival
 from truestep.reporting import plots
 from truestep.reporting.html import markdown_to_html
 from truestep.reporting.markdown import folded, link, md_table, text, with_units
+from truestep.reporting.run_record import RUN_FILE
 from truestep.reporting.scaling import scaling_section
 from truestep.reporting.sections import (
     conclusion_sentence,
@@ -371,10 +372,6 @@ def start_lecture_figures(fig_dir: Path) -> Callable[[], list[tuple[Path, str]]]
     return collect
 
 
-RUN_FILE = "run.json"
-"""What a run was asked for and what decided its numbers besides the code (:func:`run_record`)."""
-
-
 def git_revision() -> str:
     """The short git revision of truestep's source, or ``""`` outside a checkout."""
     try:
@@ -439,29 +436,6 @@ def run_record(
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
         **({"rows": dict(rows)} if rows else {}),
     }
-
-
-def read_run_record(directory: Path) -> dict | None:
-    """The ``run.json`` of an output directory, or ``None`` when it has none (a run of an
-    older truestep). One that is there but is no run record (not JSON, not an object, cut
-    short, not a regular file) is a :class:`~truestep.cases.errors.CaseError` naming it:
-    what it would have said (the packages, the engines asked) is not guessed."""
-    import json
-
-    from truestep.cases.errors import CaseError
-    from truestep.runtime.files import read_regular
-
-    path = Path(directory) / RUN_FILE
-    if not os.path.lexists(path):
-        return None
-    try:
-        record = json.loads(read_regular(path, 1 << 20).decode("utf-8"))
-    except (OSError, ValueError) as err:  # FileRefused is an OSError
-        raise CaseError(str(path), "<file>", f"not a run record truestep can read: {err}") from None
-    if not isinstance(record, dict):
-        kind = type(record).__name__
-        raise CaseError(str(path), "<file>", f"not a run record: a JSON {kind}, not an object")
-    return record
 
 
 def write_report(
