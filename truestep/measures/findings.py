@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case
-from truestep.measures.metrics import fit_order, round_off_floor
+from truestep.measures.metrics import finest_local_order, fit_order, round_off_floor
 from truestep.measures.peers import PEER_COLUMNS, same_scheme
 from truestep.measures.picks import (
     cheapest,
@@ -217,9 +217,12 @@ def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
                 "declared": expect,
                 "agrees": agrees,
                 "points": int(g["error"].notna().sum()),
+                "finest": finest_local_order(g["dt"].to_numpy(float), g["error"].to_numpy(float)),
             }
         )
-    return pd.DataFrame(rows, columns=["case", "engine", "method", "order", "declared", "agrees", "points"])
+    return pd.DataFrame(
+        rows, columns=["case", "engine", "method", "order", "declared", "agrees", "points", "finest"]
+    )
 
 
 def speed_table(case: Case, results: pd.DataFrame, engine: str, method: str) -> pd.DataFrame:

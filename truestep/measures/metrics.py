@@ -251,6 +251,17 @@ def local_orders(dts: np.ndarray, errors: np.ndarray) -> np.ndarray:
     return np.diff(e) / np.diff(d)
 
 
+def finest_local_order(dts: np.ndarray, errors: np.ndarray) -> float:
+    """The local order (:func:`local_orders`) between the two finest steps whose error is
+    finite and positive, NaN with fewer than two: below :data:`CONVERGING`, the error does
+    not yet fall with the step there, and a declared-order gate is not evaluated on such a
+    sweep (``truestep.ci.gates``)."""
+    dts, errors = np.asarray(dts, float), np.asarray(errors, float)
+    usable = np.isfinite(errors) & (errors > 0)
+    local = local_orders(dts[usable], errors[usable])
+    return float(local[-1]) if len(local) else float("nan")
+
+
 def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0, floor: float = ROUND_OFF) -> float:
     """Order of convergence, fitted where the asymptotic regime holds.
 

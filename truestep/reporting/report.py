@@ -19,7 +19,7 @@ import pandas as pd
 
 from truestep.cases.case import Case
 from truestep.measures.findings import Findings, find, speed_table, speed_tables
-from truestep.measures.metrics import PRE_ASYMPTOTIC, ROUND_OFF, ROUND_OFF_FLOAT32
+from truestep.measures.metrics import CONVERGING, PRE_ASYMPTOTIC, ROUND_OFF, ROUND_OFF_FLOAT32
 from truestep.measures.picks import scorecard_table, survival
 from truestep.reporting import plots
 from truestep.reporting.html import markdown_to_html
@@ -230,6 +230,7 @@ def render_markdown(
     parts += refined_lines(results.attrs.get("refined") or [])
     fitted = orders.dropna(subset=["order"])
     disagree = fitted[fitted["agrees"] == "no"]
+    flat = disagree[disagree["finest"] < CONVERGING]
     parts.append(
         f"Against the orders the engines declare (on smooth cases with an exact "
         f"solution): {int((fitted['agrees'] == 'yes').sum())} fits agree, "
@@ -237,7 +238,9 @@ def render_markdown(
         + (
             ": "
             + "; ".join(
-                f"{r.case} {text(r.engine)} / {text(r.method)} {r.order:.2f} (declared {r.declared:g})"
+                f"{r.case} {text(r.engine)} / {text(r.method)} {r.order:.2f} (declared {r.declared:g}"
+                + (f"; dt^{r.finest:.2f} at the finest steps" if r.finest < CONVERGING else "")
+                + ")"
                 for r in disagree.itertuples(index=False)
             )
             if len(disagree)
@@ -245,6 +248,15 @@ def render_markdown(
         )
         + ".\n"
     )
+    if len(flat):
+        parts.append(
+            f"Of those, {len(flat)} have an error that does not yet fall with the step at their "
+            f"finest steps (a local order below {CONVERGING:g}): the sweep is not in their "
+            "asymptotic range, and `truestep gate --declared-orders` reports their gates as "
+            "not evaluated, not as failed. A bug that leaves a floor under the error (a wrong "
+            "rest length) reads the same there; a comparison with a baseline is what catches "
+            "it.\n"
+        )
     parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
     parts += same_scheme_section(found.peers)
     parts.append("## Work against precision, per case\n")
