@@ -79,7 +79,8 @@ def user_ci() -> None:
     """A user's CI on a fresh machine: the quick run of the example project's engine beside
     the reference on its lecture cases, with empty caches (the example is put on the path
     by ``PYTHONPATH``, not installed: its own cases, registered by its entry points, are
-    left out)."""
+    left out), then ``truestep gate`` on it with the example's gates file, timed apart (the
+    target is the run's)."""
     example = REPO / "examples" / "leapfrog-lab"
     paths = [str(example), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
@@ -88,7 +89,12 @@ def user_ci() -> None:
         env.update(NUMBA_CACHE_DIR=f"{tmp}/numba", WARP_CACHE_PATH=f"{tmp}/warp")
         out = Path(tmp) / "out"
         wall, code = timed([*TRUESTEP, "run", *args, "--out", str(out)], env=env)
-        report("a user's CI: run --quick, own engine (cold)", wall, code, phases(out))
+        gates = str(example / "truestep-gates.toml")
+        gate_wall, gate_code = timed(
+            [*TRUESTEP, "gate", "--results", str(out / "results.csv"), "--gates", gates], env=env
+        )
+        gate = f"then its gate (the example's CI step) {gate_wall:.1f} s, rc {gate_code}"
+        report("a user's CI: run --quick, own engine (cold)", wall, code, f"{phases(out)}; {gate}")
 
 
 def report(name: str, wall: float, code: int, extra: str = "") -> None:
