@@ -499,6 +499,17 @@ def _every_step_recorded(r) -> bool:
     return not r.traj.steps or len(r.traj.t) >= r.traj.steps + 1
 
 
+def _drop(name: str, duration: float, engine: str, method: str, dt: float) -> tuple:
+    """A bounce case's run and what its bounces are read from: (run, trajectory, the
+    sphere's lowest point above the floor u (m), its vertical velocity w (m/s), the
+    floor's restitution e, the drop height h0 (m), the number of bounces checked)."""
+    r = _prop_run(name, duration, engine, method, dt)
+    case, traj = r.case, r.traj
+    u, w = traj.x[:, 0, 1] - case.model.radius[0], traj.v[:, 0, 1]
+    e, h0 = case.model.planes[0].restitution, float(u[0])
+    return r, traj, u, w, e, h0, int(case.exact_params.get("bounces", 3))
+
+
 @pytest.mark.engine
 @pytest.mark.parametrize(("name", "duration", "engine", "method", "dt"), BOUNCE_PARAMS)
 def test_apex_height_error(name, duration, engine, method, dt):
@@ -506,11 +517,7 @@ def test_apex_height_error(name, duration, engine, method, dt):
     ``e^(2n) h0``; each apex here is the highest sample of the flight after a contact,
     flights found from the samples (free-fall kicks above the plane), the drop's
     ``e^(2n) h0`` from the bounce schedule's launch speeds."""
-    r = _prop_run(name, duration, engine, method, dt)
-    case, traj = r.case, r.traj
-    u, w = traj.x[:, 0, 1] - case.model.radius[0], traj.v[:, 0, 1]
-    e, h0 = case.model.planes[0].restitution, float(u[0])
-    bounces = int(case.exact_params.get("bounces", 3))
+    r, traj, u, w, e, h0, bounces = _drop(name, duration, engine, method, dt)
     published = float(r.row["apex_height_error"])
     if not _every_step_recorded(r):
         assert np.isnan(published), f"a run recorded more sparsely than its steps publishes {published}"
@@ -538,11 +545,7 @@ def test_bounce_time_error(name, duration, engine, method, dt):
     """``bounce_time_error``: the largest error of the first three bounce times (each
     contact's lowest sample, contacts being what lies between the flights found here)
     against the rigid schedule ``T_1 = sqrt(2 h0 / g)``, ``T_(k+1) = T_k + 2 e^k V / g``."""
-    r = _prop_run(name, duration, engine, method, dt)
-    case, traj = r.case, r.traj
-    u, w = traj.x[:, 0, 1] - case.model.radius[0], traj.v[:, 0, 1]
-    e, h0 = case.model.planes[0].restitution, float(u[0])
-    bounces = int(case.exact_params.get("bounces", 3))
+    r, traj, u, w, e, h0, bounces = _drop(name, duration, engine, method, dt)
     published = float(r.row["bounce_time_error"])
     if not _every_step_recorded(r):
         assert np.isnan(published)
