@@ -1,6 +1,7 @@
 """Sweeps carried on to finer steps where a method's declared order is not reached yet
 (issue 35, item 8): a correct method whose case sweep is pre-asymptotic is judged where
-it converges, and passes its declared-order gate; a wrong one still fails there."""
+it converges, and passes its declared-order gate; a wrong one still fails there, and so
+does one whose error is flat (it converges to the wrong motion), in a ``--quick`` run too."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cli import main
@@ -46,9 +48,25 @@ class HalfMidpoint(ReferenceAdapter):
         return super().simulate(case, "euler", dt, **kw)
 
 
-def _run(tmp_path, engine: str) -> tuple[pd.DataFrame, dict, int]:
+class Misplaced(ReferenceAdapter):
+    """The reference's velocity Verlet with every position :data:`OFFSET` off: a method that
+    converges, to the wrong motion (as a spring's rest length 1 % off moves its
+    equilibrium), so that its error is flat at every step, far above round-off."""
+
+    name = "misplaced-test"
+    methods = ("verlet",)
+    adaptive_methods = ()
+
+    def simulate(self, case, method, dt, **kw):
+        traj = super().simulate(case, method, dt, **kw)
+        traj.x = traj.x + OFFSET
+        return traj
+
+
+def _run(tmp_path, engine: str, *quick: str) -> tuple[pd.DataFrame, dict, int]:
     out = tmp_path / engine.split(":")[1]
-    assert main(["run", "--cases", "harmonic-oscillator", "--engines", engine, "--out", str(out)]) == 0
+    args = ["run", *quick, "--cases", "harmonic-oscillator", "--engines", engine, "--out", str(out)]
+    assert main(args) == 0
     gate = main(["gate", "--results", str(out / "results.csv"), "--declared-orders", "-q"])
     return pd.read_csv(out / "results.csv"), json.loads((out / "run.json").read_text()), gate
 
@@ -95,8 +113,26 @@ def test_only_methods_short_of_their_order_with_every_row_ok_are_carried_on(case
     table = pd.DataFrame(
         rows("euler", [4e-3, 2e-3, 1e-3])  # at its order: left alone
         + rows("midpoint", [1.6e-3, 8e-4, 4e-4])  # first order, short of 2: carried on
-        + rows("rk4", [1e-3, 9e-4, 8e-4])  # not falling yet: not judged, not carried on
+        + rows("rk4", [1e-3, 9e-4, 8e-4])  # not falling, far above round-off: carried on
+        + rows("verlet", [5e-11, 5e-11, 5e-11])  # flat, but within 100x round-off: left alone
         + rows("heun", [1.6e-3, 8e-4, 4e-4], status="unstable")  # a failed row is its own verdict
     )
     wanted = short_of_order([case], ["reference"], table)
-    assert [(w.method, w.declared, w.dts) for w in wanted] == [("midpoint", 2.0, ())]
+    assert [(w.method, w.declared, w.dts) for w in wanted] == [("midpoint", 2.0, ()), ("rk4", 4.0, ())]
+    quick = short_of_order([case], ["reference"], table, quick=True)  # a quick run: the flat one only
+    assert [w.method for w in quick] == ["rk4"]
+
+
+@pytest.mark.parametrize("quick", [(), ("--quick",)], ids=["full", "quick"])
+def test_an_error_flat_at_every_step_is_carried_on_and_fails(tmp_path, capsys, quick):
+    results, record, gate = _run(tmp_path, "test_refine:Misplaced", *quick)
+    (refined,) = record["refined"]
+    assert refined["method"] == "verlet" and refined["order"] < 0.5
+    assert refined["dts"] == [5e-4 / 2**k for k in range(1, MAX_HALVINGS + 1)]  # every halving
+    rows = results[(results.engine == "misplaced-test") & (results.dt_kind == "step")]
+    errors = rows.error.to_numpy(float)
+    assert np.all(np.abs(errors / OFFSET - np.sqrt(3)) < 0.01)  # |(d, d, d)|: flat at every step
+    assert gate == 1
+    out = capsys.readouterr().out
+    assert "FAIL harmonic-oscillator/order/misplaced-test/verlet/declared" in out
+    assert "finer than the case's sweep (the method does not converge as declared)" in out

@@ -1,8 +1,9 @@
 """The published report's fits that do not agree with a declared order, recomputed.
 
-The report names each fit below its declared order and, where the error does not yet fall
-at the sweep's finest steps, that local order ("dt^0.41 at the finest steps"), then says how
-many such fits there are and that their declared-order gates are not evaluated. Here each
+The report names each fit below its declared order and, where the error does not fall at
+the finest steps run, that local order ("dt^0.41 at the finest steps"), then says how many
+such fits there are and which of their declared-order gates are failed (the error flat,
+well above round-off, at steps finer than the case's sweep) and which not evaluated. Here each
 of those numbers is recomputed from ``results.csv`` by hand (the two finest steps of the
 sweep that ran ``ok`` with a positive error, and the log of their errors' ratio over the
 log of their steps' ratio), and each gate's verdict is read from ``truestep gate
@@ -49,7 +50,12 @@ def _by_hand(results: pd.DataFrame, case: str, engine: str, method: str) -> floa
     return math.log(e1 / e2) / math.log(h1 / h2)
 
 
-def test_every_flat_fit_the_report_names_has_that_local_order_and_a_gate_not_evaluated():
+NOT_EVALUATED = ("not in the asymptotic range", "round-off", "rounding", "still rising")
+"""What a flat fit's gate may say when it is not evaluated: the sweep could not be carried
+on, the finer errors are round-off's, or the error is just beginning to fall."""
+
+
+def test_every_flat_fit_the_report_names_has_that_local_order_and_the_gate_its_reason():
     listed = _listed()
     count = int(re.search(r"(\d+) do not", _sentence()).group(1))
     assert len(listed) == count > 0
@@ -57,7 +63,7 @@ def test_every_flat_fit_the_report_names_has_that_local_order_and_a_gate_not_eva
     flat = [r for r in listed if r["finest"] is not None]
     text = (REPORTS / "index.md").read_text()
     if flat:
-        assert f"Of those, {len(flat)} have an error that does not yet fall" in text
+        assert f"Of those, {len(flat)} have an error that does not fall with the step" in text
     from truestep import api
 
     report = api.gate(REPORTS / "results.csv", declared_orders=True)
@@ -72,4 +78,7 @@ def test_every_flat_fit_the_report_names_has_that_local_order_and_a_gate_not_eva
         assert local == pytest.approx(float(r["finest"]), abs=0.006), r
         assert local < 0.5
         v = verdicts[(r["case"], r["engine"], method)]
-        assert not v.evaluated and "not in the asymptotic range" in v.measured, (r, v.measured)
+        if v.evaluated:  # failed only where the flat errors come from steps finer than the sweep
+            assert not v.passed and "does not converge as declared" in v.measured, (r, v.measured)
+        else:
+            assert any(why in v.measured for why in NOT_EVALUATED), (r, v.measured)

@@ -8,17 +8,30 @@ dt^2.95 and dt^3.2 from 0.25 ms to 0.125 ms. Judged on the case's sweep alone th
 fail; a method that is wrong (a flipped sign, a lost half step) stays below its order
 however fine the step.
 
-:func:`refine` carries each such method (a full run's, with rows ``ok`` at every step,
-whose error falls with the step at the sweep's finest steps, and whose fit falls short of
-its declared order: the ones the gate would fail) on to finer steps, halving the finest step each
-time, and adds those rows to the results: it stops once the fit reaches the declared
-order, once the local order stops rising (:func:`still_rising`: a wrong method's error
-stays flat however fine the step), or after :data:`MAX_HALVINGS` halvings. The gate then
-reads the finer errors: a method that reaches its order passes, one whose error stays
-flat fails, and one still rising at the last halving is not evaluated, saying so. The
-work is bounded: at most ``MAX_HALVINGS`` runs of up to ``2 ** MAX_HALVINGS`` times the
-finest row's steps, for each method that needs them. Which methods were carried on, and
-to which steps, goes to ``run.json`` (``refined``) and the report.
+:func:`refine` carries on to finer steps, halving the finest step of the case's sweep
+each time, each method of a run (rows ``ok`` at every step) whose fit falls short of its
+declared order, where either
+
+- its error falls with the step at the sweep's finest steps (the ones the gate would
+  fail), or
+- its error does not fall there at all, well above the engine's round-off
+  (:func:`~truestep.measures.metrics.flat_above_floor`): the gate could not judge such a
+  sweep, and a user's solver with a rest length 1 % off (a flat 1.3e-2 m on
+  spring-damper-pair) passed it; only finer steps tell a method that has not yet begun
+  to converge (implicit Euler on mass-ratio-chain, flat at 0.035 m down to 5 ms, falling
+  as dt^0.79 at 0.3 ms) from one that converges to something else. A ``--quick`` run
+  carries on only these, from half the finest step of the case's full sweep.
+
+It adds the rows to the results, and stops once the fit reaches the declared order, once
+the local order of a converging method stops rising (:func:`still_rising`: a method
+converging at a lower order stays there), or after :data:`MAX_HALVINGS` halvings (a
+method whose error does not fall yet is run at every one). The gate then reads the finer
+errors: a method that reaches its order passes; one whose error stays flat however fine
+the step, well above round-off, fails; one still rising at the last halving is not
+evaluated, saying so. The work is bounded: at most ``MAX_HALVINGS`` runs of up to
+``2 ** MAX_HALVINGS`` times the finest row's steps, for each method that needs them.
+Which methods were carried on, and to which steps, goes to ``run.json`` (``refined``)
+and the report.
 """
 
 from __future__ import annotations
@@ -32,7 +45,15 @@ import pandas as pd
 
 from truestep.cases.case import Case
 from truestep.measures.declared import declared_order_pairs
-from truestep.measures.metrics import RISING, fit_order, local_orders, round_off_floor
+from truestep.measures.metrics import (
+    CONVERGING,
+    RISING,
+    finest_local_order,
+    fit_order,
+    flat_above_floor,
+    local_orders,
+    round_off_floor,
+)
 
 if TYPE_CHECKING:
     from truestep.runtime.isolation import Lanes
@@ -77,36 +98,51 @@ def _rows(results: pd.DataFrame, case: str, engine: str, method: str) -> pd.Data
     ]
 
 
-def short_of_order(cases: list[Case], engines: list[str], results: pd.DataFrame) -> list[Refinement]:
-    """The methods whose rows (all ``ok``, on a case's fixed steps, converging at the finest:
-    :func:`_converging`) fit an order below the declared one less its tolerance: the ones
-    the declared-order gate would fail (``dts`` empty: the steps are chosen as they run)."""
+def short_of_order(
+    cases: list[Case], engines: list[str], results: pd.DataFrame, *, quick: bool = False
+) -> list[Refinement]:
+    """The methods whose rows (all ``ok``, on a case's fixed steps) fit an order below the
+    declared one less its tolerance, and whose error at the sweep's finest steps either
+    falls (:func:`_converging`: the gate would fail them) or does not fall at all, well
+    above round-off (:func:`~truestep.measures.metrics.flat_above_floor`: the gate could not
+    judge them, and only finer steps tell a method that has not started to converge from
+    one that converges to something else). ``quick``: only the flat ones (a ``--quick``
+    sweep's gates judge a short converging order as it is). ``dts`` empty: the steps are
+    chosen as they run."""
     by_name = {c.name: c for c in cases}
     out = []
-    for names, gate in declared_order_pairs(cases, engines):
+    for names, gate in declared_order_pairs(cases, engines, quick=quick):
         case = by_name[names[0]]
         rows = _rows(results, case.name, gate.engine, gate.method)
         if not len(rows) or not (rows["status"] == "ok").all():
             continue  # a failed row is a verdict of its own; finer steps do not change it
         order = _order(case, gate.engine, rows)
         expect, tol = float(gate.params["expect"]), float(gate.params["tol"])
-        if np.isfinite(order) and order < expect - tol and _converging(rows):
+        if not (np.isfinite(order) and order < expect - tol):
+            continue
+        if _flat(case, gate.engine, rows) or (not quick and _converging(rows)):
             out.append(Refinement(case.name, gate.engine, gate.method, order, expect, tol, ()))
     return out
 
 
 def _converging(rows: pd.DataFrame) -> bool:
     """Whether the error falls with the step at the sweep's finest steps (a local order of
-    :data:`~truestep.measures.metrics.CONVERGING` or more): the gate judges such a sweep, and fails
-    it if its order is short. A sweep whose error does not fall yet is not judged (the gate
-    says so), and is not carried on: implicit Euler on mass-ratio-chain is still rising
-    four halvings down, and Newton's XPBD on the rope stays flat."""
-    from truestep.measures.metrics import CONVERGING
+    :data:`~truestep.measures.metrics.CONVERGING` or more)."""
+    return bool(finest_local_order(rows["dt"].to_numpy(float), rows["error"].to_numpy(float)) >= CONVERGING)
 
-    dts, errors = rows["dt"].to_numpy(float), rows["error"].to_numpy(float)
-    ok = np.isfinite(errors) & (errors > 0)
-    local = local_orders(dts[ok], errors[ok])
-    return bool(len(local)) and local[-1] >= CONVERGING
+
+def _flat(case: Case, engine: str, rows: pd.DataFrame) -> bool:
+    """Whether the error does not fall at the sweep's finest steps, well above the engine's
+    round-off (:func:`~truestep.measures.metrics.flat_above_floor`): a rest length 1 %
+    off gives a flat 1.3e-2 m on spring-damper-pair; implicit Euler on mass-ratio-chain a
+    flat 0.04 m (it damps the chain's fast mode away at every swept step, and starts to
+    converge at finer ones)."""
+    return flat_above_floor(
+        rows["dt"].to_numpy(float),
+        rows["error"].to_numpy(float),
+        scale=case.error_scale,
+        floor=round_off_floor(engine),
+    )
 
 
 def _order(case: Case, engine: str, rows: pd.DataFrame) -> float:
@@ -132,15 +168,16 @@ def refine(
     lanes: Lanes | None = None,
 ) -> tuple[pd.DataFrame, list[Refinement]]:
     """``results`` with rows at finer steps for every method :func:`short_of_order` names
-    (each after its own rows), and those methods; a ``--quick`` run is returned as it is
-    (its sweep is short by design, and its gates know it). The runs go through ``lanes``
+    (each after its own rows), and those methods; in a ``--quick`` run only the flat ones
+    (:func:`short_of_order`), timed as the quick run times. The first finer step is half
+    the finest of the case's full sweep (in a ``--quick`` run too, so that the gate knows
+    those rows for steps finer than any sweep of the case). The runs go through ``lanes``
     where it is given (:func:`~truestep.execution.runner.run_sweep`)."""
     from truestep.execution.runner import Timing, run_sweep, tidy
     from truestep.execution.sweep_job import host_name
+    from truestep.execution.timing import QUICK_TIMING
 
-    if quick:
-        return results, []
-    wanted = short_of_order(cases, engines, results)
+    wanted = short_of_order(cases, engines, results, quick=quick)
     if not wanted:
         return results, []
     by_name, here = {c.name: c for c in cases}, host_name()
@@ -148,14 +185,16 @@ def refine(
     for r in wanted:
         case, added = by_name[r.case], []
         rows = _rows(results, r.case, r.engine, r.method)
+        finest = min([float(rows["dt"].min()), *(float(d) for d in getattr(case, "dts", ()))])
         for _ in range(MAX_HALVINGS):
-            dt = float(rows["dt"].min()) / 2
+            dt = min(float(rows["dt"].min()), finest) / 2
             if say is not None:
                 say(
                     f"refining {r.case} {r.engine}/{r.method}: order {_order(case, r.engine, rows):.3g} "
                     f"so far, declared {r.declared:g}; running dt {dt:.4g}"
                 )
-            swept = run_sweep(case, r.engine, r.method, [dt], adaptive=False, timing=Timing(), lanes=lanes)
+            timing = QUICK_TIMING if quick else Timing()
+            swept = run_sweep(case, r.engine, r.method, [dt], adaptive=False, timing=timing, lanes=lanes)
             new = tidy([{**row, "host": here} for row in swept], cases)
             added.append(dt)
             parts.append(new)
@@ -164,8 +203,11 @@ def refine(
                 break  # its own verdict
             if _order(case, r.engine, rows) >= r.declared - r.tol:
                 break  # reached
-            if not still_rising(rows["dt"].to_numpy(float), rows["error"].to_numpy(float)):
-                break  # flat: finer steps would not change the verdict
+            dts, errors = rows["dt"].to_numpy(float), rows["error"].to_numpy(float)
+            if finest_local_order(dts, errors) < CONVERGING:
+                continue  # not falling yet: every halving, to tell late from never
+            if not still_rising(dts, errors):
+                break  # converging short of its order: finer steps would not change the verdict
         done.append(dataclasses.replace(r, dts=tuple(added)))
     merged = pd.concat(parts, ignore_index=True)
     merged = merged.assign(_i=np.arange(len(merged)))

@@ -262,6 +262,28 @@ def finest_local_order(dts: np.ndarray, errors: np.ndarray) -> float:
     return float(local[-1]) if len(local) else float("nan")
 
 
+ABOVE_FLOOR = 100.0
+"""How far above the round-off floor (:func:`round_off_floor`, a fraction of the case's
+scale) a flat error must lie to say something about the method: there, an error that does
+not fall with the step is the method's (a wrong rest length, a lost term), not rounding."""
+
+
+def flat_above_floor(dts: np.ndarray, errors: np.ndarray, *, scale: float, floor: float) -> bool:
+    """Whether the error does not fall with the step at the finest steps (a
+    :func:`finest_local_order` below :data:`CONVERGING`) while both of those errors lie
+    :data:`ABOVE_FLOOR` times the round-off ``floor`` (a fraction of ``scale``) or more
+    above zero: a method that stopped converging, or has not started to, well above its
+    rounding. Which of the two it is, only finer steps tell
+    (:mod:`truestep.execution.refine`)."""
+    dts, errors = np.asarray(dts, float), np.asarray(errors, float)
+    usable = np.isfinite(errors) & (errors > 0) & np.isfinite(dts)
+    if usable.sum() < 2:
+        return False
+    d, e = dts[usable], errors[usable]
+    finest = e[np.argsort(d)[:2]]
+    return bool(finest_local_order(d, e) < CONVERGING and np.all(finest > ABOVE_FLOOR * floor * scale))
+
+
 def fit_order(dts: np.ndarray, errors: np.ndarray, *, scale: float = 1.0, floor: float = ROUND_OFF) -> float:
     """Order of convergence, fitted where the asymptotic regime holds.
 

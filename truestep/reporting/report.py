@@ -250,12 +250,14 @@ def render_markdown(
     )
     if len(flat):
         parts.append(
-            f"Of those, {len(flat)} have an error that does not yet fall with the step at their "
-            f"finest steps (a local order below {CONVERGING:g}): the sweep is not in their "
-            "asymptotic range, and `truestep gate --declared-orders` reports their gates as "
-            "not evaluated, not as failed. A bug that leaves a floor under the error (a wrong "
-            "rest length) reads the same there; a comparison with a baseline is what catches "
-            "it.\n"
+            f"Of those, {len(flat)} have an error that does not fall with the step at their "
+            f"finest steps (a local order below {CONVERGING:g}). A run carries such a sweep on "
+            "to finer steps where every row of it ran `ok` (the sweeps above), and `truestep "
+            "gate --declared-orders` fails it if the error stays flat there, well above "
+            "round-off: a bug that leaves a floor under the error (a wrong rest length) "
+            "converges to something else. It reports the gate as not evaluated where a row "
+            "could not be carried on (a row not `ok`), where the finer errors are round-off's, "
+            "or where the error is still beginning to fall at the finest step run.\n"
         )
     parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
     parts += same_scheme_section(found.peers)

@@ -611,6 +611,6 @@ def refined_lines(refined: list[dict]) -> list[str]:
     )
     return [
         "Sweeps carried on to finer steps, because the order fitted over the case's own steps "
-        "fell short of the declared one (a correct method converges there and is judged there; "
-        f"a wrong one does not, and fails): {said}.\n"
+        "fell short of the declared one, or the error did not fall there at all (a correct "
+        f"method converges there and is judged there; a wrong one does not, and fails): {said}.\n"
     ]
