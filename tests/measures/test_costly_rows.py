@@ -56,9 +56,10 @@ def test_the_report_lists_every_long_row_of_the_published_run():
     )
     assert len(listed) == len(long)
     for r in long.itertuples(index=False):  # a method may have several long rows, one per step
+        # a step is printed to three digits: 3.13e-05 for a carried-on 3.125e-05
         key = (r.case, r.engine, _escaped(r.method))
         line = next(
-            (x for x in listed if x[:3] == key and float(x[3]) == pytest.approx(r.dt, rel=1e-3)), None
+            (x for x in listed if x[:3] == key and float(x[3]) == pytest.approx(r.dt, rel=5e-3)), None
         )
         assert line is not None, (key, r.dt)
         assert line[4] == f"{r.wall_s:.3g}"  # printed to three digits
