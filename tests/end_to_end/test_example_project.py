@@ -1,14 +1,16 @@
-"""The worked example (examples/leapfrog-lab) as a user runs it, and three mutants of it.
+"""The worked example (examples/leapfrog-lab) as a user runs it, and four mutants of it.
 
 The example's engine holds its own drift-kick-drift leapfrog. It must pass its gates on
 the lecture's cases and on its own, through ``truestep gate --gates`` and through the
 pytest plugin; each mutant of its physics (one wrong term) must fail both and be listed
-as worse by ``truestep gate --baseline`` against the correct version. The example is
+as worse by ``truestep gate --baseline`` against the correct version, except the one its
+gates file cannot see (a rest length 1 % off), which ``--declared-orders`` must fail. The example is
 run from a copy on ``PYTHONPATH`` (installed or not), by its ``module:Class``.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -29,6 +31,7 @@ MUTANT_CASES = {
     "half-dropped": "harmonic-oscillator,free-fall",
     "damping-flipped": "damped-oscillator",
     "restitution-tangential": "bouncing-ball",
+    "rest-length-off": CASES,  # the gates file's cases, which it passes
 }
 """The cases each mutant's run needs to show its wrong term (its gates there fail, its rows
 there are worse): the whole list is the good run's, and the plugin's run of a mutant."""
@@ -40,7 +43,13 @@ MUTANTS = {
     "damping-flipped": ("-(k * (length - rest) + c * along)", "-(k * (length - rest) - c * along)"),
     # the restitution rule applied to the tangential velocity instead of the normal one
     "restitution-tangential": ("v_t - e * vn[:, None] * normal", "vn[:, None] * normal - e * v_t"),
+    # the spring's rest length 1 % long: every run converges, to the wrong motion
+    "rest-length-off": ("(k * (length - rest) + c * along)", "(k * (length - 1.01 * rest) + c * along)"),
 }
+GATES_SEE = ["half-dropped", "damping-flipped", "restitution-tangential"]
+"""The mutants the example's gates file fails. A rest length 1 % off passes it: its error
+on spring-damper-pair is a flat 1.3e-2 m at every step, which only the declared-order gate
+(its sweep carried on to finer steps: issue 35, item 8) and a baseline catch."""
 
 
 def _copy(dest: Path, mutant: str | None) -> Path:
@@ -130,7 +139,7 @@ def test_the_example_passes_its_gates_on_lecture_and_own_cases(runs):
     assert held >= 14, done.stdout
 
 
-@pytest.mark.parametrize("mutant", list(MUTANTS))
+@pytest.mark.parametrize("mutant", GATES_SEE)
 def test_each_mutant_fails_its_gates_and_is_worse_than_the_baseline(runs, mutant):
     out = runs[mutant]
     done = _truestep(
@@ -149,6 +158,34 @@ def test_each_mutant_fails_its_gates_and_is_worse_than_the_baseline(runs, mutant
     assert base.returncode == 1, base.stdout + base.stderr
     worse = [line for line in base.stdout.splitlines() if line.startswith("WORSE")]
     assert worse and all(" leapfrog leapfrog " in line for line in worse), base.stdout
+
+
+def test_a_rest_length_off_fails_its_declared_order_though_its_gates_file_passes(runs):
+    """The mutant whose error does not fall with the step: the gates file holds (what it
+    checks does not depend on the rest length), the declared-order gate fails it (its sweep
+    was carried on four halvings, and the error stayed flat far above round-off), and the
+    baseline names its rows worse. The correct example's declared orders all hold."""
+    mutant, src = runs["rest-length-off"], runs["rest-length-off-src"]
+    record = json.loads((mutant / "run.json").read_text())
+    (refined,) = record["refined"]
+    assert (refined["case"], refined["engine"], len(refined["dts"])) == ("spring-damper-pair", "leapfrog", 4)
+    own = _truestep("gate", "--results", str(mutant / "results.csv"), "--gates", str(GATES), path=src)
+    assert own.returncode == 0, own.stdout + own.stderr
+    declared = _truestep("gate", "--results", str(mutant / "results.csv"), "--declared-orders", path=src)
+    assert declared.returncode == 1, declared.stdout + declared.stderr
+    failed = [line for line in declared.stdout.splitlines() if line.startswith("FAIL")]
+    assert failed == [
+        line for line in failed if "spring-damper-pair/order/leapfrog/leapfrog/declared" in line
+    ]
+    assert failed and "the method does not converge as declared" in failed[0], declared.stdout
+    base = _truestep(
+        "gate", "--results", str(mutant / "results.csv"), "--baseline", str(runs["good"]), path=src
+    )
+    assert base.returncode == 1 and "WORSE" in base.stdout, base.stdout
+    good = _truestep(
+        "gate", "--results", str(runs["good"] / "results.csv"), "--declared-orders", path=runs["good-src"]
+    )
+    assert good.returncode == 0, good.stdout + good.stderr
 
 
 def _pytest_example(src: Path) -> subprocess.Popen:
@@ -175,8 +212,6 @@ def test_the_plugin_fails_a_mutant(runs, tmp_path):
     example itself the same test is ``.ci/run``'s last step: the project's own suite.) Each
     failed test's id is the verdict's id as ``truestep gate`` names it in its JSON and JUnit
     (issue 36, item 3: one name per verdict)."""
-    import json
-
     procs = {label: _pytest_example(runs[f"{label}-src"]) for label in [PLUGIN_MUTANT]}
     outcomes = {label: (p.communicate(timeout=600)[0], p.returncode) for label, p in procs.items()}
     for mutant, (out, code) in outcomes.items():
