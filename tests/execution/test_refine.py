@@ -136,3 +136,44 @@ def test_an_error_flat_at_every_step_is_carried_on_and_fails(tmp_path, capsys, q
     out = capsys.readouterr().out
     assert "FAIL harmonic-oscillator/order/misplaced-test/verlet/declared" in out
     assert "finer than the case's sweep (the method does not converge as declared)" in out
+
+
+def test_a_run_carried_on_that_timed_out_is_a_cost_limit_not_the_gate_s_verdict(case_named):
+    """A method flat over the case's sweep, carried on: its first finer run flat too, the
+    next one past its time limit. The declared-order gate judges the runs that ended (flat:
+    failed, the method converges to something else), not the one that timed out; a timeout
+    within the case's own sweep still fails the gate as a row not measured."""
+    from truestep.ci.gates import check_gates
+    from truestep.measures.declared import declared_order_gates
+
+    case = case_named("harmonic-oscillator")
+
+    def table(statuses: list[str]) -> pd.DataFrame:
+        dts = [2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4]
+        return pd.DataFrame(
+            {
+                "case": case.name,
+                "engine": "reference",
+                "method": "rk4",
+                "dt": dts,
+                "dt_kind": "step",
+                "status": statuses,
+                "error": [1e-3 if s == "ok" else np.nan for s in statuses],
+                "message": ["" if s == "ok" else "ran past its limit" for s in statuses],
+            }
+        )
+
+    gates = [g for g in declared_order_gates([case], ["reference"]) if g.method == "rk4"]
+
+    def verdict(statuses: list[str]):
+        (v,) = [
+            v
+            for v in check_gates([case], table(statuses), extra=[(["*"], g) for g in gates])
+            if v.gate.method == "rk4" and v.gate in gates
+        ]
+        return v
+
+    finer = verdict(["ok", "ok", "ok", "ok", "timeout"])
+    assert not finer.passed and "does not converge as declared" in finer.measured, finer.measured
+    within = verdict(["ok", "timeout", "ok", "ok", "ok"])
+    assert not within.passed and "timeout" in within.measured, within.measured
