@@ -566,8 +566,7 @@ def _declared_order(case: Case, g: Gate, ok: pd.DataFrame, order: float) -> Gate
     dts, errors = _num(ok["dt"]), _num(ok["error"])
     usable = np.isfinite(errors) & (errors > 0)
     local = local_orders(dts[usable], errors[usable])
-    sweep = [float(d) for d in getattr(case, "dts", ())]
-    finer = bool(sweep) and float(np.min(dts)) < min(sweep) * (1 - 1e-9)  # carried on: execution.refine
+    finer = bool(_carried_on(case, ok).any())  # carried on: execution.refine
     rising = len(local) >= 2 and local[-1] >= local[-2] + RISING
     if finer and rising and order < p["expect"] - p["tol"]:
         return GateResult(
