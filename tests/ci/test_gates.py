@@ -831,3 +831,19 @@ def test_a_limit_on_a_damped_mode_is_read_from_the_run_that_recorded_values(case
     finally:
         engine_facts.RECORDED_FACTS.pop("elsewhere-damped", None)
         engine_facts.RECORDED_LIMITS.pop(("elsewhere-damped", "m", case.name), None)
+
+
+def test_identical_counts_a_row_that_appeared_once(run_dir, copy, capsys):
+    """A row the baseline lacks is one ``appeared`` finding with ``--identical`` as without
+    it: the baseline comparison finds it, and the cell-for-cell comparison does not count
+    it again (it did, and the summary said twice as many rows appeared as had)."""
+    d, results = copy
+    results.iloc[1:].to_csv(d / "results.csv", index=False)  # the baseline lacks the first row
+    counts = []
+    for extra in ([], ["--identical"]):
+        main(["gate", "--results", str(run_dir / "results.csv"), "--baseline", str(d), "-v", *extra])
+        out = capsys.readouterr().out
+        counts.append(int(out.strip().splitlines()[-1].split(" appeared")[0].rsplit(" ", 1)[1]))
+        listed = [line for line in out.splitlines() if line.startswith("new ")]
+        assert len(listed) == 1 and listed[0].split()[1] == "results", out
+    assert counts == [1, 1]

@@ -559,6 +559,9 @@ def _identical(comparison: Comparison, baseline: dict, current: dict, base_dir: 
             "compared with tolerances only"
         )
     findings, cells = identical(baseline, current)
-    comparison.findings += findings
+    seen = {(f.change, f.table, f.key) for f in comparison.findings if f.change in ("appeared", "vanished")}
+    comparison.findings += [  # a row the comparison already found appeared or vanished, once
+        f for f in findings if (f.change, f.table, f.key) not in seen
+    ]
     differ = sum(f.change == "differs" for f in findings)
     return f"--identical: {cells} non-timing cells compared, {differ} differ"
