@@ -283,6 +283,7 @@ def test_installed_engine_case_exact_and_system_run_and_gate(fake_site, tmp_path
     out = tmp_path / "out"
     done = _cli(
         "run",
+        "--quick",
         "--cases",
         "drifting-pair,decay",
         "--engines",

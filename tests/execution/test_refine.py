@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from truestep.adapters.reference import ReferenceAdapter
+from truestep.api import run
 from truestep.cli import main
 from truestep.execution.refine import MAX_HALVINGS, short_of_order
 
@@ -64,9 +65,10 @@ class Misplaced(ReferenceAdapter):
 
 
 def _run(tmp_path, engine: str, *quick: str) -> tuple[pd.DataFrame, dict, int]:
+    """The sweep of harmonic-oscillator (the refinement runs after it, with or without the
+    analyses, which the declared-order gate does not read), published, and that gate."""
     out = tmp_path / engine.split(":")[1]
-    args = ["run", *quick, "--cases", "harmonic-oscillator", "--engines", engine, "--out", str(out)]
-    assert main(args) == 0
+    run("harmonic-oscillator", engine, quick=bool(quick), analyses=False, out=out, progress=lambda line: None)
     gate = main(["gate", "--results", str(out / "results.csv"), "--declared-orders", "-q"])
     return pd.read_csv(out / "results.csv"), json.loads((out / "run.json").read_text()), gate
 
