@@ -68,3 +68,36 @@ def test_gating_a_run_that_recorded_its_facts_imports_no_engine():
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_the_report_s_orders_table_reads_the_recorded_facts_of_an_engine_not_installed_here(monkeypatch):
+    """The orders table of a report made from a run's tables (``truestep report``, on a
+    machine without that engine) declares the orders the run recorded, the very ones
+    ``truestep gate --declared-orders`` checks: here the quick baseline's reference rows
+    under the name of an engine nothing here knows, with the reference's recorded facts."""
+    from pathlib import Path
+
+    from truestep.cases import load_cases
+    from truestep.measures import engine_facts
+    from truestep.measures.declared import run_order_pairs
+    from truestep.measures.findings import orders_table
+
+    monkeypatch.setattr(engine_facts, "RECORDED_FACTS", {})
+    monkeypatch.setattr(engine_facts, "RECORDED_LIMITS", {})
+    monkeypatch.setattr(metrics, "RECORDED_PRECISION", {})
+    quick = Path(__file__).resolve().parents[1] / "baselines" / "quick"
+    record = json.loads((quick / "run.json").read_text())
+    results = pd.read_csv(quick / "results.csv")
+    results = results[results["engine"] == "reference"].assign(engine="ghost")
+    cases = [c for c in load_cases("*") if c.name in set(results["case"])]
+    assert run_order_pairs(cases, results) == []  # nothing here can read ghost's facts
+    record["method_facts"] = {"ghost": record["method_facts"]["reference"]}
+    record["precision"] = {"ghost": "float64"}
+    engine_facts.take(record)
+    gates = {(names[0], g.method): g.params["expect"] for names, g in run_order_pairs(cases, results)}
+    table = orders_table(results, cases)
+    declared = table[table["declared"].notna()]
+    assert len(gates) >= 10 and set(declared["engine"]) == {"ghost"}
+    assert {(r.case, r.method): r.declared for r in declared.itertuples()} == gates
+    agrees = declared["agrees"]  # "" where the fit has no order: free-fall's runs are exact
+    assert "no" not in set(agrees) and (agrees == "yes").sum() >= 5, declared

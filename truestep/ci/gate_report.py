@@ -241,6 +241,8 @@ def _reasons(
             "the baseline comparison compared nothing: no row of the baseline matches one of this run"
         )
     if request.declared_orders:
+        from truestep.measures.declared import unreadable_facts
+
         for engine, why in unreadable_facts(results).items():
             if asked is None or engine in asked:
                 reasons.append(
@@ -336,7 +338,9 @@ def _verdicts_on(request: GateRequest, tables: dict, cases: list[Case]) -> list[
 
     extra = [item for f in request.gates for item in load_gates_file(f)]
     if request.declared_orders:
-        extra += declared_gates(cases, tables["results"])
+        from truestep.measures.declared import run_order_pairs
+
+        extra += run_order_pairs(cases, tables["results"])
     return check_gates(cases, tables["results"], tables["stability"], tables["restitution"], extra=extra)
 
 
@@ -372,51 +376,6 @@ def _quoted(value: object) -> str:
     """``repr`` of a value from outside, cut short and with hidden characters shown."""
     text = visible(value)
     return repr(text if len(text) <= 60 else text[:57] + "...")
-
-
-def declared_gates(cases: list[Case], results: pd.DataFrame) -> list:
-    """The declared-order gates (:mod:`truestep.measures.declared`) of the engines that ran,
-    each on its own case, case by case in the order of ``results``' engines: from the facts
-    their run recorded (``run.json``, :mod:`truestep.measures.engine_facts`) where it
-    recorded them, so that a verdict does not depend on which engines this machine has
-    (nor waits for their imports), else from the installed adapter's
-    (:func:`unreadable_facts` names engines with neither)."""
-    from truestep.measures.declared import declared_order_pairs, recorded_order_pairs
-    from truestep.measures.engine_facts import RECORDED_FACTS
-
-    unreadable = unreadable_facts(results)
-    readable = [e for e in dict.fromkeys(results["engine"].astype(str)) if e not in unreadable]
-    pairs = []
-    for case in cases:
-        for engine in readable:
-            if engine in RECORDED_FACTS:
-                pairs += recorded_order_pairs([case], results, engine)
-            else:
-                pairs += declared_order_pairs([case], [engine])
-    return pairs
-
-
-def unreadable_facts(results: pd.DataFrame, *, recorded: bool = True) -> dict[str, str]:
-    """The engines that ran (``results``) whose declared facts this process cannot read, each
-    with why: not registered here (an adapter run by ``module:Class``, which ``--engines``
-    can name again) or not installed; with ``recorded``, not those whose run recorded
-    them (its ``run.json``, :mod:`truestep.measures.engine_facts`). ``--declared-orders``
-    fails naming them: their order gates would otherwise be missing without a word."""
-    from truestep.adapters import engine_status, registered
-    from truestep.measures.engine_facts import RECORDED_FACTS
-
-    out = {}
-    for engine in dict.fromkeys(results["engine"].astype(str)):
-        if recorded and engine in RECORDED_FACTS:
-            continue
-        if engine not in registered():
-            out[engine] = (
-                "it is not registered here: name its adapter with --engines module:Class, or "
-                "install the package that registers it"
-            )
-        elif (status := engine_status(engine)) != "installed":
-            out[engine] = status
-    return out
 
 
 def tolerances_of(items: Iterable[str], files: Iterable[str]) -> dict[str, float]:

@@ -24,10 +24,11 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
-from truestep.adapters import PluginFailed, get_adapter, plugin_answer
+from truestep.adapters import PluginFailed, engine_status, get_adapter, plugin_answer, registered
 from truestep.adapters.base import duplicate_of, facts_of
 from truestep.adapters.reference import build_system
 from truestep.cases.case import Case, Gate
+from truestep.measures import engine_facts
 from truestep.measures.engine_facts import recorded_facts
 from truestep.reference_impl.solvers import MethodFacts
 from truestep.reference_impl.system import SecondOrderSystem
@@ -229,3 +230,43 @@ def _order_gate(engine: str, method: str, order: int) -> Gate:
         where=DECLARED_WHERE,
         file=DECLARED_FILE,
     )
+
+
+def run_order_pairs(cases: Iterable[Case], results: pd.DataFrame) -> list[tuple[list[str], Gate]]:
+    """The declared-order gates of the engines that ran (``results``), as
+    :func:`declared_order_pairs`, case by case in the order of ``results``' engines: the
+    pairs ``truestep gate --declared-orders`` checks and the report's orders table reads. From the facts
+    their run recorded (``run.json``, :mod:`truestep.measures.engine_facts`) where it
+    recorded them, so that a verdict does not depend on which engines this machine has
+    (nor waits for their imports), else from the installed adapter's
+    (:func:`unreadable_facts` names engines with neither)."""
+    unreadable = unreadable_facts(results)
+    readable = [e for e in dict.fromkeys(results["engine"].astype(str)) if e not in unreadable]
+    pairs: list[tuple[list[str], Gate]] = []
+    for case in cases:
+        for engine in readable:
+            if engine in engine_facts.RECORDED_FACTS:
+                pairs += recorded_order_pairs([case], results, engine)
+            else:
+                pairs += declared_order_pairs([case], [engine])
+    return pairs
+
+
+def unreadable_facts(results: pd.DataFrame, *, recorded: bool = True) -> dict[str, str]:
+    """The engines that ran (``results``) whose declared facts this process cannot read, each
+    with why: not registered here (an adapter run by ``module:Class``, which ``--engines``
+    can name again) or not installed; with ``recorded``, not those whose run recorded
+    them (its ``run.json``, :mod:`truestep.measures.engine_facts`). ``--declared-orders``
+    fails naming them: their order gates would otherwise be missing without a word."""
+    out: dict[str, str] = {}
+    for engine in dict.fromkeys(results["engine"].astype(str)):
+        if recorded and engine in engine_facts.RECORDED_FACTS:
+            continue
+        if engine not in registered():
+            out[engine] = (
+                "it is not registered here: name its adapter with --engines module:Class, or "
+                "install the package that registers it"
+            )
+        elif (status := engine_status(engine)) != "installed":
+            out[engine] = status
+    return out

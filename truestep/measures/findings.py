@@ -180,17 +180,14 @@ def orders_table(results: pd.DataFrame, cases: list[Case]) -> pd.DataFrame:
     """Fitted order of convergence per case, engine and fixed-step method, beside the
     order its engine declares there (:mod:`truestep.measures.declared`; empty where none is
     declared: non-smooth scenes, no exact solution, a method exact on the case) and
-    whether the fit is within the declared-order gates' tolerance of it."""
-    from truestep.adapters import engine_status, registered
-    from truestep.measures.declared import DECLARED_ORDER_TOL, declared_order_pairs
+    whether the fit is within the declared-order gates' tolerance of it. The declared orders
+    are those ``truestep gate --declared-orders`` checks
+    (:func:`~truestep.measures.declared.run_order_pairs`): the facts the run recorded where
+    it recorded them, else the installed adapter's."""
+    from truestep.measures.declared import DECLARED_ORDER_TOL, run_order_pairs
 
-    ran = [
-        e
-        for e in dict.fromkeys(results["engine"].astype(str))
-        if e in registered() and engine_status(e) == "installed"
-    ]
     declared = {
-        (names[0], g.engine, g.method): g.params["expect"] for names, g in declared_order_pairs(cases, ran)
+        (names[0], g.engine, g.method): g.params["expect"] for names, g in run_order_pairs(cases, results)
     }
     rows = []
     scales = {c.name: c.error_scale for c in cases}
