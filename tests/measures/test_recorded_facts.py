@@ -71,10 +71,10 @@ def test_gating_a_run_that_recorded_its_facts_imports_no_engine():
 
 
 def test_the_report_s_orders_table_reads_the_recorded_facts_of_an_engine_not_installed_here(monkeypatch):
-    """The orders table of a report made from a run's tables (``truestep report``, on a
-    machine without that engine) declares the orders the run recorded, the very ones
-    ``truestep gate --declared-orders`` checks: here the quick baseline's reference rows
-    under the name of an engine nothing here knows, with the reference's recorded facts."""
+    """The report's orders table declares the orders its run recorded, the very ones
+    ``truestep gate --declared-orders`` checks, also where it is made without the engine
+    installed: here the quick baseline's reference rows under the name of an engine
+    nothing here knows, with the reference's recorded facts."""
     from pathlib import Path
 
     from truestep.cases import load_cases
