@@ -288,14 +288,18 @@ def _tables(sel: Selection):
     restitution sweep only when a gate reads them), or read from ``results=``."""
     from truestep.api import run
     from truestep.cases.gate_kinds import GATE_KINDS
+    from truestep.measures.engine_facts import take
 
     key = dataclasses.astuple(sel)
-    if key not in _RUNS and sel.results is not None:
-        from truestep.ci.baseline import read_tables
-        from truestep.measures.engine_facts import take
+    if sel.results is not None:  # its run's facts, at every use: another marker may have taken others
         from truestep.reporting.run_record import read_run_record
 
         take(read_run_record(Path(sel.results).parent))
+    else:  # a run made here: the installed adapters' facts
+        take()
+    if key not in _RUNS and sel.results is not None:
+        from truestep.ci.baseline import read_tables
+
         read = read_tables(Path(sel.results).parent)
         _RUNS[key] = _Read(read["results"], read["stability"], read["restitution"])
     if key not in _RUNS:

@@ -824,7 +824,10 @@ def test_a_limit_on_a_damped_mode_is_read_from_the_run_that_recorded_values(case
     try:
         engine_facts.take({"method_facts": {"elsewhere-damped": {"m": values}}})
         assert _unstable_where_stable(case, gate, rows) is None  # the values alone: no limit known
-        engine_facts.take({"stability_limits": {"elsewhere-damped": {"m": limits}}})
+        engine_facts.take(
+            {"method_facts": {"elsewhere-damped": {"m": values}}},
+            {"stability_limits": {"elsewhere-damped": {"m": limits}}},
+        )
         verdict = _unstable_where_stable(case, gate, rows)
         assert verdict is not None and not verdict.passed
         assert "where its facts say it is stable" in verdict.measured

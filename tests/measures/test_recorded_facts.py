@@ -101,3 +101,29 @@ def test_the_report_s_orders_table_reads_the_recorded_facts_of_an_engine_not_ins
     assert {(r.case, r.method): r.declared for r in declared.itertuples()} == gates
     agrees = declared["agrees"]  # "" where the fit has no order: free-fall's runs are exact
     assert "no" not in set(agrees) and (agrees == "yes").sum() >= 5, declared
+
+
+def test_one_judged_run_s_facts_do_not_reach_the_next():
+    """Two verdicts in one process (two markers of a pytest session, two gates through the
+    API): the facts the first run recorded are gone when the second, which recorded none
+    for that engine, is judged, and ``take()`` leaves only the installed adapters' facts."""
+    from truestep.measures import engine_facts
+
+    first = {
+        "precision": {"mine": "float32"},
+        "method_facts": {"mine": {"m": {"like": "euler"}}},
+        "stability_limits": {"mine": {"m": {"free-fall": 0.5}}},
+    }
+    try:
+        engine_facts.take(first)
+        assert engine_facts.recorded_facts("mine", "m")[0] and metrics.precision_of("mine") == "float32"
+        assert engine_facts.recorded_limit("mine", "m", "free-fall") == 0.5
+        engine_facts.take({"precision": {"other": "float64"}})
+        assert engine_facts.recorded_facts("mine", "m") == (False, None)
+        assert metrics.precision_of("mine") != "float32"
+        assert engine_facts.recorded_limit("mine", "m", "free-fall") is None
+        engine_facts.take(first, {"precision": {"mine": "float64"}})  # the later record wins
+        assert metrics.precision_of("mine") == "float64" and engine_facts.recorded_facts("mine", "m")[0]
+    finally:
+        engine_facts.take()
+    assert not engine_facts.RECORDED_FACTS and not metrics.RECORDED_PRECISION

@@ -172,9 +172,9 @@ def gate(request: GateRequest) -> GateReport:
 
     tables = run_tables(request.results)
     engines = engine_names(request.engines)
-    if request.baseline is not None:  # the facts each run was made with, this run's last (they win)
-        take(read_run_record(request.baseline))
-    take(read_run_record(request.results.parent))
+    # the facts each run was made with, this run's last (they win)
+    under = () if request.baseline is None else (read_run_record(request.baseline),)
+    take(*under, read_run_record(request.results.parent))
     asked = {e.strip() for e in engines.split(",") if e.strip()} if engines else None
     cases, verdicts = _verdicts(request, tables)
     report = GateReport(verdicts, identical=request.identical)

@@ -155,9 +155,24 @@ def _facts_from(value: object) -> MethodFacts | None:
         return None
 
 
-def take(run_record: dict | None) -> None:
-    """Take what a run recorded about its engines (its ``run.json``), over what the
-    adapters installed here say: precision and method facts."""
+def take(*run_records: dict | None) -> None:
+    """Judge by what these runs recorded about their engines (their ``run.json``), over what
+    the adapters installed here say: precision, method facts and stability limits, a later
+    record winning where two name the same engine (a baseline's, then the judged run's).
+    What an earlier call took is dropped first, so one judged run's facts never reach the
+    next (two markers of one pytest session, two gates of one process); ``take()`` judges by
+    the installed adapters alone."""
+    from truestep.measures import metrics
+
+    RECORDED_FACTS.clear()
+    RECORDED_LIMITS.clear()
+    metrics.RECORDED_PRECISION.clear()
+    for run_record in run_records:
+        _take_one(run_record)
+
+
+def _take_one(run_record: dict | None) -> None:
+    """One run's record over what :func:`take` holds already."""
     from truestep.measures.metrics import recorded_precision
 
     recorded_precision(run_record)
