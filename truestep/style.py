@@ -66,8 +66,9 @@ ENGINE_MARKERS = {
     "mujoco-warp": "P",
     "newton": "X",
 }
-"""A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`)."""
-MORE_MARKERS = ("P", "X", "*", "h", "p", "<", ">")
+"""A marker for each engine (another engine's is chosen by its name from :data:`MORE_MARKERS`,
+none of which is a built-in engine's)."""
+MORE_MARKERS = ("*", "p", "<", ">", "8", "d")
 ENGINE_LINES: dict[str, str | tuple] = {
     "reference": "-",
     "scipy": ":",

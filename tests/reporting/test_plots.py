@@ -84,7 +84,7 @@ def test_every_built_in_series_has_its_own_colour_and_each_engine_its_marker():
 
     pairs = [
         (e, m)
-        for e in ("reference", "scipy", "pymunk", "pybullet", "mujoco", "drake")
+        for e in ("reference", "scipy", "pymunk", "pybullet", "mujoco", "drake", "mujoco-warp", "newton")
         for m in get_adapter(e).methods
     ]
     colours = [style.series_style(e, m)["color"] for e, m in pairs]
@@ -105,6 +105,8 @@ def test_every_built_in_series_has_a_colour_of_its_own():
     colours = [c.lower() for c in SERIES_COLOURS.values()]
     assert len(set(colours)) == len(colours)
     assert not set(colours) & {c.lower() for c in MORE_COLOURS}
+    # nor does a plugin's engine take a built-in engine's marker
+    assert not set(style.ENGINE_MARKERS.values()) & set(style.MORE_MARKERS)
 
 
 def test_a_saved_figure_has_the_pixels_savefig_draws(tmp_path):

@@ -65,25 +65,16 @@ def git_state(root: Path) -> dict[str, object] | None:
     return {"revision": head.stdout.strip(), "dirty": bool(dirty.stdout.strip())}
 
 
-def _libraries() -> dict[str, str]:
-    """The distribution that does the stepping of each engine truestep ships an adapter
-    for: the reference is truestep's own, scipy is scipy, and each other's extra is named
-    after its library (:data:`truestep.adapters.EXTRAS`)."""
-    from truestep.adapters import EXTRAS
-
-    return {"reference": "truestep", "scipy": "scipy", **EXTRAS}
-
-
 def engine_versions(engines: list[str], packages: dict[str, str]) -> dict[str, str]:
     """Each engine's distribution and version (``"name 1.2"``): a built-in engine's library
     as the run recorded it (``packages``, ``run.json``), any other's the distribution that
     holds the module its registration names (found without importing it); ``""`` where
     none does (an engine given as ``module:Class`` from a path)."""
-    from truestep.adapters import registered
+    from truestep.adapters import LIBRARIES, registered
     from truestep.runtime.distributions import holding
 
     targets = registered()
-    libraries = _libraries()
+    libraries = LIBRARIES
     out = {}
     for engine in engines:
         library = libraries.get(engine)

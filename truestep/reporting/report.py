@@ -21,6 +21,7 @@ from truestep.cases.case import Case
 from truestep.measures.findings import Findings, find, speed_table, speed_tables
 from truestep.measures.metrics import CONVERGING, PRE_ASYMPTOTIC, ROUND_OFF, ROUND_OFF_FLOAT32
 from truestep.measures.picks import scorecard_table, survival
+from truestep.numerics import PACKAGES as RECORDED_PACKAGES
 from truestep.reporting import plots
 from truestep.reporting.html import markdown_to_html
 from truestep.reporting.markdown import folded, link, md_table, text, with_units
@@ -47,18 +48,9 @@ from truestep.runtime.isolation import (
 from truestep.runtime.visible import visible
 from truestep.tables.spec import TABLES
 
-PACKAGES = (
-    "numpy",
-    "scipy",
-    "pandas",
-    "matplotlib",
-    "numba",
-    "tqdm",
-    "pymunk",
-    "pybullet",
-    "mujoco",
-    "drake",
-)
+PACKAGES = (*RECORDED_PACKAGES, "matplotlib")
+"""The packages whose versions the page's footer names: those a run records
+(:data:`truestep.numerics.PACKAGES`: its numbers follow from them) and what draws its figures."""
 __all__ = [
     "hard_case_line",
     "render_markdown",

@@ -59,7 +59,7 @@ KERNEL_FILES=(reference_impl/forces_kernels.py reference_impl/collisions_kernels
 # (reference_impl/solvers/any_method.py, a kernel file too, is among TARGETS by its folder:
 # listed twice, a mutant of it would be seen as two changed files and run the wrong tests)
 TARGETS=(reference_impl/solvers/*.py reference_impl/forces.py reference_impl/collisions.py
-         truestep/metrics.py "${KERNEL_FILES[@]}")
+         truestep/measures/metrics.py "${KERNEL_FILES[@]}")
 
 cmd="${1:-all}"
 case "$cmd" in
@@ -161,7 +161,7 @@ tests)
         reference_impl/solvers/*) tests=("${SOLVER_TESTS[@]}") ;;
         reference_impl/forces.py) tests=("${FORCE_TESTS[@]}") ;;
         reference_impl/collisions.py) tests=("${COLLISION_TESTS[@]}") ;;
-        truestep/metrics.py) tests=("${METRIC_TESTS[@]}") ;;
+        truestep/measures/metrics.py) tests=("${METRIC_TESTS[@]}") ;;
         *) tests=("${SOLVER_TESTS[@]}" "${FORCE_TESTS[@]}" "${COLLISION_TESTS[@]}" "${METRIC_TESTS[@]}") ;;
     esac
     exec python -m pytest -x -q -p no:cacheprovider "${DESELECT[@]}" "${KILLS[@]}" "${tests[@]}"
