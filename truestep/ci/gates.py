@@ -704,8 +704,10 @@ def check_gates(
     todo = gates_to_check(cases, extra)
     check_properties_exist(todo)
     for c, g in todo:
-        if g.kind in ("stability-limit", "restitution") and "*" in (g.engine, g.method):
-            pairs = _table_pairs(c, g, stability if g.kind == "stability-limit" else restitution)
+        kind = GATE_KINDS.get(g.kind)
+        reads = None if kind is None else kind.reads  # an unknown kind fails below, saying so
+        if reads in ("stability", "restitution") and "*" in (g.engine, g.method):
+            pairs = _table_pairs(c, g, stability if reads == "stability" else restitution)
         else:
             pairs = _pairs(results, c.name, g)
         if not pairs:
