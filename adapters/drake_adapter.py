@@ -10,9 +10,9 @@ positions then velocities, (6 n,); an ODE's state, (dim,)) and whose time deriva
 is the reference system's (:func:`truestep.adapters.reference.build_system`), as for
 scipy: the comparison is of integrators alone, on the same forces. Where the system has
 a compiled twin of its derivative (:meth:`~truestep.reference_impl.system.System.compiled_derivative`:
-a particle scene without fields, the lecture's ODEs), Drake calls that: the same bits in
-under a microsecond, where the Python one took 2 to 20 µs of each evaluation Drake calls
-back from C++. A second-order
+a particle scene without fields, the lecture's ODEs), Drake calls that: the same bits at
+a fraction of the cost of the Python one, whose interpreted work dominated each evaluation
+Drake calls back from C++. A second-order
 scene declares its state as Drake's generalized positions ``q`` and velocities ``v``
 (``q' = v``), which ``semi_explicit_euler`` needs; a first-order ODE is Drake's
 "miscellaneous" state ``z``. Drake's ``MultibodyPlant`` is not used: its contact is
@@ -115,9 +115,9 @@ STRETCH = 1e-9
 next step's end must not make Drake split a step."""
 
 MAX_EVALUATIONS = 300_000
-"""The most derivative evaluations an error-controlled run may make (a bound on work, the same on every
-machine, about 10 s of Drake's stepping of a Python derivative here): a run that needs
-more ends ``solver-failed`` at the step that passed it, saying so. scipy's costliest run
+"""The most derivative evaluations an error-controlled run may make (a bound on work, the
+same on every machine, not on wall time): a run that needs more ends ``solver-failed`` at
+the step that passed it, saying so. scipy's costliest run
 of the library makes 2e5; an error-controlled Drake method that cannot reach its target
 accuracy would otherwise creep for minutes."""
 

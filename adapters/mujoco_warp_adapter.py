@@ -8,8 +8,8 @@ same MJCF model (:func:`truestep.adapters.mujoco_adapter.mjcf`, so the same slid
 joints, tendons, contact pairs and the restitution-derived ``solref``), the same four
 integrators, one world, stepped by Warp's kernels in float32 on Warp's CPU device
 (:data:`DEVICE`) unless a device is asked. Its rows say whether the GPU pipeline computes
-MuJoCo's physics; its CPU wall times are those of a GPU code run on a CPU (20-50 times
-MuJoCo C's), not a speed claim, and the row's message says so.
+MuJoCo's physics; its CPU wall times are those of a GPU code run on a CPU (far slower
+than MuJoCo C's), not a speed claim, and the row's message says so.
 
 What truestep sets
 ------------------
@@ -93,8 +93,8 @@ CAPABILITIES = mj.MujocoAdapter.capabilities - frozenset(APPLIED)
 MAX_CPU_PARTICLES = 500
 """The most particles a scene may have for a run on the CPU device. Warp's CPU device
 runs each kernel's threads one after another, and MuJoCo Warp's constraint solver is
-written for a GPU's thousands of threads: on this machine particle-rain's 1000 particles
-took 74 ms a step (MuJoCo C: 0.36 ms), some 25 minutes for its sweep. Larger scenes are
+written for a GPU's thousands of threads: a step of particle-rain's 1000 particles costs
+orders of magnitude more than MuJoCo C's, far too long for a sweep. Larger scenes are
 ``skipped`` rows that say so; on a GPU (``device="cuda:0"``) there is no bound."""
 
 CPU_NOTE = "Warp CPU device, float32: a correctness peer of MuJoCo C; its wall time is no speed claim"
@@ -139,7 +139,7 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE, reuse: bo
     without contact) is that scene again, its device model's step set and its device data
     put back as built (:func:`_again`): the same arrays, so the scene built before is
     that one, reset. It steps the same bits as a scene built afresh, without MuJoCo
-    Warp's ``put_model`` and the graph capture (0.1 to 0.15 s a run on the CPU device). A
+    Warp's ``put_model`` and the graph capture, a cost at every run on the CPU device. A
     scene with plane contacts has its step in the contacts' ``solref`` too, so it is
     built afresh at every step. MuJoCo Warp's version checks are answered once per process
     (:func:`remember_versions`)."""

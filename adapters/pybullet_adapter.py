@@ -43,13 +43,13 @@ The model in pybullet
   explicit in ``v_n``). Only what the forces need is read: the positions (and, for damped
   springs, drag and wind, the velocities) of the particles the forces touch, one
   ``getBasePositionAndOrientation`` / ``getBaseVelocity`` call per body (pybullet has no
-  batched read of base states); a state read at a recorded step is reused. These calls
-  cost about 2.5 us each (``applyExternalForce`` 2 us): a 400-particle cloth with damped
-  springs takes about 4 ms per step, against 0.3 ms for the reference's numpy
-  ``symplectic-euler``, with the same trajectory to 1e-15 m. Mass-spring
-  cloth goes through the same path: pybullet's deformable world (``loadSoftBody`` with
-  mass-spring) is not used, since it needs a mesh file and its own implicit integrator
-  and damping would not be the lecture's springs.
+  batched read of base states); a state read at a recorded step is reused. These calls,
+  and ``applyExternalForce``, cost a Python call per body per step: a cloth with damped
+  springs steps many times slower than the reference's numpy ``symplectic-euler``, with
+  the same trajectory to 1e-15 m. Mass-spring cloth goes through the same path:
+  pybullet's deformable world (``loadSoftBody`` with mass-spring) is not used, since it
+  needs a mesh file and its own implicit integrator and damping would not be the
+  lecture's springs.
 - **Planes**: a static ``GEOM_PLANE`` body per plane, with ``planeNormal`` the plane's
   normal, placed at the plane's point: a half-space (no tunnelling through it however
   fast a particle moves). Radius-0 particles collide, in their own collision group, with a

@@ -112,8 +112,8 @@ class ScipyAdapter:
         def derivative(t: float, y: np.ndarray) -> np.ndarray:
             calls[0] += 1
             dy = rhs(y, t)
-            # One reduction (about 1 us, a few percent of an evaluation): NaN or inf in the
-            # state or its derivative, or a derivative beyond 1e154 (a runaway).
+            # One reduction (small beside an evaluation): NaN or inf in the state or its
+            # derivative, or a derivative beyond 1e154 (a runaway).
             if not math.isfinite(dy @ dy):
                 raise _NonFinite(t, y)
             return dy

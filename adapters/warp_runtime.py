@@ -46,8 +46,8 @@ with without_banner(BANNER):
 def host_view(array: Any) -> Any:
     """A numpy array over a Warp array's own memory when it lives on the CPU device (what
     the graph's launches write is there at once), else ``None``. Reading the state at
-    every step through it costs a copy; ``array.numpy()`` costs some 5 us a call on top
-    (Warp's device lookup and a new numpy wrapper), a third of a small scene's step."""
+    every step through it costs a copy; ``array.numpy()`` costs more on top at every call
+    (Warp's device lookup and a new numpy wrapper), a large part of a small scene's step."""
     return array.numpy() if array.device.is_cpu else None
 
 
@@ -67,15 +67,15 @@ def prepare(adapter: Any, case: Any, method: str) -> None:
     """Build ``case``'s scene for ``method`` in this process (on the CPU device only),
     before truestep forks the processes that run it: they find the solver's module
     imported and every Warp kernel module the scene needs loaded, where each would
-    otherwise import and hash them afresh (0.5 to 1 s a process). Nothing is measured from
+    otherwise import and hash them afresh, in every process. Nothing is measured from
     this build; a scene the adapter cannot or will not run is not built. On a GPU nothing
     is done: CUDA is not started in a process that forks.
 
     Once a process for each engine, method and set of scene features (springs, planes,
     friction ...): the kernels a scene loads follow from its method and what it holds, and
-    a build (0.1 to 0.3 s) for every sweep held up the parent that starts the next one. A
-    kernel module that a later scene needs and this build did not load is loaded by the
-    run's own process, the same kernels."""
+    a build for every sweep held up the parent that starts the next one. A kernel module
+    that a later scene needs and this build did not load is loaded by the run's own
+    process, the same kernels."""
     key = (adapter.name, method, frozenset(case.features))
     if adapter.device != "cpu" or case.model is None or key in _PREPARED or adapter.missing(case, method):
         return

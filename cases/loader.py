@@ -58,9 +58,9 @@ EXACT_CHECK_ENV = "TRUESTEP_EXACT_CHECK_S"
 EXACT_CHECK_S = guard_seconds(EXACT_CHECK_ENV, 300.0)
 """Seconds within which checking that an exact solution fits its case must end: a guard
 against a check that never returns (a solution waiting on a network disk), not a bound on
-its cost. The library's own checks take at most about 1 s (the million-particle rain), so
-a case is refused for its time only when its check hangs, on any machine, not for being
-slow on a slow one. 300 unless :data:`EXACT_CHECK_ENV` says."""
+its cost. The library's own checks (the costliest: the million-particle rain's) end far
+within it, so a case is refused for its time only when its check hangs, on any machine,
+not for being slow on a slow one. 300 unless :data:`EXACT_CHECK_ENV` says."""
 REFERENCE_KEYS = {"exact", "error", "scale", "conservative", "escape_energy"}
 PROPERTY_PARAMS = {"v_scale": "nonnegative", "bounces": "count"}
 """``[reference]`` parameters that properties read (:mod:`truestep.measures.properties`)."""

@@ -68,7 +68,7 @@ def add_springs(f: np.ndarray, x: np.ndarray, v: np.ndarray, s: Springs) -> None
     """Damped springs between particle pairs ``(s.i, s.j)``: :func:`spring_forces` on the
     first end of each spring, its opposite on the second, spring after spring, in one
     compiled pass (:func:`forces_kernels.add_spring_forces`, on the arrays transposed):
-    a small scene costs a microsecond, not the dozen numpy calls of the vectorised form."""
+    a small scene costs one compiled call, not the dozen numpy calls of the vectorised form."""
     if len(s):
         add_spring_forces(f.T, x.T, v.T, s.i, s.j, s.stiffness, s.damping, s.rest)
 
@@ -83,7 +83,7 @@ def add_anchors(f: np.ndarray, x: np.ndarray, v: np.ndarray, a: Anchors) -> None
 def compile_springs() -> None:
     """Compile the spring loop (or load it from numba's cache) for the argument types
     every scene uses. Processes forked afterwards inherit it; each would otherwise load
-    it again on its first spring (about 0.3 s per process)."""
+    it again on its first spring, every process paying the load."""
     one, point = np.ones(1), np.zeros((1, 3))
     f, x, v = np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))
     add_springs(f, x, v, Springs(np.array([0]), np.array([1]), one, one, one))

@@ -6,14 +6,13 @@ an unmutated one to hand back). It deep-copies each block on its own, with a fre
 so every block's copy drags along its own copy of the function's ``Scope`` and of every
 variable the scope holds: the cost grows with blocks times variables, and for the
 composed loops of :mod:`~truestep.reference_impl.compose` (a driver, a method's step, the
-derivative and the force kernels, inlined into one another) it was some 40 % of the time
-a loop takes to compile. :func:`install` gives the block copies of one ``inline_ir`` call
-one memo, so the blocks of a copy share one copied scope, as the blocks of the original
-share one scope. The IR spliced into the caller is the same, statement for statement, so
-the machine code and every number computed with it are too (the compiled-against-numpy
-equality tests and the quick run's ``--identical`` gate check it); a loop compiles in
-about three quarters of the time (harmonic-oscillator's loop for every method: 20 s to
-15 s on one core).
+derivative and the force kernels, inlined into one another) it was a large share of the
+time a loop takes to compile. :func:`install` gives the block copies of one
+``inline_ir`` call one memo, so the blocks of a copy share one copied scope, as the
+blocks of the original share one scope. The IR spliced into the caller is the same,
+statement for statement, so the machine code and every number computed with it are too
+(the compiled-against-numpy equality tests and the quick run's ``--identical`` gate check
+it); a loop compiles in less time, by the share those copies took.
 
 numba's own issues name this cost (numba#8989, numba#9204); its later versions may copy
 differently, and then the memo given here is simply not used.

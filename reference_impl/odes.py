@@ -27,8 +27,9 @@ class CircleField(System):
         return self._J
 
     def compiled_derivative(self) -> None:
-        """None: a compiled call costs more than this numpy one (0.59 against 0.36 us a call,
-        ``benchmarks/compiled_derivative.py``): two components, no loop to compile away."""
+        """None: a compiled call costs more than this numpy one (as
+        ``benchmarks/compiled_derivative.py`` times them): two components, no loop to
+        compile away."""
         return None
 
     def energy(self, x: np.ndarray, t: float) -> float:

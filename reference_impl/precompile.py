@@ -61,9 +61,9 @@ def _needed_with_weights(pairs: Iterable[tuple]) -> list[tuple[tuple, float]]:
 WEIGHTS = {"fused": 2.0, "passes": 1.0, "derivative": 0.1}
 """How long a loop of each kind takes to compile, relative to a loop in passes: a fused
 loop holds a step of one particle for every built-in method (and its special particles'),
-so it takes about twice as long (4.5 to 15 s in passes, 8 to 36 s fused, 0.5 to 2.6 s a
-derivative, in the logs of a cold ``truestep compile`` on this repository's cases). Used
-only to order the work among processes (longest first); nothing computed depends on it."""
+so it takes about twice as long, and a derivative a small part of a loop in passes (the
+logs of a cold ``truestep compile`` on this repository's cases). Used only to order the
+work among processes (longest first); nothing computed depends on it."""
 
 
 def longest_first(weighted: list[tuple[tuple, float]]) -> list[tuple]:

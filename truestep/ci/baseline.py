@@ -279,7 +279,7 @@ def _compare_timing(old: pd.DataFrame, new: pd.DataFrame, tol: float, findings: 
     ratio, less its noise, exceeds the old one, plus its noise, by more than ``tol``
     (relative), ``better`` the other way; ratios whose noise bands leave no such gap are
     a tie. An unchanged solver run twice (A/A) passes: single timings of a few
-    microseconds move two-fold from run to run."""
+    microseconds move by a large factor from run to run."""
     a, b = _index(old, RESULT_KEYS), _index(new, RESULT_KEYS)
     for k in sorted(a.keys() & b.keys(), key=str):
         ra, rb = a[k], b[k]

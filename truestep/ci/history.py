@@ -1,4 +1,4 @@
-"""Runs kept by commit, read back over commits (issue 36's history).
+"""Runs kept by commit, read back over commits.
 
 A history is a folder of saved runs (:func:`truestep.ci.saved.save`), one per git
 revision of the project, in the order they were added (``index.json``). ``truestep

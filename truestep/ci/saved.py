@@ -1,4 +1,4 @@
-"""A baseline kept on purpose: ``truestep baseline save DIR`` (issue 36's baseline lifecycle).
+"""A baseline kept on purpose: ``truestep baseline save DIR``.
 
 A baseline is a run's tables (``results.csv``, ``stability.csv``, ``restitution.csv``) and
 its ``run.json``, copied cell for cell, with what ties them to one machine or checkout

@@ -13,11 +13,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Compile the reference implementation's loops for every "
         "case of the library and of the figures and every fixed-step method, "
         "on every core, into numba's on-disk cache, as a first `truestep run` "
-        "does before its first timed run (about 70 s on 2 cores when the cache "
-        "is empty; a second call only loads them); with MuJoCo Warp or Newton "
+        "does before its first timed run (long when the cache is empty; a second "
+        "call only loads them); with MuJoCo Warp or Newton "
         "installed, also their kernels for every scene they run, into Warp's "
-        "kernel cache, each in a process of its own beside the reference's "
-        "(about 40 s of one core each when empty).",
+        "kernel cache, each in a process of its own beside the reference's.",
     )
     comp.set_defaults(func=main)
 

@@ -2,11 +2,10 @@
 
 A declared-order gate (``truestep gate --declared-orders``) fits an order to a method's
 errors over the case's sweep. Some correct methods are not yet in their asymptotic range
-there: Drake's third-order ``runge_kutta3`` and ``radau3`` on arenstorf-orbit fall as
-dt^0.69 and dt^1.95 between 1 ms and 0.5 ms (the orbit's close approaches), then as
-dt^2.95 and dt^3.2 from 0.25 ms to 0.125 ms. Judged on the case's sweep alone they would
-fail; a method that is wrong (a flipped sign, a lost half step) stays below its order
-however fine the step.
+there: Drake's third-order ``runge_kutta3`` and ``radau3`` on arenstorf-orbit fall well
+below their order over the case's sweep (the orbit's close approaches), and reach it only
+at finer steps. Judged on the case's sweep alone they would fail; a method that is
+wrong (a flipped sign, a lost half step) stays below its order however fine the step.
 
 :func:`refine` carries on to finer steps, halving the finest step of the case's sweep
 each time, each method of a run (rows ``ok`` at every step) whose fit falls short of its
@@ -16,11 +15,11 @@ declared order, where either
   fail), or
 - its error does not fall there at all, well above the engine's round-off
   (:func:`~truestep.measures.metrics.flat_above_floor`): the gate could not judge such a
-  sweep, and a user's solver with a rest length 1 % off (a flat 1.3e-2 m on
+  sweep, and a user's solver with a rest length 1 % off (a flat error on
   spring-damper-pair) passed it; only finer steps tell a method that has not yet begun
-  to converge (implicit Euler on mass-ratio-chain, flat at 0.035 m down to 5 ms, falling
-  as dt^0.79 at 0.3 ms) from one that converges to something else. A ``--quick`` run
-  carries on only these, from half the finest step of the case's full sweep.
+  to converge (implicit Euler on mass-ratio-chain, flat over the sweep, falling only at
+  finer steps) from one that converges to something else. A ``--quick`` run carries on
+  only these, from half the finest step of the case's full sweep.
 
 It adds the rows to the results, and stops once the fit reaches the declared order, once
 the local order of a converging method stops rising (:func:`still_rising`: a method

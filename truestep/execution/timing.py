@@ -60,9 +60,9 @@ class Timing:
 
 QUICK_TIMING = Timing(min_total_s=0.002, min_repeats=3, max_repeats=5, long_run_s=0.002, apart=False)
 """``--quick`` runs time a row of 2 ms or more once, a shorter one 3 to 5 times (a single
-timing of a few microseconds moves two-fold from run to run: a CI's ``--time-against``
-needs the median and the spread there, at a cost of some milliseconds a row); its rows
-are measured and timed in one process."""
+timing of a short row moves by a large factor from run to run: a CI's ``--time-against``
+needs the median and the spread there, at a small cost a row); its rows are measured
+and timed in one process."""
 
 
 UNTIMED = Timing(timed=False)
@@ -149,8 +149,8 @@ TIMED_RECORDS = 2
 """The records a timed run of a fixed-step method keeps when the row is measured from
 another run (its start, middle and end: :func:`~truestep.reference_impl.integrate.record_indices`):
 the time of a speed claim is the engine's stepping, not the harness reading its state back
-at every record (an engine stepped from Python paid a call per record, 15x its stepping
-on a 9-particle net recorded at every step). An error-controlled method keeps the
+at every record (an engine stepped from Python paid a call per record, many times its
+stepping on a small net recorded at every step). An error-controlled method keeps the
 case's records: where it records may decide where it stops."""
 
 
@@ -181,7 +181,7 @@ def timed_runs(
     run, and the timed runs keep few records (:func:`timed_case`). ``known_s``: the wall
     time of that run (the same steps, watched, so no faster), s: how many runs to time is
     decided from the faster of it and the first timed run, so that a first run the machine
-    held up (a 50 us row timed at 10 ms on a busy CI) is not the row's only sample."""
+    held up (a short row timed many times too long on a busy CI) is not the row's only sample."""
     if lean:
         case = timed_case(adapter, case, method)
     if warm_up:

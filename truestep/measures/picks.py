@@ -39,12 +39,12 @@ PICK_COLUMNS = [
 ]
 TIE_NOISE = 0.15
 """The least relative noise of a wall time: two runs of the same revision on one machine
-moved single rows by up to 12% (a shared machine's load, caches, frequency), more than the
-spread of one row's repeats shows. Wall times closer than their noise bands are a tie."""
+move single rows (a shared machine's load, caches, frequency) by more than the spread of
+one row's repeats shows. Wall times closer than their noise bands are a tie."""
 TIMER_FLOOR_S = 1e-5
-"""The least absolute noise of a wall time, s: timings of a few microseconds moved by up to
-6 us between two runs of one revision (3x on a 3 us row: caches, interrupts, the call
-around the stepping; ``tools/experiments/aa_timing.py``), whatever their spread within a run."""
+"""The least absolute noise of a wall time, s: timings of a few microseconds move by more
+than themselves between two runs of one revision (caches, interrupts, the call around the
+stepping; ``tools/experiments/aa_timing.py``), whatever their spread within a run."""
 
 
 def _num(frame: pd.DataFrame, column: str) -> np.ndarray:

@@ -3,11 +3,11 @@ blind to what was alive before the run's first process is forked.
 
 Importing every engine makes about a million objects that live as long as the process. A
 full collection walks all of them and finds nearly nothing: the collector starts one each
-time the long-lived objects have grown by a quarter, so a quick run paid for ten of them
-before its first row, 1.7 to 1.8 s of a 5.4 s start on a 2-core AMD EPYC, and two more of
-0.5 to 0.7 s each later. With the collector off during the imports and those objects frozen
-(:func:`gc.freeze`) for the run, no collection walks them again, in the run's process or in
-the processes it forks (which would also copy every page of them that a collection touches).
+time the long-lived objects have grown by a quarter, so a quick run paid for many of them
+before its first row, a large part of its start, and more later. With the collector off
+during the imports and those objects frozen (:func:`gc.freeze`) for the run, no
+collection walks them again, in the run's process or in the processes it forks (which
+would also copy every page of them that a collection touches).
 
 Both are scoped: the collector's state, and the objects frozen, are put back as they were
 when the block ends, so that calling :func:`truestep.run` from a user's program changes
@@ -43,7 +43,7 @@ def frozen(*, collecting: bool = True) -> Iterator[None]:
 
     Entered inside :func:`paused`, the objects made during the pause are frozen before
     any collection walks them (once the collector is on again, the first collection would
-    walk them all: 0.42 s after the engines' imports)."""
+    walk them all, and after the engines' imports they are many)."""
     was_on = gc.isenabled()
     froze = not gc.get_freeze_count()
     if froze:

@@ -1,6 +1,6 @@
 """Which installed distributions hold a top-level module, found without building
-:func:`importlib.metadata.packages_distributions`' map of every one (about 0.5 s with the
-dev extras installed: it turns each distribution's RECORD into path objects)."""
+:func:`importlib.metadata.packages_distributions`' map of every one (slow with many
+distributions installed: it turns each distribution's RECORD into path objects)."""
 
 from __future__ import annotations
 

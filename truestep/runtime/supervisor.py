@@ -100,8 +100,8 @@ def _exit_at_once(code: int) -> NoReturn:
     """End the worker as Python would, less the teardown of its objects: the exit
     handlers run and every buffered stream (Python's and C's) is flushed, then the process
     exits without freeing what it holds. Freeing a process that holds every engine, their
-    scenes and a run's tables one object at a time took 2.8 s after a quick run had
-    written its report (mypy's ``hard_exit`` does the same for the same reason)."""
+    scenes and a run's tables one object at a time held up the exit of a quick run
+    that had written its report (mypy's ``hard_exit`` does the same for the same reason)."""
     with contextlib.suppress(Exception):
         atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
