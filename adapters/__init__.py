@@ -53,6 +53,10 @@ EXTRAS: dict[str, str] = {
 }
 """Built-in engine -> the optional extra of truestep that installs its library."""
 
+LIBRARIES: dict[str, str] = {"reference": "truestep", "scipy": "scipy", **EXTRAS}
+"""Built-in engine -> the distribution that does its stepping: the reference is truestep's
+own, scipy is scipy, and each other's extra is named after its library."""
+
 _RESOLVED: dict[str, str] = {}
 """Engines named by ``module:Class`` in this process: adapter name -> target."""
 
@@ -299,7 +303,7 @@ PREPARE_ALL_S = 1800.0
 compiles for minutes)."""
 PREPARE_S = 600.0
 """Seconds an adapter's ``prepare(case, method)`` has to compile or load what one scene and
-method need (a cold cache compiles a scene's kernels in about a minute)."""
+method need (a cold cache compiles a scene's kernels first)."""
 
 
 def plugin_answer(
