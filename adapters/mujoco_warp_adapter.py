@@ -55,7 +55,7 @@ import numpy as np
 from truestep.adapters import mujoco_adapter as mj
 from truestep.adapters.base import FactsSpec
 from truestep.adapters.quiet import without_banner
-from truestep.adapters.warp_runtime import BANNER, DEVICE, WarpAdapter, host_copy, host_view, wp
+from truestep.adapters.warp_runtime import BANNER, DEVICE, WarpAdapter, host_copy, host_view, start, wp
 from truestep.cases.case import Case
 from truestep.reference_impl.features import Feature
 
@@ -143,6 +143,7 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE, reuse: bo
     scene with plane contacts has its step in the contacts' ``solref`` too, so it is
     built afresh at every step. MuJoCo Warp's version checks are answered once per process
     (:func:`remember_versions`)."""
+    start()
     remember_versions()
     model = case.particles
     h = case.steps_for(dt)[1]

@@ -75,7 +75,7 @@ import numpy as np
 from truestep.adapters import contact_law
 from truestep.adapters.base import Trajectory
 from truestep.adapters.quiet import without_banner
-from truestep.adapters.warp_runtime import BANNER, DEVICE, WarpAdapter, host_copy, host_view, wp
+from truestep.adapters.warp_runtime import BANNER, DEVICE, WarpAdapter, host_copy, host_view, start, wp
 from truestep.cases.case import Case
 from truestep.reference_impl.features import Feature
 from truestep.reference_impl.model import ParticleModel
@@ -293,6 +293,7 @@ def build(case: Case, method: str, dt: float, *, device: str = DEVICE) -> Scene:
     """Build ``case`` for ``method`` at nominal step ``dt`` on ``device`` and capture one step
     (its collision pipeline sharing the process's narrow-phase kernels:
     :func:`share_narrow_phase_kernels`)."""
+    start()
     share_narrow_phase_kernels()
     model = case.particles
     h = case.steps_for(dt)[1]

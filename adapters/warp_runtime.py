@@ -1,9 +1,12 @@
 """Warp, started once for every engine built on it (MuJoCo Warp, Newton).
 
-Importing this module imports and initialises Warp the way truestep runs it: without
-its CUDA greeting on a machine with no GPU, at warning log level, and with its CPU
-kernels compiled for a generic target (:data:`GENERIC_CPU`) unless
-``TRUESTEP_NUMERICS=native``.
+Importing this module imports and configures Warp the way truestep runs it: at warning
+log level, with its CPU kernels compiled for a generic target (:data:`GENERIC_CPU`) unless
+``TRUESTEP_NUMERICS=native``. It does not start Warp's runtime: :func:`start` does, without
+its CUDA greeting on a machine with no GPU, in the process that first needs it. Starting it
+looks for CUDA devices, and CUDA does not survive a fork, so a process that has made an
+adapter for a GPU device (:func:`wants_gpu`) leaves it to the forked runs: a GPU run's
+process starts CUDA itself, and no scene is built before the fork (:func:`prepare`).
 """
 
 from __future__ import annotations
@@ -37,10 +40,30 @@ PRECISION = "float32"
 with without_banner(BANNER):
     import warp as wp
 
-    wp.config.log_level = wp.LOG_WARNING
-    if os.environ.get(OPT_OUT, "").lower() != "native":
-        wp.config.cpu_compiler_flags = GENERIC_CPU
-    wp.init()
+wp.config.log_level = wp.LOG_WARNING
+if os.environ.get(OPT_OUT, "").lower() != "native":
+    wp.config.cpu_compiler_flags = GENERIC_CPU
+
+_STARTED: list[bool] = []
+"""Whether :func:`start` has started Warp in this process."""
+_GPU_WANTED: list[str] = []
+"""The devices other than the CPU that adapters made in this process asked for."""
+
+
+def start() -> None:
+    """Start Warp's runtime in this process, once (without its CUDA greeting where there is
+    no GPU): the first scene a process builds calls it, and so does a look at its kernel cache."""
+    if not _STARTED:
+        with without_banner(BANNER):
+            wp.init()
+        _STARTED.append(True)
+
+
+def wants_gpu() -> bool:
+    """Whether an adapter made in this process runs on a device other than the CPU: then
+    nothing here starts Warp before the runs are forked (CUDA started in a parent is
+    unusable in its forked children)."""
+    return bool(_GPU_WANTED)
 
 
 def host_view(array: Any) -> Any:
@@ -77,7 +100,13 @@ def prepare(adapter: Any, case: Any, method: str) -> None:
     that a later scene needs and this build did not load is loaded by the run's own
     process, the same kernels."""
     key = (adapter.name, method, frozenset(case.features))
-    if adapter.device != "cpu" or case.model is None or key in _PREPARED or adapter.missing(case, method):
+    if (
+        adapter.device != "cpu"
+        or wants_gpu()
+        or case.model is None
+        or key in _PREPARED
+        or adapter.missing(case, method)
+    ):
         return
     _PREPARED.add(key)
     skip = getattr(adapter, "skip", None)
@@ -97,6 +126,7 @@ _WARMING: dict[str, Any] = {}
 def cold_cache(package: str) -> bool:
     """Whether Warp's kernel cache holds no module of ``package`` (its directory's entries
     are named ``wp_<module>_<hash>``): the engine's kernels were never compiled here."""
+    start()
     folder = wp.config.kernel_cache_dir
     if not folder or not os.path.isdir(folder):
         return True
@@ -157,6 +187,8 @@ class WarpAdapter(FixedStepAdapter):
 
     def __init__(self, *, device: str = DEVICE) -> None:
         self.device = device
+        if device != "cpu":
+            _GPU_WANTED.append(device)
 
     def prepare_all(self, pairs: Iterable[tuple[Any, str]], *, workers: int = 1) -> None:
         """Where Warp's kernel cache holds none of this engine's kernels (a first run on
@@ -168,6 +200,7 @@ class WarpAdapter(FixedStepAdapter):
         them."""
         if (
             self.device != "cpu"
+            or wants_gpu()
             or not self.kernel_package
             or self.name in _WARMING
             or not cold_cache(self.kernel_package)
@@ -211,5 +244,7 @@ __all__ = [
     "prepare",
     "settle",
     "settle_all",
+    "start",
+    "wants_gpu",
     "wp",
 ]

@@ -176,7 +176,10 @@ def test_forces_without_an_mjcf_element_are_unsupported_with_the_reason(case_nam
     assert "passive-force callback" in unsupported_message("mujoco-warp", "universal-gravitation")
 
 
-def test_a_scene_over_the_cpu_bound_is_a_skipped_row_that_says_why(case_named):
+def test_a_scene_over_the_cpu_bound_is_a_skipped_row_that_says_why(case_named, monkeypatch):
+    from truestep.adapters import warp_runtime
+
+    monkeypatch.setattr(warp_runtime, "_GPU_WANTED", [])  # the GPU adapter made below: this test's
     case = case_named("particle-rain")
     assert case.particles.n > MAX_CPU_PARTICLES
     rows = list(plan(case, "mujoco-warp", quick=True))

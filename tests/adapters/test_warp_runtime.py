@@ -14,6 +14,7 @@ pytest.importorskip("newton")
 
 
 def test_a_cache_without_the_engine_s_modules_is_cold(tmp_path, monkeypatch):
+    wr.start()  # as cold_cache does first: a started Warp has set its cache folder
     monkeypatch.setattr(wr.wp.config, "kernel_cache_dir", str(tmp_path))
     assert wr.cold_cache("newton")
     (tmp_path / "wp_mujoco_warp._src.smooth_9c01802").mkdir()
@@ -35,6 +36,7 @@ def test_a_cold_cache_compiles_apart_and_the_run_waits_for_it(case_named, monkey
     """The background process builds the scenes (here from the warm cache: quick) and
     ends; ``prepared()`` (what the run awaits) and the first ``prepare`` wait for it."""
     monkeypatch.setattr(wr, "cold_cache", lambda package: True)
+    monkeypatch.setattr(wr, "_GPU_WANTED", [])  # a process that made no GPU adapter
     adapter = get_adapter("newton")
     pairs = [(case_named("spring-chain"), "semi-implicit"), (case_named("spring-chain"), "xpbd")]
     adapter.prepare_all(pairs)
@@ -55,3 +57,56 @@ def test_a_background_compile_past_its_limit_is_stopped(monkeypatch):
     began = time.monotonic()
     wr.settle("slow-engine", limit_s=0.2)
     assert not proc.is_alive() and time.monotonic() - began < 10
+
+
+def _probe(code: str) -> str:
+    """``code`` run by a fresh interpreter (Warp not started there); its standard output."""
+    import subprocess
+    import sys
+    import textwrap
+
+    done = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done.stdout.strip()
+
+
+STARTED = "from warp._src import context; print(context.runtime is not None)"
+"""Whether Warp's runtime is started in this process (Warp's own module state)."""
+
+
+def test_importing_the_warp_engines_starts_no_warp_runtime():
+    """Starting Warp looks for CUDA devices, which a forked child cannot use: importing the
+    adapters (as every run's parent does) must not start it."""
+    out = _probe(f"""
+        import truestep.adapters.newton_adapter, truestep.adapters.mujoco_warp_adapter
+        {STARTED}
+    """)
+    assert out == "False"
+
+
+def test_a_gpu_adapter_leaves_warp_unstarted_before_the_fork_and_the_cpu_path_still_prepares():
+    """A process that made an adapter for a GPU device builds no scene before its runs are
+    forked, not even a CPU engine's (a started Warp would have looked for CUDA there: the
+    runs on the GPU would inherit a CUDA they cannot use); without one, a CPU engine's
+    scene is built before the fork, as it was (the runs find its kernels loaded)."""
+    prepare_both = """
+        from truestep.adapters.mujoco_warp_adapter import MujocoWarpAdapter
+        from truestep.adapters.newton_adapter import NewtonAdapter
+        from truestep.adapters import warp_runtime as wr
+        from truestep.cases.loader import CASE_DIR, load_case
+        case = load_case(CASE_DIR / "spring-chain.toml")
+        {make}
+        for adapter in adapters:
+            adapter.prepare(case, adapter.methods[0])
+            adapter.prepare_all([(case, adapter.methods[0])])
+        wr.settle_all()
+        print(wr.wants_gpu())
+        {started}
+    """
+    both = "adapters = [NewtonAdapter(device='cuda:0'), MujocoWarpAdapter()]"
+    gpu = _probe(prepare_both.format(make=both, started=STARTED))
+    assert gpu.splitlines() == ["True", "False"]
+    cpu = _probe(prepare_both.format(make="adapters = [MujocoWarpAdapter()]", started=STARTED))
+    assert cpu.splitlines() == ["False", "True"]
