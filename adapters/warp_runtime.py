@@ -18,6 +18,7 @@ from collections.abc import Iterable
 from typing import Any, ClassVar
 
 from truestep.adapters.base import FixedStepAdapter
+from truestep.adapters.devices import chosen
 from truestep.adapters.quiet import without_banner
 from truestep.numerics import OPT_OUT
 
@@ -185,10 +186,10 @@ class WarpAdapter(FixedStepAdapter):
     starts it before the other engines' (:func:`truestep.execution.runner.compile_ahead`)
     and waits for it after them."""
 
-    def __init__(self, *, device: str = DEVICE) -> None:
-        self.device = device
-        if device != "cpu":
-            _GPU_WANTED.append(device)
+    def __init__(self, *, device: str | None = None) -> None:
+        self.device = device or chosen(self.name) or DEVICE
+        if self.device != "cpu":
+            _GPU_WANTED.append(self.device)
 
     def prepare_all(self, pairs: Iterable[tuple[Any, str]], *, workers: int = 1) -> None:
         """Where Warp's kernel cache holds none of this engine's kernels (a first run on

@@ -20,12 +20,13 @@ import dataclasses
 import functools
 import os
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 
 import pandas as pd
 
-from truestep.adapters import adapter_class, engine_status, registered, resolve_engine, shadowed
+from truestep.adapters import adapter_class, devices, engine_status, registered, resolve_engine, shadowed
+from truestep.adapters.devices import DeviceError
 from truestep.cases import Case, load_case, load_cases
 from truestep.cases.limits import DEFAULT as _DEFAULT_LIMITS
 from truestep.cases.loader import load_gates_file, read_gate
@@ -56,6 +57,7 @@ __all__ = [
     "MAX_PARTICLES",
     "BaselineRefused",
     "ClusterError",
+    "DeviceError",
     "EngineInfo",
     "GateInputError",
     "GateReport",
@@ -196,6 +198,7 @@ def run(
     budget: float | None = None,
     lecture_figures: bool = False,
     argv: list[str] | None = None,
+    device: str | Mapping[str, str] | None = None,
 ) -> Tables:
     """Run the matrix (and, with ``analyses``, the stability searches, the restitution
     sweep and scaling) and return the tables; with ``out``, also write the report there, as
@@ -210,7 +213,11 @@ def run(
     standard error); ``resume``: a folder whose journal the run continues from (``out``
     defaults to it); ``scheduler``: a Dask scheduler or ``local:N``; ``budget``: the run's
     time budget, s; ``lecture_figures``: also draw the lecture's figures; ``argv``: the
-    command line the report says reproduces the run.
+    command line the report says reproduces the run; ``device``: where the engines that
+    take a device compute, as ``--device`` takes it (``"cuda:0"``, ``"newton=cuda:0"``) or
+    a mapping engine -> device (default: every engine on the CPU); a device this machine
+    lacks, or an engine that takes none, is a :class:`~truestep.adapters.devices.DeviceError`
+    raised before anything runs or is written.
     """
     say = progress or (lambda msg: print(visible(msg), file=sys.stderr))
     with collector.paused() as collecting:  # the engines' imports, until they are frozen
@@ -218,6 +225,7 @@ def run(
         names = select_engines(engines, say=say)
         if out is None and resume is not None:
             out = resume
+        on = devices.resolve(devices.parse(device), names, {n: adapter_class(n) for n in names})
         exp = Experiment(
             chosen,
             names,
@@ -231,8 +239,9 @@ def run(
             lecture_figures=lecture_figures,
             rows=progress,
             say=say,
+            devices=on,
         )
-        with collector.frozen(collecting=collecting):
+        with collector.frozen(collecting=collecting), devices.used(on):
             return _run_locked(exp)
 
 

@@ -58,6 +58,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "host at a time (needs truestep[dask])",
     )
     run.add_argument(
+        "--device",
+        default=None,
+        metavar="DEVICE",
+        help="where the engines that take a device (mujoco-warp, newton) compute: cpu "
+        "(the default), cuda or cuda:N for every one of them, or ENGINE=DEVICE pairs, "
+        "comma-separated (newton=cuda:0,mujoco-warp=cpu); every other engine computes on the "
+        "CPU. A device this machine lacks, or an engine that takes none, exits 2 before "
+        "anything runs",
+    )
+    run.add_argument(
         "--budget",
         type=float,
         default=RUN_BUDGET_S,
@@ -114,6 +124,7 @@ def _run(args: argparse.Namespace) -> int:
     experiment driver, :mod:`truestep.execution.experiment`) with the report in ``--out``."""
     from truestep.api import (
         ClusterError,
+        DeviceError,
         JournalError,
         LockBusy,
         OutRefused,
@@ -145,7 +156,10 @@ def _run(args: argparse.Namespace) -> int:
             budget=args.budget,
             lecture_figures=not args.quick,
             argv=_reproduce(args),
+            device=args.device,
         )
+    except DeviceError as err:
+        raise UsageError(f"--device: {err}") from None
     except JournalError as err:
         raise UsageError(f"--resume: {err}") from None
     except (LockBusy, OutRefused, ClusterError) as err:
@@ -174,4 +188,6 @@ def _reproduce(args: argparse.Namespace) -> list[str]:
         argv += ["--engines", args.engines]
     if args.out != "reports":
         argv += ["--out", args.out]
+    if args.device:
+        argv += ["--device", args.device]
     return argv

@@ -72,6 +72,8 @@ class Experiment:
     say : what the run has to say (resuming, a lost lock taken over)
     report : what publishes the report once the analyses are done (the API's, with an
         output folder), while the journal still keeps the run; ``None``: tables only
+    devices : the engines put off the CPU and their devices (``--device``, resolved by
+        :func:`truestep.adapters.devices.resolve`; the caller sets them in the environment)
     """
 
     cases: list[Case]
@@ -87,6 +89,7 @@ class Experiment:
     rows: Callable[[str], None] | None = None
     say: Callable[[str], None] = print
     report: Callable[[Finished], None] | None = None
+    devices: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -184,7 +187,7 @@ def _journal(exp: Experiment):
 
     assert exp.out is not None
     journal = Journal(exp.resume or exp.out)
-    fp = fingerprint(exp.cases, exp.engines, exp.quick)
+    fp = fingerprint(exp.cases, exp.engines, exp.quick, exp.devices)
     if exp.resume is None:
         journal.start(fp)
         return journal

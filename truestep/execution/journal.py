@@ -142,16 +142,20 @@ def code_digest(engines: list[str]) -> dict[str, str]:
     return out
 
 
-def fingerprint(cases: list[Case], engines: list[str], quick: bool) -> dict[str, Any]:
+def fingerprint(
+    cases: list[Case], engines: list[str], quick: bool, devices: dict[str, str] | None = None
+) -> dict[str, Any]:
     """What a resumed run must share with the interrupted one: truestep's version,
     ``--quick``, the engines and the code they run (:func:`code_digest`), the cases'
-    files."""
+    files, and the devices of the engines put off the CPU (``--device``; a run on the
+    CPU alone has no such entry, as before ``--device`` was)."""
     return {
         "truestep": __version__,
         "quick": bool(quick),
         "engines": list(engines),
         "code": code_digest(list(engines)),
         "cases": [[c.name, _case_digest(c)] for c in cases],
+        **({"devices": dict(sorted(devices.items()))} if devices else {}),
     }
 
 
@@ -286,9 +290,10 @@ class Journal:
             ("engines", "engines"),
             ("code", "engine code (an adapter, its package or truestep changed since)"),
             ("cases", "cases"),
+            ("devices", "devices (--device)"),
         ):
-            if kept.get(key) != fp[key]:
-                was, now = kept.get(key), fp[key]
+            was, now = kept.get(key, {} if key == "devices" else None), fp.get(key, {})
+            if was != now:
                 if key == "cases":
                     was, now = _case_change(was, now)
                 raise JournalError(

@@ -409,6 +409,8 @@ def run_record(
     where that engine is not installed: :func:`truestep.measures.metrics.recorded_precision`);
     each method's declared facts, peers and glossary notes (``method_facts``, ``peers``,
     ``method_notes``: :mod:`truestep.measures.engine_facts`, read back the same way);
+    ``devices``, the engines the run put off the CPU and their devices (``--device``; absent
+    where every engine computed on the CPU);
     wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``;
     ``compile``, the part of the sweep spent compiling ahead of the first timed run;
     ``sweep <engine>``, the seconds each engine's sweep processes ran, which overlap where
@@ -421,6 +423,7 @@ def run_record(
     a table cut short at the end of a row is refused)."""
     from truestep import __version__
     from truestep.adapters import shadowed
+    from truestep.adapters.devices import in_use
     from truestep.measures import engine_facts
     from truestep.measures.metrics import precision_of
     from truestep.numerics import fingerprint
@@ -437,6 +440,7 @@ def run_record(
         if len(results)
         else {},
         **engine_facts.record(dict.fromkeys(results["engine"].astype(str)) if len(results) else [], cases),
+        **({"devices": in_use()} if in_use() else {}),
         **({"shadowed": shadowed()} if shadowed() else {}),
         **({"refined": list(results.attrs["refined"])} if results.attrs.get("refined") else {}),
         **({"seconds": {k: round(float(v), 3) for k, v in seconds.items()}} if seconds else {}),
