@@ -62,7 +62,24 @@ def trajectory_of_states(
 
 
 class ReferenceAdapter:
-    """Every solver of :mod:`truestep.reference_impl.solvers` on every case it can express."""
+    """Every solver of :mod:`truestep.reference_impl.solvers` on every case it can express.
+
+    Parameters
+    ----------
+    compiled : bool
+        Whether runs take the compiled path where it applies (default), or the numpy one.
+    threads : int
+        Threads that step a scene of independent particles at once, a tile of
+        :data:`~truestep.reference_impl.tiles.BLOCK` particles each at a time (the
+        compiled path; the same numbers as one thread, bit for bit). Default 1: a run's
+        timed rows keep one core each, as every engine's do.
+    """
+
+    def __init__(self, *, compiled: bool = True, threads: int = 1) -> None:
+        if not (isinstance(threads, int) and threads >= 1):
+            raise ValueError(f"threads: a whole number of at least 1, got {threads!r}")
+        self.compiled = compiled
+        self.threads = threads
 
     name = "reference"
     methods = tuple(METHODS)
@@ -137,9 +154,6 @@ class ReferenceAdapter:
         if self.compiled:
             compile_all(pairs=[(case.model, method) for case, method in pairs], workers=workers)
 
-    def __init__(self, *, compiled: bool = True) -> None:
-        self.compiled = compiled
-
     def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False) -> Trajectory:
         """Run ``case`` with ``method``: through the compiled loop where it applies
         (:func:`~truestep.reference_impl.compiled.compiled_reason`; not with
@@ -200,7 +214,12 @@ class ReferenceAdapter:
 
     def _simulate_compiled(self, case: Case, method: str, dt: float) -> Trajectory:
         run, wall = run_compiled(
-            case.particles, method, case.duration, case.steps_for(dt)[1], max_records=case.max_records
+            case.particles,
+            method,
+            case.duration,
+            case.steps_for(dt)[1],
+            max_records=case.max_records,
+            threads=self.threads,
         )
         with np.errstate(all="ignore"):
             energy = total_energy(case.particles, run.x, run.v)

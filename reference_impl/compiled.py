@@ -309,6 +309,8 @@ def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], Non
         for a in (
             kind,
             1,
+            0,
+            1,
             scene,
             np.zeros((3, 1)),
             np.zeros((3, 1)),
@@ -398,11 +400,14 @@ def run_compiled(
     max_records: int = 2000,
     track_energy: bool = False,
     progress: Callable[[str], None] | None = None,
+    threads: int = 1,
 ) -> tuple[CompiledRun, float]:
     """Run ``method`` on ``model`` for ``round(duration / h)`` steps of ``h`` s; return the
     run and the wall time of the stepping (s, the compiled loop only: packing the scene,
     compiling and allocating the records happen before it). With ``track_energy`` the
-    run's ``extra`` holds ``energy_min`` and ``energy_max`` (J) over every step."""
+    run's ``extra`` holds ``energy_min`` and ``energy_max`` (J) over every step.
+    ``threads``: how many threads step the tiles of a scene of independent particles at
+    once (:func:`integrate_kernels.run`; the same numbers as one)."""
     loop, kind, layout, scene = prepared(model, method, progress=progress)
     result = run(
         loop,
@@ -417,5 +422,6 @@ def run_compiled(
         planes=len(model.planes),
         max_records=max_records,
         track_energy=track_energy,
+        threads=threads,
     )
     return result, result.wall_s

@@ -40,10 +40,11 @@ numba does not copy them into the loop (it copies a function it inlines once for
 place that calls it, a cost that grows with the square of the loop's size)."""
 COPY_COLD: dict[str, Any] = {"error_model": "numpy", "_nrt": False}
 """How a copy of a rarely called part is compiled (:func:`instantiate`)."""
-LOOP: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
-"""How a composed loop is compiled: cached on disk, and without numba's reference counting
+LOOP: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False, "nogil": True}
+"""How a composed loop is compiled: cached on disk, without numba's reference counting
 (its arrays all come from Python, which holds them while it runs; it allocates none), so
-that passing arrays between the functions it is made of costs nothing."""
+that passing arrays between the functions it is made of costs nothing, and without
+Python's lock while it runs, so that threads may step a run's tiles at once."""
 
 
 def source_fingerprint(folder: Path) -> str:

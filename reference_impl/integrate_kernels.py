@@ -17,7 +17,9 @@ and the step it stopped at are what stepping the whole scene gives.
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -153,15 +155,18 @@ def run_tile(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts,
     return kept, n_steps, nfev, False
 
 
-def drive(method, size, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor):
-    """Every tile of ``scene`` (``size`` particles each) through ``n_steps`` steps
-    (:func:`run_tile`). Returns (records kept, steps, evaluations, unstable, split): with
+def drive(method, size, first, stride, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor):
+    """Tiles ``first``, ``first + stride``, ... of ``scene`` (``size`` particles each) through
+    ``n_steps`` steps (:func:`run_tile`); ``first = 0, stride = 1``: every tile. Returns
+    (records kept, steps, evaluations, unstable, split) of the last tile it ran: with
     ``split``, a tile of several blew up and the run must be made again as one tile.
-    Compiled for each composition of a run (:func:`compiled.loop_for`), with caching."""
+    Compiled for each composition of a run (:func:`compiled.loop_for`), with caching and
+    without Python's lock, so that threads may run other tiles of the same run at once
+    (:func:`run`)."""
     n = X0.shape[1]
     size = max(1, min(size, n))
     kept, steps, nfev, unstable = 0, 0, 0, False
-    for lo in range(0, max(n, 1), size):
+    for lo in range(first * size, max(n, 1), stride * size):
         hi = min(lo + size, n)
         kept, steps, nfev, unstable = run_tile(
             method, cut(scene, lo, hi), X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor
@@ -169,6 +174,40 @@ def drive(method, size, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, 
         if unstable and size < n:
             return kept, steps, nfev, unstable, True
     return kept, steps, nfev, unstable, False
+
+
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+"""The thread pools of this process, by (process id, threads): a forked process starts its own."""
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """A pool of ``threads`` threads, made once per process and size (its threads started
+    once, not at every run)."""
+    key = (os.getpid(), threads)
+    if key not in _POOLS:
+        _POOLS[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="truestep-tiles")
+    return _POOLS[key]
+
+
+def _on_threads(
+    loop, method, size: int, tiles: int, scene, state: tuple, scratches: list, out: tuple
+) -> tuple:
+    """The tiles of a run on ``len(scratches)`` threads, thread ``k`` stepping tiles ``k``,
+    ``k + threads``, ... in its own scratch (the compiled loop holds no lock). Each tile's
+    particles are stepped, and written to their own columns of the records, exactly as
+    on one thread: a tile of independent particles reads nothing of another. Returns what
+    one thread stepping every tile returns: the last tile's counts, or ``split`` where any
+    tile of several blew up (the run is then made again as one tile, on one thread)."""
+    threads = len(scratches)
+    done = list(
+        _pool(threads).map(
+            lambda k: loop(method, size, k, threads, scene, *state, scratches[k], *out),
+            range(threads),
+        )
+    )
+    if any(d[4] for d in done):
+        return next(d for d in done if d[4])
+    return done[(tiles - 1) % threads]
 
 
 @dataclass
@@ -205,12 +244,14 @@ def run(
     planes: int,
     max_records: int = 2000,
     track_energy: bool = False,
+    threads: int = 1,
 ) -> DrivenRun:
     """Step ``scene`` from ``x0``, ``v0`` ((n, 3), m and m/s) through ``n_steps`` steps of
     ``h`` s with ``loop`` (:func:`drive` compiled for this scene and ``method``) in tiles
     of ``size`` particles; ``stages`` and ``planes`` size the scratch. Records and results
     are allocated before the timed call; with ``track_energy`` the scene is one tile and
-    the energy is watched at every step."""
+    the energy is watched at every step. ``threads`` > 1 steps the tiles on that many
+    threads at once (:func:`_on_threads`): the same numbers, bit for bit, as one thread."""
     n = len(x0)
     if track_energy:
         size = max(n, 1)
@@ -223,16 +264,23 @@ def run(
     xs, vs, ts = np.full((slots, n, 3), np.nan), np.full((slots, n, 3), np.nan), np.full(slots, np.nan)
     X0, V0 = np.ascontiguousarray(x0.T, dtype=float), np.ascontiguousarray(v0.T, dtype=float)
     monitor = EnergyMonitor(np.array([math.inf, -math.inf])) if track_energy else unwatched()
-    buffers = scratch(max(1, min(size, n)), stages, planes)
-    args = (scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor)
+    tiles = -(-max(n, 1) // max(1, min(size, max(n, 1))))
+    threads = max(1, min(threads, tiles))
+    scratches = [scratch(max(1, min(size, n)), stages, planes) for _ in range(threads)]
+    state = (X0, V0, h, n_steps, record)
+    out = (xs, vs, ts, monitor)
     start = time.perf_counter()
-    kept, steps, nfev, unstable, split = loop(method, size, *args)
+    if threads == 1:
+        kept, steps, nfev, unstable, split = loop(method, size, 0, 1, scene, *state, scratches[0], *out)
+    else:
+        kept, steps, nfev, unstable, split = _on_threads(
+            loop, method, size, tiles, scene, state, scratches, out
+        )
     rerun = bool(split)
     if split:
         start = time.perf_counter()
         buffers = scratch(max(n, 1), stages, planes)
-        args = (scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor)
-        kept, steps, nfev, unstable, split = loop(method, max(n, 1), *args)
+        kept, steps, nfev, unstable, split = loop(method, max(n, 1), 0, 1, scene, *state, buffers, *out)
     wall = time.perf_counter() - start
     extra = (
         {"energy_min": float(monitor.bounds[0]), "energy_max": float(monitor.bounds[1])}

@@ -88,24 +88,41 @@ class Tile(NamedTuple):
     count: np.ndarray  # type: ignore[assignment]  # a field named like tuple.count, as numba reads it
 
 
+LINE = 64
+"""Bytes of a cache line: each scratch buffer starts on one and owns the lines it touches."""
+
+
+def _owned(count: int, dtype: type = np.float64) -> np.ndarray:
+    """``count`` zeros of ``dtype`` that share no cache line with any other array: a view
+    into a larger allocation, starting on a line and followed by a line of its own. Tiles
+    stepped on several threads at once (:func:`~truestep.reference_impl.integrate_kernels.run`)
+    write their scratch at every step; two threads' buffers on one line would pass it
+    between their cores at every write."""
+    item = np.dtype(dtype).itemsize
+    raw: np.ndarray = np.zeros(count + 3 * LINE // item, dtype=dtype)
+    skip = (-raw.ctypes.data % LINE) // item
+    return raw[skip : skip + count]
+
+
 def scratch(size: int, stages: int, planes: int) -> Tile:
     """The buffers of a tile of up to ``size`` particles (one-dimensional, each field of
-    :class:`Tile` flattened), allocated once per run by Python: a compiled step allocates
-    nothing (it is compiled without numba's reference counting, see :mod:`compose`)."""
+    :class:`Tile` flattened, each on cache lines of its own: :func:`_owned`), allocated
+    once per run by Python: a compiled step allocates nothing (it is compiled without
+    numba's reference counting, see :mod:`compose`)."""
     size = max(size, 1)
-    f = [np.zeros(3 * size) for _ in range(6)]
+    f = [_owned(3 * size) for _ in range(6)]
     return Tile(  # type: ignore[call-arg]  # mypy drops the field count (see Tile)
         *f,
-        np.zeros(stages * 3 * size),
-        np.zeros(stages * 3 * size),
-        np.zeros(3 * size),
-        np.zeros(3 * size),
-        np.zeros(planes * size, dtype=np.bool_),
-        np.zeros(size, dtype=np.bool_),
-        np.zeros(8 * ((size + 7) // 8), dtype=np.int64),
-        np.zeros(size, dtype=np.int64),
-        np.zeros(size, dtype=np.int64),
-        np.zeros(4, dtype=np.int64),
+        _owned(stages * 3 * size),
+        _owned(stages * 3 * size),
+        _owned(3 * size),
+        _owned(3 * size),
+        _owned(planes * size, np.bool_),
+        _owned(size, np.bool_),
+        _owned(8 * ((size + 7) // 8), np.int64),
+        _owned(size, np.int64),
+        _owned(size, np.int64),
+        _owned(4, np.int64),
     )
 
 

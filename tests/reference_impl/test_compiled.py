@@ -607,3 +607,44 @@ def test_a_compile_helper_whose_parent_is_gone_stops_before_its_next_loop():
     helper.start()
     helper.join(60)
     assert helper.exitcode == 1  # its parent is this process, not the pid it was given
+
+
+@pytest.mark.parametrize("method", ["symplectic-euler", "rk4", "lecture"])
+@pytest.mark.parametrize("threads", [2, 3])
+def test_tiles_on_several_threads_step_as_one_thread_does(method, threads):
+    """A scene of independent particles in more tiles than threads (and one short tile),
+    stepped on several threads at once: every record, count and status is one thread's,
+    bit for bit; and a blow-up in one tile is the run made again as one tile, as on one
+    thread."""
+    model = dataclasses.replace(
+        unstable_in_one_tile(4 * tiles.BLOCK + 17), mass=np.ones(4 * tiles.BLOCK + 17)
+    )
+    assert compiled.layout_for(compiled.method_kind(method), compiled.pack(model)).size < model.n
+    one, _ = run_compiled(model, method, 0.5, 1e-3, max_records=30)
+    many, _ = run_compiled(model, method, 0.5, 1e-3, max_records=30, threads=threads)
+    assert one.status == many.status == "ok"
+    assert (one.steps, one.nfev, one.rerun_whole) == (many.steps, many.nfev, many.rerun_whole)
+    for a, b in ((one.t, many.t), (one.x, many.x), (one.v, many.v)):
+        np.testing.assert_array_equal(a, b)
+    bad = unstable_in_one_tile()
+    one, _ = run_compiled(bad, "euler", 1.0, 1e-3, max_records=40)
+    many, _ = run_compiled(bad, "euler", 1.0, 1e-3, max_records=40, threads=threads)
+    assert many.rerun_whole and many.status == one.status == "unstable"
+    assert (one.steps, one.nfev, one.t_fail) == (many.steps, many.nfev, many.t_fail)
+    np.testing.assert_array_equal(one.x, many.x)
+
+
+def test_the_adapter_s_threads_give_its_one_thread_trajectory():
+    """``ReferenceAdapter(threads=2)`` through the adapter API: the same trajectory as
+    the default adapter's; a count that is not a whole number of at least 1 is refused."""
+    from truestep.execution.bench import rain_case
+
+    case = rain_case(3 * tiles.BLOCK + 5)
+    one = ReferenceAdapter().simulate(case, "lecture", 1e-3)
+    two = ReferenceAdapter(threads=2).simulate(case, "lecture", 1e-3)
+    assert one.path == two.path == "compiled" and one.status == two.status == "ok"
+    for a, b in ((one.t, two.t), (one.x, two.x), (one.v, two.v), (one.energy, two.energy)):
+        np.testing.assert_array_equal(a, b)
+    for bad in (0, 1.5, "2"):
+        with pytest.raises(ValueError, match="threads"):
+            ReferenceAdapter(threads=bad)  # type: ignore[arg-type]
