@@ -21,6 +21,7 @@ CUDA does not survive the fork that runs every sweep
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import os
 import re
@@ -224,3 +225,26 @@ def in_use() -> dict[str, str]:
         if sep and name and FORM.match(device):
             out[name] = device
     return out
+
+
+def device_of(adapter: object) -> str:
+    """The device an adapter computes on: its ``device`` attribute where it has one (a Warp
+    engine's), else the CPU."""
+    device = getattr(adapter, "device", None)
+    return device if isinstance(device, str) and device else CPU
+
+
+def engine_device(engine: str) -> str:
+    """The device engine ``engine``'s adapter computes on in this run (:func:`device_of`),
+    made once per engine and run's devices (:data:`ENV`); empty where it cannot be made."""
+    return _engine_device(engine, os.environ.get(ENV, ""))
+
+
+@functools.cache
+def _engine_device(engine: str, _devices: str) -> str:
+    from truestep.adapters import get_adapter
+
+    try:
+        return device_of(get_adapter(engine))
+    except Exception:  # an engine that cannot be made: its rows say why, not where
+        return ""

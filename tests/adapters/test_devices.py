@@ -227,9 +227,32 @@ def test_a_run_records_its_devices_and_its_rows_carry_what_happened_there(tmp_pa
     assert os.environ.get(devices.ENV) == real
     record = json.loads((tmp_path / "rep" / "run.json").read_text())
     assert record["devices"] == {"newton": "cuda:0"} and "--device newton=cuda:0" in record["command"]
+    page = (tmp_path / "rep" / "index.md").read_text()
+    assert "Devices: newton on cuda:0, every other engine on the CPU" in page
     rows = tables.results
     newton, reference = rows[rows.engine == "newton"], rows[rows.engine == "reference"]
     assert len(newton) and len(reference) and set(reference.status) == {"ok"}
+    assert set(newton.device) == {"cuda:0"} and set(reference.device) == {"cpu"}
     if devices.cuda_devices() == 0:
         assert set(newton.status) == {"crashed"}
         assert newton.message.str.contains("cuda:0").all()
+
+
+def test_every_table_says_where_each_row_computed(tmp_path):
+    """A run on the CPU: ``cpu`` on every row that ran, in each of the three tables, and
+    nothing on rows that did not (an engine that lacks a feature, an adaptive method's
+    search)."""
+    from truestep import api
+
+    tables = api.run(
+        ["bouncing-ball", "harmonic-oscillator"], ["reference", "pymunk"], quick=True, progress=lambda _: None
+    )
+    for name, table in (
+        ("results", tables.results),
+        ("stability", tables.stability),
+        ("restitution", tables.restitution),
+    ):
+        ran = ~table.status.isin(["unsupported", "skipped"])
+        assert ran.any(), name
+        assert set(table.device[ran]) == {"cpu"}, name
+        assert table.device[~ran].isna().all(), name

@@ -13,6 +13,7 @@ import pandas as pd
 
 from truestep.adapters import PluginFailed, get_adapter, plugin_answer
 from truestep.adapters.base import duplicate_of, facts_of
+from truestep.adapters.devices import engine_device
 from truestep.cases.case import Case
 from truestep.cases.exact import stability_limit
 from truestep.cases.loader import CASE_DIR, load_case
@@ -239,9 +240,11 @@ def stability_part(
                 elif (same := duplicate_of(adapter, case, method)) is not None:
                     rows.append({**row, "status": "skipped", "note": same})
                 elif (twin := _twin_searched(engine, adapter, case, method, searched)) is not None:
+                    row["device"] = engine_device(engine)
                     rows.append(row)
                     sharing.append((row, (case.name, engine, twin[0]), twin[1]))
                 else:
+                    row["device"] = engine_device(engine)
                     rows.append(row)
                     searched[(case.name, engine, method)] = row
                     slots.append(row)
@@ -578,8 +581,9 @@ def restitution_part(
     def done(k: int, out: Outcome, bar: Progress) -> None:
         g, engine, method, e, dt = slots[k]
         bar.done(f"{engine:9s} {method:17s} dt {dt:.4g} e {e:g}: {out.status}")
+        device = engine_device(engine)
         if out.status == "ok":
-            groups[g].extend(out.value)
+            groups[g].extend({**r, "device": device} for r in out.value)
         else:
             groups[g].append(
                 {
@@ -590,6 +594,7 @@ def restitution_part(
                     "bounce": 1,
                     "status": out.status,
                     "note": out.message,
+                    "device": device,
                 }
             )
 

@@ -24,6 +24,7 @@ from truestep.adapters import (
     plugin_answer,
 )
 from truestep.adapters.base import Trajectory, duplicate_of
+from truestep.adapters.devices import engine_device
 from truestep.cases.case import Case
 from truestep.execution.progress import Progress
 from truestep.execution.sweep_job import SweepJob, host_name
@@ -221,6 +222,7 @@ def row_from(
         "method": method,
         "dt": dt,
         "dt_kind": "tolerance" if adaptive else "step",
+        "device": engine_device(engine),
     }
     if isinstance(outcome, str):
         row.update(status="crashed", message=outcome[:MESSAGE_CHARS])

@@ -63,7 +63,16 @@ __all__ = [
 
 
 def footer(argv: list[str]) -> str:
-    """Machine, package versions, git revision and the command that reproduces the page."""
+    """Machine, devices, package versions, git revision and the command that reproduces
+    the page."""
+    from truestep.adapters.devices import in_use
+
+    devices = in_use()
+    where = (
+        "every engine on the CPU"
+        if not devices
+        else ", ".join(f"{e} on {d}" for e, d in sorted(devices.items())) + ", every other engine on the CPU"
+    )
     versions = []
     for p in PACKAGES:
         try:
@@ -75,6 +84,7 @@ def footer(argv: list[str]) -> str:
         "---\n\n"
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.system()} "
         f"{platform.release()}, Python {platform.python_version()}.  \n"
+        f"Devices: {where} (the `device` column of each table).  \n"
         f"Packages: {', '.join(versions)}.  \n"
         f"Numerics: {numerics_line()}.  \n"
         f"Revision: {rev or 'unknown'}.  \n"

@@ -171,6 +171,15 @@ _STATUS = Column(
 )
 _NOTE = Column("note", "text", "", "why a row is not ok, or what to know about it")
 
+_DEVICE = Column(
+    "device",
+    "text",
+    "",
+    "where the row computed: cpu, or the GPU its engine was put on (truestep run --device, or "
+    "an adapter made for one); empty for rows that did not run",
+)
+
+
 RESULTS = Table(
     "results",
     "one run of a case with an engine and method at one step (or tolerance)",
@@ -288,6 +297,7 @@ RESULTS = Table(
             machine=True,
         ),
         Column("path", "text", "", "the engine's code path (the reference: compiled or numpy)"),
+        _DEVICE,
         Column(
             "host",
             "text",
@@ -332,6 +342,7 @@ STABILITY = Table(
         Column("runs", "count", "runs", "the simulations the search took", least=0.0),
         _STATUS,
         _NOTE,
+        _DEVICE,
     ),
 )
 """``stability.csv``."""
@@ -405,6 +416,7 @@ RESTITUTION = Table(
             "the largest restitution over the impact-phase drops (bounce 1 only)",
             label="e max over phases",
         ),
+        _DEVICE,
     ),
 )
 """``restitution.csv``."""
