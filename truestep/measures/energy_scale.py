@@ -60,7 +60,7 @@ kinetic and potential energy (K,) J there (a first-order ODE: ``None`` and ``|E|
 
 def energy_scale(case: Case) -> float:
     """The case's energy scale :math:`S` (J; NaN where the case has no energy), read once
-    per case object along its reference path (:func:`reference_path`)."""
+    per case object along its reference path (:func:`path_at`)."""
     hit = _CACHE.get(id(case))
     if hit is not None and hit[0] is case:
         return hit[1]
@@ -238,18 +238,3 @@ def path_at(case: Case) -> Callable[[np.ndarray], tuple] | None:
     if solution is None:
         raise ValueError(f"{case.name}: no exact solution named {case.exact!r}")
     return lambda t: (solution(case, t), None)
-
-
-def reference_path(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
-    """The case's motion as truestep knows it best, at :data:`GRID` times or the reference
-    run's records: ``(t, x, v, alive)`` with ``x``, ``v`` of shape (T, n, 3) (an ODE's
-    states as ``x`` of shape (T, dim), ``v`` None); ``None`` without an exact solution."""
-    at = path_at(case)
-    if at is None:
-        return None
-    ex, alive = at(np.linspace(0.0, case.duration, GRID))
-    if isinstance(case.scene, OdeSpec):
-        return ex.t, ode_states(ex), None, None
-    if ex.v is None or len(ex.t) < 2:
-        return None
-    return ex.t, ex.x, ex.v, alive
