@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -255,4 +256,20 @@ def test_every_table_says_where_each_row_computed(tmp_path):
         ran = ~table.status.isin(["unsupported", "skipped"])
         assert ran.any(), name
         assert set(table.device[ran]) == {"cpu"}, name
+        assert table.device[~ran].isna().all(), name
+
+
+def test_the_published_report_says_every_row_computed_on_the_cpu():
+    """The committed report was made without ``--device``: ``run.json`` names no device,
+    its footer says every engine computed on the CPU, and each table's ``device`` is
+    ``cpu`` on every row that ran and empty on every row that did not."""
+    import pandas as pd
+
+    reports = Path(__file__).resolve().parents[2] / "reports"
+    assert "devices" not in json.loads((reports / "run.json").read_text())
+    assert "Devices: every engine on the CPU" in (reports / "index.md").read_text()
+    for name in ("results", "stability", "restitution"):
+        table = pd.read_csv(reports / f"{name}.csv")
+        ran = ~table.status.isin(["unsupported", "skipped"])
+        assert ran.any() and set(table.device[ran]) == {"cpu"}, name
         assert table.device[~ran].isna().all(), name
