@@ -226,6 +226,12 @@ def run(
         if out is None and resume is not None:
             out = resume
         on = devices.resolve(devices.parse(device), names, {n: adapter_class(n) for n in names})
+        if on and scheduler is not None and not scheduler.startswith("local:"):
+            raise DeviceError(
+                f"{devices.words(on)} with --scheduler {scheduler}: the cluster's workers make their "
+                "adapters in their own environment, where this run's devices do not reach; run "
+                "the GPU engines without --scheduler, or with --scheduler local:N"
+            )
         exp = Experiment(
             chosen,
             names,

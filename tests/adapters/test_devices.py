@@ -273,3 +273,23 @@ def test_the_published_report_says_every_row_computed_on_the_cpu():
         ran = ~table.status.isin(["unsupported", "skipped"])
         assert ran.any() and set(table.device[ran]) == {"cpu"}, name
         assert table.device[~ran].isna().all(), name
+
+
+def test_a_remote_cluster_is_refused_with_a_device(monkeypatch, tmp_path):
+    """A cluster's workers make their adapters where they run, which this run's devices
+    do not reach: a GPU device with a remote scheduler is refused before anything runs."""
+    pytest.importorskip("newton")
+    from truestep import api
+
+    monkeypatch.setattr(devices, "cuda_devices", lambda python=None: 1)
+    with pytest.raises(DeviceError, match="newton=cuda:0 with --scheduler tcp://"):
+        api.run(
+            "harmonic-oscillator",
+            ["reference", "newton"],
+            quick=True,
+            out=tmp_path / "rep",
+            scheduler="tcp://127.0.0.1:1",
+            device="newton=cuda:0",
+            progress=lambda _: None,
+        )
+    assert not (tmp_path / "rep").exists()
