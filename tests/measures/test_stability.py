@@ -331,3 +331,29 @@ def test_mujoco_warp_s_search_from_mujoco_s_bracket_is_the_same_made_here_or_han
     scale = energy_scale(case)
     assert is_stable(_search_run(case, "mujoco-warp", "RK4", handed.dt_limit), case=case, scale=scale)
     assert not is_stable(_search_run(case, "mujoco-warp", "RK4", handed.dt_unstable), case=case, scale=scale)
+
+
+def test_a_search_that_started_at_a_hint_says_so_after_searching_again(case_named):
+    """A search from another engine's bracket whose limit then fails its longer
+    confirmation run is searched again from below that limit: its note still says where it
+    started (the hint chose where to look), then why it searched again. The runs here are
+    made up: stable below 0.0505 s over the search's horizon, below 0.0500 s over the
+    confirmation's five times longer one."""
+    from truestep.adapters.base import Trajectory
+    from truestep.measures.stability import CONFIRM, Hint, search_case
+
+    case = case_named("harmonic-oscillator")
+    spec = case.stability
+
+    def simulate(c, dt):
+        n = round(c.duration / dt)
+        t = np.arange(n + 1) * dt
+        longer = n >= CONFIRM * max(spec.min_steps, math.ceil(spec.horizon / dt))
+        grows = dt > (0.0500 if longer else 0.0505)
+        energy = 0.5 + (np.expm1(30 * t / t[-1]) if grows else np.zeros(n + 1))
+        return Trajectory.of_ode(t, np.zeros((n + 1, 2)), energy, status="ok", steps=n, nfev=n, wall_s=0.0)
+
+    found = search_case(case, simulate, hint=Hint(0.0504, 0.0506, "peer"))
+    assert found.dt_limit < 0.0500 <= found.dt_unstable
+    assert found.note.startswith("searched first at peer's bracket (0.0504, 0.0506) s; ")
+    assert "searched again over that horizon" in found.note

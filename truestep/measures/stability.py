@@ -559,6 +559,10 @@ class Hint:
     dt_unstable: float
     source: str
 
+    def words(self) -> str:
+        """How a search's note says it started here."""
+        return f"searched first at {self.source}'s bracket ({self.dt_limit:.6g}, {self.dt_unstable:.6g}) s"
+
     def usable(self, dt_lo: float, dt_hi: float) -> bool:
         """Whether it is a finite bracket inside ``(dt_lo, dt_hi]``."""
         lo, hi = self.dt_limit, self.dt_unstable
@@ -584,7 +588,7 @@ def _first_bracket(
     if hint is None or not hint.usable(dt_lo, dt_hi):
         return search(dt_lo, dt_hi, 0)
     lo, hi = hint.dt_limit, hint.dt_unstable
-    said = f"searched first at {hint.source}'s bracket ({lo:.6g}, {hi:.6g}) s"
+    said = hint.words()
     ratio = max(hi / lo, 1.0 + rel_tol)
     runs = 1
     if stable_at(lo):
@@ -638,10 +642,11 @@ def search_case(
     to where it does not (:func:`_roundoff_interval`). A ``hint`` (another engine's
     bracket for the same scheme) is tried first: where this engine is stable at its low
     end and unstable at its high end, the bisection starts there (:func:`_first_bracket`);
-    it only chooses where to look, every verdict is this engine's own run. A run whose solver fails ends the
-    search with status ``solver-failed`` and no limit. A search still running after
-    ``budget_s`` seconds raises :class:`SearchTimeout` (a safety valve: it never shortens
-    a search).
+    it only chooses where to look, every verdict is this engine's own run, and the note
+    says where the search started also when a later step searched again from elsewhere.
+    A run whose solver fails ends the search with status ``solver-failed`` and no limit. A
+    search still running after ``budget_s`` seconds raises :class:`SearchTimeout` (a
+    safety valve: it never shortens a search).
     """
     from truestep.measures.energy_scale import energy_scale
 
@@ -722,6 +727,9 @@ def search_case(
             result = _roundoff_interval(
                 result, lambda dt, ulps: run_steps(dt, horizon_steps(dt), ulps), spec.dt_lo, spec.dt_hi
             )
+        said = hint.words() if hint is not None and hint.usable(spec.dt_lo, spec.dt_hi) else ""
+        if said and not result.note.startswith(said):  # searched again from elsewhere since
+            result = dataclasses.replace(result, note="; ".join(n for n in (said, result.note) if n))
     except _SolverFailedAt as err:
         return SearchResult(
             float("nan"),
