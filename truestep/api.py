@@ -525,14 +525,17 @@ def bench(
     sizes: Iterable[float] | None = None,
     budget_s: float | None = None,
     out: str | Path = "bench",
+    threads: int = 1,
 ) -> pd.DataFrame:
     """Particle-steps per second against n on the rain scene (``truestep bench``): the
     scaling table (:func:`truestep.execution.bench.scaling_table`; its ``attrs`` hold the
     copy bandwidth, bytes per particle-step, the time it took and its warm-ups), written
     with its figure into ``out`` (``scaling.csv`` and ``figures/scaling.png``, whose paths
     are ``attrs["csv"]`` and ``attrs["figure"]``). ``sizes`` default to :data:`BENCH_SIZES`, ``budget_s`` to
-    :data:`BENCH_BUDGET_S`. Raises :class:`~truestep.runtime.folder.OutRefused` for a
-    folder truestep may not write, before anything runs."""
+    :data:`BENCH_BUDGET_S`; ``threads``: the threads of the engines that take a count (the
+    reference, whose tiles of independent particles then run that many at once; its rows
+    say so). Raises :class:`~truestep.runtime.folder.OutRefused` for a folder truestep may
+    not write, before anything runs."""
     from truestep.execution.bench import COLUMNS, scaling_plot, scaling_table
     from truestep.runtime.folder import check_out, prepare
 
@@ -542,6 +545,7 @@ def bench(
         list(engines),
         sizes=list(BENCH_SIZES if sizes is None else sizes),
         budget_s=BENCH_BUDGET_S if budget_s is None else budget_s,
+        threads=threads,
     )
     written = prepare(folder)
     table.attrs["csv"] = written / "scaling.csv"

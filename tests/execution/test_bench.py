@@ -217,6 +217,7 @@ def test_the_command_writes_the_table_and_the_figure(tmp_path, capsys):
         ["--budget", "inf"],
         ["--budget", "1e308"],
         ["--budget", "nan"],
+        ["--threads", "0"],
     ],
 )
 def test_the_command_rejects_bad_input_and_writes_nothing(tmp_path, capsys, argv):
@@ -285,3 +286,22 @@ def test_the_report_section_recomputes_from_the_measured_table(table, tmp_path):
 def test_a_run_without_the_rain_case_says_so(tmp_path):
     parts = report_scaling.scaling_section(pd.DataFrame(), tmp_path)
     assert "Not run" in parts[1] and not list(tmp_path.iterdir())
+
+
+def test_the_reference_on_several_threads_says_so_and_other_engines_run_as_they_do():
+    """``threads=2``: the reference's rows run and say ``on 2 threads`` (its adapter takes
+    the count), pymunk's run as they do and say nothing of threads; a count below 1 is
+    refused."""
+    compile_reference_loops()
+    out = bench.scaling_table(
+        ["reference", "pymunk"], sizes=[300, 600], budget_s=AMPLE_S, target_s=TARGET_S, threads=2
+    )
+    assert out.attrs["threads"] == 2
+    ran = out[out.status == "ok"]
+    reference, pymunk = ran[ran.engine == "reference"], ran[ran.engine == "pymunk"]
+    assert len(reference) and len(pymunk)
+    assert reference.note.str.startswith("on 2 threads").all()
+    assert not out[out.engine == "pymunk"].note.str.contains("thread").any()
+    assert bench.threaded("reference") and not bench.threaded("pymunk")
+    with pytest.raises(ValueError, match="threads"):
+        bench.scaling_table(["reference"], sizes=[10], threads=0)

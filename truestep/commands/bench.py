@@ -48,6 +48,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="N,N,...",
         help=f"particle counts, comma-separated (default: {sizes})",
     )
+    bench.add_argument(
+        "--threads",
+        default=1,
+        type=int,
+        metavar="N",
+        help="threads of the engines that take a count: the reference steps its tiles of "
+        "independent particles N at a time (default 1; its rows say so); every other "
+        "engine runs as it does",
+    )
     bench.set_defaults(func=main)
 
 
@@ -75,13 +84,15 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--budget: expected seconds above 0 and at most {BENCH_BUDGET_MAX_S:g}, got {args.budget:g}"
         )
+    if args.threads < 1:
+        raise UsageError(f"--threads: expected a whole number of at least 1, got {args.threads}")
     folder = common.folder(args.out, "--out")
     engines = select_engines(args.engines, say=common.say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
     start = time.perf_counter()
     try:
-        table = bench(engines, sizes=sizes, budget_s=args.budget, out=folder)
+        table = bench(engines, sizes=sizes, budget_s=args.budget, out=folder, threads=args.threads)
     except OutRefused as err:
         raise UsageError(str(err)) from None
     bandwidth = table.attrs["bandwidth_bytes_per_s"]

@@ -58,7 +58,9 @@ How a run is timed
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
+import re
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Sequence
@@ -193,10 +195,37 @@ def _calibrate(adapter, case: Case, method: str, dt: float, max_steps: int) -> f
         steps = min(max_steps, max(8 * steps, math.ceil(1.5 * CALIBRATION_S / max(per_step, 1e-9))))
 
 
-def _warm_up(engine: str, method: str, dt: float, warm: Case, max_steps: int) -> float:
+def threaded(engine: str) -> bool:
+    """Whether truestep's own adapter of ``engine`` takes a count of ``threads`` (the
+    reference: :class:`~truestep.adapters.reference.ReferenceAdapter`)."""
+    from truestep.adapters import adapter_class
+
+    cls = adapter_class(engine)
+    return cls.__module__.startswith("truestep.") and "threads" in inspect.signature(cls).parameters
+
+
+def _adapter(engine: str, threads: int):
+    """``engine``'s adapter, on ``threads`` threads where it takes a count (:func:`threaded`)."""
+    if threads > 1 and threaded(engine):
+        from truestep.adapters import adapter_class
+
+        return adapter_class(engine)(threads=threads)
+    return get_adapter(engine)
+
+
+def _adapters_on(engines: list[str], threads: int) -> tuple[dict[str, Any], dict[str, int]]:
+    """Each engine's adapter (:func:`_adapter`) and the threads it runs on: ``threads``
+    where it takes a count, else 1."""
+    if not (isinstance(threads, int) and threads >= 1):
+        raise ValueError(f"threads: a whole number of at least 1, got {threads!r}")
+    on = {e: threads if threads > 1 and threaded(e) else 1 for e in engines}
+    return {e: _adapter(e, on[e]) for e in engines}, on
+
+
+def _warm_up(engine: str, method: str, dt: float, warm: Case, max_steps: int, threads: int = 1) -> float:
     """In the warm-up child: a first run of 2 steps, then :func:`_calibrate`; returns
     seconds per step at ``warm``'s n."""
-    adapter = get_adapter(engine)
+    adapter = _adapter(engine, threads)
     adapter.simulate(_with_steps(warm, MIN_STEPS, dt), method, dt)
     return _calibrate(adapter, warm, method, dt, max_steps)
 
@@ -211,8 +240,10 @@ def _timed_run(
     probe: bool,
     target_s: float,
     max_steps: int,
+    threads: int = 1,
 ) -> dict:
-    """In a timed child: warm up on ``warm`` (2 steps); probe at ``case``'s n if asked
+    """In a timed child (``engine``'s adapter on ``threads`` threads where it takes a count:
+    :func:`_adapter`): warm up on ``warm`` (2 steps); probe at ``case``'s n if asked
     (:data:`PROBE_FRACTION` of ``steps``; the steps then come from it); then run ``case``
     timed, once, or again (each run built afresh) while the runs so far are shorter than
     ``target_s`` in all (at most :data:`MAX_REPEATS` runs, and at most 3 x ``target_s`` of
@@ -221,7 +252,7 @@ def _timed_run(
     ``repeats``, ``wall_total_s``, ``status`` and ``message`` (of the last run),
     ``run_s`` (seconds of the ``simulate`` calls of the timed runs: building, stepping,
     reading back) and ``probe_s`` (seconds spent probing)."""
-    adapter = get_adapter(engine)
+    adapter = _adapter(engine, threads)
     adapter.simulate(_with_steps(warm, MIN_STEPS, dt), method, dt)
     began = time.perf_counter()
     if probe:
@@ -290,7 +321,7 @@ def _prepare_and_warm_up(
         warm_up = Outcome("ok", math.nan)
     else:
         warm_up = run_isolated(
-            _warm_up, (pair.engine, pair.method, dt, warm, max_steps), min(first_timeout, left)
+            _warm_up, (pair.engine, pair.method, dt, warm, max_steps, pair.threads), min(first_timeout, left)
         )
     pair.spent = time.perf_counter() - began
     note = ""
@@ -335,8 +366,11 @@ def _fmt_n(n: int) -> str:
 class _Pair:
     """What one (engine, method) has measured and spent while its sizes run, smallest first."""
 
-    def __init__(self, engine: str, method: str, share: float, budget_s: float, deadline: float) -> None:
+    def __init__(
+        self, engine: str, method: str, share: float, budget_s: float, deadline: float, threads: int = 1
+    ) -> None:
         self.engine, self.method, self.share, self.budget_s = engine, method, share, budget_s
+        self.threads = threads  # the adapter's threads (1 where it takes no count)
         self.deadline = deadline  # time.perf_counter() when the budget ends
         self.spent = 0.0  # seconds of this pair's compiling, warm-up and children so far
         self.fixed = 0.0  # seconds of the last timed child outside its timed simulate call
@@ -396,7 +430,18 @@ class _Pair:
         began = time.perf_counter()
         outcome = run_isolated(
             _timed_run,
-            (self.engine, self.method, dt, scene(n), scene(warm_n), steps, probe, target_s, max_steps),
+            (
+                self.engine,
+                self.method,
+                dt,
+                scene(n),
+                scene(warm_n),
+                steps,
+                probe,
+                target_s,
+                max_steps,
+                self.threads,
+            ),
             timeout,
         )
         elapsed = time.perf_counter() - began
@@ -442,6 +487,7 @@ def scaling_table(
     progress: Callable[[str], None] | None = None,
     target_s: float = TARGET_S,
     case: Case | None = None,
+    threads: int = 1,
 ) -> pd.DataFrame:
     """Particle-steps per second against n on the rain scene, per engine and method.
 
@@ -456,6 +502,9 @@ def scaling_table(
     progress : receives one line per row; default, lines (or a bar) on standard error
     target_s : seconds of timed stepping each run aims at
     case : the scene to scale (default the library's ``particle-rain``; one block)
+    threads : threads of the engines whose adapter takes a count (:func:`threaded`: the
+        reference, whose tiles of independent particles then run that many at once); every
+        other engine runs as it does. Those rows' notes say so.
 
     Returns
     -------
@@ -471,8 +520,9 @@ def scaling_table(
     reading back, teardown); ``status`` ``ok``, ``unstable``, ``crashed``, ``timeout``,
     ``unsupported`` or ``skipped``; ``note``, the reason, or the engine's notes.
     ``attrs`` holds ``bandwidth_bytes_per_s``, ``bytes_per_particle_step``, ``dt``,
-    ``budget_s``, ``target_s``, ``elapsed_s`` (seconds of the whole call, within the
-    budget) and ``warmup_s`` (those of compiling and the warm-up children, within it).
+    ``budget_s``, ``target_s``, ``threads``, ``elapsed_s`` (seconds of the whole call,
+    within the budget) and ``warmup_s`` (those of compiling and the warm-up children,
+    within it).
     """
     from truestep.cases.loader import library, load_case
     from truestep.numerics import pin_threads
@@ -486,7 +536,7 @@ def scaling_table(
     deadline = start_all + budget_s
     bandwidth = copy_bandwidth()
     engines = list(dict.fromkeys(engines))
-    adapters = {e: get_adapter(e) for e in engines}
+    adapters, on = _adapters_on(engines, threads)
 
     rows: list[dict] = []
     pairs: list[tuple[str, str]] = []
@@ -515,7 +565,7 @@ def scaling_table(
     with Progress(len(pairs) * len(ns), "bench", say=progress) as bar:
         for k, (engine, method) in enumerate(pairs):
             share = max(0.0, deadline - time.perf_counter()) / (len(pairs) - k)
-            pair = _Pair(engine, method, share, budget_s, deadline)
+            pair = _Pair(engine, method, share, budget_s, deadline, on[engine])
             warm, warm_note = _prepare_and_warm_up(
                 pair, adapters[engine], dt, scene(warm_n), max_steps, first_timeout
             )
@@ -547,6 +597,8 @@ def scaling_table(
                     )
                     if warm_note and n == ns[0]:
                         row["note"] = "; ".join(x for x in (row["note"], warm_note) if x)
+                if on[engine] > 1:
+                    row["note"] = "; ".join(x for x in (f"on {on[engine]} threads", row.get("note")) if x)
                 rows.append(row)
                 bar.done(
                     f"{engine:9s} {method:17s} n={n:>9,d} {row['status']:8s} "
@@ -575,6 +627,7 @@ def scaling_table(
         dt=dt,
         budget_s=budget_s,
         target_s=target_s,
+        threads=threads,
         elapsed_s=time.perf_counter() - start_all,
         warmup_s=warmups_s,
     )
@@ -609,6 +662,9 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
         if ok.empty:
             continue
         label = f"{engine} / {method}"
+        threads = re.match(r"on (\d+) threads", str(ok["note"].iloc[0]))
+        if threads:
+            label += f", {threads.group(1)} threads"
         after = g[(g["n"] > ok["n"].max()) & (g["status"] != "ok")].sort_values("n")
         if len(after):
             first = after.iloc[0]
