@@ -397,12 +397,15 @@ def compare(
 class EngineInfo:
     """What ``truestep list`` says of an engine: its ``status`` (``installed``, or why it
     cannot run here, with the pip line that adds it), and, installed, its ``methods`` and
-    ``capabilities`` (empty where its adapter could not be made: ``status`` says why)."""
+    ``capabilities`` (empty where its adapter could not be made: ``status`` says why), and
+    whether it takes a device (``devices``: ``truestep run --device`` can put it on a GPU,
+    :func:`truestep.adapters.devices.takes_device`)."""
 
     name: str
     status: str
     methods: tuple[str, ...] = ()
     capabilities: tuple[str, ...] = ()
+    devices: bool = False
 
 
 def engines(names: Iterable[str] | None = None) -> Iterator[EngineInfo]:
@@ -422,7 +425,11 @@ def engines(names: Iterable[str] | None = None) -> Iterator[EngineInfo]:
             yield EngineInfo(name, f"unusable: {err}")
             continue
         yield EngineInfo(
-            name, status, tuple(map(str, adapter.methods)), tuple(sorted(map(str, adapter.capabilities)))
+            name,
+            status,
+            tuple(map(str, adapter.methods)),
+            tuple(sorted(map(str, adapter.capabilities))),
+            devices.takes_device(adapter_class(name)),
         )
 
 

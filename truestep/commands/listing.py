@@ -51,4 +51,8 @@ def main(args: argparse.Namespace) -> int:
             continue
         print(visible(f"  {info.name:10s} methods: {', '.join(info.methods)}"))
         print(visible(f"  {'':10s} capabilities: {', '.join(info.capabilities)}"))
+        if info.devices:
+            print(
+                f"  {'':10s} devices: cpu (the default), or a GPU: truestep run --device {info.name}=cuda:0"
+            )
     return 0
