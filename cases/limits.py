@@ -89,35 +89,40 @@ def read_limits(f: Fields, base: Limits) -> Limits:
     return dataclasses.replace(base, **values)
 
 
+class LimitError(ValueError):
+    """A limit item or value that cannot be used (``--limit``, a ``[limits]`` table): one
+    line that says which and why."""
+
+
 def check_ceilings(values: dict[str, float], *, trusted: bool, where: str = "--limit") -> None:
-    """Refuse (ValueError, one line) a limit in ``values`` over its :data:`CEILING`
+    """Refuse (:class:`LimitError`, one line) a limit in ``values`` over its :data:`CEILING`
     unless the inputs are ``trusted`` (``--trust-limits``)."""
     for key, value in values.items():
         ceiling = getattr(CEILING, key)
         if not trusted and value > ceiling:
-            raise ValueError(
+            raise LimitError(
                 f"{where} {key}={value:.3g} is over the ceiling of {ceiling:.3g}; "
                 f"add {TRUST_FLAG} if the cases of this run are trusted"
             )
 
 
 def parse_override(items: list[str], *, trusted: bool = False) -> dict[str, float]:
-    """``["steps=1e8", "particles=2e6"]`` -> ``{"steps": 1e8, ...}``; ValueError says why
+    """``["steps=1e8", "particles=2e6"]`` -> ``{"steps": 1e8, ...}``; :class:`LimitError` says why
     (a value over its :data:`CEILING` needs ``trusted``)."""
     out: dict[str, float] = {}
     for item in items:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or key not in KEYS:
-            raise ValueError(
+            raise LimitError(
                 f"--limit: expected KEY=VALUE with KEY one of {', '.join(KEYS)}, got {item[:40]!r}"
             )
         try:
             value = float(raw)
         except ValueError:
-            raise ValueError(f"--limit {key}: not a number: {raw[:40]!r}") from None
+            raise LimitError(f"--limit {key}: not a number: {raw[:40]!r}") from None
         if not 0 < value < float("inf"):
-            raise ValueError(f"--limit {key}: must be a positive finite number, got {raw[:40]!r}")
+            raise LimitError(f"--limit {key}: must be a positive finite number, got {raw[:40]!r}")
         out[key] = value
     check_ceilings(out, trusted=trusted)
     return out

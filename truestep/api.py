@@ -88,6 +88,7 @@ __all__ = [
     "resumable",
     "run",
     "save_baseline",
+    "select_cases",
     "select_engines",
     "shadowed",
 ]
@@ -174,6 +175,33 @@ def check_report_folder(out: str | Path, *, flag: str = "--out") -> Path:
     from truestep.runtime.folder import check_publishable
 
     return check_publishable(Path(out), flag=flag)
+
+
+def select_cases(
+    selection: str | Iterable[str] = "*",
+    *,
+    quick: bool = False,
+    limits: Iterable[str] = (),
+    trust_limits: bool = False,
+) -> list[Case]:
+    """The cases of a selection as ``--cases`` takes it (names, globs, files, directories),
+    under the cost limits ``limits`` (``KEY=VALUE`` items, as ``--limit`` takes them; past
+    the ceiling a case file cannot pass only with ``trust_limits``): what ``truestep run``
+    and ``truestep list`` run and list. With ``quick`` and the whole library (``"*"``),
+    the cases marked for a quick run (every case where none is), as ``truestep run --quick``
+    chooses. A bad limit item is a :class:`~truestep.cases.limits.LimitError`; a bad case file a
+    :class:`~truestep.cases.errors.CaseError`, a selection that names nothing a
+    :class:`~truestep.cases.errors.SelectionError` (both ``ValueError``, each one line)."""
+    from truestep.cases.limits import parse_override
+
+    chosen = load_cases(
+        selection,
+        limits=parse_override(list(limits), trusted=trust_limits),
+        trust_limits=trust_limits,
+    )
+    if quick and selection == "*":
+        chosen = [c for c in chosen if c.in_quick] or chosen
+    return chosen
 
 
 def _cases(cases: str | Iterable[str] | Iterable[Case]) -> list[Case]:

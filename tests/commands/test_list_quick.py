@@ -6,6 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from truestep.cases import load_cases
 from truestep.cli import main
 
@@ -32,3 +34,25 @@ def test_a_reader_that_stops_early_gets_no_traceback():
     err = proc.stderr.read()
     proc.wait(timeout=120)
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_the_api_selects_what_the_commands_run_and_refuses_a_bad_limit_in_one_line(capsys):
+    """``truestep.api.select_cases`` is the selection ``run`` and ``list`` make: the quick
+    cases of the library with ``quick``, a named case whatever ``quick`` says, every case
+    without; a bad ``--limit`` item is a :class:`LimitError` from the API and exit 2 with
+    its one line from a command."""
+    from truestep.api import select_cases
+    from truestep.cases.limits import LimitError
+
+    library = load_cases("*")
+    assert [c.name for c in select_cases()] == [c.name for c in library]
+    assert [c.name for c in select_cases(quick=True)] == [c.name for c in library if c.in_quick]
+    assert [c.name for c in select_cases("bouncing-ball", quick=True)] == ["bouncing-ball"]
+    assert [c.name for c in select_cases("bouncing-ball", limits=["steps=1e12"], trust_limits=True)] == [
+        "bouncing-ball"
+    ]
+    with pytest.raises(LimitError, match="over the ceiling"):
+        select_cases("bouncing-ball", limits=["steps=1e12"])
+    assert main(["run", "--quick", "--cases", "bouncing-ball", "--limit", "steps=x"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "truestep: error: --limit steps: not a number: 'x'"

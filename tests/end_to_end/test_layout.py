@@ -220,3 +220,20 @@ def test_a_thin_command_imports_nothing_of_truestep_but_the_api(graph, command):
     allowed = COMMAND_VOCABULARY | THIN_COMMANDS[command]
     assert "truestep.api" in imported, f"{module} does not call truestep.api"
     assert imported <= allowed, f"{module} imports {sorted(imported - allowed)}"
+
+
+COMMON_VOCABULARY = {"truestep.api", "truestep.cases.limits", "truestep.runtime.visible"}
+"""What the commands' shared helpers may import of truestep: the API (the cases of a
+selection come from :func:`truestep.api.select_cases`, never from the loader), the limits'
+keys and ceilings their ``--limit`` help names, and the escaping of what they print."""
+
+
+def test_the_commands_shared_helpers_load_cases_only_through_the_api(graph):
+    imported = {
+        m
+        for m in graph.find_modules_directly_imported_by("truestep.commands.common")
+        if m.startswith("truestep")
+    }
+    assert imported <= COMMON_VOCABULARY, (
+        f"truestep.commands.common imports {sorted(imported - COMMON_VOCABULARY)}"
+    )

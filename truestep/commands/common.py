@@ -1,6 +1,6 @@
 """What the commands share: the usage error (exit 2), messages to standard error, the
-``--limit`` and ``--results`` options, case loading, and the refusal of an empty or
-enclosing output folder."""
+``--limit`` and ``--results`` options, case selection (through :mod:`truestep.api`), and
+the refusal of an empty or enclosing output folder."""
 
 from __future__ import annotations
 
@@ -77,20 +77,17 @@ def results_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def load(selection: str, limit_items: list[str] | None = None, *, trust_limits: bool = False) -> list[Case]:
-    """The cases of a ``--cases`` selection under the ``--limit`` items."""
-    from truestep.cases import load_cases
-
-    return load_cases(selection, limits=limits(limit_items, trust_limits), trust_limits=trust_limits)
-
-
-def limits(items: list[str] | None, trusted: bool) -> dict[str, float]:
-    """The ``--limit`` items as a mapping (a bad one is a :class:`UsageError`)."""
-    from truestep.cases.limits import parse_override
+def load(
+    selection: str, limit_items: list[str] | None = None, *, quick: bool = False, trust_limits: bool = False
+) -> list[Case]:
+    """The cases of a ``--cases`` selection under the ``--limit`` items
+    (:func:`truestep.api.select_cases`; a bad limit item is a :class:`UsageError`)."""
+    from truestep.api import select_cases
+    from truestep.cases.limits import LimitError
 
     try:
-        return parse_override(items or [], trusted=trusted)
-    except ValueError as err:
+        return select_cases(selection, quick=quick, limits=limit_items or (), trust_limits=trust_limits)
+    except LimitError as err:
         raise UsageError(str(err)) from None
 
 

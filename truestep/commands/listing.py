@@ -32,9 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     from truestep.api import engines, shadowed
 
-    cases = common.load(args.cases)
-    if args.quick and args.cases == "*":
-        cases = [c for c in cases if c.in_quick] or cases  # as `truestep run --quick` chooses
+    cases = common.load(args.cases, quick=args.quick)  # as `truestep run --quick` chooses
     print("cases" + (" of a --quick run:" if args.quick else ":"))
     for c in cases:
         print(f"  {c.name:24s} {c.kind:9s} features: {', '.join(sorted(c.features))}")

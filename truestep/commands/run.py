@@ -139,9 +139,7 @@ def _run(args: argparse.Namespace) -> int:
     engines = engines_for_run(args.engines, say=common.say)
     if not engines:
         raise UsageError("--engines: no engine is installed")
-    cases = common.load(args.cases, args.limit, trust_limits=args.trust_limits)
-    if args.quick and args.cases == "*":
-        cases = [c for c in cases if c.in_quick] or cases
+    cases = common.load(args.cases, args.limit, quick=args.quick, trust_limits=args.trust_limits)
     out = Path(args.out)
     try:
         check_report_folder(out)
