@@ -322,6 +322,12 @@ class Recording:
     extremes: EnergyExtremes | None = None
 
 
+def _stepped_by_its_own_loop(self: Any, scene: Any, k: int, steps: int, h: float) -> None:
+    """:meth:`FixedStepAdapter.advance` of an adapter that steps in its own
+    :meth:`~FixedStepAdapter.step_and_record`."""
+    raise NotImplementedError(f"{type(self).__name__} steps in its own step_and_record, not by advance()")
+
+
 class FixedStepAdapter(abc.ABC):
     """Base class of an adapter whose engine advances a particle scene by fixed steps.
 
@@ -332,7 +338,9 @@ class FixedStepAdapter(abc.ABC):
        ``case.model`` (a :class:`~truestep.reference_impl.model.ParticleModel`), ready to
        take steps of ``h`` seconds; not timed;
     2. :meth:`advance` ``(scene, k, steps, h)``: take ``steps`` steps of ``h`` seconds,
-       the first one starting at time ``k h`` (timed);
+       the first one starting at time ``k h`` (timed); an adapter that steps in a loop of
+       its own instead (it overrides :meth:`step_and_record`, as MuJoCo's rollout does)
+       needs none, and nothing calls it;
     3. :meth:`read` ``(scene) -> (x, v)``: positions and velocities now, each shape
        ``(n, 3)``, m and m/s, in the model's particle order (may be views: they are
        copied when kept).
@@ -365,6 +373,14 @@ class FixedStepAdapter(abc.ABC):
     check_every: ClassVar[int] = CHECK_EVERY
     """Steps between blow-up checks: a blown-up run stops within this many steps (the
     reference's :data:`~truestep.reference_impl.integrate.CHECK_EVERY`)."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass with a stepping loop of its own (its own :meth:`step_and_record`)
+        and no :meth:`advance`: :meth:`advance` is not abstract for it (nothing calls it)."""
+        super().__init_subclass__(**kwargs)
+        own_loop = cls.step_and_record is not FixedStepAdapter.step_and_record
+        if own_loop and getattr(cls.advance, "__isabstractmethod__", False):
+            cls.advance = _stepped_by_its_own_loop  # type: ignore[method-assign]  # set before ABCMeta reads it
 
     def missing(self, case: Case, method: str) -> set[str]:
         """Features of ``case`` beyond :attr:`capabilities`."""

@@ -567,16 +567,6 @@ class MujocoAdapter(FixedStepAdapter):
         """The method whose steps ``method`` repeats bit for bit (:func:`same_steps`)."""
         return same_steps(case, method)
 
-    def advance(self, scene: Scene, k: int, steps: int, h: float) -> None:
-        """``mj_step`` ``steps`` times (one call; a Python loop when forces are held)."""
-        m, d = scene.model, scene.data
-        if scene.applied is not None and not self.stage_forces:
-            for _ in range(steps):
-                d.qfrc_applied[:] = scene.applied(d.qpos, d.qvel, d.time)
-                mujoco.mj_step(m, d)
-        else:
-            mujoco.mj_step(m, d, steps)
-
     def read(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         n = len(scene.layout.free) + len(scene.layout.pinned)
         return scene.positions(n), scene.velocities(n)

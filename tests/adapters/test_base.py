@@ -89,3 +89,34 @@ def test_unknown_methods_and_missing_features_are_refused(case_named):
     assert adapter.missing(spring, "euler") == {"anchored-springs"}
     with pytest.raises(ValueError, match="needs anchored-springs"):
         adapter.simulate(spring, "euler", 0.01)
+
+
+def test_advance_is_required_unless_the_adapter_steps_in_its_own_loop(case_named):
+    """``advance`` is the hook of the shared stepping loop: a user's adapter without it is
+    refused when it is made (an abstract method); one that overrides ``step_and_record``
+    (as MuJoCo's rollout does) needs none, and its ``advance``, never called by the loop,
+    says so if called."""
+
+    class NoAdvance(truestep.FixedStepAdapter):
+        name = "no-advance"
+        methods = ("euler",)
+        capabilities = ExplicitEuler.capabilities
+        build = ExplicitEuler.build
+        read = ExplicitEuler.read
+
+    class OwnLoop(NoAdvance):
+        def step_and_record(self, case, scene, n_steps, h):
+            return ExplicitEuler.step_and_record(ExplicitEuler(), case, scene, n_steps, h)
+
+    with pytest.raises(TypeError, match="abstract method advance"):
+        NoAdvance()
+    traj = OwnLoop().simulate(_case(case_named, 1.0, 30), "euler", 0.01)
+    mine = ExplicitEuler().simulate(_case(case_named, 1.0, 30), "euler", 0.01)
+    assert traj.status == "ok" and np.array_equal(traj.x, mine.x)
+    with pytest.raises(NotImplementedError, match="steps in its own step_and_record"):
+        OwnLoop().advance({}, 0, 1, 0.01)
+    from truestep.adapters.mujoco_adapter import MujocoAdapter
+
+    assert not MujocoAdapter.__abstractmethods__
+    with pytest.raises(NotImplementedError, match="MujocoAdapter steps in its own step_and_record"):
+        MujocoAdapter().advance(None, 0, 1, 0.01)
