@@ -72,6 +72,13 @@ class GateKind:
     any_status : its row may have any status (it reads the status); else a row that is
         not ``ok`` fails the gate, saying so
     tells_apart : what else, beside case, engine, method and step, its id carries
+    steps_only : with no ``dt``, it reads the rows of fixed steps only (an order is a slope
+        over steps, not tolerances)
+    unmeasured : why a row gate finds no row with its quantity (the verdict's words)
+    names_property : it names a property (``name``) that its case must measure
+    needs_energy : it reads an energy drift, which a case that is neither conservative
+        nor given an exact energy curve never measures (the loader warns)
+    speed : it reads wall times: the report shows the speed table it judged
     """
 
     name: str
@@ -83,15 +90,29 @@ class GateKind:
     words: tuple[str, ...] = ()
     any_status: bool = False
     tells_apart: Callable[[dict], str] | None = None
+    steps_only: bool = False
+    unmeasured: str = "it has no exact solution or reference run"
+    names_property: bool = False
+    needs_energy: bool = False
+    speed: bool = False
 
 
 GATE_KINDS: Mapping[str, GateKind] = MappingProxyType(
     {
         k.name: k
         for k in (
-            GateKind("order", "sweep", needs=("expect", "tol")),
+            GateKind("order", "sweep", needs=("expect", "tol"), steps_only=True),
             GateKind("error", "row", needs=("max",), needs_dt=True),
-            GateKind("energy_drift", "row", needs=("max",), needs_dt=True),
+            GateKind(
+                "energy_drift",
+                "row",
+                needs=("max",),
+                needs_dt=True,
+                unmeasured=(
+                    "a dissipative scene whose exact solution gives no energy curve, or one without energy"
+                ),
+                needs_energy=True,
+            ),
             GateKind(
                 "status", "row", needs_dt=True, fields=_expect_status, words=("expect",), any_status=True
             ),
@@ -102,6 +123,7 @@ GATE_KINDS: Mapping[str, GateKind] = MappingProxyType(
                 one_of=(("max", "min"), "a property gate needs min, max or both"),
                 fields=_property_name,
                 tells_apart=lambda p: str(p.get("name", "")),
+                names_property=True,
             ),
             GateKind(
                 "stability-limit",
@@ -111,7 +133,7 @@ GATE_KINDS: Mapping[str, GateKind] = MappingProxyType(
                     "a stability-limit gate needs rel_tol (against the exact limit), min (s), or both",
                 ),
             ),
-            GateKind("speedup", "row", needs=("min",), needs_dt=True, fields=_over),
+            GateKind("speedup", "row", needs=("min",), needs_dt=True, fields=_over, speed=True),
             GateKind(
                 "restitution",
                 "restitution",

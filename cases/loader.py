@@ -316,7 +316,7 @@ def _warn_unmeasured_energy_drift(case: Case, start: object) -> None:
     ``t = 0``, ``start``, has no energy). Such a gate fails every run ("measured
     nothing"); a later release refuses it when the case loads, and this warning comes
     first, so that a case file that loaded before still loads."""
-    gates = [g for g in case.gates if g.kind == "energy_drift"]
+    gates = [g for g in case.gates if GATE_KINDS[g.kind].needs_energy]
     if not gates or case.conservative:
         return
     if case.exact is not None:
@@ -352,7 +352,7 @@ def check_case_gates(case: Case, engines: set[str]) -> None:
     """A case's gates must name engines of ``engines`` (or ``*``), and a property gate a
     property of the case: :class:`CaseError` naming the gate's field otherwise."""
     for g in case.gates:
-        if g.kind == "property" and g.params["name"] not in case.properties:
+        if GATE_KINDS[g.kind].names_property and g.params["name"] not in case.properties:
             raise CaseError(
                 case.file, f"{g.where}.name", f"{short(g.params['name'])} is not in this case's properties"
             )

@@ -102,3 +102,31 @@ def test_every_gate_kind_has_one_record_and_one_checker():
         "restitution",
     }
     assert len(GATE_KINDS) == 9
+
+
+def test_no_harness_code_decides_by_a_gate_kind_s_name():
+    """Whatever a kind of gate does differently (reads fixed steps only, names a property,
+    reads wall times ...) is a field of its record: no comparison in the harness or the
+    loader names a kind (the check fails on the one this file plants)."""
+    from truestep.cases.gate_kinds import GATE_KINDS
+
+    names = set(GATE_KINDS)
+
+    def spelt(source: str) -> list[str]:
+        return [
+            c.value
+            for node in ast.walk(ast.parse(source))
+            if isinstance(node, ast.Compare)
+            and isinstance(node.left, ast.Attribute)
+            and node.left.attr == "kind"
+            for c in node.comparators
+            if isinstance(c, ast.Constant) and c.value in names
+        ]
+
+    assert spelt('if g.kind == "order" or g.kind != "speedup" or case.kind == "ode": pass') == [
+        "order",
+        "speedup",
+    ]
+    files = [*sorted((ROOT / "truestep").rglob("*.py")), *sorted((ROOT / "cases").glob("*.py"))]
+    found = {str(p.relative_to(ROOT)): spelt(p.read_text()) for p in files if not p.is_symlink()}
+    assert {k: v for k, v in found.items() if v} == {}

@@ -134,7 +134,7 @@ def _pairs(results: pd.DataFrame, case: str, g: Gate) -> list[tuple[str, str]]:
     ran = results[(results["case"] == case) & ~results["status"].isin(NOT_RUN)]
     if g.dt is not None:
         ran = _at_dt(ran, g.dt)
-    elif g.kind == "order":
+    elif GATE_KINDS[g.kind].steps_only:
         ran = ran[ran["dt_kind"] == "step"]
     pairs = ran[["engine", "method"]].drop_duplicates().itertuples(index=False)
     return [(e, m) for e, m in pairs if g.engine in ("*", e) and g.method in ("*", m)]
@@ -214,11 +214,7 @@ def _measured(case: Case, g: Gate, results: pd.DataFrame, rows: pd.DataFrame) ->
         g,
         _within(value, None, g.params["max"]),
         f"nothing: {g.kind} is never measured on this case (no ok row of any engine has one: "
-        + (
-            "a dissipative scene whose exact solution gives no energy curve, or one without energy)"
-            if g.kind == "energy_drift"
-            else "it has no exact solution or reference run)"
-        )
+        f"{GATE_KINDS[g.kind].unmeasured})"
         if never
         else f"{g.kind} {value:.3g}",
         f"<= {g.params['max']:g}",
@@ -813,7 +809,7 @@ def _matches(case: Case, g: Gate, patterns: list[str]) -> bool:
     property gate matched only by a glob applies where the case measures that property
     (a case named outright that does not is refused: :func:`check_properties_exist`)."""
     hits = [p for p in patterns if fnmatch.fnmatchcase(case.name, p)]
-    if not hits or g.kind != "property" or g.params["name"] in case.properties:
+    if not hits or not GATE_KINDS[g.kind].names_property or g.params["name"] in case.properties:
         return bool(hits)
     return any(p == case.name for p in hits)
 
@@ -847,7 +843,11 @@ def check_properties_exist(todo: list[tuple[Case, Gate]]) -> None:
     from truestep.cases.errors import CaseError
 
     for case, g in todo:
-        if g.kind == "property" and case is not _SWEEP_CASE and g.params["name"] not in case.properties:
+        if (
+            GATE_KINDS[g.kind].names_property
+            and case is not _SWEEP_CASE
+            and g.params["name"] not in case.properties
+        ):
             raise CaseError(
                 g.file or case.file,
                 f"{g.where}.name",

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case
+from truestep.cases.gate_kinds import GATE_KINDS
 from truestep.measures.metrics import finest_local_order, fit_order, round_off_floor
 from truestep.measures.peers import PEER_COLUMNS, same_scheme
 from truestep.measures.picks import (
@@ -172,7 +173,7 @@ def speed_tables(cases: list[Case], results: pd.DataFrame) -> dict[tuple[str, st
         (c.name, g.where): speed_table(c, results, g.engine, g.method)
         for c in cases
         for g in c.gates
-        if g.kind == "speedup"
+        if GATE_KINDS[g.kind].speed
     }
 
 

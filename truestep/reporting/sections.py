@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.cases.case import Case
+from truestep.cases.gate_kinds import GATE_KINDS
 from truestep.measures.findings import Conclusion, Findings
 from truestep.measures.peers import SAME
 from truestep.measures.picks import (
@@ -213,7 +214,7 @@ def speed_section(
     errors there are partly their contact law's (:func:`phase_sentence`)."""
     parts: list[str] = []
     for case in cases:
-        for g in (g for g in case.gates if g.kind == "speedup"):
+        for g in (g for g in case.gates if GATE_KINDS[g.kind].speed):
             table = speed[(case.name, g.where)]
             if table.empty or g.dt is None:
                 continue
