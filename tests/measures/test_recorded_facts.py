@@ -127,3 +127,31 @@ def test_one_judged_run_s_facts_do_not_reach_the_next():
     finally:
         engine_facts.take()
     assert not engine_facts.RECORDED_FACTS and not metrics.RECORDED_PRECISION
+
+
+def test_the_peers_and_notes_a_run_recorded_are_read_back_where_its_engine_is_not_installed():
+    """A judged run's ``peers`` and ``method_notes`` (its ``run.json``) are what the peer
+    table and the glossary read for its engines, also an engine not installed here; an
+    installed engine's record wins over its adapter; ``take()`` leaves the adapters' own."""
+    import pandas as pd
+
+    from truestep.adapters import adapter_class
+    from truestep.measures import engine_facts
+    from truestep.measures.findings import method_notes
+    from truestep.measures.peers import declared_peers
+
+    rows = pd.DataFrame({"engine": ["mine", "mujoco"], "method": ["m", "RK4"]})
+    record = {
+        "peers": {"mine": {"m": "rk4"}, "mujoco": {"RK4": "euler"}},
+        "method_notes": {"mine": {"m": "my own RK4"}},
+    }
+    assert declared_peers("mine") == {} and ("mine", "m") not in method_notes(rows)
+    try:
+        engine_facts.take(record)
+        assert declared_peers("mine") == {"m": "rk4"}
+        assert declared_peers("mujoco") == {"RK4": "euler"}  # the run's record, not the adapter's
+        assert method_notes(rows)[("mine", "m")] == "my own RK4"
+    finally:
+        engine_facts.take()
+    assert declared_peers("mine") == {}
+    assert declared_peers("mujoco") == dict(adapter_class("mujoco").peers)

@@ -32,6 +32,12 @@ RECORDED_FACTS: dict[str, dict[str, MethodFacts | None]] = {}
 RECORDED_LIMITS: dict[tuple[str, str, str], float] = {}
 """(engine, method, case) -> the exact largest stable step (s) its run recorded
 (``stability_limits``), set by :func:`take`."""
+RECORDED_PEERS: dict[str, dict[str, str]] = {}
+"""Engine -> method -> the reference method its run recorded as its scheme (``peers``),
+set by :func:`take`."""
+RECORDED_NOTES: dict[str, dict[str, str]] = {}
+"""Engine -> method -> the glossary note its run recorded (``method_notes``), set by
+:func:`take`."""
 
 
 def _number(x: float) -> float | str:
@@ -157,8 +163,9 @@ def _facts_from(value: object) -> MethodFacts | None:
 
 def take(*run_records: dict | None) -> None:
     """Judge by what these runs recorded about their engines (their ``run.json``), over what
-    the adapters installed here say: precision, method facts and stability limits, a later
-    record winning where two name the same engine (a baseline's, then the judged run's).
+    the adapters installed here say: precision, method facts, stability limits, peers and
+    glossary notes, a later record winning where two name the same engine (a baseline's,
+    then the judged run's).
     What an earlier call took is dropped first, so one judged run's facts never reach the
     next (two markers of one pytest session, two gates of one process); ``take()`` judges by
     the installed adapters alone."""
@@ -166,6 +173,8 @@ def take(*run_records: dict | None) -> None:
 
     RECORDED_FACTS.clear()
     RECORDED_LIMITS.clear()
+    RECORDED_PEERS.clear()
+    RECORDED_NOTES.clear()
     metrics.RECORDED_PRECISION.clear()
     for run_record in run_records:
         _take_one(run_record)
@@ -179,6 +188,10 @@ def _take_one(run_record: dict | None) -> None:
     for engine, methods in ((run_record or {}).get("method_facts") or {}).items():
         if isinstance(methods, dict):
             RECORDED_FACTS[str(engine)] = {str(m): _facts_from(v) for m, v in methods.items()}
+    for key, into in (("peers", RECORDED_PEERS), ("method_notes", RECORDED_NOTES)):
+        for engine, said in ((run_record or {}).get(key) or {}).items():
+            if isinstance(said, dict):
+                into[str(engine)] = {str(m): v for m, v in said.items() if isinstance(v, str)}
     for engine, methods in ((run_record or {}).get("stability_limits") or {}).items():
         for method, by_case in methods.items() if isinstance(methods, dict) else ():
             for case, value in by_case.items() if isinstance(by_case, dict) else ():
@@ -197,6 +210,12 @@ def recorded_facts(engine: str, method: str) -> tuple[bool, MethodFacts | None]:
     if methods is None or method not in methods:
         return False, None
     return True, methods[method]
+
+
+def recorded_words(engine: str, key: str) -> dict[str, str] | None:
+    """What the judged run recorded of ``engine``'s ``peers`` or ``method_notes``
+    (``key``), method -> words, or ``None`` where it recorded nothing of that engine."""
+    return {"peers": RECORDED_PEERS, "method_notes": RECORDED_NOTES}[key].get(engine)
 
 
 def recorded_limit(engine: str, method: str, case: str) -> float | None:

@@ -151,14 +151,19 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
 
 
 def method_notes(results: pd.DataFrame) -> dict[tuple[str, str], str]:
-    """(engine, method) -> its adapter's one-line ``method_notes`` entry, for every pair in
-    ``results`` (an engine not installed here, or whose adapter says nothing, has none)."""
+    """(engine, method) -> its one-line ``method_notes`` entry, for every pair in
+    ``results``: what the judged run recorded (:func:`~truestep.measures.engine_facts.take`),
+    else what its installed adapter says (an engine not installed here, or whose adapter
+    says nothing, has none)."""
     from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
+    from truestep.measures.engine_facts import recorded_words
 
     notes: dict[tuple[str, str], str] = {}
     for engine, methods in results.groupby("engine", sort=False)["method"]:
+        said = recorded_words(str(engine), "method_notes")
         try:
-            said = getattr(adapter_class(str(engine)), "method_notes", None) or {}
+            if said is None:
+                said = getattr(adapter_class(str(engine)), "method_notes", None) or {}
         except (UnknownEngine, EngineNotInstalled):
             continue
         for method in dict.fromkeys(methods.astype(str)):

@@ -30,10 +30,15 @@ scheme differ by round-off and engine detail, never by a steady factor beyond it
 
 
 def declared_peers(engine: str) -> Mapping[str, str]:
-    """The ``peers`` an installed engine's adapter declares (method -> reference method),
-    or none (an engine not installed here, or one that declares none)."""
+    """The ``peers`` (method -> reference method) the judged run recorded for ``engine``
+    (:func:`~truestep.measures.engine_facts.take`), else those its installed adapter
+    declares, else none (an engine not installed here, or one that declares none)."""
     from truestep.adapters import EngineNotInstalled, UnknownEngine, adapter_class
+    from truestep.measures.engine_facts import recorded_words
 
+    recorded = recorded_words(engine, "peers")
+    if recorded is not None:
+        return recorded
     try:
         return dict(getattr(adapter_class(engine), "peers", None) or {})
     except (EngineNotInstalled, UnknownEngine):
