@@ -161,11 +161,13 @@ class GateCheck:
     def check(self) -> None:
         """Fail the test (with the gate's measured and required values) unless it holds;
         skip it when the run could not evaluate it."""
+        from truestep.runtime.visible import visible
+
         r = self.result()
         if not r.evaluated:
-            pytest.skip(f"not evaluated: {r.line()}")
+            pytest.skip(visible(f"not evaluated: {r.line()}"))
         if not r.passed:
-            pytest.fail(r.line(), pytrace=False)
+            pytest.fail(visible(r.line()), pytrace=False)
 
 
 @functools.cache
@@ -248,7 +250,9 @@ class BaselineCheck:
             )
         bad = [f for f in comparison.worse() if f.table == self.table]
         if bad:
-            pytest.fail("\n".join(f.line() for f in bad), pytrace=False)
+            from truestep.runtime.visible import visible
+
+            pytest.fail("\n".join(visible(f.line()) for f in bad), pytrace=False)
 
 
 def _comparison(sel: Selection):

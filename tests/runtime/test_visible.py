@@ -104,3 +104,25 @@ def test_console_lines_show_hidden_characters(capsys):
     assert main(["run", "--engines", "no\u202esuch\x1b[2J"]) == 2
     err = capsys.readouterr().err
     assert "\\u202e" in err and not any(ch in err for ch in HIDDEN)
+
+
+def test_the_pytest_plugin_s_verdict_lines_show_hidden_characters():
+    """The pytest plugin's failed and skipped gates say what the CLI's console says, hidden
+    characters spelt out (the same ``GateResult.line`` through :func:`visible`)."""
+    from truestep.pytest_plugin import GateCheck
+
+    gate = Gate("error", ENGINE, METHOD, 0.01, {"max": 0.0}, "gates[0]")
+    verdicts = [
+        GateResult("free-fall\x1b", gate, False, "1e-3 \u202e", "<= 0"),
+        GateResult("free-fall\x1b", gate, True, "\u202e", "<= 1", evaluated=False),
+    ]
+    for verdict, outcome in zip(verdicts, (pytest.fail.Exception, pytest.skip.Exception), strict=True):
+
+        class Fixed(GateCheck):
+            def result(self, verdict=verdict):
+                return verdict
+
+        with pytest.raises(outcome) as said:
+            Fixed(None, None, gate).check()
+        assert "\\u202e" in str(said.value) and not any(ch in str(said.value) for ch in HIDDEN)
+        assert visible(verdict.line()) in str(said.value)
