@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from truestep import adapters
 from truestep.adapters import resolve_engine
 from truestep.execution import journal
 from truestep.execution.journal import Journal, JournalError, code_digest, fingerprint
@@ -26,6 +27,7 @@ def test_a_fixed_adapter_does_not_resume_the_buggy_ones_sweeps(tmp_path, monkeyp
     module = tmp_path / "mine_adapter_for_resume.py"
     module.write_text(ADAPTER.format(tag="a", factor=1.5))
     monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(adapters, "_RESOLVED", dict(adapters._RESOLVED))  # mine-a leaves with the test
     engine = resolve_engine("mine_adapter_for_resume:Mine")
     cases = [case_named("free-fall")]
     before = fingerprint(cases, [engine, "reference"], quick=True)
