@@ -561,6 +561,7 @@ def bench(
     budget_s: float | None = None,
     out: str | Path = "bench",
     threads: int = 1,
+    device: str | Mapping[str, str] | None = None,
 ) -> pd.DataFrame:
     """Particle-steps per second against n on the rain scene (``truestep bench``): the
     scaling table (:func:`truestep.execution.bench.scaling_table`; its ``attrs`` hold the
@@ -569,19 +570,24 @@ def bench(
     are ``attrs["csv"]`` and ``attrs["figure"]``). ``sizes`` default to :data:`BENCH_SIZES`, ``budget_s`` to
     :data:`BENCH_BUDGET_S`; ``threads``: the threads of the engines that take a count (the
     reference, whose tiles of independent particles then run that many at once; its rows
-    say so). Raises :class:`~truestep.runtime.folder.OutRefused` for a folder truestep may
-    not write, before anything runs."""
+    say so); ``device``: where the engines that take one compute, as :func:`run` takes it
+    (each row names its ``device``). Raises :class:`~truestep.runtime.folder.OutRefused`
+    for a folder truestep may not write, and :class:`~truestep.adapters.devices.DeviceError`
+    for a device this machine lacks or an engine that takes none, before anything runs."""
     from truestep.execution.bench import COLUMNS, scaling_plot, scaling_table
     from truestep.runtime.folder import check_out, prepare
 
     folder = Path(out)
     check_out(folder)
-    table = scaling_table(
-        list(engines),
-        sizes=list(BENCH_SIZES if sizes is None else sizes),
-        budget_s=BENCH_BUDGET_S if budget_s is None else budget_s,
-        threads=threads,
-    )
+    names = list(engines)
+    on = devices.resolve(devices.parse(device), names, {n: adapter_class(n) for n in names})
+    with devices.used(on):
+        table = scaling_table(
+            names,
+            sizes=list(BENCH_SIZES if sizes is None else sizes),
+            budget_s=BENCH_BUDGET_S if budget_s is None else budget_s,
+            threads=threads,
+        )
     written = prepare(folder)
     table.attrs["csv"] = written / "scaling.csv"
     table.to_csv(table.attrs["csv"], index=False, columns=COLUMNS)

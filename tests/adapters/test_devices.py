@@ -12,6 +12,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from truestep.adapters import devices
@@ -293,3 +294,48 @@ def test_a_remote_cluster_is_refused_with_a_device(monkeypatch, tmp_path):
             progress=lambda _: None,
         )
     assert not (tmp_path / "rep").exists()
+
+
+def test_the_scaling_table_names_each_row_s_device_and_a_gpu_that_is_not_here_is_rows(tmp_path, monkeypatch):
+    """``truestep bench --device``: Newton put on ``cuda:0`` of a machine said to have one
+    GPU; without it its rows are ``crashed`` rows that say why, and every row that ran
+    names its device (the reference's ``cpu``); rows that did not run name none."""
+    pytest.importorskip("newton")
+    from truestep import api
+    from truestep.adapters import warp_runtime
+
+    monkeypatch.setattr(devices, "cuda_devices", lambda python=None: 1)
+    monkeypatch.setattr(warp_runtime, "_GPU_WANTED", [])  # this test's GPU adapter marks no other test
+    real = os.environ.get(devices.ENV)
+    table = api.bench(
+        ["reference", "newton"], sizes=[10], budget_s=2.0, out=tmp_path / "b", device="newton=cuda:0"
+    )
+    assert os.environ.get(devices.ENV) == real
+    ran = ~table.status.isin(["skipped", "unsupported"])
+    newton, reference = table[ran & (table.engine == "newton")], table[ran & (table.engine == "reference")]
+    assert len(newton) and len(reference)
+    assert set(newton.device) == {"cuda:0"} and set(reference.device) == {"cpu"}
+    assert set(table.device[~ran]) <= {""}
+    if devices.cuda_devices() == 0:
+        assert set(newton.status) == {"crashed"} and newton.note.str.contains("cuda:0").all()
+    written = pd.read_csv(tmp_path / "b" / "scaling.csv", keep_default_na=False)
+    assert list(written.device) == list(table.device)
+
+
+@pytest.mark.parametrize(
+    ("device", "engines", "said"),
+    [
+        ("reference=cuda:0", "reference", "--device: reference=cuda:0: reference computes on the CPU only"),
+        ("cuda:99", "reference,newton", "--device: newton=cuda:99: this machine has "),
+    ],
+)
+def test_bench_refuses_a_device_it_cannot_use_in_one_line_and_writes_nothing(tmp_path, device, engines, said):
+    if "newton" in engines:
+        pytest.importorskip("newton")
+    done = _truestep(
+        "bench", "--engines", engines, "--sizes", "10", "--device", device, "--out", "b", cwd=tmp_path
+    )
+    assert done.returncode == 2, done.stderr[-2000:]
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"truestep: error: {said}")
+    assert not (tmp_path / "b").exists()

@@ -57,6 +57,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "independent particles N at a time (default 1; its rows say so); every other "
         "engine runs as it does",
     )
+    bench.add_argument(
+        "--device",
+        default=None,
+        metavar="DEVICE",
+        help="where the engines that take a device compute, as `truestep run --device` takes it: "
+        "cuda:0 for every one of them, newton=cuda:0 for one (default: every engine on the CPU; "
+        "each row names its device)",
+    )
     bench.set_defaults(func=main)
 
 
@@ -65,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
     its table printed."""
     import pandas as pd
 
-    from truestep.api import MAX_PARTICLES, OutRefused, bench, select_engines
+    from truestep.api import MAX_PARTICLES, DeviceError, OutRefused, bench, select_engines
 
     try:
         sizes = [float(s) for s in args.sizes.split(",") if s.strip()]
@@ -92,7 +100,11 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError("--engines: no engine is installed")
     start = time.perf_counter()
     try:
-        table = bench(engines, sizes=sizes, budget_s=args.budget, out=folder, threads=args.threads)
+        table = bench(
+            engines, sizes=sizes, budget_s=args.budget, out=folder, threads=args.threads, device=args.device
+        )
+    except DeviceError as err:
+        raise UsageError(f"--device: {err}") from None
     except OutRefused as err:
         raise UsageError(str(err)) from None
     bandwidth = table.attrs["bandwidth_bytes_per_s"]

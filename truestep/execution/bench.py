@@ -71,6 +71,7 @@ import numpy as np
 import pandas as pd
 
 from truestep.adapters import PluginFailed, get_adapter, plugin_answer
+from truestep.adapters.devices import CPU, engine_device
 from truestep.cases.case import Case
 from truestep.execution.bench_defaults import BUDGET_S, SIZES
 from truestep.execution.progress import Progress
@@ -79,6 +80,9 @@ from truestep.tables.spec import SCALING
 
 RAIN_CASE = "particle-rain"
 """The case whose scene is scaled: independent balls over a floor."""
+NOT_RUN = ("skipped", "unsupported")
+"""Statuses of rows that did not run (over the budget, or a scene the engine cannot
+model): they name no device."""
 
 
 TARGET_S = 0.2
@@ -506,6 +510,10 @@ def scaling_table(
         reference, whose tiles of independent particles then run that many at once); every
         other engine runs as it does. Those rows' notes say so.
 
+    Each engine computes on the device the run resolved for it (``truestep bench
+    --device``, :mod:`truestep.adapters.devices`; the CPU by default), which each row that
+    ran names (``device``).
+
     Returns
     -------
     DataFrame with one row per (engine, method, n), columns :data:`COLUMNS`:
@@ -518,7 +526,8 @@ def scaling_table(
     1: the state stays in cache between steps); ``untimed_s``, the rest of the timed
     child's time, s (process start, its warm-up, building the scenes, a probe run,
     reading back, teardown); ``status`` ``ok``, ``unstable``, ``crashed``, ``timeout``,
-    ``unsupported`` or ``skipped``; ``note``, the reason, or the engine's notes.
+    ``unsupported`` or ``skipped``; ``note``, the reason, or the engine's notes; ``device``,
+    where the row computed (empty for a row that did not run).
     ``attrs`` holds ``bandwidth_bytes_per_s``, ``bytes_per_particle_step``, ``dt``,
     ``budget_s``, ``target_s``, ``threads``, ``elapsed_s`` (seconds of the whole call,
     within the budget) and ``warmup_s`` (those of compiling and the warm-up children,
@@ -610,6 +619,10 @@ def scaling_table(
     for col in COLUMNS:
         if col not in table:
             table[col] = np.nan
+    table["device"] = [
+        "" if status in NOT_RUN else engine_device(str(engine))
+        for engine, status in zip(table["engine"], table["status"], strict=True)
+    ]
     order = {e: i for i, e in enumerate(engines)}
     methods = {(e, m): i for e in engines for i, m in enumerate(adapters[e].methods)}
     table = table.assign(
@@ -662,6 +675,9 @@ def scaling_plot(table: pd.DataFrame, bandwidth: float, path: Path | str) -> Pat
         if ok.empty:
             continue
         label = f"{engine} / {method}"
+        device = str(ok["device"].iloc[0]) if "device" in ok else ""
+        if device not in ("", "nan", CPU):
+            label += f" on {device}"
         threads = re.match(r"on (\d+) threads", str(ok["note"].iloc[0]))
         if threads:
             label += f", {threads.group(1)} threads"

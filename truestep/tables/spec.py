@@ -175,8 +175,8 @@ _DEVICE = Column(
     "device",
     "text",
     "",
-    "where the row computed: cpu, or the GPU its engine was put on (truestep run --device, or "
-    "an adapter made for one); empty for rows that did not run",
+    "where the row computed: cpu, or the GPU its engine was put on (--device of truestep run or "
+    "truestep bench, or an adapter made for one); empty for rows that did not run",
 )
 
 
@@ -457,6 +457,7 @@ SCALING = Table(
         ),
         Column("status", "name", "", "ok, skipped (over the budget) or the run's failure", required=True),
         _NOTE,
+        _DEVICE,
     ),
 )
 """``scaling.csv``."""
