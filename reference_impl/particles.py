@@ -10,13 +10,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from truestep.reference_impl import collisions, forces
 from truestep.reference_impl.model import ParticleModel
 from truestep.reference_impl.system import SecondOrderSystem
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 DENSE_JACOBIAN = 240
 """Up to this state dimension the Jacobian is returned as a dense array."""
@@ -167,7 +170,9 @@ class ParticleSystem(SecondOrderSystem):
             jac = np.zeros((self.dim, self.dim))
             np.add.at(jac, (ri, ci), blocks)
             return jac
-        return sp.csr_matrix((blocks.ravel(), (ri.ravel(), ci.ravel())), shape=(self.dim, self.dim))
+        from scipy.sparse import csr_matrix  # here, not at import: scipy.sparse is a tenth of a second
+
+        return csr_matrix((blocks.ravel(), (ri.ravel(), ci.ravel())), shape=(self.dim, self.dim))
 
     def between_steps(self, dt: float) -> None:
         for p in self.passes:

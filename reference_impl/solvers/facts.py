@@ -25,7 +25,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq
 
 StepMatrix = Callable[[float, float], np.ndarray]
 """``(a, b) -> M``: one step on the test system, ``a = (omega h)^2``, ``b = c h``
@@ -62,6 +61,8 @@ def first_growth(radius: Callable[[float], float], *, lo: float = SCAN_MIN, hi: 
     ``1 + RADIUS_TOL``. Returns ``0.0`` if ``radius(lo)`` already grows and ``inf`` if
     nothing in the range does.
     """
+    from scipy.optimize import brentq  # here, not at import: scipy.optimize is a third of a second
+
     grid = [float(x) for x in np.geomspace(lo, hi, int(SCAN_PER_DECADE * np.log10(hi / lo)) + 1)]
     grows = next((k for k, x in enumerate(grid) if radius(x) > 1.0 + RADIUS_TOL), None)
     if grows is None:

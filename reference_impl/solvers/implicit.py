@@ -6,9 +6,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-import scipy.linalg as la
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from truestep.reference_impl.solvers.base import Solver, SolverFailed
 from truestep.reference_impl.solvers.facts import MethodFacts, Stability
@@ -85,6 +82,10 @@ class ImplicitEuler(Solver):
         self, y: np.ndarray, t: float, fy: np.ndarray, dt: float
     ) -> Callable[[np.ndarray], np.ndarray]:
         """Factorise ``I - dt J`` at ``y``; keep and return its solve."""
+        import scipy.linalg as la  # here, not at import: scipy's linear algebra costs every
+        import scipy.sparse as sp  # process that imports truestep a tenth of a second, and
+        import scipy.sparse.linalg as spla  # only an implicit step needs it
+
         jac = self._jacobian(y, t, fy)
         solve: Callable[[np.ndarray], np.ndarray]
         if sp.issparse(jac) and y.size > DENSE_UP_TO:
