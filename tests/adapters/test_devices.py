@@ -308,7 +308,7 @@ def test_the_scaling_table_names_each_row_s_device_and_a_gpu_that_is_not_here_is
     monkeypatch.setattr(warp_runtime, "_GPU_WANTED", [])  # this test's GPU adapter marks no other test
     real = os.environ.get(devices.ENV)
     table = api.bench(
-        ["reference", "newton"], sizes=[10], budget_s=2.0, out=tmp_path / "b", device="newton=cuda:0"
+        ["reference", "newton"], sizes=[10], budget_s=120.0, out=tmp_path / "b", device="newton=cuda:0"
     )
     assert os.environ.get(devices.ENV) == real
     ran = ~table.status.isin(["skipped", "unsupported"])
