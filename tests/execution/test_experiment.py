@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pandas as pd
@@ -55,6 +56,23 @@ def test_the_public_run_writes_the_same_tables_and_leaves_no_journal(tmp_path):
     assert 0 < spent["sweep reference"] <= spent["sweep"] and 0 <= spent["compile"] <= spent["sweep"]
     # the searches and drops run beside the sweep's timed runs, the scaling table after it
     assert sum(spent[k] for k in kinds) <= spent["sweep"] + spent["analyses"]
+
+
+def test_each_engine_s_seconds_count_its_processes_from_fork_to_end(tmp_path):
+    """``run.json`` gives each engine's seconds of sweep and of search processes, each
+    counted from its fork to its end: not up to the moment its outcome was handed on (an
+    untimed outcome waits for a gap between timed runs), so that together they cannot pass
+    what the machine's cores had in the run's wall time."""
+    out = tmp_path / "rep"
+    truestep.run("harmonic-oscillator", ["reference", "pymunk"], quick=True, out=out, progress=lambda _: None)
+    spent = json.loads((out / "run.json").read_text())["seconds"]
+    engines = ("reference", "pymunk")
+    for engine in engines:
+        assert spent[f"sweep {engine}"] > 0 and spent[f"analyses stability {engine}"] > 0
+    cores = len(os.sched_getaffinity(0))
+    wall = spent["sweep"] + spent["analyses"]
+    counted = sum(spent[f"{phase} {e}"] for e in engines for phase in ("sweep", "analyses stability"))
+    assert counted <= cores * wall
 
 
 def test_a_run_beside_its_analyses_gives_the_tables_of_one_after_them(tmp_path):

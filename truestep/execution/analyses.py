@@ -146,6 +146,10 @@ class UntimedPart:
         self._bar: Progress | None = None
         self._first: float | None = None
         self._last: float | None = None
+        self.by_engine: dict[str, float] = {}
+        """Seconds of this part's processes by engine (each from its fork to its end,
+        :attr:`~truestep.runtime.isolation.Outcome.seconds`; they may overlap), where
+        ``prepares`` names each call's engine."""
 
     def __len__(self) -> int:
         return len(self.calls)
@@ -164,6 +168,9 @@ class UntimedPart:
         if self._bar is None:  # not started: the run's budget was spent
             self.call(k)
         assert self._bar is not None
+        if self._prepares:
+            engine = self._prepares[k][0]
+            self.by_engine[engine] = self.by_engine.get(engine, 0.0) + out.seconds
         self._on_done(k, out, self._bar)
         self._last = time.perf_counter()
         faults.point("analyses")
@@ -648,7 +655,9 @@ def run_analyses(
     started meanwhile), then the backlog's rest. Each phase shows done / total and the
     time left (``progress`` takes the lines instead); ``seconds`` receives each one's wall
     time (``analyses stability``, ``analyses restitution``, ``analyses scaling``, s; for a
-    part run as a backlog, from its first call's start to its last call's end).
+    part run as a backlog, from its first call's start to its last call's end), and the
+    seconds of each engine's processes in the first two (``analyses stability mujoco``...:
+    :attr:`UntimedPart.by_engine`).
     """
     from truestep.execution.bench import RAIN_CASE, scaling_table
 
@@ -680,5 +689,6 @@ def run_analyses(
     if seconds is not None:
         for part in ran:
             seconds[f"analyses {part.kind}"] = round(part.seconds, 3)
+            seconds.update({f"analyses {part.kind} {e}": round(s, 3) for e, s in part.by_engine.items()})
         seconds.setdefault("analyses restitution", 0.0)
     return {kind: tables[kind] for kind in ("stability", "restitution", "scaling")}

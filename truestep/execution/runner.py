@@ -638,7 +638,9 @@ def _run_here(
     cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
     and the measured runs of a split sweep (:func:`split_sweep`). Each finished sweep's
     rows go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
-    processes, from a process's start (its ``prepare`` included) to its outcome. Through
+    processes, each from its fork to its end (:attr:`Outcome.seconds`) with the adapter's
+    ``prepare`` before it, summed over processes that may overlap (a split sweep's two
+    halves run at once). Through
     ``lanes`` where it is given (its backlog follows the sweep's untimed runs)."""
     here = host_name()
     timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
@@ -647,21 +649,23 @@ def _run_here(
         for j, t in enumerate(timings)
         for part in (("measured", "timed") if split_sweep(planned[local[j][0]][1], t) else ("both",))
     ]
-    began: dict[int, float] = {}
+    prepared_s: dict[int, float] = {}
     waiting: dict[int, dict[str, Outcome]] = {}
 
     def call(i: int) -> Call:
         j, part = halves[i]
         k, dts, _ = local[j]
         case, engine, method, _ = planned[k]
-        began[i] = time.perf_counter()
-        return sweep_call(case, engine, method, dts, timings[j], part)
+        start = time.perf_counter()
+        made = sweep_call(case, engine, method, dts, timings[j], part)
+        prepared_s[i] = time.perf_counter() - start
+        return made
 
     def done(i: int, outcome: Outcome) -> None:
         j, part = halves[i]
         k, dts, adaptive = local[j]
         case, engine, method, _ = planned[k]
-        spent[engine] = spent.get(engine, 0.0) + time.perf_counter() - began.get(i, time.perf_counter())
+        spent[engine] = spent.get(engine, 0.0) + prepared_s.pop(i, 0.0) + outcome.seconds
         if part != "both":
             waiting.setdefault(j, {})[part] = outcome
             if len(waiting[j]) < 2:

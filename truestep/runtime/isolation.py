@@ -59,6 +59,10 @@ class Outcome:
     value: Any = None
     message: str = ""
     output: str = ""
+    seconds: float = 0.0
+    """Wall time (s) from the child's fork to its end (its result read, its death seen or
+    its time up); 0 for a call never started. Not the time its outcome was handed on: an
+    untimed outcome may wait for a gap between timed calls (:class:`Lanes`)."""
 
 
 OUTPUT_TAIL = 4000
@@ -223,10 +227,13 @@ class Running:
     deadline: float
     timeout: float
     by_budget: bool = False
+    started: float = 0.0
+    """``time.perf_counter()`` just before the fork."""
 
 
 def _start(index: int, call: Call) -> Running:
     fn, args, timeout = call
+    started = time.perf_counter()
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, os.getpid(), fn, args), daemon=True)
@@ -240,7 +247,13 @@ def _start(index: int, call: Call) -> Running:
     child.close()
     left = _budget_left()
     return Running(
-        index, proc, parent, time.monotonic() + min(timeout, left), timeout, by_budget=left < timeout
+        index,
+        proc,
+        parent,
+        time.monotonic() + min(timeout, left),
+        timeout,
+        by_budget=left < timeout,
+        started=started,
     )
 
 
@@ -264,6 +277,12 @@ def reap_exited(*, wait: bool = False) -> None:
 
 
 def _finish(run: Running, *, timed_out: bool, reap_later: bool = False) -> Outcome:
+    out = _outcome(run, timed_out=timed_out, reap_later=reap_later)
+    out.seconds = time.perf_counter() - run.started
+    return out
+
+
+def _outcome(run: Running, *, timed_out: bool, reap_later: bool) -> Outcome:
     try:
         if timed_out:
             return Outcome(
