@@ -3,8 +3,11 @@
 A run's device choice (:func:`parse`) names one device for every engine that takes one
 (``cuda:0``), a device per engine (``newton=cuda:0``), or both
 (``cuda:0,mujoco-warp=cpu``). An engine takes a device when its adapter class's
-constructor has a ``device`` parameter (truestep's Warp engines, MuJoCo Warp and Newton);
-every other engine computes on the CPU whatever is asked. :func:`resolve` checks a
+constructor has a ``device`` parameter (truestep's Warp engines, MuJoCo Warp and Newton,
+and the reference, whose independent-particle scenes have a Warp kernel); every other
+engine computes on the CPU whatever is asked. An engine whose class says
+``device_named_only`` (the reference) moves only when the choice names it
+(``reference=cuda:0``), never with a device for every engine (:func:`named_only`). :func:`resolve` checks a
 choice against the run's engines and this machine before anything runs: a form it does
 not know, an engine that is not in the run or takes no device, or a GPU that the machine
 does not have is a :class:`DeviceError` (``truestep run`` says it in one line and exits
@@ -118,6 +121,13 @@ def takes_device(adapter_class: type) -> bool:
         return False
 
 
+def named_only(adapter_class: type) -> bool:
+    """Whether an engine moves off the CPU only when a run names it (``reference=cuda:0``),
+    not with every engine (``cuda:0``): its adapter class's ``device_named_only`` (the
+    reference's, which on a GPU models fewer scenes)."""
+    return bool(getattr(adapter_class, "device_named_only", False))
+
+
 def cuda_devices(python: str | None = None) -> int:
     """The CUDA devices Warp finds on this machine, asked in a fresh interpreter (``python``,
     default this one): 0 where Warp is not installed, finds no driver, or does not answer
@@ -169,12 +179,17 @@ def resolve(
                 f"{engine}={device}: {engine} computes on the CPU only (its adapter takes no device)"
             )
     able = [e for e in engines if takes_device(classes[e])]
-    if choice.every not in (None, CPU) and not able:
+    if choice.every not in (None, CPU) and not [e for e in able if not named_only(classes[e])]:
         raise DeviceError(
             f"{choice.every}: none of the run's engines ({', '.join(engines)}) takes a device; "
-            "those that do: MuJoCo Warp and Newton (mujoco-warp, newton)"
+            "those that do: MuJoCo Warp and Newton (mujoco-warp, newton); the reference when named "
+            "(reference=cuda:0)"
         )
-    wanted = {e: d for e in able if (d := choice.of(e)) not in (None, CPU)}
+    wanted = {
+        e: d
+        for e in able
+        if (d := choice.engines.get(e) if named_only(classes[e]) else choice.of(e)) not in (None, CPU)
+    }
     if not wanted:
         return {}
     have = cuda_devices() if gpus is None else gpus

@@ -1,4 +1,13 @@
-"""The reference implementation as an adapter among equals."""
+"""The reference implementation as an adapter among equals.
+
+On the CPU (the default) every case runs, through the compiled path where it applies, else
+through the numpy system. Put on a GPU (``truestep run --device reference=cuda:0``; never
+by a bare ``--device cuda:0``, which moves the GPU engines only), the reference runs the
+scenes of independent particles with the lecture's update and symplectic Euler as one Warp
+kernel (:mod:`~truestep.reference_impl.warp_particles`, tested equal to the compiled path
+bit for bit on Warp's CPU device), and says ``unsupported`` for the rest: the same
+reference on the CPU is the other half of the twin rows.
+"""
 
 from __future__ import annotations
 
@@ -15,6 +24,7 @@ from truestep.adapters.base import (
     thin_records,
     unwatched_note,
 )
+from truestep.adapters.devices import CPU, chosen
 from truestep.cases.case import Case, OdeSpec
 from truestep.cases.plugins import ode_system
 from truestep.reference_impl.compiled import compiled_reason, prepared, run_compiled
@@ -61,6 +71,23 @@ def trajectory_of_states(
             return Trajectory(t=t, x=x, v=v, energy=e_particles, **fields)
 
 
+DEVICE_METHODS = ("lecture", "symplectic-euler")
+"""The methods the reference runs on a GPU (:data:`~truestep.reference_impl.warp_particles.KICK_DRIFT`)."""
+DEVICE_CAPABILITIES = frozenset(
+    {
+        Feature.POINT_MASSES,
+        Feature.PLANAR,
+        Feature.SPATIAL,
+        Feature.UNIFORM_GRAVITY,
+        Feature.DRAG,
+        Feature.PLANES,
+        Feature.THIN_WALLS,
+        Feature.FRICTION,
+    }
+)
+"""What the reference models on a GPU: independent particles (the Warp kernel's scenes)."""
+
+
 class ReferenceAdapter:
     """Every solver of :mod:`truestep.reference_impl.solvers` on every case it can express.
 
@@ -75,15 +102,25 @@ class ReferenceAdapter:
         timed rows keep one core each, as every engine's do.
     """
 
-    def __init__(self, *, compiled: bool = True, threads: int = 1) -> None:
+    def __init__(self, *, compiled: bool = True, threads: int = 1, device: str | None = None) -> None:
         if not (isinstance(threads, int) and threads >= 1):
             raise ValueError(f"threads: a whole number of at least 1, got {threads!r}")
         self.compiled = compiled
         self.threads = threads
+        self.device = device or chosen(self.name) or CPU
+        """Where the runs compute: ``cpu``, or a Warp device (``cuda:N``) for the scenes
+        and methods of :mod:`~truestep.reference_impl.warp_particles`."""
+        if self.device != CPU:
+            from truestep.adapters.warp_runtime import want_gpu
+
+            want_gpu(self.device)
+            self.methods = DEVICE_METHODS
+            self.adaptive_methods = ()
+            self.bounce_methods = tuple(m for m in type(self).bounce_methods if m in DEVICE_METHODS)
 
     name = "reference"
-    methods = tuple(METHODS)
-    adaptive_methods = tuple(m for m, cls in METHODS.items() if cls.adaptive)
+    methods: tuple[str, ...] = tuple(METHODS)
+    adaptive_methods: tuple[str, ...] = tuple(m for m, cls in METHODS.items() if cls.adaptive)
     method_notes = MappingProxyType(
         {
             "euler": "explicit (forward) Euler: order 1",
@@ -104,7 +141,7 @@ class ReferenceAdapter:
         """Each solver's own facts, read from its class attribute ``facts`` when asked."""
         return MappingProxyType({m: cls.facts for m, cls in METHODS.items()})
 
-    bounce_methods = ("lecture", "symplectic-euler", "rk4")
+    bounce_methods: tuple[str, ...] = ("lecture", "symplectic-euler", "rk4")
     """The methods of the restitution sweep: the collision pass is the same for all, so a
     first-order, a symplectic and a fourth-order integrator show whether the integrator
     matters at all."""
@@ -131,7 +168,31 @@ class ReferenceAdapter:
         }
     )
 
+    device_named_only = True
+    """A bare ``--device cuda:0`` leaves the reference on the CPU: it moves there only when
+    named (``reference=cuda:0``), since on a GPU it models fewer scenes."""
+    unsupported_notes = MappingProxyType(
+        {
+            f: "on a GPU the reference steps independent particles only (gravity, drag, planes)"
+            for f in (
+                Feature.ODE,
+                Feature.SECOND_ORDER,
+                Feature.SPRINGS,
+                Feature.SPRING_DAMPING,
+                Feature.ANCHORED_SPRINGS,
+                Feature.UNIVERSAL_GRAVITATION,
+                Feature.FORCE_FIELDS,
+                Feature.EMITTERS,
+                Feature.PINNED_PARTICLES,
+                Feature.IMPULSES,
+            )
+        }
+    )
+    """Why a feature is beyond the reference, which is only ever so on a GPU."""
+
     def missing(self, case: Case, method: str) -> set[str]:
+        if self.device != CPU:
+            return set(case.features - DEVICE_CAPABILITIES)
         missing = case.features - self.capabilities
         if (
             METHODS[method].needs_second_order
@@ -145,13 +206,13 @@ class ReferenceAdapter:
         """Compile the loop ``method`` runs ``case`` with (or load it from numba's cache;
         shown on standard error when slow), where the compiled path applies: called in
         the parent before it forks a sweep's runs, so that they find it ready."""
-        if self.compiled and compiled_reason(case.model, method) is None:
+        if self.device == CPU and self.compiled and compiled_reason(case.model, method) is None:
             prepared(case.particles, method)
 
     def prepare_all(self, pairs: list[tuple[Case, str]], *, workers: int = 1) -> None:
         """:meth:`prepare` every (case, method) of ``pairs``, the loops they need compiled
         on ``workers`` cores at once (:func:`~truestep.reference_impl.precompile.compile_all`)."""
-        if self.compiled:
+        if self.device == CPU and self.compiled:
             compile_all(pairs=[(case.model, method) for case, method in pairs], workers=workers)
 
     def simulate(self, case: Case, method: str, dt: float, *, monitor: bool = False) -> Trajectory:
@@ -181,6 +242,8 @@ class ReferenceAdapter:
         return traj
 
     def _simulate(self, case: Case, method: str, dt: float) -> Trajectory:
+        if self.device != CPU:
+            return self._simulate_on_device(case, method, dt)
         if self.compiled and compiled_reason(case.model, method) is None:
             return self._simulate_compiled(case, method, dt)
         system = build_system(case)
@@ -210,6 +273,41 @@ class ReferenceAdapter:
             alive=run.extra.get("alive"),
             path="numpy",
             message=run.message,
+        )
+
+    def _simulate_on_device(self, case: Case, method: str, dt: float) -> Trajectory:
+        """The run on :attr:`device` (:func:`~truestep.reference_impl.warp_particles.run`); a
+        run in which a particle ran away is made again on the CPU, whose records and stop
+        are the row's (its message says so)."""
+        from truestep.adapters.warp_runtime import start
+        from truestep.reference_impl.warp_particles import run as run_on_device
+
+        start()
+        n_steps, h = case.steps_for(dt)
+        run = run_on_device(
+            case.particles, method, h, n_steps, device=self.device, max_records=case.max_records
+        )
+        if run.blew_up is not None:
+            again = self._simulate_compiled(case, method, dt)
+            words = (
+                f"a particle ran away by step {run.blew_up} on {self.device}: "
+                "the records and the stop are the CPU's run of the same steps"
+            )
+            again.message = "; ".join(m for m in (again.message, words) if m)
+            return again
+        with np.errstate(all="ignore"):
+            energy = total_energy(case.particles, run.x, run.v)
+        return Trajectory(
+            t=run.t,
+            x=run.x,
+            v=run.v,
+            energy=energy,
+            status="ok",
+            t_fail=None,
+            nfev=run.nfev,
+            steps=run.steps,
+            wall_s=run.wall_s,
+            path="warp",
         )
 
     def _simulate_compiled(self, case: Case, method: str, dt: float) -> Trajectory:

@@ -20,16 +20,14 @@ from typing import Any, ClassVar
 from truestep.adapters.base import FixedStepAdapter
 from truestep.adapters.devices import chosen
 from truestep.adapters.quiet import without_banner
-from truestep.numerics import OPT_OUT
+from truestep.numerics import WARP_GENERIC_CPU, configure_warp
 
 BANNER = r"^Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
 """Warp's greeting on a machine without a GPU (its version banner is off by log level)."""
 
-GENERIC_CPU = ""
-"""Warp's CPU compiler flags: a generic x86-64 (or aarch64) target, not Warp's default
-``-march=native``, so that the kernels round alike on every machine of one architecture
-(no FMA contraction or wider vectors chosen by the host). ``TRUESTEP_NUMERICS=native``
-keeps Warp's default."""
+GENERIC_CPU = WARP_GENERIC_CPU
+"""Warp's CPU compiler flags (:data:`truestep.numerics.WARP_GENERIC_CPU`);
+``TRUESTEP_NUMERICS=native`` keeps Warp's default."""
 
 DEVICE = "cpu"
 """Warp's device unless one is asked: the CPU, so that every machine computes the same
@@ -41,9 +39,7 @@ PRECISION = "float32"
 with without_banner(BANNER):
     import warp as wp
 
-wp.config.log_level = wp.LOG_WARNING
-if os.environ.get(OPT_OUT, "").lower() != "native":
-    wp.config.cpu_compiler_flags = GENERIC_CPU
+configure_warp(wp)
 
 _STARTED: list[bool] = []
 """Whether :func:`start` has started Warp in this process."""
@@ -58,6 +54,12 @@ def start() -> None:
         with without_banner(BANNER):
             wp.init()
         _STARTED.append(True)
+
+
+def want_gpu(device: str) -> None:
+    """Say that an adapter made in this process computes on ``device`` (not the CPU): from
+    then on nothing here starts Warp before the runs are forked (:func:`wants_gpu`)."""
+    _GPU_WANTED.append(device)
 
 
 def wants_gpu() -> bool:
@@ -189,7 +191,7 @@ class WarpAdapter(FixedStepAdapter):
     def __init__(self, *, device: str | None = None) -> None:
         self.device = device or chosen(self.name) or DEVICE
         if self.device != "cpu":
-            _GPU_WANTED.append(self.device)
+            want_gpu(self.device)
 
     def prepare_all(self, pairs: Iterable[tuple[Any, str]], *, workers: int = 1) -> None:
         """Where Warp's kernel cache holds none of this engine's kernels (a first run on
@@ -246,6 +248,7 @@ __all__ = [
     "settle",
     "settle_all",
     "start",
+    "want_gpu",
     "wants_gpu",
     "wp",
 ]

@@ -92,6 +92,21 @@ OPT_OUT = "TRUESTEP_NUMERICS"
 """``TRUESTEP_NUMERICS=native``: leave threads, kernels and dispatch as the machine has them."""
 
 
+WARP_GENERIC_CPU = ""
+"""Warp's CPU compiler flags: a generic x86-64 (or aarch64) target, not Warp's default
+``-march=native``, so that its kernels round alike on every machine of one architecture
+(no FMA contraction or wider vectors chosen by the host)."""
+
+
+def configure_warp(wp: Any) -> None:
+    """Set Warp (the module ``wp``, imported by the caller) as truestep computes with it:
+    warning log level, and CPU kernels compiled for :data:`WARP_GENERIC_CPU` unless
+    ``TRUESTEP_NUMERICS=native``. Starts nothing (Warp's runtime looks for CUDA)."""
+    wp.config.log_level = wp.LOG_WARNING
+    if os.environ.get(OPT_OUT, "").lower() != "native":
+        wp.config.cpu_compiler_flags = WARP_GENERIC_CPU
+
+
 def _cpu_flags() -> set[str]:
     """The CPU's feature flags (Linux ``/proc/cpuinfo``; empty elsewhere)."""
     try:

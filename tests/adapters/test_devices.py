@@ -32,6 +32,12 @@ class OnDevice:
         self.device = device
 
 
+class OnDeviceByName(OnDevice):
+    """An adapter class that moves off the CPU only when named (as the reference does)."""
+
+    device_named_only = True
+
+
 CLASSES = {"reference": OnCpu, "mujoco": OnCpu, "newton": OnDevice, "mujoco-warp": OnDevice}
 
 
@@ -73,6 +79,23 @@ def test_every_engine_that_takes_a_device_gets_it_and_a_named_one_wins():
     assert resolve(parse("cuda:0"), engines, CLASSES, gpus=1) == {"newton": "cuda:0", "mujoco-warp": "cuda:0"}
     assert resolve(parse("cuda:0,mujoco-warp=cpu"), engines, CLASSES, gpus=1) == {"newton": "cuda:0"}
     assert resolve(parse("newton=cuda:1"), engines, CLASSES, gpus=2) == {"newton": "cuda:1"}
+
+
+def test_the_reference_moves_to_a_gpu_only_when_named():
+    """``--device cuda:0`` moves the GPU engines and leaves the reference on the CPU (on a GPU
+    it models fewer scenes); ``reference=cuda:0`` moves it; a run of the reference alone
+    cannot take a device for every engine."""
+    from truestep.adapters.reference import ReferenceAdapter
+
+    assert devices.takes_device(ReferenceAdapter) and devices.named_only(ReferenceAdapter)
+    classes = {**CLASSES, "reference": OnDeviceByName}
+    engines = ["reference", "newton"]
+    assert resolve(parse("cuda:0"), engines, classes, gpus=1) == {"newton": "cuda:0"}
+    assert resolve(parse("reference=cuda:0"), engines, classes, gpus=1) == {"reference": "cuda:0"}
+    both = {"reference": "cuda:0", "newton": "cuda:0"}
+    assert resolve(parse("cuda:0,reference=cuda:0"), engines, classes, gpus=1) == both
+    with pytest.raises(DeviceError, match=r"none of the run's engines .* the reference when named"):
+        resolve(parse("cuda:0"), ["reference"], classes, gpus=1)
 
 
 def test_the_cpu_or_nothing_asked_needs_no_gpu_and_resolves_to_nothing(monkeypatch):
@@ -240,6 +263,37 @@ def test_a_run_records_its_devices_and_its_rows_carry_what_happened_there(tmp_pa
         assert newton.message.str.contains("cuda:0").all()
 
 
+def test_the_reference_named_onto_a_gpu_runs_its_particle_scenes_there_and_says_what_it_does_not(
+    tmp_path, monkeypatch
+):
+    """``--device reference=cuda:0`` on a machine said to have one GPU: the reference runs
+    its two device methods there (without a GPU, ``crashed`` rows naming the device), and a
+    scene its device kernel does not model is ``unsupported``, saying so."""
+    pytest.importorskip("warp")
+    from truestep import api
+    from truestep.adapters import warp_runtime
+    from truestep.adapters.reference import DEVICE_METHODS
+
+    monkeypatch.setattr(devices, "cuda_devices", lambda python=None: 1)
+    monkeypatch.setattr(warp_runtime, "_GPU_WANTED", [])  # this test's GPU adapter marks no other test
+    tables = api.run(
+        ["bouncing-ball", "hanging-cloth"],
+        ["reference"],
+        quick=True,
+        analyses=False,
+        progress=lambda _: None,
+        device="reference=cuda:0",
+    )
+    rows = tables.results
+    assert set(rows.method) == set(DEVICE_METHODS)
+    ball, cloth = rows[rows.case == "bouncing-ball"], rows[rows.case == "hanging-cloth"]
+    assert set(ball.device) == {"cuda:0"} and len(ball) == 2 * len(load_cases("bouncing-ball")[0].quick_dts)
+    assert set(cloth.status) == {"unsupported"}
+    assert cloth.message.str.contains("on a GPU the reference steps independent particles only").all()
+    if devices.cuda_devices() == 0:
+        assert set(ball.status) == {"crashed"} and ball.message.str.contains("cuda:0").all()
+
+
 def test_every_table_says_where_each_row_computed(tmp_path):
     """A run on the CPU: ``cpu`` on every row that ran, in each of the three tables, and
     nothing on rows that did not (an engine that lacks a feature, an adaptive method's
@@ -325,7 +379,7 @@ def test_the_scaling_table_names_each_row_s_device_and_a_gpu_that_is_not_here_is
 @pytest.mark.parametrize(
     ("device", "engines", "said"),
     [
-        ("reference=cuda:0", "reference", "--device: reference=cuda:0: reference computes on the CPU only"),
+        ("pymunk=cuda:0", "pymunk", "--device: pymunk=cuda:0: pymunk computes on the CPU only"),
         ("cuda:99", "reference,newton", "--device: newton=cuda:99: this machine has "),
     ],
 )

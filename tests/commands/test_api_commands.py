@@ -28,20 +28,21 @@ def test_engines_are_what_list_prints(capsys):
         assert printed[line].split("methods: ", 1)[1] == ", ".join(info.methods)
         assert printed[line + 1].split("capabilities: ", 1)[1] == ", ".join(info.capabilities)
         assert info.methods == tuple(truestep.get_adapter(info.name).methods)
-        assert not info.devices
-    assert not any("devices: " in text for text in printed)  # neither takes a device
+    assert infos[0].devices and not infos[1].devices  # the reference takes one when named
+    assert sum("devices: " in text for text in printed) == 1  # the reference's, not pymunk's
 
 
 def test_the_engines_that_take_a_device_say_so_in_list(capsys):
     """``truestep list`` names a device line for the engines whose adapter takes a device
-    (``--device`` can put them on a GPU), and none for the others."""
+    (``--device`` can put them on a GPU: Newton, and the reference when named), and none
+    for the others."""
     pytest.importorskip("newton")
     assert main(["list", "--cases", "free-fall", "--engines", "newton,reference"]) == 0
     printed = capsys.readouterr().out.split("engines:\n", 1)[1].splitlines()
     infos = {i.name: i for i in truestep.engines(["newton", "reference"])}
-    assert infos["newton"].devices and not infos["reference"].devices
+    assert infos["newton"].devices and infos["reference"].devices
     devices = [text.split("devices: ", 1)[1] for text in printed if "devices: " in text]
-    assert devices == ["cpu (the default), or a GPU: truestep run --device newton=cuda:0"]
+    assert devices == [f"cpu (the default), or a GPU: truestep run --device {e}=cuda:0" for e in infos]
 
 
 def test_the_environment_is_what_env_exports(capsys):

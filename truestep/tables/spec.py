@@ -296,7 +296,12 @@ RESULTS = Table(
             "truestep gate finds it again)",
             machine=True,
         ),
-        Column("path", "text", "", "the engine's code path (the reference: compiled or numpy)"),
+        Column(
+            "path",
+            "text",
+            "",
+            "the engine's code path (the reference: compiled, numpy, or warp: its kernel on a GPU)",
+        ),
         _DEVICE,
         Column(
             "host",
