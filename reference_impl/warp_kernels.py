@@ -4,7 +4,11 @@ Each function is the compiled path's of the same name (:mod:`~truestep.reference
 :mod:`~truestep.reference_impl.tiles`, :mod:`~truestep.reference_impl.solvers.splitting_kernels`), term for
 term and in its order, on float64 scalars (a particle's state is six of them, in registers).
 Importing it imports Warp (configured by :func:`truestep.numerics.configure_warp`) and
-starts nothing. mypy does not check this module (``pyproject.toml``): Warp's stubs type its
+starts nothing. The module is compiled without floating-point contraction (Warp's
+``fuse_fp`` off: no ``a * b + c`` fused into one rounding, on a GPU as on the CPU, whose
+generic target has no FMA) and without adjoints (nothing here is differentiated), so
+that a GPU can give the compiled path's bits too: IEEE double division and square root
+round correctly on both. mypy does not check this module (``pyproject.toml``): Warp's stubs type its
 arrays as read-only and its integer types apart from Python's.
 """
 
@@ -15,6 +19,7 @@ from truestep.reference_impl.collisions import EPS_DISTANCE, EPS_SPEED
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY
 
 configure_warp(wp)
+wp.set_module_options({"fuse_fp": False, "enable_backward": False})
 f64 = wp.float64
 F64 = wp.array[wp.float64]
 eps_d = wp.constant(f64(EPS_DISTANCE))

@@ -10,9 +10,10 @@ formulas of the compiled path's fused layout (:func:`~truestep.reference_impl.ti
 :func:`~truestep.reference_impl.collisions_kernels.collide`), term for term and in its
 order, in float64; the numpy system (:mod:`~truestep.reference_impl.particles`) stays the
 spec, and the tests hold this kernel to the compiled path's records bit for bit on Warp's
-CPU device (compiled for a generic target, :func:`truestep.numerics.configure_warp`: no
-FMA contraction). On a GPU the compiler may contract ``a * b + c`` into one rounding: the
-row then says which device it ran on, and the twin rows of the report compare the two.
+CPU device (compiled for a generic target, :func:`truestep.numerics.configure_warp`, and
+without floating-point contraction on any device, :mod:`~truestep.reference_impl.warp_kernels`),
+so that a GPU run can give the same bits; whether it does is measured where a GPU is
+(``benchmarks/gpu_checks.py``).
 
 Modelled, and nothing else (:func:`device_reason` names what a scene needs beyond it): a
 scene whose particles do not act on one another (no springs, anchors, gravitation,
