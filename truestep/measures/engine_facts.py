@@ -92,13 +92,16 @@ def _limits_record(facts: MethodFacts | None, recorded: dict | None, cases: Iter
 
 def record(engines: Iterable[str], cases: Iterable = ()) -> dict:
     """``run.json``'s facts of ``engines`` (installed here: the run just used them):
-    ``method_facts``, ``peers`` and ``method_notes``, each engine -> method -> value; and
+    ``method_facts``, ``peers`` and ``method_notes``, each engine -> method -> value;
     ``stability_limits`` (engine -> method -> case -> s) on ``cases`` for the methods whose
-    step matrix the recorded values leave out (:func:`_limits_record`), where there are any."""
+    step matrix the recorded values leave out (:func:`_limits_record`), and ``twins``
+    (:func:`truestep.measures.twins.twins_of`), where there are any."""
     from truestep.adapters import EngineNotInstalled, UnknownEngine, get_adapter
     from truestep.adapters.base import facts_of
+    from truestep.measures.twins import twins_of
 
     cases = list(cases)
+    engines = list(engines)
     limits: dict[str, dict] = {}
     facts: dict[str, dict] = {}
     peers: dict[str, dict] = {}
@@ -126,6 +129,7 @@ def record(engines: Iterable[str], cases: Iterable = ()) -> dict:
         "peers": peers,
         "method_notes": notes,
         **({"stability_limits": limits} if limits else {}),
+        **({"twins": twins} if (twins := twins_of(engines, recorded=False)) else {}),
     }
 
 
@@ -163,18 +167,19 @@ def _facts_from(value: object) -> MethodFacts | None:
 
 def take(*run_records: dict | None) -> None:
     """Judge by what these runs recorded about their engines (their ``run.json``), over what
-    the adapters installed here say: precision, method facts, stability limits, peers and
-    glossary notes, a later record winning where two name the same engine (a baseline's,
+    the adapters installed here say: precision, method facts, stability limits, peers,
+    glossary notes and twins, a later record winning where two name the same engine (a baseline's,
     then the judged run's).
     What an earlier call took is dropped first, so one judged run's facts never reach the
     next (two markers of one pytest session, two gates of one process); ``take()`` judges by
     the installed adapters alone."""
-    from truestep.measures import metrics
+    from truestep.measures import metrics, twins
 
     RECORDED_FACTS.clear()
     RECORDED_LIMITS.clear()
     RECORDED_PEERS.clear()
     RECORDED_NOTES.clear()
+    twins.RECORDED_TWINS.clear()
     metrics.RECORDED_PRECISION.clear()
     for run_record in run_records:
         _take_one(run_record)
@@ -183,11 +188,15 @@ def take(*run_records: dict | None) -> None:
 def _take_one(run_record: dict | None) -> None:
     """One run's record over what :func:`take` holds already."""
     from truestep.measures.metrics import recorded_precision
+    from truestep.measures.twins import RECORDED_TWINS
 
     recorded_precision(run_record)
     for engine, methods in ((run_record or {}).get("method_facts") or {}).items():
         if isinstance(methods, dict):
             RECORDED_FACTS[str(engine)] = {str(m): _facts_from(v) for m, v in methods.items()}
+    pairs = (run_record or {}).get("twins")
+    if isinstance(pairs, dict):
+        RECORDED_TWINS.update({str(b): str(a) for b, a in pairs.items() if isinstance(a, str)})
     for key, into in (("peers", RECORDED_PEERS), ("method_notes", RECORDED_NOTES)):
         for engine, said in ((run_record or {}).get(key) or {}).items():
             if isinstance(said, dict):

@@ -29,6 +29,7 @@ from truestep.measures.picks import (
 )
 from truestep.measures.reference_floor import ReferenceFloor, reference_floor
 from truestep.measures.restitution import phase_contact
+from truestep.measures.twins import TWIN_COLUMNS, twin_rows
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,8 @@ class Findings:
     floors: dict[str, ReferenceFloor] = dataclasses.field(default_factory=dict)
     """case name -> its reference run's own error, for a case measured against a run
     (:func:`truestep.measures.reference_floor.reference_floor`)."""
+    twins: pd.DataFrame = dataclasses.field(default_factory=lambda: pd.DataFrame(columns=list(TWIN_COLUMNS)))
+    """An engine's rows off the CPU beside its rows on the CPU (:func:`truestep.measures.twins.twin_rows`)."""
 
 
 Run = tuple[str, str, float, str, float]
@@ -147,6 +150,7 @@ def find(cases: list[Case], results: pd.DataFrame, tables: dict[str, pd.DataFram
         costly=costly_rows(results),
         phase_contact=phase_contact(tables.get("restitution")),
         floors={c.name: f for c in cases if (f := reference_floor(c)) is not None},
+        twins=twin_rows(results, cases),
     )
 
 

@@ -38,6 +38,7 @@ from truestep.reporting.sections import (
     scorecard_section,
     speed_section,
     summary,
+    twin_section,
 )
 from truestep.runtime.isolation import (
     finish_isolated,
@@ -263,6 +264,7 @@ def render_markdown(
         )
     parts.append(folded(f"{len(fitted)} fitted orders", md_table(fitted)))
     parts += same_scheme_section(found.peers)
+    parts += twin_section(found.twins)
     parts.append("## Work against precision, per case\n")
     parts += costly_lines(found.costly)
     drawn = draw_case_figures(cases, results, traces, fig_dir)

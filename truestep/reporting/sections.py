@@ -562,6 +562,45 @@ def same_scheme_section(peers: pd.DataFrame) -> list[str]:
     return lines
 
 
+def twin_section(twins: pd.DataFrame) -> list[str]:
+    """ "One engine on two devices": each twin's rows (an engine off the CPU) beside its CPU
+    engine's at the same case, method and step, and a sentence naming every row where they
+    part (:func:`~truestep.measures.twins.twin_rows`); nothing where the run had no twins."""
+    if not len(twins):
+        return []
+    lines = ["### One engine on two devices\n"]
+    for (engine, base), pair in twins.groupby(["engine", "twin_of"], sort=False):
+        parting = pair[pair["parts"]]
+        device, there = pair["device"].iloc[0], pair["twin_device"].iloc[0]
+        lines.append(
+            f"**{text(engine)}** on {text(device)} is **{text(base)}** on {text(there)}: over "
+            f"{len(pair)} rows at the same case, method and step, the two end alike and their errors "
+            f"differ by at most {fmt(pair['band'].iloc[0])} of the case's scale (round-off) in "
+            f"{len(pair) - len(parting)}; they part in {len(parting)}"
+            + (
+                ": "
+                + "; ".join(
+                    f"{text(r.case)} {text(r.method)} at {fmt(r.dt)} ("
+                    + (
+                        f"{text(r.status)} on {text(device)}, {text(r.twin_status)} on {text(there)}"
+                        if r.status != r.twin_status
+                        else f"errors {fmt(r.error)} and {fmt(r.twin_error)}, "
+                        f"{fmt(r.difference)} of the scale apart"
+                    )
+                    + ")"
+                    for r in parting.head(12).itertuples(index=False)
+                )
+                + (f"; and {len(parting) - 12} more" if len(parting) > 12 else "")
+                + "."
+                if len(parting)
+                else "."
+            )
+            + "\n"
+        )
+    lines.append(folded(f"{len(twins)} twin rows", md_table(twins)))
+    return lines
+
+
 def costly_lines(costly: pd.DataFrame) -> list[str]:
     """The rows of over :data:`~truestep.measures.picks.LONG_ROW_S` of stepping, each with
     what it buys against its next coarser step (:func:`~truestep.measures.picks.costly_rows`)."""
