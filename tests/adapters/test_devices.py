@@ -98,6 +98,23 @@ def test_the_reference_moves_to_a_gpu_only_when_named():
         resolve(parse("cuda:0"), ["reference"], classes, gpus=1)
 
 
+def test_the_reference_made_for_a_gpu_marks_its_process_and_compiles_nothing_before_the_fork(monkeypatch):
+    """``ReferenceAdapter(device="cuda:0")`` says its process wants a GPU (no Warp engine
+    then starts Warp before the runs are forked), offers its device methods, and its
+    ``prepare`` compiles no CPU loop; made for the CPU, it marks nothing."""
+    pytest.importorskip("warp")
+    from truestep.adapters import reference, warp_runtime
+    from truestep.adapters.reference import DEVICE_METHODS, ReferenceAdapter
+
+    monkeypatch.setattr(warp_runtime, "_GPU_WANTED", [])
+    ReferenceAdapter()
+    assert not warp_runtime.wants_gpu()
+    monkeypatch.setattr(reference, "prepared", lambda *a, **k: pytest.fail("a CPU loop compiled on a GPU"))
+    on_gpu = ReferenceAdapter(device="cuda:0")
+    assert warp_runtime.wants_gpu() and on_gpu.methods == DEVICE_METHODS and on_gpu.adaptive_methods == ()
+    on_gpu.prepare(load_cases("bouncing-ball")[0], "lecture")
+
+
 def test_the_cpu_or_nothing_asked_needs_no_gpu_and_resolves_to_nothing(monkeypatch):
     monkeypatch.setattr(devices, "cuda_devices", lambda python=None: pytest.fail("no GPU is asked"))
     for text in (None, "cpu", "newton=cpu"):
