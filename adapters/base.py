@@ -283,6 +283,15 @@ def thin_records(traj: Trajectory, n_steps: int, max_records: int) -> Trajectory
     return traj
 
 
+def particle_trajectory(case: Case, t: np.ndarray, x: np.ndarray, v: np.ndarray, **fields: Any) -> Trajectory:
+    """The Trajectory of a particle scene's records (``t`` (T,) s, ``x``, ``v`` (T, n, 3) m
+    and m/s) with its energy (:func:`~truestep.reference_impl.particles.total_energy`, NaN
+    where the state is not finite) and ``fields`` (status, counts, wall time, message...)."""
+    with np.errstate(all="ignore"):
+        energy = total_energy(case.particles, x, v)
+    return Trajectory(t=t, x=x, v=v, energy=energy, **fields)
+
+
 def finite_until(x: np.ndarray, t: np.ndarray, limit: float = BLOWUP) -> tuple[str, float | None]:
     """Status of recorded states ``x`` (T, ...): ``ok`` or ``unstable`` at the first bad time."""
     flat = np.abs(x.reshape(len(x), -1))
@@ -516,13 +525,11 @@ class FixedStepAdapter(abc.ABC):
             status, t_fail = "unstable", float(rec.t[-1])
         if status != "ok" and rec.stopped:
             notes = [rec.stopped, *notes]
-        with np.errstate(all="ignore"):
-            energy = total_energy(case.particles, rec.x, rec.v)
-        return Trajectory(
-            t=rec.t,
-            x=rec.x,
-            v=rec.v,
-            energy=energy,
+        return particle_trajectory(
+            case,
+            rec.t,
+            rec.x,
+            rec.v,
             status=status,
             t_fail=t_fail,
             nfev=rec.steps * self.evaluations_for(case, method),

@@ -21,6 +21,7 @@ from truestep.adapters.base import (
     MONITOR_BYTES,
     EnergyExtremes,
     Trajectory,
+    particle_trajectory,
     thin_records,
     unwatched_note,
 )
@@ -295,20 +296,8 @@ class ReferenceAdapter:
             )
             again.message = "; ".join(m for m in (again.message, words) if m)
             return again
-        with np.errstate(all="ignore"):
-            energy = total_energy(case.particles, run.x, run.v)
-        return Trajectory(
-            t=run.t,
-            x=run.x,
-            v=run.v,
-            energy=energy,
-            status="ok",
-            t_fail=None,
-            nfev=run.nfev,
-            steps=run.steps,
-            wall_s=run.wall_s,
-            path="warp",
-        )
+        fields = {"nfev": run.nfev, "steps": run.steps, "wall_s": run.wall_s, "path": "warp"}
+        return particle_trajectory(case, run.t, run.x, run.v, status="ok", t_fail=None, **fields)
 
     def _simulate_compiled(self, case: Case, method: str, dt: float) -> Trajectory:
         run, wall = run_compiled(
@@ -319,14 +308,12 @@ class ReferenceAdapter:
             max_records=case.max_records,
             threads=self.threads,
         )
-        with np.errstate(all="ignore"):
-            energy = total_energy(case.particles, run.x, run.v)
         message = "non-finite or runaway state (beyond 1e12)" if run.status == "unstable" else ""
-        return Trajectory(
-            t=run.t,
-            x=run.x,
-            v=run.v,
-            energy=energy,
+        return particle_trajectory(
+            case,
+            run.t,
+            run.x,
+            run.v,
             status=run.status,
             t_fail=run.t_fail,
             nfev=run.nfev,
