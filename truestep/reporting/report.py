@@ -425,10 +425,13 @@ def run_record(
     where every engine computed on the CPU);
     wall time of the run's phases before the report (``seconds``: ``sweep``, ``analyses``;
     ``compile``, the part of the sweep spent compiling ahead of the first timed run;
-    ``sweep <engine>``, the seconds each engine's sweep processes ran, which overlap where
-    sweeps share the cores; ``analyses stability`` and ``analyses restitution``, from the
-    first search or drop's start to the last one's end, which overlap ``sweep`` where they
-    run beside its timed runs, and ``analyses scaling``; the report's own time is not in
+    ``sweep <engine>``, the seconds each engine's sweep processes ran, each from its fork
+    to its end with its adapter's ``prepare``, which overlap where sweeps share the cores;
+    ``analyses stability`` and ``analyses restitution``, from the first search or drop's
+    start to the last one's end, which overlap ``sweep`` where they run beside its timed
+    runs, and ``analyses stability <engine>`` and ``analyses restitution <engine>``, the
+    seconds of each engine's search and drop processes, counted as the sweep's are;
+    ``analyses scaling``; the report's own time is not in
     it, it is being written); ``refined``, the methods whose sweeps were carried on to finer steps
     because their order was not reached yet (:mod:`truestep.execution.refine`); ``rows``,
     the row count of each table written (:func:`truestep.tables.io.check_recorded_rows`:
