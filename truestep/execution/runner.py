@@ -22,11 +22,13 @@ from truestep.adapters import (
     adapter_class,
     get_adapter,
     plugin_answer,
+    truestep_target,
 )
 from truestep.adapters.base import Trajectory, duplicate_of
 from truestep.adapters.devices import engine_device
 from truestep.cases.case import Case
 from truestep.execution.progress import Progress
+from truestep.execution.sweep_groups import group_sweeps
 from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.timing import (
     NOT_REPEATABLE as NOT_REPEATABLE,
@@ -149,6 +151,13 @@ def simulate_sweep(
             where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
             out.append(f"{type(err).__name__}: {err}{where}")
     return out
+
+
+def simulate_sweeps(sweeps: list[tuple]) -> list[list[Trajectory | TimedRuns | Outcome | str]]:
+    """:func:`simulate_sweep` of each of ``sweeps`` (its arguments), one after another in
+    one child process (:mod:`truestep.execution.sweep_groups`): each sweep's entries as
+    :func:`simulate_sweep` gives them alone."""
+    return [simulate_sweep(*args) for args in sweeps]
 
 
 def split_sweep(engine: str, timing: Timing) -> bool:
@@ -634,43 +643,125 @@ def _run_here(
 ) -> None:
     """The sweeps ``local`` (planned index, steps, adaptive) on this machine
     (:meth:`~truestep.runtime.isolation.Lanes.run`): the timed runs of engines that make a
-    speed claim one sweep at a time on a core of their own; everything untimed on the
+    speed claim one process at a time on a core of their own; everything untimed on the
     cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
-    and the measured runs of a split sweep (:func:`split_sweep`). Each finished sweep's
-    rows go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
+    and the measured runs of a split sweep (:func:`split_sweep`). A built-in engine's
+    sweeps of one case share a process (:class:`_LocalSweeps`). Each finished sweep's rows
+    go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
     processes, each from its fork to its end (:attr:`Outcome.seconds`) with the adapter's
     ``prepare`` before it, summed over processes that may overlap (a split sweep's two
-    halves run at once). Through
-    ``lanes`` where it is given (its backlog follows the sweep's untimed runs)."""
-    here = host_name()
-    timings = [timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local]
-    halves = [
-        (j, part)
-        for j, t in enumerate(timings)
-        for part in (("measured", "timed") if split_sweep(planned[local[j][0]][1], t) else ("both",))
-    ]
-    prepared_s: dict[int, float] = {}
-    waiting: dict[int, dict[str, Outcome]] = {}
+    halves run at once). Through ``lanes`` where it is given (its backlog follows the
+    sweep's untimed runs)."""
+    sweeps = _LocalSweeps(planned, local, timing, keep_traces, finished, spent)
+    if lanes is not None:
+        lanes.run(sweeps.timed, sweeps.untimed, sweeps.call, sweeps.done)
+        return
+    with Lanes(untimed_workers()) as own:
+        own.run(sweeps.timed, sweeps.untimed, sweeps.call, sweeps.done)
 
-    def call(i: int) -> Call:
-        j, part = halves[i]
-        k, dts, _ = local[j]
-        case, engine, method, _ = planned[k]
+
+class _LocalSweeps:
+    """The isolated calls of :func:`_run_here`: each sweep whole, or its measured and
+    timed halves apart (:func:`split_sweep`); the halves of a built-in engine's sweeps of
+    one case, of one part and timing, in one call (:func:`~truestep.execution.sweep_groups.group_sweeps`,
+    :func:`simulate_sweeps`). A sweep of a group whose process did not end ``ok``, or whose
+    rows say a run crashed or timed out, is made again in a process of its own, so that
+    its rows (their messages with its own output) are the ones it gives alone.
+    :attr:`timed` and :attr:`untimed` index the calls of each lane."""
+
+    def __init__(
+        self,
+        planned: list[tuple],
+        local: list[tuple[int, list[float], bool]],
+        timing: Timing,
+        keep_traces: bool,
+        finished: Callable[[int, list[dict], dict], None],
+        spent: dict[str, float],
+    ) -> None:
+        self.planned, self.local, self.keep_traces = planned, local, keep_traces
+        self.finished, self.spent, self.here = finished, spent, host_name()
+        self.timings = [
+            timing if makes_speed_claim(get_adapter(planned[k][1])) else UNTIMED for k, _, _ in local
+        ]
+        self.halves = [
+            (j, part)
+            for j, t in enumerate(self.timings)
+            for part in (("measured", "timed") if split_sweep(self._sweep(j)[1], t) else ("both",))
+        ]
+        self.units = group_sweeps(
+            [self._shares(j, part) for j, part in self.halves], [len(local[j][1]) for j, _ in self.halves]
+        )
+        self.grouped = {self.halves[i][0] for unit in self.units if len(unit) > 1 for i in unit}
+        timed = [
+            self.timings[j].timed and part != "measured"
+            for j, part in (self.halves[u[0]] for u in self.units)
+        ]
+        self.timed = [u for u, t in enumerate(timed) if t]
+        self.untimed = [u for u, t in enumerate(timed) if not t]
+        self._prepared_s: dict[int, float] = {}
+        self._waiting: dict[int, dict[str, Outcome]] = {}
+
+    def _sweep(self, j: int) -> tuple:
+        """(case, engine, method, entries) of the ``j``-th local sweep."""
+        return self.planned[self.local[j][0]]
+
+    def _shares(self, j: int, part: str) -> tuple | None:
+        """What the ``j``-th sweep's ``part`` shares with the others of its group, or
+        ``None`` for a plugin's (a process of its own)."""
+        case, engine = self._sweep(j)[:2]
+        return (engine, case.name, part, self.timings[j].timed) if truestep_target(engine) else None
+
+    def _made(self, i: int) -> Call:
+        j, part = self.halves[i]
+        case, engine, method, _ = self._sweep(j)
+        return sweep_call(case, engine, method, self.local[j][1], self.timings[j], part)
+
+    def call(self, u: int) -> Call:
+        """The ``u``-th call, its sweeps prepared (:func:`sweep_call`)."""
         start = time.perf_counter()
-        made = sweep_call(case, engine, method, dts, timings[j], part)
-        prepared_s[i] = time.perf_counter() - start
-        return made
+        calls = [self._made(i) for i in self.units[u]]
+        self._prepared_s[u] = time.perf_counter() - start
+        if len(calls) == 1:
+            return calls[0]
+        return simulate_sweeps, ([args for _, args, _ in calls],), sum(limit for *_, limit in calls)
 
-    def done(i: int, outcome: Outcome) -> None:
-        j, part = halves[i]
-        k, dts, adaptive = local[j]
-        case, engine, method, _ = planned[k]
-        spent[engine] = spent.get(engine, 0.0) + prepared_s.pop(i, 0.0) + outcome.seconds
+    def _alone(self, i: int) -> Outcome:
+        """The ``i``-th half made again in a process of its own (prepare and run counted)."""
+        engine = self._sweep(self.halves[i][0])[1]
+        start = time.perf_counter()
+        outcome = run_isolated(*self._made(i))
+        self.spent[engine] = self.spent.get(engine, 0.0) + time.perf_counter() - start
+        return outcome
+
+    def done(self, u: int, outcome: Outcome) -> None:
+        """The ``u``-th call's outcome, handed on sweep by sweep."""
+        unit = self.units[u]
+        engine = self._sweep(self.halves[unit[0]][0])[1]
+        self.spent[engine] = self.spent.get(engine, 0.0) + self._prepared_s.pop(u, 0.0) + outcome.seconds
+        if len(unit) == 1:
+            self._half_done(unit[0], outcome)
+            return
+        for n, i in enumerate(unit):
+            self._half_done(
+                i, Outcome("ok", value=outcome.value[n]) if outcome.status == "ok" else self._alone(i)
+            )
+
+    def _half_done(self, i: int, outcome: Outcome) -> None:
+        j, part = self.halves[i]
         if part != "both":
-            waiting.setdefault(j, {})[part] = outcome
-            if len(waiting[j]) < 2:
+            self._waiting.setdefault(j, {})[part] = outcome
+            if len(self._waiting[j]) < 2:
                 return
-            outcome = joined(waiting[j]["measured"], waiting.pop(j)["timed"])
+            outcome = joined(self._waiting[j]["measured"], self._waiting.pop(j)["timed"])
+        rows, swept = self._rows(j, outcome)
+        if j in self.grouped and any(row["status"] in ("crashed", "timeout") for row in rows):
+            again = [self._alone(h) for h, (sweep, _) in enumerate(self.halves) if sweep == j]
+            rows, swept = self._rows(j, again[0] if len(again) == 1 else joined(*again))
+        self.finished(self.local[j][0], rows, swept)
+
+    def _rows(self, j: int, outcome: Outcome) -> tuple[list[dict], dict]:
+        case, engine, method, _ = self._sweep(j)
+        _, dts, adaptive = self.local[j]
         swept: dict = {}
         rows = sweep_rows(
             outcome,
@@ -679,20 +770,12 @@ def _run_here(
             method,
             dts,
             adaptive=adaptive,
-            timing=timings[j],
-            traces=swept if keep_traces else None,
+            timing=self.timings[j],
+            traces=swept if self.keep_traces else None,
         )
         for row in rows:
-            row["host"] = here
-        finished(k, rows, swept)
-
-    timed = [i for i, (j, part) in enumerate(halves) if timings[j].timed and part != "measured"]
-    untimed = [i for i, (j, part) in enumerate(halves) if not timings[j].timed or part == "measured"]
-    if lanes is not None:
-        lanes.run(timed, untimed, call, done)
-        return
-    with Lanes(untimed_workers()) as own:
-        own.run(timed, untimed, call, done)
+            row["host"] = self.here
+        return rows, swept
 
 
 def case_source(case: Case, lib: dict | None = None) -> str:
