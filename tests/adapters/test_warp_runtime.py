@@ -32,11 +32,13 @@ def test_a_warm_cache_starts_no_process(case_named, monkeypatch):
     assert "newton" not in wr._WARMING
 
 
-def test_a_cold_cache_compiles_apart_and_the_run_waits_for_it(case_named, monkeypatch):
-    """The background process builds the scenes (here from the warm cache: quick) and
-    ends; ``prepared()`` (what the run awaits) and the first ``prepare`` wait for it."""
+def test_a_cold_cache_compiles_apart_and_the_run_waits_for_it(case_named, monkeypatch, capfd):
+    """The background process builds the scenes (here from the warm cache: quick), says
+    so one line a scene, and ends; ``prepared()`` (what the run awaits) and the first
+    ``prepare`` wait for it."""
     monkeypatch.setattr(wr, "cold_cache", lambda package: True)
     monkeypatch.setattr(wr, "_GPU_WANTED", [])  # a process that made no GPU adapter
+    monkeypatch.setattr(wr, "_PREPARED", set())  # nothing built here yet
     adapter = get_adapter("newton")
     pairs = [(case_named("spring-chain"), "semi-implicit"), (case_named("spring-chain"), "xpbd")]
     adapter.prepare_all(pairs)
@@ -45,6 +47,9 @@ def test_a_cold_cache_compiles_apart_and_the_run_waits_for_it(case_named, monkey
     assert wr._WARMING["newton"] is proc
     adapter.prepared()
     assert "newton" not in wr._WARMING and proc.exitcode == 0
+    said = [line for line in capfd.readouterr().err.splitlines() if "kernels" in line]
+    assert said[-1].startswith("[newton kernels] 2 scene(s) built, their kernels compiled, in ")
+    assert all(" / " in line for line in said[:-1])  # a scene that took SAID_S or more, here from the cache
 
 
 def test_a_background_compile_past_its_limit_is_stopped(monkeypatch):
