@@ -32,6 +32,10 @@ class CircleField(System):
         compile away."""
         return None
 
+    def rhs_kernel(self) -> tuple[int, tuple[float, ...]]:
+        """The compiled loop's right-hand side (:mod:`~truestep.reference_impl.odes_loop`)."""
+        return odes_kernels.CIRCLE, ()
+
     def energy(self, x: np.ndarray, t: float) -> float:
         """Half the squared radius: conserved along the exact flow."""
         return 0.5 * float(x @ x)
@@ -51,6 +55,10 @@ class KeplerProblem(SecondOrderSystem):
     def acceleration(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         r2 = float(q @ q)
         return q * (-self.mu / (r2 * math.sqrt(r2)))
+
+    def rhs_kernel(self) -> tuple[int, tuple[float, ...]]:
+        """The compiled loop's right-hand side (:mod:`~truestep.reference_impl.odes_loop`)."""
+        return odes_kernels.KEPLER, (float(self.mu),)
 
     def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray]:
         kernel, mu = odes_kernels.kepler, float(self.mu)
@@ -93,6 +101,10 @@ class Arenstorf(SecondOrderSystem):
         ax = x + 2 * float(v[1]) - nu * (x + mu) / d1 - mu * (x - nu) / d2
         ay = y - 2 * float(v[0]) - nu * y / d1 - mu * y / d2
         return np.array([ax, ay])
+
+    def rhs_kernel(self) -> tuple[int, tuple[float, ...]]:
+        """The compiled loop's right-hand side (:mod:`~truestep.reference_impl.odes_loop`)."""
+        return odes_kernels.ARENSTORF, (float(self.mu), 2.0)
 
     def compiled_derivative(self) -> Callable[[np.ndarray, float], np.ndarray]:
         kernel, mu = odes_kernels.arenstorf, float(self.mu)

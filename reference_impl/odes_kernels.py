@@ -20,6 +20,8 @@ from numba import njit
 
 ODE: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 """How a right-hand side is compiled: on its own, cached, called from Python."""
+KEPLER, ARENSTORF, CIRCLE = 0, 1, 2
+"""Which right-hand side the compiled loop calls (:func:`rhs`)."""
 
 
 @njit(**ODE)
@@ -47,3 +49,22 @@ def arenstorf(y, t, out, mu, two):
     out[2] = x + 2 * y[3] - nu * (x + mu) / d1 - mu * (x - nu) / d2
     out[3] = z - 2 * y[2] - nu * z / d1 - mu * z / d2
     return out
+
+
+@njit(**ODE)
+def circle(y, t, out):
+    """The lecture's field ``x' = (-y, x)``: :meth:`odes.CircleField.derivative`."""
+    out[0], out[1] = -y[1], y[0]
+    return out
+
+
+@njit(**ODE)
+def rhs(system, y, t, out, params):
+    """``dy/dt`` of the ``system`` named by :data:`KEPLER`, :data:`ARENSTORF` or
+    :data:`CIRCLE`, into ``out``; ``params`` (float64) its constants as its system's
+    ``rhs_kernel`` gives them."""
+    if system == KEPLER:
+        return kepler(y, t, out, params[0])
+    if system == ARENSTORF:
+        return arenstorf(y, t, out, params[0], params[1])
+    return circle(y, t, out)

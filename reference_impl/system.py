@@ -71,6 +71,14 @@ class System(ABC):
         ``None`` (default) where there is none. Its parameters are those the system has now."""
         return None
 
+    def rhs_kernel(self) -> tuple[int, tuple[float, ...]] | None:
+        """Which compiled right-hand side of :mod:`~truestep.reference_impl.odes_kernels`
+        is this system's :meth:`derivative` bit for bit, and its constants (for the
+        compiled loop of :mod:`~truestep.reference_impl.odes_loop`); ``None`` (default)
+        where none is: truestep's own systems name theirs, a user's system runs on the
+        numpy path."""
+        return None
+
     def energy(self, x: np.ndarray, t: float) -> float | None:
         """Return the total energy (J) at ``(x, t)``, or ``None`` if it has no meaning."""
         return None

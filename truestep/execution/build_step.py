@@ -40,6 +40,10 @@ def compile_everything(cases: list[Case], say: Callable[[str], None]) -> list[st
     models = [c.model for c in cases if c.model is not None]
     workers = len(os.sched_getaffinity(0))
     compile_all(models, workers=workers, progress=say)
+    if any(c.kind == "ode" for c in cases):
+        from truestep.reference_impl.odes_loop import warm as warm_ode_loop
+
+        warm_ode_loop(say)
     say(f"reference loops ready in {time.perf_counter() - began:.1f} s ({workers} workers)")
     failed = []
     for engine, proc in apart:
