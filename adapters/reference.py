@@ -259,18 +259,20 @@ class ReferenceAdapter:
         cls = get_solver(method)
         if cls.needs_second_order and not isinstance(system, SecondOrderSystem):
             raise TypeError(f"{method} needs a position/velocity split, {case.name} has none")
-        if self.compiled and isinstance(case.scene, OdeSpec) and ode_reason(system, method) is None:
-            return self._simulate_ode(case, system, method, dt)
+        on_loop = self.compiled and isinstance(case.scene, OdeSpec) and ode_reason(system, method) is None
         samples = None
-        if cls.adaptive:
-            adaptive: Any = cls  # an adaptive solver takes its tolerances (Solver, ``adaptive = True``)
-            solver = adaptive(system, rtol=dt, atol=dt)
-            step = case.duration
-            samples = np.linspace(0.0, case.duration, case.max_records + 1)
+        if on_loop:  # the plain ODE systems' compiled loop: the numpy path's run, bit for bit
+            run = run_ode(system, method, case.duration, case.steps_for(dt)[1], max_records=case.max_records)
         else:
-            solver = cls(system)
-            step = case.steps_for(dt)[1]
-        run = integrate(solver, case.duration, step, max_records=case.max_records, sample_at=samples)
+            if cls.adaptive:
+                adaptive: Any = cls  # an adaptive solver takes its tolerances (Solver, ``adaptive = True``)
+                solver = adaptive(system, rtol=dt, atol=dt)
+                step = case.duration
+                samples = np.linspace(0.0, case.duration, case.max_records + 1)
+            else:
+                solver = cls(system)
+                step = case.steps_for(dt)[1]
+            run = integrate(solver, case.duration, step, max_records=case.max_records, sample_at=samples)
         return trajectory_of_states(
             case,
             system,
@@ -282,26 +284,8 @@ class ReferenceAdapter:
             steps=run.steps,
             wall_s=run.wall_s,
             alive=run.extra.get("alive"),
-            path="numpy",
+            path="compiled" if on_loop else "numpy",
             message=run.message,
-        )
-
-    def _simulate_ode(self, case: Case, system: System, method: str, dt: float) -> Trajectory:
-        """The run of an ODE case through the compiled loop
-        (:func:`~truestep.reference_impl.odes_loop.run`): the numpy path's records, bit for
-        bit (RK4's to 1e-12), faster."""
-        run = run_ode(system, method, case.duration, case.steps_for(dt)[1], max_records=case.max_records)
-        return trajectory_of_states(
-            case,
-            system,
-            run.t,
-            run.x,
-            status=run.status,
-            t_fail=run.t_fail,
-            nfev=run.nfev,
-            steps=run.steps,
-            wall_s=run.wall_s,
-            path="compiled",
         )
 
     def _simulate_on_device(self, case: Case, method: str, dt: float) -> Trajectory:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, cast
 
 import llvmlite.ir as llvm_ir  # type: ignore[import-untyped]
@@ -28,7 +27,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
+from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, Run, record_indices
 from truestep.reference_impl.odes_kernels import rhs
 from truestep.reference_impl.solvers import get_solver
 from truestep.reference_impl.solvers.explicit_rk import ExplicitRungeKutta
@@ -41,21 +40,6 @@ SPLITTINGS = {SymplecticEuler: SYMPLECTIC_EULER, VelocityVerlet: VERLET, Lecture
 """The splitting solver classes and their kinds."""
 LOOP: dict[str, Any] = {"cache": True, "error_model": "numpy", "nogil": True}
 """How the loop is compiled: once, cached on disk."""
-
-
-@dataclass
-class OdeRun:
-    """What :func:`run` returns: records ``t`` (T,) s and ``x`` (T, dim), the evaluations,
-    steps and status (``ok`` or ``unstable``), the time of the failure (s) and the
-    stepping's wall time (s)."""
-
-    t: np.ndarray
-    x: np.ndarray
-    nfev: int
-    steps: int
-    status: str
-    t_fail: float | None
-    wall_s: float
 
 
 def ode_reason(system: System, method: str) -> str | None:
@@ -83,10 +67,12 @@ def _method(method: str) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
     return TABLEAU, a, b, np.array([float(row.sum()) for row in a])
 
 
-def run(system: System, method: str, t_end: float, h: float, *, max_records: int = 2000) -> OdeRun:
+def run(system: System, method: str, t_end: float, h: float, *, max_records: int = 2000) -> Run:
     """Step ``system`` (its state now) with ``method`` at step ``h`` (s) to ``t_end`` (s), as
-    :func:`~truestep.reference_impl.integrate.integrate` does (``ode_reason`` must be
-    ``None``); recording at :func:`~truestep.reference_impl.integrate.record_indices`."""
+    :func:`~truestep.reference_impl.integrate.integrate` does, and give its
+    :class:`~truestep.reference_impl.integrate.Run` (``ode_reason`` must be ``None``;
+    recording at :func:`~truestep.reference_impl.integrate.record_indices`; the system's
+    state is left as it was)."""
     found = system.rhs_kernel()
     if found is None:
         raise ValueError(f"{type(system).__name__} has no compiled right-hand side")
@@ -103,9 +89,9 @@ def run(system: System, method: str, t_end: float, h: float, *, max_records: int
     start = time.perf_counter()
     kept, steps, nfev, bad = run_ode(which, params, kind, a, b, c, y0, t0, h, marks, out_t, out_x)
     wall = time.perf_counter() - start
-    status = "unstable" if bad else "ok"
     t_fail = float(out_t[kept - 1]) if bad else None
-    return OdeRun(out_t[:kept].copy(), out_x[:kept].copy(), int(nfev), int(steps), status, t_fail, wall)
+    t, x = out_t[:kept].copy(), out_x[:kept].copy()
+    return Run(t, x, int(nfev), int(steps), wall, {}, "unstable" if bad else "ok", t_fail)
 
 
 def warm(say: Callable[[str], None] | None = None) -> None:

@@ -620,7 +620,7 @@ def run_matrix(
             local.append((k, dts, adaptive))
         spent: dict[str, float] = {}
         if local:
-            _run_here(planned, local, timing, traces is not None, finished, spent, lanes)
+            _run_here(_LocalSweeps(planned, local, timing, traces is not None, finished, spent), lanes)
         if jobs and cluster is not None:
             for k, done, swept in cluster.sweeps(jobs):
                 finished(k, done, swept)
@@ -632,27 +632,9 @@ def run_matrix(
     return table
 
 
-def _run_here(
-    planned: list[tuple],
-    local: list[tuple[int, list[float], bool]],
-    timing: Timing,
-    keep_traces: bool,
-    finished: Callable[[int, list[dict], dict], None],
-    spent: dict[str, float],
-    lanes: Lanes | None = None,
-) -> None:
-    """The sweeps ``local`` (planned index, steps, adaptive) on this machine
-    (:meth:`~truestep.runtime.isolation.Lanes.run`): the timed runs of engines that make a
-    speed claim one process at a time on a core of their own; everything untimed on the
-    cores left: the rows of engines that make none (:func:`makes_speed_claim`), run once,
-    and the measured runs of a split sweep (:func:`split_sweep`). A built-in engine's
-    sweeps of one case share a process (:class:`_LocalSweeps`). Each finished sweep's rows
-    go to ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
-    processes, each from its fork to its end (:attr:`Outcome.seconds`) with the adapter's
-    ``prepare`` before it, summed over processes that may overlap (a split sweep's two
-    halves run at once). Through ``lanes`` where it is given (its backlog follows the
-    sweep's untimed runs)."""
-    sweeps = _LocalSweeps(planned, local, timing, keep_traces, finished, spent)
+def _run_here(sweeps: _LocalSweeps, lanes: Lanes | None = None) -> None:
+    """The sweeps of ``sweeps`` on this machine (:meth:`~truestep.runtime.isolation.Lanes.run`),
+    through ``lanes`` where it is given (its backlog follows the sweep's untimed runs)."""
     if lanes is not None:
         lanes.run(sweeps.timed, sweeps.untimed, sweeps.call, sweeps.done)
         return
@@ -661,13 +643,21 @@ def _run_here(
 
 
 class _LocalSweeps:
-    """The isolated calls of :func:`_run_here`: each sweep whole, or its measured and
-    timed halves apart (:func:`split_sweep`); the halves of a built-in engine's sweeps of
-    one case, of one part and timing, in one call (:func:`~truestep.execution.sweep_groups.group_sweeps`,
-    :func:`simulate_sweeps`). A sweep of a group whose process did not end ``ok``, or whose
-    rows say a run crashed or timed out, is made again in a process of its own, so that
-    its rows (their messages with its own output) are the ones it gives alone.
-    :attr:`timed` and :attr:`untimed` index the calls of each lane."""
+    """The isolated calls of the sweeps ``local`` (planned index, steps, adaptive) run on
+    this machine (:func:`_run_here`): the timed runs of engines that make a speed claim one
+    process at a time on a core of their own (:attr:`timed`); everything untimed on the
+    cores left (:attr:`untimed`): the rows of engines that make none
+    (:func:`makes_speed_claim`), run once, and the measured runs of a split sweep
+    (:func:`split_sweep`). Each sweep runs whole, or its measured and timed halves apart;
+    the halves of a built-in engine's sweeps of one case, of one part and timing, in one
+    call (:func:`~truestep.execution.sweep_groups.group_sweeps`, :func:`simulate_sweeps`).
+    A sweep of a group whose process did not end ``ok``, or whose rows say a run crashed
+    or timed out, is made again in a process of its own, so that its rows (their messages
+    with its own output) are the ones it gives alone. Each finished sweep's rows go to
+    ``finished(k, rows, traces)``; ``spent`` gets each engine's seconds of sweep
+    processes, each from its fork to its end (:attr:`Outcome.seconds`) with the adapter's
+    ``prepare`` before it, summed over processes that may overlap (a split sweep's two
+    halves run at once)."""
 
     def __init__(
         self,
