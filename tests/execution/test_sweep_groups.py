@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from truestep.execution import runner
-from truestep.execution.sweep_groups import group_sweeps
+from truestep.execution.sweep_groups import GROUP_BYTES, group_sweeps, weight
 from truestep.execution.timing import Timing
 
 SHORT = Timing(min_total_s=0.0, min_repeats=1, max_repeats=2, long_run_s=float("inf"))
@@ -22,10 +22,19 @@ ENGINES = ["reference", "scipy"]
 
 def test_sweeps_of_one_key_share_a_group_within_the_cap_in_the_order_planned():
     keys = ["a", "a", None, "b", "a", "a", None]
-    rows = [10, 10, 5, 30, 4, 1, 2]
-    assert group_sweeps(keys, rows, cap=24) == [[0, 1, 4], [2], [3], [5], [6]]
-    assert group_sweeps(["a", "a"], [3, 3], cap=5) == [[0], [1]]
+    runs = [10, 10, 5, 30, 4, 1, 2]
+    shares = [weight(n, 1e3) for n in runs]
+    assert group_sweeps(keys, shares) == [[0, 1, 4], [2], [3], [5], [6]]
+    assert group_sweeps(["a", "a"], [0.6, 0.6]) == [[0], [1]]
     assert group_sweeps([], []) == []
+
+
+def test_a_group_holds_at_most_its_bytes_of_records():
+    """particle-rain's runs (1000 particles, 1002 records: 48 MB each): two sweeps of two
+    steps a group, where 24 runs of a small scene share one."""
+    rain = weight(2, 1000 * 1002 * 48.0)
+    assert 0.5 > rain > 0.3 and group_sweeps(["r"] * 3, [rain] * 3) == [[0, 1], [2]]
+    assert weight(24, 1e3) == 1.0 and weight(2, GROUP_BYTES) == 2.0
 
 
 def _key(frame: pd.DataFrame) -> pd.DataFrame:

@@ -28,7 +28,7 @@ from truestep.adapters.base import Trajectory, duplicate_of
 from truestep.adapters.devices import engine_device
 from truestep.cases.case import Case
 from truestep.execution.progress import Progress
-from truestep.execution.sweep_groups import group_sweeps
+from truestep.execution.sweep_groups import group_sweeps, weight
 from truestep.execution.sweep_job import SweepJob, host_name
 from truestep.execution.timing import (
     NOT_REPEATABLE as NOT_REPEATABLE,
@@ -679,7 +679,7 @@ class _LocalSweeps:
             for part in (("measured", "timed") if split_sweep(self._sweep(j)[1], t) else ("both",))
         ]
         self.units = group_sweeps(
-            [self._shares(j, part) for j, part in self.halves], [len(local[j][1]) for j, _ in self.halves]
+            [self._shares(j, part) for j, part in self.halves], [self._weight(j) for j, _ in self.halves]
         )
         self.grouped = {self.halves[i][0] for unit in self.units if len(unit) > 1 for i in unit}
         timed = [
@@ -700,6 +700,12 @@ class _LocalSweeps:
         ``None`` for a plugin's (a process of its own)."""
         case, engine = self._sweep(j)[:2]
         return (engine, case.name, part, self.timings[j].timed) if truestep_target(engine) else None
+
+    def _weight(self, j: int) -> float:
+        """The ``j``-th sweep's share of a group: its runs, and their records' bytes (each
+        body's position and velocity at each record, float64)."""
+        case = self._sweep(j)[0]
+        return weight(len(self.local[j][1]), case.bodies * (case.max_records + 1) * 48.0)
 
     def _made(self, i: int) -> Call:
         j, part = self.halves[i]

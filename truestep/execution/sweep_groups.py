@@ -16,32 +16,38 @@ from __future__ import annotations
 from collections.abc import Hashable, Sequence
 
 GROUP_ROWS = 24
-"""The most runs (steps of sweeps) one process takes together: a cap on what a group holds
-in memory and hands back at once, and on the work one failure sends to be made again alone
-(:func:`truestep.execution.runner.simulate_sweeps`)."""
+"""The most runs (steps of sweeps) one process takes together: a cap on the work one
+failure sends to be made again alone (:func:`truestep.execution.runner.simulate_sweeps`)."""
+GROUP_BYTES = 256e6
+"""The most bytes of records the runs of one process hand back together (a particle-rain
+run's positions and velocities are 48 MB: five of them a process, where one sweep holds two)."""
 
 
-def group_sweeps(
-    keys: Sequence[Hashable | None], rows: Sequence[int], cap: int = GROUP_ROWS
-) -> list[list[int]]:
+def weight(runs: int, record_bytes: float) -> float:
+    """A sweep's share of a group: its ``runs`` of :data:`GROUP_ROWS`, or its records
+    (``runs`` times ``record_bytes``) of :data:`GROUP_BYTES`, whichever is more."""
+    return max(runs / GROUP_ROWS, runs * record_bytes / GROUP_BYTES)
+
+
+def group_sweeps(keys: Sequence[Hashable | None], weights: Sequence[float]) -> list[list[int]]:
     """Indices of sweeps gathered into groups, each run by one process.
 
     ``keys[i]`` is what the ``i``-th sweep must share with the others of its group (its
     engine, case, part and timing), or ``None`` for a sweep that keeps a process of its
-    own; ``rows[i]`` its runs. Sweeps of one key join the group that key has open while
-    its runs stay within ``cap`` (a sweep over it is a group of its own). Groups come in
-    the order of their first sweep, and each lists its sweeps in their order, so that the
-    lanes run them in the order planned."""
+    own; ``weights[i]`` its share of a group (:func:`weight`). Sweeps of one key join the
+    group that key has open while their shares add up to at most 1 (a sweep over it is a
+    group of its own). Groups come in the order of their first sweep, and each lists its
+    sweeps in their order, so that the lanes run them in the order planned."""
     groups: list[list[int]] = []
-    open_group: dict[Hashable, tuple[list[int], int]] = {}
+    open_group: dict[Hashable, tuple[list[int], float]] = {}
     for i, key in enumerate(keys):
         held = open_group.get(key) if key is not None else None
-        if held is not None and held[1] + rows[i] <= cap:
+        if held is not None and held[1] + weights[i] <= 1.0:
             held[0].append(i)
-            open_group[key] = (held[0], held[1] + rows[i])
+            open_group[key] = (held[0], held[1] + weights[i])
             continue
         group = [i]
         groups.append(group)
         if key is not None:
-            open_group[key] = (group, rows[i])
+            open_group[key] = (group, weights[i])
     return groups
