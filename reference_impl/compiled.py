@@ -300,7 +300,7 @@ def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], Non
     key = composition(held, layout, scene)
     if key in _PREPARED:
         return _PREPARED[key], kind, layout, scene
-    loop = loop_for(held, layout, scene)
+    loop = loop_for(held, layout)
     if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
         _PREPARED[key] = loop
         return loop, kind, layout, scene
@@ -371,7 +371,7 @@ def derivative_for(
     key = ("derivative", sig)
     if key not in _PREPARED:
         scene = args[0]
-        loop = derivative_loop(scene)
+        loop = derivative_loop()
         if hasattr(loop, "overloads"):  # else NUMBA_DISABLE_JIT: the composition runs as Python
             if sig not in loop.overloads:
                 kinds = ", ".join(type(k).__name__.lower() for k in scene.forces) or "no forces"

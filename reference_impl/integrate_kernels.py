@@ -29,7 +29,7 @@ from numba import njit
 from truestep.reference_impl.compose import COLD, slot
 from truestep.reference_impl.forces_kernels import KERNEL, LEAF
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
-from truestep.reference_impl.particles_kernels import total_energy
+from truestep.reference_impl.particles_kernels import cut, total_energy
 from truestep.reference_impl.tiles import load, scratch, store, tile_view
 
 
@@ -51,11 +51,6 @@ def step(method, scene, tile, t, h):
 @slot
 def start(scene, tile, t):
     """The layout's pass over the first state of ``tile`` (its ``start``)."""
-
-
-@slot
-def cut(scene, lo, hi):
-    """``scene`` for its particles ``lo`` to ``hi`` (:func:`particles_kernels.tile_scene`)."""
 
 
 def unwatched() -> EnergyMonitor:

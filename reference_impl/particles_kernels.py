@@ -7,7 +7,8 @@ loop, as :meth:`ParticleSystem.acceleration` makes it: clear the accumulator, le
 force kind add in, then the impulses, then the contact force for the particles resting on
 a plane, divide by the masses. :func:`accelerations` runs it over a tile in passes (any
 scene); :func:`particle_force` for one particle alone (scenes whose forces are all
-pointwise). The parts a scene may lack are slots (:mod:`~truestep.reference_impl.compose`).
+pointwise). The calls that depend on what a scene holds are resolved by its types
+(:mod:`~truestep.reference_impl.by_type`).
 """
 
 from __future__ import annotations
@@ -16,10 +17,12 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.core import types
+from numba.extending import overload
 
+from truestep.reference_impl.by_type import BY_TYPE, field, is_none, kernel
 from truestep.reference_impl.collisions_kernels import contact_force
-from truestep.reference_impl.compose import slot
-from truestep.reference_impl.forces_kernels import KERNEL, LEAF
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF, impulse_at, impulses_add
 
 
 class Particles(NamedTuple):
@@ -50,37 +53,145 @@ class Scene(NamedTuple):
     planes: object
 
 
-@slot
 def add_forces(scene, F, X, V, t):
     """Add the force of every kind in ``scene.forces`` into ``F``, in order (each kind's
     ``add``)."""
+    for kind in scene.forces:
+        type(kind).add(kind, F, X, V, t, scene.particles)
 
 
-@slot
+@overload(add_forces, **BY_TYPE)
+def _add_forces(scene, F, X, V, t):
+    def impl(scene, F, X, V, t):
+        each_add(scene.forces, F, X, V, t, scene.particles)
+
+    return impl
+
+
+def each_add(kinds, F, X, V, t, particles):
+    """Each of ``kinds``' ``add`` in order (a tuple of kinds, each of its own type)."""
+    for kind in kinds:
+        type(kind).add(kind, F, X, V, t, particles)
+
+
+@overload(each_add, **BY_TYPE)
+def _each_add(kinds, F, X, V, t, particles):
+    if len(kinds) == 0:
+        return lambda kinds, F, X, V, t, particles: None
+    add = kernel(kinds[0], "add")
+
+    def impl(kinds, F, X, V, t, particles):
+        add(kinds[0], F, X, V, t, particles)
+        each_add(kinds[1:], F, X, V, t, particles)
+
+    return impl
+
+
 def add_impulses(scene, F, X, V, t):
     """Add the impulses acting at ``t`` into ``F`` (``Impulses.add``), if the scene has any."""
+    if scene.impulses is not None:
+        impulses_add(scene.impulses, F, X, V, t, scene.particles)
 
 
-@slot
+@overload(add_impulses, **BY_TYPE)
+def _add_impulses(scene, F, X, V, t):
+    if is_none(scene, "impulses"):
+        return lambda scene, F, X, V, t: None
+    return lambda scene, F, X, V, t: impulses_add(scene.impulses, F, X, V, t, scene.particles)
+
+
 def add_contact(scene, F, V, contact, any_contact):
     """Add the contact force of every plane to the particles in contact with it
     (:func:`add_contact_forces`), if the scene has planes."""
+    if scene.planes is not None:
+        add_contact_forces(scene, F, V, contact, any_contact)
 
 
-@slot
+@overload(add_contact, **BY_TYPE)
+def _add_contact(scene, F, V, contact, any_contact):
+    if is_none(scene, "planes"):
+        return lambda scene, F, V, contact, any_contact: None
+    return lambda scene, F, V, contact, any_contact: add_contact_forces(scene, F, V, contact, any_contact)
+
+
 def point_force(scene, x, v, t, p):
     """The force (N, 3-tuple) of every kind in ``scene.forces`` on particle ``p`` alone
-    (each kind's ``at`` in order, from zero); for scenes whose forces are all pointwise."""
+    (each kind's ``at`` in order, from zero); for scenes whose forces are all pointwise
+    (zero for any other)."""
+    f = (0.0, 0.0, 0.0)
+    if all(type(kind).pointwise for kind in scene.forces):
+        for kind in scene.forces:
+            f = type(kind).at(kind, f, x, v, t, scene.particles, p)
+    return f
 
 
-@slot
+@overload(point_force, **BY_TYPE)
+def _point_force(scene, x, v, t, p):
+    if not all(kernel(k, "pointwise") for k in field(scene, "forces")):
+        return lambda scene, x, v, t, p: (0.0, 0.0, 0.0)
+    return lambda scene, x, v, t, p: each_at(scene.forces, (0.0, 0.0, 0.0), x, v, t, scene.particles, p)
+
+
+def each_at(kinds, f, x, v, t, particles, p):
+    """``f`` with each of ``kinds``' ``at`` added in order."""
+    for kind in kinds:
+        f = type(kind).at(kind, f, x, v, t, particles, p)
+    return f
+
+
+@overload(each_at, **BY_TYPE)
+def _each_at(kinds, f, x, v, t, particles, p):
+    if len(kinds) == 0:
+        return lambda kinds, f, x, v, t, particles, p: f
+    at = kernel(kinds[0], "at")
+
+    def impl(kinds, f, x, v, t, particles, p):
+        return each_at(kinds[1:], at(kinds[0], f, x, v, t, particles, p), x, v, t, particles, p)
+
+    return impl
+
+
 def point_impulses(scene, f, t, p):
     """``f`` with the impulses on particle ``p`` acting at ``t`` added, if any."""
+    if scene.impulses is None:
+        return f
+    return impulse_at(scene.impulses, f, None, None, t, scene.particles, p)
 
 
-@slot
+@overload(point_impulses, **BY_TYPE)
+def _point_impulses(scene, f, t, p):
+    if is_none(scene, "impulses"):
+        return lambda scene, f, t, p: f
+    return lambda scene, f, t, p: impulse_at(scene.impulses, f, None, None, t, scene.particles, p)
+
+
 def potential_energy(scene, X):
     """The potential energy (J) of every kind in ``scene.forces``, summed in order."""
+    return each_energy(scene.forces, 0.0, X, scene.particles)
+
+
+@overload(potential_energy, **BY_TYPE)
+def _potential_energy(scene, X):
+    return lambda scene, X: each_energy(scene.forces, 0.0, X, scene.particles)
+
+
+def each_energy(kinds, e, X, particles):
+    """``e`` plus each of ``kinds``' ``energy``, added in order."""
+    for kind in kinds:
+        e += type(kind).energy(kind, X, particles)
+    return e
+
+
+@overload(each_energy, **BY_TYPE)
+def _each_energy(kinds, e, X, particles):
+    if len(kinds) == 0:
+        return lambda kinds, e, X, particles: e
+    energy = kernel(kinds[0], "energy")
+
+    def impl(kinds, e, X, particles):
+        return each_energy(kinds[1:], e + energy(kinds[0], X, particles), X, particles)
+
+    return impl
 
 
 @njit(**KERNEL)
@@ -91,6 +202,56 @@ def tile_particles(particles, lo, hi):
     return Particles(
         p.mass[lo:hi], p.inv_mass[lo:hi], p.radius[lo:hi], p.movable[lo:hi], p.moving_mass[lo:hi]
     )
+
+
+def cut(scene, lo, hi):
+    """``scene`` for its particles ``lo`` to ``hi`` (a tile of a scene whose particles do
+    not act on one another): its particles' constants, each kind cut by its ``cut`` kernel
+    (a kind without one is the same for every tile), its impulses cut alike."""
+    kinds = tuple(type(k).cut(k, lo, hi) if hasattr(type(k), "cut") else k for k in scene.forces)
+    impulses = None if scene.impulses is None else type(scene.impulses).cut(scene.impulses, lo, hi)
+    return Scene(tile_particles(scene.particles, lo, hi), kinds, impulses, scene.planes)
+
+
+@overload(cut, **BY_TYPE)
+def _cut(scene, lo, hi):
+    def impl(scene, lo, hi):
+        return Scene(
+            tile_particles(scene.particles, lo, hi),
+            each_cut(scene.forces, lo, hi),
+            cut_or_none(scene.impulses, lo, hi),
+            scene.planes,
+        )
+
+    return impl
+
+
+def each_cut(kinds, lo, hi):
+    """The tuple of ``kinds``, each cut to particles ``lo`` to ``hi`` (:func:`cut`)."""
+    return tuple(type(k).cut(k, lo, hi) if hasattr(type(k), "cut") else k for k in kinds)
+
+
+@overload(each_cut, **BY_TYPE)
+def _each_cut(kinds, lo, hi):
+    if len(kinds) == 0:
+        return lambda kinds, lo, hi: ()
+    if not hasattr(kinds[0].instance_class, "cut"):
+        return lambda kinds, lo, hi: (kinds[0], *each_cut(kinds[1:], lo, hi))
+    first = kernel(kinds[0], "cut")
+    return lambda kinds, lo, hi: (first(kinds[0], lo, hi), *each_cut(kinds[1:], lo, hi))
+
+
+def cut_or_none(kind, lo, hi):
+    """``kind`` cut to particles ``lo`` to ``hi`` by its ``cut`` kernel, or ``None``."""
+    return None if kind is None else type(kind).cut(kind, lo, hi)
+
+
+@overload(cut_or_none, **BY_TYPE)
+def _cut_or_none(kind, lo, hi):
+    if isinstance(kind, types.NoneType):
+        return lambda kind, lo, hi: None
+    first = kernel(kind, "cut")
+    return lambda kind, lo, hi: first(kind, lo, hi)
 
 
 @njit(**KERNEL)

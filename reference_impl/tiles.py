@@ -29,7 +29,10 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.core import types
+from numba.extending import overload
 
+from truestep.reference_impl.by_type import BY_TYPE, is_none
 from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.collisions import EPS_DISTANCE
 from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
@@ -39,6 +42,7 @@ from truestep.reference_impl.particles_kernels import (
     applied_forces,
     particle_force,
     point_force,
+    resting_force,
     scaled,
 )
 
@@ -154,24 +158,47 @@ def tile_view(buffers, m):
     )
 
 
-@slot
-def collisions(scene, tile, t, dt):
-    """The collision and contact pass of the tile's layout after a step of ``dt`` (s)
-    ending at ``t`` (nothing for a scene without planes); returns whether it changed any
-    particle's state."""
-
-
-@slot
 def near_planes(scene, x, radius):
     """Whether a particle at ``x`` (3-tuple, m) of ``radius`` (m) is within eps of a plane
     of the scene (NaN counts as near), each plane's :func:`near_plane` or'ed; ``False``
     without planes."""
+    return any_near(scene.planes, x, radius)
 
 
-@slot
+@overload(near_planes, **BY_TYPE)
+def _near_planes(scene, x, radius):
+    return lambda scene, x, radius: any_near(scene.planes, x, radius)
+
+
+def any_near(planes, x, radius):
+    """Whether a particle at ``x`` of ``radius`` is :func:`near_plane` to any of
+    ``planes`` (a tuple, or ``None``), every plane tested."""
+    near = False
+    for plane in planes or ():
+        near = near | near_plane(plane, x, radius)
+    return near
+
+
+@overload(any_near, **BY_TYPE)
+def _any_near(planes, x, radius):
+    if isinstance(planes, types.NoneType):
+        return lambda planes, x, radius: False
+    if len(planes) == 1:
+        return lambda planes, x, radius: near_plane(planes[0], x, radius)
+    return lambda planes, x, radius: near_plane(planes[0], x, radius) | any_near(planes[1:], x, radius)
+
+
 def point_contact(scene, tile, f, v, p):
     """``f`` with the contact force of every plane particle ``p`` rests on added
     (:func:`particles_kernels.resting_force`); ``f`` without planes."""
+    return f if scene.planes is None else resting_force(scene, f, v, tile.contact, p)
+
+
+@overload(point_contact, **BY_TYPE)
+def _point_contact(scene, tile, f, v, p):
+    if is_none(scene, "planes"):
+        return lambda scene, tile, f, v, p: f
+    return lambda scene, tile, f, v, p: resting_force(scene, f, v, tile.contact, p)
 
 
 @njit(**LEAF)
@@ -261,14 +288,14 @@ def passes_collisions(scene, tile, t, dt):
 def passes_start(scene, tile, t):
     """The collision pass on the first state (a particle may start on a plane); the first
     step evaluates afresh."""
-    collisions(scene, tile, t, 0.0)
+    passes_collide(scene, tile, t, 0.0)
     tile.count[FRESH] = 1
 
 
-@carries(name="passes", start=passes_start, collide=passes_collisions)
+@carries(name="passes", start=passes_start)
 class Passes(NamedTuple):
     """The layout that runs the derivative in passes over a tile (any scene), in tiles of
-    ``size`` particles; ``collide`` is its collision pass."""
+    ``size`` particles."""
 
     size: int
 
@@ -304,15 +331,41 @@ def collide_particle(scene, tile, p, t, dt):
     return resting
 
 
-@slot
 def kicked(scene, p):
     """Whether particle ``p`` has impulses (``False`` for a scene without)."""
+    return scene.impulses is not None and scene.impulses.start[p + 1] > scene.impulses.start[p]
 
 
-@slot
+@overload(kicked, **BY_TYPE)
+def _kicked(scene, p):
+    if is_none(scene, "impulses"):
+        return lambda scene, p: False
+    return lambda scene, p: scene.impulses.start[p + 1] > scene.impulses.start[p]
+
+
 def list_kicked(scene, special):
     """Write the particles that have impulses into ``special`` (int64); return how many
     (0 for a scene without)."""
+    if scene.impulses is None:
+        return 0
+    k = scene.impulses.kicked
+    for q in range(k.shape[0]):
+        special[q] = k[q] - scene.impulses.first
+    return k.shape[0]
+
+
+@overload(list_kicked, **BY_TYPE)
+def _list_kicked(scene, special):
+    if is_none(scene, "impulses"):
+        return lambda scene, special: 0
+
+    def impl(scene, special):
+        k = scene.impulses.kicked
+        for q in range(k.shape[0]):
+            special[q] = k[q] - scene.impulses.first
+        return k.shape[0]
+
+    return impl
 
 
 @njit(**KERNEL)
@@ -362,6 +415,35 @@ def fused_collisions(scene, tile, t, dt):
     return changed
 
 
+def passes_collide(scene, tile, t, dt):
+    """The collision pass of the passes layout (:func:`passes_collisions`) after a step of
+    ``dt`` (s) ending at ``t``; nothing (``False``) for a scene without planes. Returns
+    whether it changed any particle's state."""
+    return scene.planes is not None and passes_collisions(scene, tile, t, dt)
+
+
+def fused_collide(scene, tile, t, dt):
+    """The collision pass of the fused layout (:func:`fused_collisions`), as
+    :func:`passes_collide`."""
+    return scene.planes is not None and fused_collisions(scene, tile, t, dt)
+
+
+def _collide_if_planes(collide):
+    """The overload of a layout's generic collision pass: ``collide`` for a scene with
+    planes, ``False`` without."""
+
+    def pick(scene, tile, t, dt):
+        if is_none(scene, "planes"):
+            return lambda scene, tile, t, dt: False
+        return lambda scene, tile, t, dt: collide(scene, tile, t, dt)
+
+    return pick
+
+
+overload(passes_collide, **BY_TYPE)(_collide_if_planes(passes_collisions))
+overload(fused_collide, **BY_TYPE)(_collide_if_planes(fused_collisions))
+
+
 @njit(**COLD)
 def fused_start(scene, tile, t):
     """The collision pass on the first state, every particle visited (with planes), then
@@ -369,17 +451,17 @@ def fused_start(scene, tile, t):
     flags = tile.flags
     for p in range(tile.X.shape[1]):
         flags[p] = 1
-    collisions(scene, tile, t, 0.0)
+    fused_collide(scene, tile, t, 0.0)
     for p in range(flags.shape[0]):
         flags[p] = 0
     list_special(scene, tile)
     tile.count[FRESH] = 1
 
 
-@carries(name="fused", start=fused_start, collide=fused_collisions)
+@carries(name="fused", start=fused_start)
 class Fused(NamedTuple):
     """The layout that steps each particle of a tile in one loop, for scenes whose forces
-    are all pointwise, in tiles of ``size`` particles; ``collide`` is its collision pass."""
+    are all pointwise, in tiles of ``size`` particles."""
 
     size: int
 
@@ -465,6 +547,6 @@ def fused_step(method, scene, tile, t, h):
         store(X, p, x)
         store(V, p, v)
     mark_special(scene, tile)
-    tile.count[FRESH] = collisions(scene, tile, t + h, h)
+    tile.count[FRESH] = fused_collide(scene, tile, t + h, h)
     list_special(scene, tile)
     return evaluations

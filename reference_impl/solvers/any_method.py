@@ -37,7 +37,7 @@ from truestep.reference_impl.solvers.splitting_kernels import (
     kick_drift_kick_finish,
     kick_drift_kick_input,
 )
-from truestep.reference_impl.tiles import CONTACT, FRESH, collisions
+from truestep.reference_impl.tiles import CONTACT, FRESH, passes_collide
 
 TABLEAU, KICK_DRIFT, KICK_DRIFT_KICK = 0, 1, 2
 """The shapes of step (:attr:`AnyMethod.shape`)."""
@@ -88,7 +88,7 @@ def any_passes(method, scene, tile, t, h):
         out, X, V, te = step_input(method, e, tile, t, h)
         accelerations(scene, out, tile.F, X, V, te, tile.contact, tile.count[CONTACT] > 0)
     step_finish(method, tile, h)
-    changed = collisions(scene, tile, t + h, h)
+    changed = passes_collide(scene, tile, t + h, h)
     if method.shape == KICK_DRIFT_KICK:  # its closing acceleration is kept unless changed
         tile.count[FRESH] = changed
     return n

@@ -18,16 +18,18 @@ methods known by their facts alone, and the composition itself.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import os
 from pathlib import Path
 
 import numba
 import numpy as np
 import pytest
+from numba import typeof
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import load_cases
-from truestep.reference_impl import compiled, compose, precompile, step_slots, tiles
+from truestep.reference_impl import compiled, compose, particles_kernels, precompile, step_slots, tiles
 from truestep.reference_impl.compiled import compiled_reason, independent, run_compiled
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel, Plane, Springs
@@ -209,27 +211,41 @@ def held(scene, method: str) -> tuple:
     return compiled.loop_kind(kind, layout, scene)[1], layout, scene
 
 
-def test_a_step_is_composed_of_only_what_its_scene_declares(case_named):
+def test_a_step_calls_only_the_kernels_its_scene_declares(case_named):
+    """numba picks what a step calls by the types of what its scene holds
+    (:mod:`~truestep.reference_impl.by_type`): the kernels of its force kinds, and nothing
+    for a part it lacks; every scene of a layout then shares one loop, compiled for each
+    combination of types."""
     harmonic, ball = (
-        compiled.pack(case_named("harmonic-oscillator").model),
-        compiled.pack(case_named("bouncing-ball").model),
+        compiled.pack(case_named(name).model) for name in ("harmonic-oscillator", "bouncing-ball")
     )
-    plain, planes = (step_slots.slots_for(*held(scene, "lecture")) for scene in (harmonic, ball))
-    # no planes: the collision slots are filled with nothing; with them, the kernels
-    assert "return False" in compose.source_of(plain["collisions"])
-    assert compose.source_of(plain["near_planes"]).endswith("return False\n")
-    assert planes["collisions"] is tiles.fused_collisions
-    assert "near_plane(scene.planes[0], x, radius)" in compose.source_of(planes["near_planes"])
-    # the forces: the anchor kernels for the one, gravity's for the other, nothing else
-    assert "anchors_add(scene.forces[0]" in compose.source_of(plain["add_forces"])
-    assert "gravity" not in compose.source_of(plain["add_forces"])
-    assert "gravity_at(scene.forces[0]" in compose.source_of(planes["point_force"])
-    names = {compose.cache_name("drive", s) for s in (plain, planes)}
-    assert len(names) == 2
+
+    def kernels(pick, kinds) -> list[str]:
+        """The kernels the generic call ``pick`` (an overload) makes for ``kinds``, in order."""
+        names = []
+        for k in range(len(kinds)):
+            impl = pick(typeof(kinds[k:]), *[None] * (len(inspect.signature(pick).parameters) - 1))
+            names += [c.cell_contents.__name__ for c in impl.__closure__ or ()]
+        return names
+
+    # the forces: the anchors' kernels for the one, gravity's for the other, nothing else
+    assert kernels(particles_kernels._each_add, harmonic.forces) == ["anchors_add"]
+    assert kernels(particles_kernels._each_at, ball.forces) == ["gravity_at"]
+    assert kernels(particles_kernels._each_energy, ball.forces) == ["gravity_energy"]
+    # no planes: a step's plane tests and collision passes are constants; with them, the kernels
+    near = tiles._any_near(typeof(harmonic.planes), None, None)
+    assert near(None, None, None) is False
+    assert tiles._any_near(typeof(ball.planes), None, None)(ball.planes, (0.0, 0.01, 0.0), 0.05)
+    collide = tiles._collide_if_planes(tiles.fused_collisions)
+    assert collide(typeof(harmonic), None, None, None)(None, None, None, None) is False
+    assert collide(typeof(ball), None, None, None).__closure__[0].cell_contents is tiles.fused_collisions
+    assert step_slots.loop_for(*held(harmonic, "lecture")[:2]) is step_slots.loop_for(
+        *held(ball, "lecture")[:2]
+    )
 
 
 def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named, monkeypatch):
-    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model), "lecture"))
+    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model), "lecture")[:2])
     before = compose.cache_name("drive", slots)
     monkeypatch.setattr(compose, "FINGERPRINT", "another source")
     assert compose.cache_name("drive", slots) != before
