@@ -2,9 +2,10 @@
 
 A NamedTuple's body may declare only fields (anything else is not a field to a type
 checker), yet the scene's force kinds, the methods and the layouts are NamedTuples (numba
-passes them to compiled code as records) that also name their kernels, read by Python
-when a step is composed (``type(kind).add``, ``type(layout).start``). :func:`carries`
-attaches them after the class is made.
+passes them to compiled code as records) that also name their kernels, read when a step
+is compiled (``type(kind).add``, ``type(layout).start``:
+:mod:`~truestep.reference_impl.by_type`). :func:`carries` attaches them after the class
+is made.
 """
 
 from __future__ import annotations

@@ -46,13 +46,12 @@ from truestep.reference_impl.forces_kernels import (
     Impulses,
     Springs,
 )
-from truestep.reference_impl.integrate_kernels import DrivenRun, run, unwatched
+from truestep.reference_impl.integrate_kernels import DrivenRun, drive, run, unwatched
 from truestep.reference_impl.model import ParticleModel
-from truestep.reference_impl.particles_kernels import Particles, Scene
+from truestep.reference_impl.particles_kernels import Particles, Scene, flat_derivative
 from truestep.reference_impl.solvers.any_method import AnyMethod, fused_kinds, pattern
 from truestep.reference_impl.solvers.explicit_rk_kernels import Tableau
 from truestep.reference_impl.solvers.splitting_kernels import KickDrift, KickDriftKick
-from truestep.reference_impl.step_slots import derivative_loop, loop_for
 from truestep.reference_impl.tiles import BLOCK, Fused, Passes
 
 CompiledRun = DrivenRun
@@ -300,7 +299,7 @@ def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], Non
     key = composition(held, layout, scene)
     if key in _PREPARED:
         return _PREPARED[key], kind, layout, scene
-    loop = loop_for(held, layout)
+    loop = drive
     if not hasattr(loop, "overloads"):  # NUMBA_DISABLE_JIT: the composition runs as Python
         _PREPARED[key] = loop
         return loop, kind, layout, scene
@@ -308,6 +307,7 @@ def prepared(model: ParticleModel, method: str, *, progress: Callable[[str], Non
         typeof(a)
         for a in (
             kind,
+            layout,
             1,
             0,
             1,
@@ -371,7 +371,7 @@ def derivative_for(
     key = ("derivative", sig)
     if key not in _PREPARED:
         scene = args[0]
-        loop = derivative_loop()
+        loop = flat_derivative
         if hasattr(loop, "overloads"):  # else NUMBA_DISABLE_JIT: the composition runs as Python
             if sig not in loop.overloads:
                 kinds = ", ".join(type(k).__name__.lower() for k in scene.forces) or "no forces"
@@ -412,7 +412,7 @@ def run_compiled(
     result = run(
         loop,
         kind,
-        layout.size,
+        layout,
         scene,
         model.x0,
         model.v0,

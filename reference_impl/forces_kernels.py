@@ -8,8 +8,8 @@ step that calls the kinds its scene has.
 
 A compiled scene declares its forces as a tuple of kinds, in the order of
 :func:`~truestep.reference_impl.forces.add_model_forces`. A kind is a ``NamedTuple`` of its
-parameters whose class names its kernels, from which a step is composed when it is
-compiled (:mod:`~truestep.reference_impl.compose`), never by a test at run time:
+parameters whose class names its kernels, which numba picks by the kind's type when it
+compiles a step (:mod:`~truestep.reference_impl.by_type`), never by a test at run time:
 
 ``add(kind, F, X, V, t, particles)``
     add its force on every particle of a tile into ``F``;
@@ -43,16 +43,27 @@ TIME_ROUNDOFF = 1e-9
 addition (``4 x 0.0025 = 0.009999999999999998``) counts as the time it stands for."""
 
 KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy", "inline": "always"}
-"""How a kernel that names a slot of a composed step is compiled (:mod:`compose`): into
-the step that calls it (numba inlines it before it types the step: a call costs
-nothing), or on its own and cached when Python calls it; division by zero gives ``inf``
-or ``nan`` as numpy does, never an exception."""
+"""How a kernel of a step's hot path is compiled: into the step that calls it (numba
+inlines it before it types the step: a call costs nothing), or on its own and cached when
+Python calls it; division by zero gives ``inf`` or ``nan`` as numpy does, never an
+exception."""
 LEAF: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
 """How a kernel off the hot path of a step is compiled (a collision response, an
-energy): once, on its own, cached, and called, so that composing a step does not
-compile it again; without reference counting (a composed step has none,
-:data:`compose.LOOP`). A kernel in the hot path is inlined (:data:`KERNEL`): a call with
-its arrays would cost more than its arithmetic."""
+energy): once, on its own, cached, and called, so that compiling a step does not
+compile it again; without reference counting (a loop has none, :data:`LOOP`). A kernel
+in the hot path is inlined (:data:`KERNEL`): a call with its arrays would cost more than
+its arithmetic."""
+
+COLD: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
+"""How the rarely called parts of a loop are compiled (a tile's start, a collision pass, a
+particle stepped again alone, the stop after a blow-up): on their own, called, so that
+numba does not copy them into the loop (it copies a function it inlines once for every
+place that calls it, a cost that grows with the square of the loop's size)."""
+LOOP: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False, "nogil": True}
+"""How a whole loop is compiled: cached on disk, without numba's reference counting (its
+arrays all come from Python, which holds them while it runs; it allocates none), so that
+passing arrays between the functions it is made of costs nothing, and without Python's
+lock while it runs, so that threads may step a run's tiles at once."""
 
 
 @njit(**KERNEL)

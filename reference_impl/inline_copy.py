@@ -5,8 +5,8 @@ copies the callee's IR first (``InlineWorker.inline_ir``, twice: a copy to splic
 an unmutated one to hand back). It deep-copies each block on its own, with a fresh memo,
 so every block's copy drags along its own copy of the function's ``Scope`` and of every
 variable the scope holds: the cost grows with blocks times variables, and for the
-composed loops of :mod:`~truestep.reference_impl.compose` (a driver, a method's step, the
-derivative and the force kernels, inlined into one another) it was a large share of the
+compiled loops of :mod:`~truestep.reference_impl.integrate_kernels` (a driver, a
+method's step, the derivative and the force kernels, inlined into one another) it was a large share of the
 time a loop takes to compile. :func:`install` gives the block copies of one
 ``inline_ir`` call one memo, so the blocks of a copy share one copied scope, as the
 blocks of the original share one scope. The IR spliced into the caller is the same,

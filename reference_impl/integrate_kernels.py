@@ -16,6 +16,7 @@ and the step it stopped at are what stepping the whole scene gives.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import time
@@ -25,12 +26,15 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
-from truestep.reference_impl.compose import COLD, slot
-from truestep.reference_impl.forces_kernels import KERNEL, LEAF
+from truestep.reference_impl.by_type import BY_TYPE, CALLED, field_type, tag_key
+from truestep.reference_impl.forces_kernels import COLD, KERNEL, LEAF, LOOP
+from truestep.reference_impl.fused_steps import fused_step_for
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
 from truestep.reference_impl.particles_kernels import cut, total_energy
-from truestep.reference_impl.tiles import load, scratch, store, tile_view
+from truestep.reference_impl.solvers.any_method import AnyMethod
+from truestep.reference_impl.tiles import Fused, load, scratch, store, tile_view
 
 
 class EnergyMonitor(NamedTuple):
@@ -39,18 +43,6 @@ class EnergyMonitor(NamedTuple):
     not track the energy passes empty ``bounds`` (:data:`UNWATCHED`)."""
 
     bounds: np.ndarray
-
-
-@slot
-def step(method, scene, tile, t, h):
-    """One step of ``method`` over ``tile`` from time ``t`` (s), ``h`` s long, in the
-    run's layout (the method's ``passes`` or ``fused``); returns the derivative evaluations
-    it made."""
-
-
-@slot
-def start(scene, tile, t):
-    """The layout's pass over the first state of ``tile`` (its ``start``)."""
 
 
 def unwatched() -> EnergyMonitor:
@@ -120,42 +112,76 @@ def stopped(xs, vs, ts, tile, lo, checked, kept, recorded, t):
     return kept
 
 
-@njit(**COLD)
-def run_tile(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
-    """Particles ``lo`` to ``lo + m`` of ``scene`` (a tile of m) from ``X0``, ``V0`` through
-    ``n_steps`` steps of ``h`` s, in the scratch ``buffers``. Returns (records kept, steps,
-    evaluations, unstable)."""
-    m = scene.particles.mass.shape[0]
-    tile = tile_view(buffers, m)
-    for p in range(m):
-        store(tile.X, p, load(X0, lo + p))
-        store(tile.V, p, load(V0, lo + p))
-    t = 0.0
-    start(scene, tile, t)
-    write(xs, vs, ts, 0, tile, lo, t)
-    watch_energy(monitor, scene, tile)
-    kept, checked, nfev = 1, 1, 0
-    for i in range(1, n_steps + 1):
-        nfev += step(method, scene, tile, t, h)
-        t = t + h
-        if record[i]:
-            write(xs, vs, ts, kept, tile, lo, t)
-            kept += 1
+RUNNER: dict = CALLED
+"""How a tile's runner for a layout is compiled: on its own, called once a tile (not
+cached on its own: the loop that calls it is)."""
+
+
+@functools.cache
+def tile_runner(layout: type, patterns: tuple):
+    """The loop over a tile's steps in ``layout`` (:class:`Passes` or :class:`Fused`; fused,
+    with the step of one particle of every tableau of ``patterns``): the layout's first
+    pass and its step, compiled into it. ``run(method, scene, X0, V0, lo, h, n_steps,
+    record, buffers, xs, vs, ts, monitor)`` steps particles ``lo`` to ``lo + m`` of
+    ``scene`` (a tile of m) from ``X0``, ``V0`` through ``n_steps`` steps of ``h`` s, in the
+    scratch ``buffers``, and returns (records kept, steps, evaluations, unstable)."""
+    start = getattr(layout, "start")  # noqa: B009  # set by @carries, unseen by a type checker
+    step = fused_step_for(patterns) if layout is Fused else getattr(AnyMethod, "passes")  # noqa: B009
+
+    def run(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
+        m = scene.particles.mass.shape[0]
+        tile = tile_view(buffers, m)
+        for p in range(m):
+            store(tile.X, p, load(X0, lo + p))
+            store(tile.V, p, load(V0, lo + p))
+        t = 0.0
+        start(scene, tile, t)
+        write(xs, vs, ts, 0, tile, lo, t)
         watch_energy(monitor, scene, tile)
-        if i % CHECK_EVERY == 0 or i == n_steps:
-            if finite(tile.X, tile.V):
-                checked = kept
-                continue
-            return stopped(xs, vs, ts, tile, lo, checked, kept, record[i], t), i, nfev, True
-    return kept, n_steps, nfev, False
+        kept, checked, nfev = 1, 1, 0
+        for i in range(1, n_steps + 1):
+            nfev += step(method, scene, tile, t, h)
+            t = t + h
+            if record[i]:
+                write(xs, vs, ts, kept, tile, lo, t)
+                kept += 1
+            watch_energy(monitor, scene, tile)
+            if i % CHECK_EVERY == 0 or i == n_steps:
+                if finite(tile.X, tile.V):
+                    checked = kept
+                    continue
+                return stopped(xs, vs, ts, tile, lo, checked, kept, record[i], t), i, nfev, True
+        return kept, n_steps, nfev, False
+
+    return njit(**RUNNER)(run)
 
 
-def drive(method, size, first, stride, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor):
+def run_tile(method, layout, scene, *rest):
+    """Particles of a tile of ``scene`` through their steps in ``layout`` by ``method``
+    (:func:`tile_runner` for the layout and the method's patterns; ``rest`` as it takes)."""
+    return tile_runner(type(layout), method.patterns.key)(method, scene, *rest)
+
+
+@overload(run_tile, **BY_TYPE)
+def _run_tile(method, layout, scene, *rest):
+    run = tile_runner(layout.instance_class, tag_key(field_type(method, "patterns")))
+
+    def impl(method, layout, scene, *rest):
+        return run(method, scene, *rest)
+
+    return impl
+
+
+@njit(**LOOP)
+def drive(
+    method, layout, size, first, stride, scene, X0, V0, h, n_steps, record, buffers, xs, vs, ts, monitor
+):
     """Tiles ``first``, ``first + stride``, ... of ``scene`` (``size`` particles each) through
     ``n_steps`` steps (:func:`run_tile`); ``first = 0, stride = 1``: every tile. Returns
     (records kept, steps, evaluations, unstable, split) of the last tile it ran: with
     ``split``, a tile of several blew up and the run must be made again as one tile.
-    Compiled for each composition of a run (:func:`compiled.loop_for`), with caching and
+    Compiled once for each combination of the types of its arguments (the method record,
+    the layout, the scene's kinds; :mod:`~truestep.reference_impl.by_type`), with caching and
     without Python's lock, so that threads may run other tiles of the same run at once
     (:func:`run`)."""
     n = X0.shape[1]
@@ -164,7 +190,7 @@ def drive(method, size, first, stride, scene, X0, V0, h, n_steps, record, buffer
     for lo in range(first * size, max(n, 1), stride * size):
         hi = min(lo + size, n)
         kept, steps, nfev, unstable = run_tile(
-            method, cut(scene, lo, hi), X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor
+            method, layout, cut(scene, lo, hi), X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor
         )
         if unstable and size < n:
             return kept, steps, nfev, unstable, True
@@ -185,7 +211,7 @@ def _pool(threads: int) -> ThreadPoolExecutor:
 
 
 def _on_threads(
-    loop, method, size: int, tiles: int, scene, state: tuple, scratches: list, out: tuple
+    loop, method, layout, size: int, tiles: int, scene, state: tuple, scratches: list, out: tuple
 ) -> tuple:
     """The tiles of a run on ``len(scratches)`` threads, thread ``k`` stepping tiles ``k``,
     ``k + threads``, ... in its own scratch (the compiled loop holds no lock). Each tile's
@@ -196,7 +222,7 @@ def _on_threads(
     threads = len(scratches)
     done = list(
         _pool(threads).map(
-            lambda k: loop(method, size, k, threads, scene, *state, scratches[k], *out),
+            lambda k: loop(method, layout, size, k, threads, scene, *state, scratches[k], *out),
             range(threads),
         )
     )
@@ -228,7 +254,7 @@ class DrivenRun:
 def run(
     loop,
     method,
-    size: int,
+    layout,
     scene,
     x0: np.ndarray,
     v0: np.ndarray,
@@ -242,12 +268,13 @@ def run(
     threads: int = 1,
 ) -> DrivenRun:
     """Step ``scene`` from ``x0``, ``v0`` ((n, 3), m and m/s) through ``n_steps`` steps of
-    ``h`` s with ``loop`` (:func:`drive` compiled for this scene and ``method``) in tiles
-    of ``size`` particles; ``stages`` and ``planes`` size the scratch. Records and results
-    are allocated before the timed call; with ``track_energy`` the scene is one tile and
+    ``h`` s with ``loop`` (:func:`drive`) in ``layout``, in tiles of its ``size``
+    particles; ``stages`` and ``planes`` size the scratch. Records and results are
+    allocated before the timed call; with ``track_energy`` the scene is one tile and
     the energy is watched at every step. ``threads`` > 1 steps the tiles on that many
     threads at once (:func:`_on_threads`): the same numbers, bit for bit, as one thread."""
     n = len(x0)
+    size = layout.size
     if track_energy:
         size = max(n, 1)
     marks = record_indices(n_steps, max_records)
@@ -266,16 +293,20 @@ def run(
     out = (xs, vs, ts, monitor)
     start = time.perf_counter()
     if threads == 1:
-        kept, steps, nfev, unstable, split = loop(method, size, 0, 1, scene, *state, scratches[0], *out)
+        kept, steps, nfev, unstable, split = loop(
+            method, layout, size, 0, 1, scene, *state, scratches[0], *out
+        )
     else:
         kept, steps, nfev, unstable, split = _on_threads(
-            loop, method, size, tiles, scene, state, scratches, out
+            loop, method, layout, size, tiles, scene, state, scratches, out
         )
     rerun = bool(split)
     if split:
         start = time.perf_counter()
         buffers = scratch(max(n, 1), stages, planes)
-        kept, steps, nfev, unstable, split = loop(method, max(n, 1), 0, 1, scene, *state, buffers, *out)
+        kept, steps, nfev, unstable, split = loop(
+            method, layout, max(n, 1), 0, 1, scene, *state, buffers, *out
+        )
     wall = time.perf_counter() - start
     extra = (
         {"energy_min": float(monitor.bounds[0]), "energy_max": float(monitor.bounds[1])}

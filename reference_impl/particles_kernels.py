@@ -20,9 +20,9 @@ from numba import njit
 from numba.core import types
 from numba.extending import overload
 
-from truestep.reference_impl.by_type import BY_TYPE, field, is_none, kernel
+from truestep.reference_impl.by_type import BY_TYPE, field_type, fold, is_none, kernel
 from truestep.reference_impl.collisions_kernels import contact_force
-from truestep.reference_impl.forces_kernels import KERNEL, LEAF, impulse_at, impulses_add
+from truestep.reference_impl.forces_kernels import KERNEL, LEAF, LOOP, impulse_at, impulses_add
 
 
 class Particles(NamedTuple):
@@ -60,31 +60,20 @@ def add_forces(scene, F, X, V, t):
         type(kind).add(kind, F, X, V, t, scene.particles)
 
 
+def _then_add(previous, i: int, kind):
+    add = kernel(kind, "add")
+
+    def added(kinds, F, X, V, t, particles):
+        previous(kinds, F, X, V, t, particles)
+        add(kinds[i], F, X, V, t, particles)
+
+    return added
+
+
 @overload(add_forces, **BY_TYPE)
 def _add_forces(scene, F, X, V, t):
-    def impl(scene, F, X, V, t):
-        each_add(scene.forces, F, X, V, t, scene.particles)
-
-    return impl
-
-
-def each_add(kinds, F, X, V, t, particles):
-    """Each of ``kinds``' ``add`` in order (a tuple of kinds, each of its own type)."""
-    for kind in kinds:
-        type(kind).add(kind, F, X, V, t, particles)
-
-
-@overload(each_add, **BY_TYPE)
-def _each_add(kinds, F, X, V, t, particles):
-    if len(kinds) == 0:
-        return lambda kinds, F, X, V, t, particles: None
-    add = kernel(kinds[0], "add")
-
-    def impl(kinds, F, X, V, t, particles):
-        add(kinds[0], F, X, V, t, particles)
-        each_add(kinds[1:], F, X, V, t, particles)
-
-    return impl
+    adds = fold(field_type(scene, "forces"), lambda kinds, F, X, V, t, particles: None, _then_add)
+    return lambda scene, F, X, V, t: adds(scene.forces, F, X, V, t, scene.particles)
 
 
 def add_impulses(scene, F, X, V, t):
@@ -125,30 +114,22 @@ def point_force(scene, x, v, t, p):
     return f
 
 
+def _then_at(previous, i: int, kind):
+    at = kernel(kind, "at")
+
+    def added(kinds, f, x, v, t, particles, p):
+        return at(kinds[i], previous(kinds, f, x, v, t, particles, p), x, v, t, particles, p)
+
+    return added
+
+
 @overload(point_force, **BY_TYPE)
 def _point_force(scene, x, v, t, p):
-    if not all(kernel(k, "pointwise") for k in field(scene, "forces")):
+    kinds = field_type(scene, "forces")
+    if not all(kernel(k, "pointwise") for k in kinds):
         return lambda scene, x, v, t, p: (0.0, 0.0, 0.0)
-    return lambda scene, x, v, t, p: each_at(scene.forces, (0.0, 0.0, 0.0), x, v, t, scene.particles, p)
-
-
-def each_at(kinds, f, x, v, t, particles, p):
-    """``f`` with each of ``kinds``' ``at`` added in order."""
-    for kind in kinds:
-        f = type(kind).at(kind, f, x, v, t, particles, p)
-    return f
-
-
-@overload(each_at, **BY_TYPE)
-def _each_at(kinds, f, x, v, t, particles, p):
-    if len(kinds) == 0:
-        return lambda kinds, f, x, v, t, particles, p: f
-    at = kernel(kinds[0], "at")
-
-    def impl(kinds, f, x, v, t, particles, p):
-        return each_at(kinds[1:], at(kinds[0], f, x, v, t, particles, p), x, v, t, particles, p)
-
-    return impl
+    ats = fold(kinds, lambda kinds, f, x, v, t, particles, p: f, _then_at)
+    return lambda scene, x, v, t, p: ats(scene.forces, (0.0, 0.0, 0.0), x, v, t, scene.particles, p)
 
 
 def point_impulses(scene, f, t, p):
@@ -167,31 +148,25 @@ def _point_impulses(scene, f, t, p):
 
 def potential_energy(scene, X):
     """The potential energy (J) of every kind in ``scene.forces``, summed in order."""
-    return each_energy(scene.forces, 0.0, X, scene.particles)
+    e = 0.0
+    for kind in scene.forces:
+        e += type(kind).energy(kind, X, scene.particles)
+    return e
+
+
+def _then_energy(previous, i: int, kind):
+    energy = kernel(kind, "energy")
+
+    def added(kinds, X, particles):
+        return previous(kinds, X, particles) + energy(kinds[i], X, particles)
+
+    return added
 
 
 @overload(potential_energy, **BY_TYPE)
 def _potential_energy(scene, X):
-    return lambda scene, X: each_energy(scene.forces, 0.0, X, scene.particles)
-
-
-def each_energy(kinds, e, X, particles):
-    """``e`` plus each of ``kinds``' ``energy``, added in order."""
-    for kind in kinds:
-        e += type(kind).energy(kind, X, particles)
-    return e
-
-
-@overload(each_energy, **BY_TYPE)
-def _each_energy(kinds, e, X, particles):
-    if len(kinds) == 0:
-        return lambda kinds, e, X, particles: e
-    energy = kernel(kinds[0], "energy")
-
-    def impl(kinds, e, X, particles):
-        return each_energy(kinds[1:], e + energy(kinds[0], X, particles), X, particles)
-
-    return impl
+    energies = fold(field_type(scene, "forces"), lambda kinds, X, particles: 0.0, _then_energy)
+    return lambda scene, X: energies(scene.forces, X, scene.particles)
 
 
 @njit(**KERNEL)
@@ -209,36 +184,28 @@ def cut(scene, lo, hi):
     not act on one another): its particles' constants, each kind cut by its ``cut`` kernel
     (a kind without one is the same for every tile), its impulses cut alike."""
     kinds = tuple(type(k).cut(k, lo, hi) if hasattr(type(k), "cut") else k for k in scene.forces)
-    impulses = None if scene.impulses is None else type(scene.impulses).cut(scene.impulses, lo, hi)
-    return Scene(tile_particles(scene.particles, lo, hi), kinds, impulses, scene.planes)
+    return Scene(
+        tile_particles(scene.particles, lo, hi), kinds, cut_or_none(scene.impulses, lo, hi), scene.planes
+    )
+
+
+def _then_cut(previous, i: int, kind):
+    if not hasattr(kind.instance_class, "cut"):
+        return lambda kinds, lo, hi: (*previous(kinds, lo, hi), kinds[i])
+    one = kernel(kind, "cut")
+    return lambda kinds, lo, hi: (*previous(kinds, lo, hi), one(kinds[i], lo, hi))
 
 
 @overload(cut, **BY_TYPE)
 def _cut(scene, lo, hi):
+    cuts = fold(field_type(scene, "forces"), lambda kinds, lo, hi: (), _then_cut)
+
     def impl(scene, lo, hi):
-        return Scene(
-            tile_particles(scene.particles, lo, hi),
-            each_cut(scene.forces, lo, hi),
-            cut_or_none(scene.impulses, lo, hi),
-            scene.planes,
-        )
+        kinds = cuts(scene.forces, lo, hi)
+        impulses = cut_or_none(scene.impulses, lo, hi)
+        return Scene(tile_particles(scene.particles, lo, hi), kinds, impulses, scene.planes)
 
     return impl
-
-
-def each_cut(kinds, lo, hi):
-    """The tuple of ``kinds``, each cut to particles ``lo`` to ``hi`` (:func:`cut`)."""
-    return tuple(type(k).cut(k, lo, hi) if hasattr(type(k), "cut") else k for k in kinds)
-
-
-@overload(each_cut, **BY_TYPE)
-def _each_cut(kinds, lo, hi):
-    if len(kinds) == 0:
-        return lambda kinds, lo, hi: ()
-    if not hasattr(kinds[0].instance_class, "cut"):
-        return lambda kinds, lo, hi: (kinds[0], *each_cut(kinds[1:], lo, hi))
-    first = kernel(kinds[0], "cut")
-    return lambda kinds, lo, hi: (first(kinds[0], lo, hi), *each_cut(kinds[1:], lo, hi))
 
 
 def cut_or_none(kind, lo, hi):
@@ -295,6 +262,7 @@ def accelerations(scene, A, F, X, V, t, contact, any_contact):
         A[2, p] = F[2, p] * w[p]
 
 
+@njit(**LOOP)
 def flat_derivative(scene, y, t, out, X, V, F, A, contact):
     """``dy/dt`` of a flat state ``y`` (6 m,: the positions (m, 3) then the velocities,
     each particle's three components together, as :class:`ParticleSystem` keeps them) at

@@ -32,12 +32,11 @@ from numba import njit
 from numba.core import types
 from numba.extending import overload
 
-from truestep.reference_impl.by_type import BY_TYPE, is_none
+from truestep.reference_impl.by_type import BY_TYPE, fold, is_none
 from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.collisions import EPS_DISTANCE
 from truestep.reference_impl.collisions_kernels import collide, signed_distance, within
-from truestep.reference_impl.compose import COLD, slot
-from truestep.reference_impl.forces_kernels import KERNEL, LEAF
+from truestep.reference_impl.forces_kernels import COLD, KERNEL, LEAF
 from truestep.reference_impl.particles_kernels import (
     applied_forces,
     particle_force,
@@ -112,7 +111,7 @@ def scratch(size: int, stages: int, planes: int) -> Tile:
     """The buffers of a tile of up to ``size`` particles (one-dimensional, each field of
     :class:`Tile` flattened, each on cache lines of its own: :func:`_owned`), allocated
     once per run by Python: a compiled step allocates nothing (it is compiled without
-    numba's reference counting, see :mod:`compose`)."""
+    numba's reference counting, see :data:`forces_kernels.LOOP`)."""
     size = max(size, 1)
     f = [_owned(3 * size) for _ in range(6)]
     return Tile(  # type: ignore[call-arg]  # mypy drops the field count (see Tile)
@@ -179,13 +178,15 @@ def any_near(planes, x, radius):
     return near
 
 
+def _then_near(previous, i: int, plane):
+    return lambda planes, x, radius: previous(planes, x, radius) | near_plane(planes[i], x, radius)
+
+
 @overload(any_near, **BY_TYPE)
 def _any_near(planes, x, radius):
     if isinstance(planes, types.NoneType):
         return lambda planes, x, radius: False
-    if len(planes) == 1:
-        return lambda planes, x, radius: near_plane(planes[0], x, radius)
-    return lambda planes, x, radius: near_plane(planes[0], x, radius) | any_near(planes[1:], x, radius)
+    return fold(planes, lambda planes, x, radius: False, _then_near).py_func
 
 
 def point_contact(scene, tile, f, v, p):
@@ -473,30 +474,6 @@ def mark_special(scene, tile):
         tile.flags[tile.special[q]] = 1
 
 
-@slot
-def point_accel(scene, tile, x, v, t, p):
-    """The acceleration (m/s^2, 3-tuple) of particle ``p`` at ``x``, ``v``, time ``t``, in
-    a fused step: :func:`smooth_accel`, or :func:`special_accel` for a special particle."""
-
-
-@slot
-def point_step(method, scene, tile, x, v, t, h, p):
-    """One step of ``method`` for particle ``p`` alone from ``x``, ``v`` (3-tuples) at time
-    ``t``, ``h`` s long: the method's step of one particle with :func:`smooth_accel`.
-    Returns ``(x', v')``."""
-
-
-@slot
-def step_particles(method, scene, tile, t, h):
-    """Every particle of the tile through one step of ``method`` (an ``AnyMethod``): the
-    loop's :func:`fused_particles` for the method's step; returns the evaluations."""
-
-
-@slot
-def special_step(method, scene, tile, x, v, t, h, p):
-    """:func:`point_step` of ``method`` (an ``AnyMethod``) with :func:`special_accel`."""
-
-
 @njit(**KERNEL)
 def smooth_accel(scene, tile, x, v, t, p):
     """The acceleration of particle ``p`` under the scene's pointwise kinds (every force
@@ -513,40 +490,10 @@ def special_accel(scene, tile, x, v, t, p):
 
 
 @njit(**KERNEL)
-def fused_particles(method, scene, tile, t, h):
-    """Each particle's whole step (:func:`point_step` of ``method``, a compiled step of one
-    shape) in one loop that also marks those near a plane."""
-    X, V = tile.X, tile.V
-    radius = scene.particles.radius
-    for j in range(X.shape[1]):
-        x, v = point_step(method, scene, tile, load(X, j), load(V, j), t, h, j)
-        store(X, j, x)
-        store(V, j, v)
-        tile.flags[j] = near_planes(scene, x, radius[j])
-
-
-@njit(**KERNEL)
-def fused_step(method, scene, tile, t, h):
-    """One step of ``method`` over a tile of independent particles: each particle's whole
-    step (:func:`step_particles`); the special particles' again (:func:`special_step`) from
-    their state at the step's start, saved first (with the acceleration a method that
-    carries it keeps, into ``F``); then the collision pass on the marked ones, which says
-    whether the next step evaluates afresh, and the special ones listed anew. Returns the
-    evaluations the step made."""
-    X, V, XS, VS = tile.X, tile.V, tile.XS, tile.VS
-    special = tile.special
-    for q in range(tile.count[SPECIAL]):
-        p = special[q]
-        store(XS, p, load(X, p))
-        store(VS, p, load(V, p))
-        store(tile.F, p, load(tile.A, p))
-    evaluations = step_particles(method, scene, tile, t, h)
-    for q in range(tile.count[SPECIAL]):
-        p = special[q]
-        x, v = special_step(method, scene, tile, load(XS, p), load(VS, p), t, h, p)
-        store(X, p, x)
-        store(V, p, v)
-    mark_special(scene, tile)
-    tile.count[FRESH] = fused_collide(scene, tile, t + h, h)
-    list_special(scene, tile)
-    return evaluations
+def point_accel(special, scene, tile, x, v, t, p):
+    """The acceleration (m/s^2, 3-tuple) of particle ``p`` at ``x``, ``v``, time ``t``, in
+    a fused step: :func:`special_accel` for a ``special`` particle, else
+    :func:`smooth_accel` (a fused step passes a constant: the compiler keeps one)."""
+    if special:
+        return special_accel(scene, tile, x, v, t, p)
+    return smooth_accel(scene, tile, x, v, t, p)

@@ -11,8 +11,9 @@ step of every method that runs in that layout, picked once a step by the record
   evaluation, the scene's forces, is at one place in the loop (:func:`any_passes`);
 - fused (:class:`~truestep.reference_impl.tiles.Fused`), a step for each *pattern* of
   non-zero tableau entries among the methods (its stages unrolled for speed:
-  :meth:`Tableau.point_step`; Heun and the midpoint method share a pattern), the kick and
-  drift, and velocity Verlet's (whose tile is the whole scene: it carries state over it).
+  :func:`~.explicit_rk_kernels.unrolled_step`; Heun and the midpoint method share a
+  pattern), the kick and drift, and velocity Verlet's (whose tile is the whole scene: it
+  carries state over it).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from truestep.reference_impl.by_type import Tag
 from truestep.reference_impl.class_kernels import carries
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.particles_kernels import accelerations
@@ -109,25 +111,29 @@ def pattern(kind: Tableau) -> tuple:
 class AnyMethod(NamedTuple):
     """A method of any ``shape`` (:data:`TABLEAU`, ...): its own step in the field of that
     shape, placeholders of the right types in the others; ``pattern``, fused, the index of
-    its tableau's pattern among the loop's (:func:`fused_kinds`)."""
+    its tableau's pattern among the loop's ``patterns`` (:func:`fused_kinds`; a
+    :class:`~truestep.reference_impl.by_type.Tag` of them, so that a loop is compiled
+    with a step of one particle unrolled for each: :mod:`~truestep.reference_impl.fused_steps`)."""
 
     shape: int
     pattern: int
     tableau: Tableau
     kick_drift: KickDrift
     kick_drift_kick: KickDriftKick
+    patterns: Tag
 
     @classmethod
     def of(cls, kind, patterns: tuple = ()) -> AnyMethod:
         """The record of a method's compiled step (a :class:`Tableau`, :class:`KickDrift`
         or :class:`KickDriftKick`); ``patterns`` are the fused loop's tableau patterns."""
+        held = Tag(tuple(patterns))
         if isinstance(kind, Tableau):
             index = patterns.index(pattern(kind)) if patterns else 0
-            return cls(TABLEAU, index, kind, _NO_KICK_DRIFT, _NO_KICK_DRIFT_KICK)
+            return cls(TABLEAU, index, kind, _NO_KICK_DRIFT, _NO_KICK_DRIFT_KICK, held)
         if isinstance(kind, KickDrift):
-            return cls(KICK_DRIFT, 0, _NO_TABLEAU, kind, _NO_KICK_DRIFT_KICK)
+            return cls(KICK_DRIFT, 0, _NO_TABLEAU, kind, _NO_KICK_DRIFT_KICK, held)
         if isinstance(kind, KickDriftKick):
-            return cls(KICK_DRIFT_KICK, 0, _NO_TABLEAU, _NO_KICK_DRIFT, kind)
+            return cls(KICK_DRIFT_KICK, 0, _NO_TABLEAU, _NO_KICK_DRIFT, kind, held)
         raise TypeError(f"no compiled step for {type(kind).__name__}")
 
     @property

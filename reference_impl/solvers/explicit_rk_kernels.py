@@ -8,20 +8,19 @@ the order of the stages. The tableau is data: every explicit method shares one c
 step in passes (:func:`stage_input` and :func:`tableau_finish` around each evaluation,
 :func:`~truestep.reference_impl.solvers.any_method.any_passes`); a fused step
 (:func:`tiles.fused_step`) takes the step of one particle unrolled for the tableau's
-pattern of non-zero entries (:meth:`Tableau.point_step`). Twin:
+pattern of non-zero entries (:func:`unrolled_step`). Twin:
 :meth:`~truestep.reference_impl.solvers.explicit_rk.ExplicitRungeKutta.step`.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from truestep.reference_impl import tiles
 from truestep.reference_impl.class_kernels import carries
-from truestep.reference_impl.compose import glue
 from truestep.reference_impl.forces_kernels import KERNEL
 from truestep.reference_impl.tiles import axpy, load, point_accel, store
 
@@ -72,10 +71,11 @@ def tableau_finish(method, tile, h):
 
 
 @njit(**KERNEL)
-def tableau_point_loop(method, scene, tile, x, v, t, h, p):
+def tableau_point_loop(method, special, scene, tile, x, v, t, h, p):
     """One particle's step of the tableau with its stages in a loop, their values in
-    column ``p`` of ``KX``, ``KV``: the sums of :func:`point_step_lines` in the same order,
-    for the rare particles a fused step takes again alone (a loop compiles faster than
+    column ``p`` of ``KX``, ``KV``, its acceleration a ``special`` particle's or not
+    (:func:`tiles.point_accel`): the sums of :func:`unrolled_step` in the same order, for
+    the rare particles a fused step takes again alone (a loop compiles faster than
     the stages unrolled; their speed does not matter)."""
     KX, KV, b = tile.KX, tile.KV, method.b
     for s in range(b.shape[0]):
@@ -85,30 +85,85 @@ def tableau_point_loop(method, scene, tile, x, v, t, h, p):
             w = h * method.weights[s, q]
             xs, vs = axpy(xs, w, load(KX[r], p)), axpy(vs, w, load(KV[r], p))
         store(KX[s], p, vs)
-        store(KV[s], p, point_accel(scene, tile, xs, vs, t + method.c[s] * h, p))
+        store(KV[s], p, point_accel(special, scene, tile, xs, vs, t + method.c[s] * h, p))
     dx, dv = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
     for s in range(b.shape[0]):
         dx, dv = axpy(dx, b[s], load(KX[s], p)), axpy(dv, b[s], load(KV[s], p))
     return axpy(x, h, dx), axpy(v, h, dv)
 
 
-def point_step_lines(terms: list[list[int]], stages: int) -> list[str]:
-    """The body of a tableau's step for one particle (see :meth:`Tableau.point_step`):
-    its stages in order, stage ``s`` at ``x + sum (h a_sr) k_r`` over the non-zero entries
-    ``terms[s]`` of its row, one term at a time, its acceleration from the slot
-    ``point_accel``; then ``x + h sum_s b_s k_s`` summed from 0.0 in stage order."""
-    lines = []
+UNROLLED: dict = {"error_model": "numpy", "inline": "always"}
+"""How the parts of an unrolled step are compiled: into the loop over a tile's particles
+that calls them (which the compiler vectorises), made for each pattern by Python as
+closures over its stages and terms (not cached on their own: the loop is)."""
+
+
+def _no_terms(method, h, x, v, ks):
+    return x, v
+
+
+def _then_term(terms, s: int, q: int, r: int):
+    """``terms`` followed by the term ``(h a_sr) k_r``, the ``q``-th of row ``s``."""
+
+    def added(method, h, x, v, ks):
+        xs, vs = terms(method, h, x, v, ks)
+        w = h * method.weights[s, q]
+        return axpy(xs, w, ks[r][0]), axpy(vs, w, ks[r][1])
+
+    return njit(**UNROLLED)(added)
+
+
+def _stages(pattern: tuple, s: int):
+    """Stages ``s`` onwards of a step of ``pattern``: each stage's state ``x + sum_r (h
+    a_sr) k_r``, one term at a time in the order of the row, and its acceleration,
+    appended to ``ks`` (pairs of the stages' velocity and acceleration, 3-tuples)."""
+    if s == len(pattern):
+        return njit(**UNROLLED)(lambda method, special, scene, tile, x, v, t, h, p, ks: ks)
+    terms = njit(**UNROLLED)(_no_terms)
+    for q, r in enumerate(pattern[s]):
+        terms = _then_term(terms, s, q, r)
+    rest = _stages(pattern, s + 1)
+
+    def stage(method, special, scene, tile, x, v, t, h, p, ks):
+        xs, vs = terms(method, h, x, v, ks)
+        a = point_accel(special, scene, tile, xs, vs, t + method.c[s] * h, p)
+        return rest(method, special, scene, tile, x, v, t, h, p, (*ks, (vs, a)))
+
+    return njit(**UNROLLED)(stage)
+
+
+def _weighted(stages: int):
+    """``(sum_s b_s v_s, sum_s b_s a_s)`` of the stages ``ks``, summed from 0.0 in stage
+    order, one 3-tuple each."""
+    total = njit(**UNROLLED)(lambda method, ks: ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
     for s in range(stages):
-        lines += [f"x{s}, v{s} = x, v"]
-        for q, r in enumerate(terms[s]):
-            lines += [
-                f"w = h * method.weights[{s}, {q}]",
-                f"x{s}, v{s} = axpy(x{s}, w, v{r}), axpy(v{s}, w, a{r})",
-            ]
-        lines += [f"a{s} = point_accel(scene, tile, x{s}, v{s}, t + method.c[{s}] * h, p)"]
-    lines += ["dx, dv = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)"]
-    lines += [f"dx, dv = axpy(dx, method.b[{s}], v{s}), axpy(dv, method.b[{s}], a{s})" for s in range(stages)]
-    return [*lines, "return axpy(x, h, dx), axpy(v, h, dv)"]
+        total = _then_weight(total, s)
+    return total
+
+
+def _then_weight(total, s: int):
+    def added(method, ks):
+        dx, dv = total(method, ks)
+        return axpy(dx, method.b[s], ks[s][0]), axpy(dv, method.b[s], ks[s][1])
+
+    return njit(**UNROLLED)(added)
+
+
+@functools.cache
+def unrolled_step(pattern: tuple):
+    """The step of one particle of a tableau whose non-zero entries below the diagonal are
+    ``pattern`` (row by row, :func:`any_method.pattern`), its stages unrolled: stage ``s`` at
+    ``x + sum_r (h a_sr) k_r`` over the entries of its row, one term at a time, its
+    acceleration a ``special`` particle's or not (:func:`tiles.point_accel`); then ``x + h sum_s b_s k_s``
+    summed from 0.0 in stage order. The weights are read from the tableau, so Heun and the
+    midpoint method share it; made once a process for each pattern."""
+    stages, weighted = _stages(pattern, 0), _weighted(len(pattern))
+
+    def step(method, special, scene, tile, x, v, t, h, p):
+        dx, dv = weighted(method, stages(method, special, scene, tile, x, v, t, h, p, ()))
+        return axpy(x, h, dx), axpy(v, h, dv)
+
+    return njit(**UNROLLED)(step)
 
 
 @carries(carries_state=False)
@@ -125,22 +180,6 @@ class Tableau(NamedTuple):
     cols: np.ndarray
     weights: np.ndarray
     evaluations: int
-
-    def point_step(self):
-        """The step of one particle (a filling of :func:`tiles.point_step`): the stages
-        unrolled for this tableau's pattern of non-zero entries, which the code is made
-        from (its weights are read from the tableau, so Heun and the midpoint method
-        share it)."""
-        terms = [list(self.cols[s, : self.terms[s]]) for s in range(len(self.b))]
-        return glue(
-            tiles.point_step,
-            point_step_lines(terms, len(self.b)),
-            {"axpy": axpy, "point_accel": tiles.point_accel},
-        )
-
-    def special_step(self):
-        """The step of one special particle (a filling of :func:`tiles.special_step`)."""
-        return tableau_point_loop
 
     @classmethod
     def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> Tableau:

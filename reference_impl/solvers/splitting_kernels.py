@@ -48,10 +48,10 @@ def kick_drift_finish(method, tile, h):
 
 
 @njit(**KERNEL)
-def kick_drift_point_step(method, scene, tile, x, v, t, h, p):
-    """The kick and drift of particle ``p`` alone, its acceleration from the slot
-    ``point_accel`` (a filling of :func:`tiles.point_step`)."""
-    return kick_drift_point(method, x, v, point_accel(scene, tile, x, v, t, p), h)
+def kick_drift_point_step(method, special, scene, tile, x, v, t, h, p):
+    """The kick and drift of particle ``p`` alone, its acceleration a ``special``
+    particle's or not (:func:`tiles.point_accel`)."""
+    return kick_drift_point(method, x, v, point_accel(special, scene, tile, x, v, t, p), h)
 
 
 @carries(carries_state=False)
@@ -63,14 +63,6 @@ class KickDrift(NamedTuple):
     old: float
     new: float
     evaluations: int
-
-    def point_step(self):
-        """The step of one particle (a filling of :func:`tiles.point_step`)."""
-        return kick_drift_point_step
-
-    def special_step(self):
-        """The step of one special particle (a filling of :func:`tiles.special_step`)."""
-        return kick_drift_point_step
 
 
 @njit(**KERNEL)
@@ -110,7 +102,7 @@ def kick_drift_kick_finish(method, tile, h):
 
 
 @njit(**KERNEL)
-def kick_drift_kick_point(method, scene, tile, x, v, t, h, p, a):
+def kick_drift_kick_point(method, special, scene, tile, x, v, t, h, p, a):
     """Velocity Verlet's step of particle ``p`` alone from ``x``, ``v`` with ``a``, the
     acceleration at the step's start: the half kick, the drift, the closing acceleration
     (kept in column ``p`` of ``A`` for the next step) and the closing half kick."""
@@ -121,28 +113,32 @@ def kick_drift_kick_point(method, scene, tile, x, v, t, h, p, a):
         drift(method, x[1], v[1], u[1], h),
         drift(method, x[2], v[2], u[2], h),
     )
-    closing = point_accel(scene, tile, y, u, t + h, p)
+    closing = point_accel(special, scene, tile, y, u, t + h, p)
     store(tile.A, p, closing)
     return y, axpy(u, kick, closing)
 
 
 @njit(**KERNEL)
-def kick_drift_kick_point_step(method, scene, tile, x, v, t, h, p):
-    """Velocity Verlet's step of particle ``p`` alone (a filling of
-    :func:`tiles.point_step`): the acceleration at the start evaluated afresh when the
+def kick_drift_kick_point_step(method, special, scene, tile, x, v, t, h, p):
+    """Velocity Verlet's step of particle ``p`` alone, its acceleration a ``special``
+    particle's or not (:func:`tiles.point_accel`): the acceleration at the start evaluated afresh when the
     step is (:data:`tiles.FRESH`), else the one kept in ``A``."""
     if tile.count[FRESH]:
-        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, point_accel(scene, tile, x, v, t, p))
-    return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.A, p))
+        return kick_drift_kick_point(
+            method, special, scene, tile, x, v, t, h, p, point_accel(special, scene, tile, x, v, t, p)
+        )
+    return kick_drift_kick_point(method, special, scene, tile, x, v, t, h, p, load(tile.A, p))
 
 
 @njit(**KERNEL)
-def kick_drift_kick_special_step(method, scene, tile, x, v, t, h, p):
+def kick_drift_kick_special_step(method, special, scene, tile, x, v, t, h, p):
     """:func:`kick_drift_kick_point_step` of a special particle, stepped again from the
     step's start: its kept acceleration is where the fused step saved it (``F``)."""
     if tile.count[FRESH]:
-        return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, point_accel(scene, tile, x, v, t, p))
-    return kick_drift_kick_point(method, scene, tile, x, v, t, h, p, load(tile.F, p))
+        return kick_drift_kick_point(
+            method, special, scene, tile, x, v, t, h, p, point_accel(special, scene, tile, x, v, t, p)
+        )
+    return kick_drift_kick_point(method, special, scene, tile, x, v, t, h, p, load(tile.F, p))
 
 
 @carries(carries_state=True)
@@ -155,11 +151,3 @@ class KickDriftKick(NamedTuple):
     kick: float
     old: float
     new: float
-
-    def point_step(self):
-        """The step of one particle (a filling of :func:`tiles.point_step`)."""
-        return kick_drift_kick_point_step
-
-    def special_step(self):
-        """The step of one special particle (a filling of :func:`tiles.special_step`)."""
-        return kick_drift_kick_special_step

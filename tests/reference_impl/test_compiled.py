@@ -25,12 +25,20 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
-from numba import typeof
+from numba import njit, typeof
 
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.cases import load_cases
-from truestep.reference_impl import compiled, compose, particles_kernels, precompile, step_slots, tiles
+from truestep.reference_impl import (
+    cache_guard,
+    compiled,
+    integrate_kernels,
+    particles_kernels,
+    precompile,
+    tiles,
+)
 from truestep.reference_impl.compiled import compiled_reason, independent, run_compiled
+from truestep.reference_impl.forces_kernels import LOOP
 from truestep.reference_impl.integrate import integrate
 from truestep.reference_impl.model import ParticleModel, Plane, Springs
 from truestep.reference_impl.particles import ParticleSystem, total_energy
@@ -195,7 +203,7 @@ def test_a_new_tableau_is_compiled_from_its_facts_alone(case_named, monkeypatch)
 @pytest.mark.skipif(numba.config.DISABLE_JIT, reason="nothing is compiled with NUMBA_DISABLE_JIT=1")
 def test_compiling_is_shown_as_progress(case_named, monkeypatch):
     monkeypatch.setattr(compiled, "SLOW_S", 0.0)
-    monkeypatch.setattr(step_slots, "_LOOPS", {})
+    monkeypatch.setattr(compiled, "drive", njit(**LOOP)(integrate_kernels.drive.py_func))  # none compiled
     monkeypatch.setattr(compiled, "_PREPARED", {})
     said: list[str] = []
     case = case_named("free-fall")
@@ -220,18 +228,26 @@ def test_a_step_calls_only_the_kernels_its_scene_declares(case_named):
         compiled.pack(case_named(name).model) for name in ("harmonic-oscillator", "bouncing-ball")
     )
 
-    def kernels(pick, kinds) -> list[str]:
-        """The kernels the generic call ``pick`` (an overload) makes for ``kinds``, in order."""
-        names = []
-        for k in range(len(kinds)):
-            impl = pick(typeof(kinds[k:]), *[None] * (len(inspect.signature(pick).parameters) - 1))
-            names += [c.cell_contents.__name__ for c in impl.__closure__ or ()]
-        return names
+    def called(pick, scene) -> set[str]:
+        """The names of the functions the generic call ``pick`` (an overload) makes for
+        ``scene``, through the chain of calls it compiles (:func:`by_type.fold`)."""
+        seen, todo = set(), [pick(typeof(scene), *[None] * (len(inspect.signature(pick).parameters) - 1))]
+        while todo:
+            item = todo.pop()
+            fn = getattr(item, "py_func", item)
+            for cell in fn.__closure__ or ():
+                inner = cell.cell_contents
+                if callable(inner) and getattr(inner, "__name__", "") not in seen:
+                    seen.add(getattr(inner, "__name__", ""))
+                    todo.append(inner)
+        return seen
 
     # the forces: the anchors' kernels for the one, gravity's for the other, nothing else
-    assert kernels(particles_kernels._each_add, harmonic.forces) == ["anchors_add"]
-    assert kernels(particles_kernels._each_at, ball.forces) == ["gravity_at"]
-    assert kernels(particles_kernels._each_energy, ball.forces) == ["gravity_energy"]
+    assert {"anchors_add"} <= called(particles_kernels._add_forces, harmonic)
+    assert not {"gravity_add", "drag_add"} & called(particles_kernels._add_forces, harmonic)
+    assert "gravity_at" in called(particles_kernels._point_force, ball)
+    assert not {"anchors_at", "drag_at"} & called(particles_kernels._point_force, ball)
+    assert "gravity_energy" in called(particles_kernels._potential_energy, ball)
     # no planes: a step's plane tests and collision passes are constants; with them, the kernels
     near = tiles._any_near(typeof(harmonic.planes), None, None)
     assert near(None, None, None) is False
@@ -239,16 +255,33 @@ def test_a_step_calls_only_the_kernels_its_scene_declares(case_named):
     collide = tiles._collide_if_planes(tiles.fused_collisions)
     assert collide(typeof(harmonic), None, None, None)(None, None, None, None) is False
     assert collide(typeof(ball), None, None, None).__closure__[0].cell_contents is tiles.fused_collisions
-    assert step_slots.loop_for(*held(harmonic, "lecture")[:2]) is step_slots.loop_for(
-        *held(ball, "lecture")[:2]
+    # one function, compiled for each scene's types
+    loops = [
+        compiled.prepared(case_named(n).model, "lecture")[0] for n in ("harmonic-oscillator", "bouncing-ball")
+    ]
+    compiled_for = [c.entry_point for c in integrate_kernels.drive.overloads.values()]
+    assert loops[0] is not loops[1] and all(loop in compiled_for for loop in loops)
+
+
+def test_a_changed_module_compiles_every_function_of_the_package_afresh():
+    """numba's cache takes a function's code as current while its own file is unchanged;
+    the reference implementation's functions are stamped by the whole folder instead, so
+    that a changed kernel in another module is never taken stale from the cache."""
+    from numba.core import caching
+
+    def locator(fn):
+        return caching.CompileResultCacheImpl(fn.py_func)._locator
+
+    assert isinstance(locator(integrate_kernels.drive), cache_guard.FolderStampedLocator)
+    assert locator(integrate_kernels.drive).get_source_stamp() == (
+        "truestep.reference_impl",
+        cache_guard.FINGERPRINT,
     )
+    assert not isinstance(locator(njit(cache=True)(_plain)), cache_guard.FolderStampedLocator)
 
 
-def test_a_changed_kernel_is_compiled_afresh_not_taken_from_the_cache(case_named, monkeypatch):
-    slots = step_slots.slots_for(*held(compiled.pack(case_named("bouncing-ball").model), "lecture")[:2])
-    before = compose.cache_name("drive", slots)
-    monkeypatch.setattr(compose, "FINGERPRINT", "another source")
-    assert compose.cache_name("drive", slots) != before
+def _plain(x):
+    return x
 
 
 def test_the_fingerprint_reads_every_module_of_the_reference_implementation(tmp_path):
@@ -257,83 +290,16 @@ def test_the_fingerprint_reads_every_module_of_the_reference_implementation(tmp_
     (tmp_path / "solvers").mkdir()
     (tmp_path / "a.py").write_text("x = 1\n")
     (tmp_path / "solvers" / "b.py").write_text("y = 2\n")
-    first = compose.source_fingerprint(tmp_path)
-    assert compose.source_fingerprint(tmp_path) == first
+    first = cache_guard.source_fingerprint(tmp_path)
+    assert cache_guard.source_fingerprint(tmp_path) == first
     (tmp_path / "solvers" / "b.py").write_text("y = 3\n")
-    second = compose.source_fingerprint(tmp_path)
+    second = cache_guard.source_fingerprint(tmp_path)
     (tmp_path / "solvers" / "b.py").rename(tmp_path / "solvers" / "c.py")
-    third = compose.source_fingerprint(tmp_path)
+    third = cache_guard.source_fingerprint(tmp_path)
     (tmp_path / "d.py").write_text("")
-    assert len({first, second, third, compose.source_fingerprint(tmp_path)}) == 4
-    package = Path(compose.__file__).parent
-    assert compose.FINGERPRINT == compose.source_fingerprint(package)
-
-
-TWO_FILLINGS = '''
-import sys
-import numpy as np
-from numba import njit
-from truestep.reference_impl.compose import COLD, LOOP, glue, instantiate, slot
-
-
-@slot
-def f(x):
-    """A slot."""
-
-
-@njit(**COLD)
-def middle(a):
-    for k in range(a.shape[0]):
-        a[k] = f(a[k])
-        if a[k] > 1e300:
-            a[k] = np.sqrt(a[k]) + np.sin(a[k]) * np.cos(a[k])
-
-
-def loop(a, n):
-    for _ in range(n):
-        middle(a)
-    return a[0]
-
-
-FILLINGS = {"plus": ["return x + 1.0"], "times": ["return x * 10.0"]}
-
-
-def compiled(name):
-    return instantiate(loop, {"f": glue(f, FILLINGS[name], {})}, name=f"loop_{name}",
-                       options=LOOP)
-
-
-if __name__ == "__main__":
-    print(*(compiled(name)(np.ones(3), 1) for name in sys.argv[1:]))
-'''
-
-
-def test_loops_from_the_cache_made_in_other_processes_keep_their_own_copies(tmp_path):
-    """Two loops, each with its own copy of a rarely called part compiled on its own
-    (``middle``, :data:`compose.COLD`, as the collision passes are; filled differently),
-    compiled and cached by two processes that count their functions alike, then both
-    loaded from the cache into a third: each runs its own copy (the copies' names differ
-    by their fillings, :func:`compose.copy_name`; with one name, the linker gave both
-    loops the first copy, and Heun's step ran Euler's)."""
-    import os
-    import subprocess
-    import sys
-
-    (tmp_path / "two_fillings.py").write_text(TWO_FILLINGS)
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_DISABLE_JIT": "0"}
-
-    def run(*names: str) -> list[str]:
-        return subprocess.run(
-            [sys.executable, "two_fillings.py", *names],
-            cwd=tmp_path,
-            env=env,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.split()
-
-    assert run("plus") == ["2.0"] and run("times") == ["10.0"]
-    assert run("plus", "times") == ["2.0", "10.0"]
+    assert len({first, second, third, cache_guard.source_fingerprint(tmp_path)}) == 4
+    package = Path(cache_guard.__file__).parent
+    assert cache_guard.FINGERPRINT == cache_guard.source_fingerprint(package)
 
 
 def test_compile_all_prepares_every_fixed_step_method_the_scene_compiles(case_named, monkeypatch):

@@ -54,8 +54,8 @@ KERNEL_DESELECT=(--deselect "tests/reference_impl/test_compiled.py::test_compile
 DESELECT=(--deselect tests/reference_impl/test_collisions.py::test_bounce_times_converge_at_first_order)
 KERNEL_FILES=(reference_impl/forces_kernels.py reference_impl/collisions_kernels.py
               reference_impl/particles_kernels.py reference_impl/tiles.py
-              reference_impl/integrate_kernels.py reference_impl/compose.py
-              reference_impl/step_slots.py reference_impl/compiled.py)
+              reference_impl/integrate_kernels.py reference_impl/by_type.py
+              reference_impl/fused_steps.py reference_impl/compiled.py)
 # (reference_impl/solvers/any_method.py, a kernel file too, is among TARGETS by its folder:
 # listed twice, a mutant of it would be seen as two changed files and run the wrong tests)
 TARGETS=(reference_impl/solvers/*.py reference_impl/forces.py reference_impl/collisions.py
@@ -154,7 +154,7 @@ tests)
     changed="$(sha256sum --quiet -c .pristine.sha256 2>/dev/null | sed -n 's/: FAILED$//p')" || true
     case "$changed" in
         reference_impl/*_kernels.py|reference_impl/solvers/*_kernels.py|reference_impl/tiles.py|\
-        reference_impl/compose.py|reference_impl/step_slots.py|reference_impl/compiled.py|\
+        reference_impl/by_type.py|reference_impl/fused_steps.py|reference_impl/compiled.py|\
         reference_impl/solvers/any_method.py)
             NUMBA_DISABLE_JIT=1 exec python -m pytest -x -q -p no:cacheprovider "${KERNEL_DESELECT[@]}" \
                 "${KERNEL_TESTS[@]}" ;;
