@@ -14,6 +14,7 @@ otherwise idle machine; the numbers are seconds of this machine, not ratios.
 
 from __future__ import annotations
 
+import argparse
 import statistics
 
 from truestep.cases import library, load_case
@@ -34,6 +35,8 @@ REPEATS = 7
 
 
 def main() -> None:
+    layout = argparse.RawDescriptionHelpFormatter
+    argparse.ArgumentParser(description=__doc__, formatter_class=layout).parse_args()
     cases = library()
     for name, method, dt in ROWS:
         model = load_case(cases[name]).model
