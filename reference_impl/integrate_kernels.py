@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from truestep.reference_impl.by_type import BY_TYPE, CALLED, field_type, tag_key
+from truestep.reference_impl.by_type import BY_TYPE, field_type, tag_key
 from truestep.reference_impl.forces_kernels import COLD, KERNEL, LEAF, LOOP
 from truestep.reference_impl.fused_steps import fused_step_for
 from truestep.reference_impl.integrate import BLOWUP, CHECK_EVERY, record_indices
@@ -112,23 +112,16 @@ def stopped(xs, vs, ts, tile, lo, checked, kept, recorded, t):
     return kept
 
 
-RUNNER: dict = CALLED
-"""How a tile's runner for a layout is compiled: on its own, called once a tile (not
-cached on its own: the loop that calls it is)."""
-
-
 @functools.cache
 def tile_runner(layout: type, patterns: tuple):
     """The loop over a tile's steps in ``layout`` (:class:`Passes` or :class:`Fused`; fused,
     with the step of one particle of every tableau of ``patterns``): the layout's first
-    pass and its step, compiled into it. ``run(method, scene, X0, V0, lo, h, n_steps,
-    record, buffers, xs, vs, ts, monitor)`` steps particles ``lo`` to ``lo + m`` of
-    ``scene`` (a tile of m) from ``X0``, ``V0`` through ``n_steps`` steps of ``h`` s, in the
-    scratch ``buffers``, and returns (records kept, steps, evaluations, unstable)."""
+    pass and its step, compiled into it: :func:`run_tile`'s code for that layout (numba
+    compiles it as the overload of :func:`run_tile`, one function: no call between)."""
     start = getattr(layout, "start")  # noqa: B009  # set by @carries, unseen by a type checker
     step = fused_step_for(patterns) if layout is Fused else getattr(AnyMethod, "passes")  # noqa: B009
 
-    def run(method, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
+    def run(method, layout, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
         m = scene.particles.mass.shape[0]
         tile = tile_view(buffers, m)
         for p in range(m):
@@ -153,23 +146,21 @@ def tile_runner(layout: type, patterns: tuple):
                 return stopped(xs, vs, ts, tile, lo, checked, kept, record[i], t), i, nfev, True
         return kept, n_steps, nfev, False
 
-    return njit(**RUNNER)(run)
+    return run
 
 
-def run_tile(method, layout, scene, *rest):
-    """Particles of a tile of ``scene`` through their steps in ``layout`` by ``method``
-    (:func:`tile_runner` for the layout and the method's patterns; ``rest`` as it takes)."""
-    return tile_runner(type(layout), method.patterns.key)(method, scene, *rest)
+def run_tile(method, layout, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
+    """Particles ``lo`` to ``lo + m`` of ``scene`` (a tile of m) from ``X0``, ``V0`` through
+    ``n_steps`` steps of ``h`` s by ``method`` in ``layout``, in the scratch ``buffers``
+    (:func:`tile_runner` for the layout and the method's patterns). Returns (records kept,
+    steps, evaluations, unstable)."""
+    run = tile_runner(type(layout), method.patterns.key)
+    return run(method, layout, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor)
 
 
 @overload(run_tile, **BY_TYPE)
-def _run_tile(method, layout, scene, *rest):
-    run = tile_runner(layout.instance_class, tag_key(field_type(method, "patterns")))
-
-    def impl(method, layout, scene, *rest):
-        return run(method, scene, *rest)
-
-    return impl
+def _run_tile(method, layout, scene, X0, V0, lo, h, n_steps, record, buffers, xs, vs, ts, monitor):
+    return tile_runner(layout.instance_class, tag_key(field_type(method, "patterns")))
 
 
 @njit(**LOOP)
