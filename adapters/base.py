@@ -166,7 +166,11 @@ class Adapter(Protocol):
     9. optionally, accept ``simulate(case, method, dt, monitor=True)``: the run a row is
        measured from (untimed), watched at every step, its ``Trajectory.extremes`` the
        lowest and highest energy over every step; the harness then times plain runs and
-       checks they end in the same state;
+       checks they end in the same state. An adapter whose watched run adds no more than
+       a copy of the state a step to the same stepping, inside its timed region, may say
+       so (``light_watch = True``): a long row whose steps take a millisecond or more is
+       then timed from its watched run, not stepped again
+       (:func:`truestep.execution.timing.timed_from_watched`);
     10. optionally, ``peers``: for a method, the reference method whose scheme it says it
         computes; the report sets their errors at the same steps side by side
         (:mod:`truestep.measures.peers`), and ``unsupported_notes``: for a feature it

@@ -237,6 +237,10 @@ class DrakeAdapter:
     peers: ClassVar[Mapping[str, str]] = MappingProxyType(PEERS)
     """The reference method each one names as its scheme (the report compares their
     errors at the same steps, :mod:`truestep.measures.peers`)."""
+    light_watch: ClassVar[bool] = True
+    """A watched run (``monitor=True``) makes the same ``AdvanceTo`` calls as a plain one
+    and keeps the state after each (a copy, microseconds; the energy is computed after the
+    timed region): a long row of long steps is timed from it (Adapter protocol, item 9)."""
     capabilities = frozenset(
         {
             Feature.ODE,

@@ -38,6 +38,7 @@ from truestep.execution.timing import (
     UNTIMED,
     TimedRuns,
     Timing,
+    light_watch,
     makes_speed_claim,
     measured_run,
     merged,
@@ -163,12 +164,20 @@ def simulate_sweeps(sweeps: list[tuple]) -> list[list[Trajectory | TimedRuns | O
 def split_sweep(engine: str, timing: Timing) -> bool:
     """Whether a sweep's measured runs go apart from its timed runs (:data:`PARTS`): for an
     engine that makes a speed claim and watches every step, whose measured run is a
-    second stepping of every row, where the timing allows it (:attr:`Timing.apart`).
-    Apart, it is untimed work on a core of its own while
+    second stepping of every row, where the timing allows it (:attr:`Timing.apart`),
+    unless its watch is light (:func:`~truestep.execution.timing.light_watch`: its sweeps
+    run whole where the timed runs run, a long row of long steps timed from its watched
+    run). Apart, it is untimed work on a core of its own while
     the timed runs keep theirs, and the row's numbers are the same
     (:func:`~truestep.execution.timing.merged`)."""
     adapter = get_adapter(engine)
-    return timing.timed and timing.apart and makes_speed_claim(adapter) and watches_every_step(adapter)
+    return (
+        timing.timed
+        and timing.apart
+        and makes_speed_claim(adapter)
+        and watches_every_step(adapter)
+        and not light_watch(adapter)
+    )
 
 
 def joined(measured: Outcome, timed: Outcome) -> Outcome:

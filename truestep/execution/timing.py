@@ -135,6 +135,21 @@ def watches_every_step(adapter) -> bool:
         return False
 
 
+WATCHED_STEP_S = 1e-3
+"""The shortest step (s: a watched run's wall time over its steps) that hides a light
+watch (:func:`light_watch`: a copy of the state a step, a few microseconds, under 0.5% of
+such a step): a long row (:attr:`Timing.long_run_s`) whose steps take this long is timed
+from its watched run, not stepped once more."""
+
+
+def light_watch(adapter) -> bool:
+    """Whether ``adapter`` watches every step (:func:`watches_every_step`) and says that
+    watching adds no more than a copy of the state a step to the same stepping, inside its
+    timed region (its optional ``light_watch``, Adapter protocol item 9): a long row of
+    long steps is then timed from its watched run (:func:`timed_from_watched`)."""
+    return watches_every_step(adapter) and bool(getattr(adapter, "light_watch", False))
+
+
 @dataclass
 class TimedRuns:
     """What the timed runs of one row give (:func:`timed_runs`): each one's wall time (s),
@@ -185,10 +200,7 @@ def timed_runs(
     if lean:
         case = timed_case(adapter, case, method)
     if warm_up:
-        short = dataclasses.replace(
-            case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
-        )
-        adapter.simulate(short, method, dt)
+        _warm_up(adapter, case, method, dt, timing)
     first = adapter.simulate(case, method, dt)
     runs = TimedRuns([first.wall_s], [end_of(first)], first.path)
     if first.status == "ok":
@@ -197,6 +209,35 @@ def timed_runs(
             runs.walls.append(again.wall_s)
             runs.ends.append(end_of(again))
     return first, runs
+
+
+def _warm_up(adapter, case: Case, method: str, dt: float, timing: Timing) -> None:
+    """A short untimed run of the row's scene (:attr:`Timing.warmup_fraction` of its
+    duration, at least a step): JIT compilation, caches, first-call costs."""
+    short = dataclasses.replace(
+        case, duration=max(case.duration * timing.warmup_fraction, min(dt, case.duration))
+    )
+    adapter.simulate(short, method, dt)
+
+
+def timed_from_watched(
+    adapter, case: Case, method: str, dt: float, timing: Timing, *, warm_up: bool
+) -> Trajectory:
+    """A row of an adapter whose watch is light (:func:`light_watch`), made where the timed
+    runs are made: the watched run, after a short warm-up when ``warm_up``. Where it ended
+    ``ok`` and was long (:attr:`Timing.long_run_s`, the length timed once) of steps of
+    :data:`WATCHED_STEP_S` or more, it is also the row's one timed run: what the watch
+    added is under 0.5% of its time, and a second stepping of seconds would buy nothing.
+    Otherwise the timed runs follow as for any row (:func:`timed_runs`; the watched run
+    warmed the process up), each checked to end where it did (:func:`merged`)."""
+    if warm_up:
+        _warm_up(adapter, case, method, dt, timing)
+    traj = measured_run(adapter, case, method, dt)
+    long_steps = traj.wall_s >= WATCHED_STEP_S * max(traj.steps, 1)
+    if traj.status == "ok" and traj.wall_s >= timing.long_run_s and long_steps:
+        return merged(traj, TimedRuns([traj.wall_s], [end_of(traj)], traj.path))
+    _, runs = timed_runs(adapter, case, method, dt, timing, warm_up=False, lean=True, known_s=traj.wall_s)
+    return merged(traj, runs)
 
 
 def merged(traj: Trajectory, runs: TimedRuns) -> Trajectory:
@@ -232,9 +273,10 @@ def simulate_timed(
     watch every step is warmed up instead by a short run (unless ``warm_up`` is false:
     this process has just run the same case and method), and its first timed run is the
     measured run. The timed runs follow (:func:`timed_runs`), and every one of them is
-    checked to end where the measured run did, bit for bit (:func:`merged`). With an
-    untimed ``timing`` (:data:`UNTIMED`) the measured run is the only one, and its row's
-    ``repeats`` is 0.
+    checked to end where the measured run did, bit for bit (:func:`merged`). An adapter
+    whose watch is light times a long row of long steps from its measured run
+    (:func:`timed_from_watched`). With an untimed ``timing`` (:data:`UNTIMED`) the
+    measured run is the only one, and its row's ``repeats`` is 0.
     """
     adapter = get_adapter(engine)
     if not timing.timed:  # no speed claim: the measured run, once
@@ -242,6 +284,8 @@ def simulate_timed(
         once.extra["repeats"] = np.array(0)
         once.extra["wall_s_spread"] = np.array(np.nan)
         return once
+    if light_watch(adapter):
+        return timed_from_watched(adapter, case, method, dt, timing, warm_up=warm_up)
     monitor = watches_every_step(adapter)
     traj = measured_run(adapter, case, method, dt) if monitor else None
     first, runs = timed_runs(

@@ -1,0 +1,87 @@
+"""A long row of long steps of an engine whose watch is light is timed from its watched run
+(timing.light_watch, timing.timed_from_watched): one stepping instead of two, the same
+numbers. The thresholds are set here (no verdict on the clock): what is checked is which
+runs are made and that the row is the row the two runs give."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from truestep.adapters.drake_adapter import DrakeAdapter
+from truestep.execution import runner, timing
+from truestep.execution.timing import Timing, light_watch, measured_run, merged, simulate_timed, timed_runs
+
+pytestmark = pytest.mark.engine
+
+LONG = Timing(min_total_s=0.0, min_repeats=2, max_repeats=2, long_run_s=0.0)
+"""Every run counts as long (timed once) unless the step rule says otherwise."""
+
+
+@pytest.fixture
+def runs(monkeypatch) -> list[bool]:
+    """Each Drake run made, as its ``monitor`` flag."""
+    made: list[bool] = []
+    plain = DrakeAdapter.simulate
+
+    def spy(self, case, method, dt, *, monitor=False):
+        made.append(monitor)
+        return plain(self, case, method, dt, monitor=monitor)
+
+    monkeypatch.setattr(DrakeAdapter, "simulate", spy)
+    return made
+
+
+def _same_numbers(a, b) -> None:
+    assert a.status == b.status and (a.nfev, a.steps) == (b.nfev, b.steps)
+    for name in ("t", "x", "v", "energy", "step_t", "step_energy"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.extremes == b.extremes
+
+
+def test_drake_says_its_watch_is_light_and_its_sweeps_are_not_split():
+    assert light_watch(DrakeAdapter())
+    assert not runner.split_sweep("drake", Timing())
+    assert runner.split_sweep("reference", Timing())  # its watch is not declared light
+
+
+def test_a_long_row_of_long_steps_is_its_watched_run_timed_once(case_named, monkeypatch, runs):
+    monkeypatch.setattr(timing, "WATCHED_STEP_S", 0.0)
+    case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
+    row = simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=False)
+    assert runs == [True]
+    assert int(row.extra["repeats"]) == 1 and row.wall_s > 0
+    apart = merged(
+        measured_run(DrakeAdapter(), case, "runge_kutta2", 0.01),
+        timed_runs(DrakeAdapter(), case, "runge_kutta2", 0.01, LONG, warm_up=False, lean=True)[1],
+    )
+    _same_numbers(row, apart)
+
+
+def test_the_first_row_of_a_process_is_warmed_up_first(case_named, monkeypatch, runs):
+    monkeypatch.setattr(timing, "WATCHED_STEP_S", 0.0)
+    case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
+    simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=True)
+    assert runs == [False, True]
+
+
+def test_short_steps_are_timed_by_plain_runs_after_the_watched_one(case_named, monkeypatch, runs):
+    """Steps shorter than WATCHED_STEP_S (here every step): the watched run warms the
+    process up, and plain runs are timed, each checked to end where it did."""
+    monkeypatch.setattr(timing, "WATCHED_STEP_S", float("inf"))
+    case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
+    row = simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=True)
+    assert runs == [False, True, False]  # the warm-up, the watched run, the timed run
+    assert int(row.extra["repeats"]) == 1 and timing.NOT_REPEATABLE not in row.message
+
+
+def test_a_row_that_did_not_end_ok_is_timed_as_any_row(case_named, monkeypatch, runs):
+    """An explicit Euler run far past its limit blows up: its time to the blow-up is not a
+    long row's, and a plain run is timed after it, as for every engine."""
+    monkeypatch.setattr(timing, "WATCHED_STEP_S", 0.0)
+    case = dataclasses.replace(case_named("harmonic-oscillator"), duration=50.0)
+    row = simulate_timed("drake", case, "explicit_euler", 0.5, LONG, warm_up=False)
+    assert row.status == "unstable"
+    assert runs == [True, False]
