@@ -137,8 +137,9 @@ def watches_every_step(adapter) -> bool:
 
 WATCHED_STEP_S = 1e-3
 """The shortest step (s: a watched run's wall time over its steps) that hides a light
-watch (:func:`light_watch`: a copy of the state a step, a few microseconds, under 0.5% of
-such a step): a long row (:attr:`Timing.long_run_s`) whose steps take this long is timed
+watch (:func:`light_watch`: a copy of the state a step, a few microseconds; watched and
+plain runs of Drake's such rows differ by about 1%, the noise of one run:
+``benchmarks/light_watch.py``): a long row (:attr:`Timing.long_run_s`) whose steps take this long is timed
 from its watched run, not stepped once more."""
 
 
@@ -227,7 +228,7 @@ def timed_from_watched(
     runs are made: the watched run, after a short warm-up when ``warm_up``. Where it ended
     ``ok`` and was long (:attr:`Timing.long_run_s`, the length timed once) of steps of
     :data:`WATCHED_STEP_S` or more, it is also the row's one timed run: what the watch
-    added is under 0.5% of its time, and a second stepping of seconds would buy nothing.
+    added is within the noise of one run, and a second stepping of seconds would buy nothing.
     Otherwise the timed runs follow as for any row (:func:`timed_runs`; the watched run
     warmed the process up), each checked to end where it did (:func:`merged`)."""
     if warm_up:
