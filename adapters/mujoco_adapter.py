@@ -282,6 +282,8 @@ def mjcf(
     contact_steps: float = CONTACT_STEPS,
     autoreset_flag: bool = True,
     only_what_it_needs: bool = True,
+    energy: bool = True,
+    sensors: bool = True,
 ) -> tuple[str, Layout]:
     """The MJCF text of a particle scene, and where its particles are in the model.
 
@@ -290,7 +292,10 @@ def mjcf(
     writes ``autoreset="disable"``; MuJoCo Warp, which never resets a state and has no
     such flag, takes the model without it. ``only_what_it_needs``: a scene without planes
     (so no contact pair, and no joint limit or equality either) is written with
-    ``contact`` and ``constraint`` disabled (:data:`NEEDS_NO_CONSTRAINTS`).
+    ``contact`` and ``constraint`` disabled (:data:`NEEDS_NO_CONSTRAINTS`). ``energy``
+    writes ``energy="enable"`` (MuJoCo computes ``mjData.energy``, which the tests compare
+    with truestep's); ``sensors=False`` writes ``sensor="disable"`` (the model has no
+    sensor; MuJoCo Warp launches its sensor kernels without one). Neither changes a step.
     """
     _check_method(method)
     dim = 2 if model.dimension == 2 else 3
@@ -368,6 +373,7 @@ def mjcf(
                 f'solref="{-stiffness:.17g} {-damping:.17g}" solimp="{solimp}"/>'
             )
 
+    flags = (' energy="enable"' if energy else "") + ("" if sensors else ' sensor="disable"')
     reset = ' autoreset="disable"' if autoreset_flag else ""
     reset += NEEDS_NO_CONSTRAINTS if only_what_it_needs and not pairs else ""
     text = "\n".join(
@@ -376,7 +382,7 @@ def mjcf(
             '  <compiler inertiafromgeom="false" angle="radian"/>',
             f'  <option timestep="{h:.17g}" integrator="{method}" gravity="{_vec(model.gravity)}" '
             'cone="elliptic">',
-            f'    <flag energy="enable"{reset}/>',
+            f"    <flag{flags}{reset}/>",
             "  </option>",
             "  <default>",
             f'    <joint armature="0" damping="{model.drag:.17g}" frictionloss="0" stiffness="0" '

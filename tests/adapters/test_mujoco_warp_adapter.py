@@ -246,21 +246,21 @@ def test_on_the_cpu_its_rows_run_once_untimed_and_say_so(case_named):
     assert "no speed claim" in once.message
 
 
-@pytest.mark.parametrize("name", ["rope-pendulum", "hanging-cloth", "damped-oscillator"])
-def test_a_scene_without_constraints_steps_the_same_bits_without_contact_and_solver(
-    case_named, name, monkeypatch
-):
+@pytest.mark.parametrize("name", ["rope-pendulum", "hanging-cloth", "damped-oscillator", "bouncing-ball"])
+def test_the_lean_model_steps_the_same_bits_as_the_whole_one(case_named, name, monkeypatch):
     """A scene without planes is written with contact and constraint disabled
-    (:data:`~truestep.adapters.mujoco_adapter.NEEDS_NO_CONSTRAINTS`): every integrator's
-    steps equal those of the model with both stages on, bit for bit."""
+    (:data:`~truestep.adapters.mujoco_adapter.NEEDS_NO_CONSTRAINTS`), and every scene
+    without MuJoCo's energy and sensor stages: every integrator's steps equal those of the
+    model with every stage on, bit for bit (the ball on its plane: only the energy and
+    sensor stages differ)."""
     from truestep.adapters import mujoco_adapter as mj
 
     case = case_named(name)
-    assert not case.particles.planes
     plain_mjcf = mj.mjcf
+    whole = {"only_what_it_needs": False, "energy": True, "sensors": True}
     for method in INTEGRATORS:
         lean = build(case, method, 0.002)
-        monkeypatch.setattr(mj, "mjcf", lambda *a, **k: plain_mjcf(*a, **k, only_what_it_needs=False))
+        monkeypatch.setattr(mj, "mjcf", lambda *a, **k: plain_mjcf(*a, **{**k, **whole}))
         full = build(case, method, 0.002)
         monkeypatch.setattr(mj, "mjcf", plain_mjcf)
         assert lean.model.opt.disableflags != full.model.opt.disableflags
