@@ -258,6 +258,11 @@ def run(case, engine: str, method: str, dt: float) -> Run:
         _TIMED.add((engine, method))
         with pytest.MonkeyPatch.context() as patch:
             patch.setattr(timing, "get_adapter", lambda name: watched)
+            # a light watch's long row of long steps is timed from its watched run: whether
+            # a row is one is read from the clock, so this audit never takes that path (it
+            # checks one measured and one timed run; tests/execution/test_timed_from_watched.py
+            # checks the other)
+            patch.setattr(timing, "WATCHED_STEP_S", math.inf)
             traj = runner.simulate_timed(
                 engine, case, method, dt, ONE_TIMED_RUN if timed_here else timing.UNTIMED, warm_up=False
             )
