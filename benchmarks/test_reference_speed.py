@@ -3,8 +3,9 @@
 Run: ``python -m pytest benchmarks/test_reference_speed.py -q -s`` (``-s`` prints the
 tables at the end; about ten minutes on this machine, most of it the engines' own runs).
 The machine is shared and noisy: every comparison here is a ratio of runs timed in turn
-(A B A B ...) in one process, each an ``adapter.simulate(...).wall_s`` (the stepping and
-the reading back of the records, as ``results.csv`` times it), medians of
+(A B A B ...) in one process, each an ``adapter.simulate(...).wall_s`` of the run
+``results.csv`` times (:func:`timed`: the stepping, and the reading back of the three records
+a timed run of a fixed-step method keeps), medians of
 :data:`REPEATS` to :data:`MAX_REPEATS` rounds after one warm-up round.
 
 - :func:`test_one_particle_step`: a particle on a spring (``harmonic-oscillator``, 1000
@@ -36,6 +37,7 @@ from truestep.cases import load_cases
 from truestep.cases.case import Case
 from truestep.cases.loader import CASE_DIR, load_case
 from truestep.execution.runner import measure, plan
+from truestep.execution.timing import timed_case
 from truestep.reference_impl.compiled import compiled_reason
 
 FIXED = ["euler", "midpoint", "heun", "rk4", "symplectic-euler", "verlet", "lecture"]
@@ -53,11 +55,14 @@ SHARED_MIN_S = 1e-3
 
 
 def timed(engine: str, case: Case, method: str, dt: float) -> Callable[[], float]:
-    """A run of ``case`` by ``engine``/``method`` at ``dt``, returning its ``wall_s``."""
+    """A run of ``case`` by ``engine``/``method`` at ``dt``, returning its ``wall_s``: the
+    run ``results.csv`` times (:func:`~truestep.execution.timing.timed_case`: a fixed-step
+    method keeps its start, middle and end, not the case's records)."""
     adapter = get_adapter(engine)
+    lean = timed_case(adapter, case, method)
 
     def run() -> float:
-        trajectory = adapter.simulate(case, method, dt)
+        trajectory = adapter.simulate(lean, method, dt)
         assert trajectory.status == "ok", f"{engine}/{method}: {trajectory.message}"
         return trajectory.wall_s
 
