@@ -388,3 +388,26 @@ def test_a_scene_with_a_plane_keeps_contact_and_constraints():
 
     model = load_case(CASES / "bouncing-ball.toml").particles
     assert model.planes and NEEDS_NO_CONSTRAINTS not in mjcf(model, "Euler", 0.002)[0]
+
+
+@pytest.mark.parametrize("name", ["bouncing-ball", "projectile-drag", "hanging-cloth", "triangle-impulse"])
+def test_a_run_from_the_reused_model_is_the_run_of_a_model_compiled_afresh(name):
+    """The adapter compiles a row's model once (``build(..., reuse=True)``): its runs after
+    the first, and a run after a run of another scene and back, step the bits of a scene
+    compiled afresh for the run (contact, a Python force, pinned particles, impulses)."""
+    case = load_case(CASES / f"{name}.toml")
+    adapter = MujocoAdapter()
+    method, dt = "RK4", case.dts[0]
+    fresh_adapter = MujocoAdapter()
+    fresh_adapter.build = lambda c, m, h: build(c, m, h, reuse=False)  # type: ignore[method-assign]
+    fresh = fresh_adapter.simulate(case, method, dt)
+    other = load_case(CASES / "harmonic-oscillator.toml")
+    runs = [adapter.simulate(case, method, dt), adapter.simulate(case, method, dt)]
+    adapter.simulate(other, method, other.dts[0])
+    runs.append(adapter.simulate(case, method, dt))
+    first = build(case, method, case.steps_for(dt)[1], reuse=True)
+    assert build(case, method, case.steps_for(dt)[1], reuse=True).model is first.model
+    for run in runs:
+        assert run.status == fresh.status == "ok"
+        assert np.array_equal(run.x, fresh.x) and np.array_equal(run.v, fresh.v)
+        assert np.array_equal(run.t, fresh.t) and run.message == fresh.message
