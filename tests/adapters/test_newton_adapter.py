@@ -300,3 +300,30 @@ def test_newton_is_installed_without_mujoco():
     out = subprocess.run(run, capture_output=True, text=True, check=True)
     newton, mujoco = (s.strip() for s in out.stdout.strip().split("|"))
     assert newton == "installed" and mujoco.startswith("not installed")
+
+
+@pytest.mark.parametrize("method", ["semi-implicit", "xpbd", "vbd"])
+@pytest.mark.parametrize("name", ["bouncing-ball", "hanging-cloth", "projectile-drag"])
+def test_a_run_of_the_reused_scene_is_the_run_of_a_scene_built_afresh(case_named, method, name):
+    """The adapter builds a row's scene once (``build(..., reuse=True)``): its runs after the
+    first (a shorter warm-up before them, a run of another scene and one at another step
+    between them) step the bits of a scene built afresh for the run: contact, springs and
+    pins, drag, under every solver."""
+    case = _short(case_named(name), 0.5)
+    if NewtonAdapter().missing(case, method):
+        pytest.skip(f"newton does not run {name}")
+    dt = case.dts[-1]
+    fresh_adapter = NewtonAdapter()
+    fresh_adapter.build = lambda c, m, h: build(c, m, h, reuse=False)  # type: ignore[method-assign]
+    fresh = fresh_adapter.simulate(case, method, dt)
+    adapter = NewtonAdapter()
+    adapter.simulate(_short(case, 0.05), method, dt)
+    runs = [adapter.simulate(case, method, dt), adapter.simulate(case, method, dt)]
+    adapter.simulate(case, method, case.dts[0])
+    other = _short(case_named("spring-chain"), 0.2)
+    adapter.simulate(other, method, other.dts[0])
+    runs.append(adapter.simulate(case, method, dt))
+    assert build(case, method, dt, reuse=True) is build(case, method, dt, reuse=True)
+    for run in runs:
+        assert run.status == fresh.status and run.message == fresh.message
+        assert np.array_equal(run.x, fresh.x) and np.array_equal(run.v, fresh.v)
