@@ -314,3 +314,32 @@ def test_clean_is_default_bit_for_bit_without_contacts(adapter, case_named, name
     a, b = adapter.simulate(case, "default", 2e-3), adapter.simulate(case, "clean", 2e-3)
     assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
     assert adapter.duplicate(case_named("bouncing-ball"), "clean") is None
+
+
+@pytest.mark.parametrize("method", ["default", "clean"])
+@pytest.mark.parametrize(
+    "name", ["bouncing-ball", "sliding-contact", "high-speed-impact", "triangle-impulse", "hanging-cloth"]
+)
+def test_a_run_in_the_emptied_client_is_the_run_in_a_new_one(case_named, name, method):
+    """The adapter builds each scene in its process's client emptied by ``resetSimulation``:
+    after runs of the other method (its contact parameters), of another scene and of this
+    one, a run steps the bits of a run in a client opened for it (contact and restitution,
+    friction, a thin wall, impulses, springs and pins)."""
+    from truestep.adapters import pybullet_adapter as pb
+
+    case = dataclasses.replace(case_named(name), duration=min(case_named(name).duration, 0.5))
+    adapter = PybulletAdapter()
+    dt = case.dts[-1]
+    fresh_adapter = PybulletAdapter()
+    fresh_adapter.build = lambda c, m, h: pb._Run(  # type: ignore[method-assign]
+        c.particles, pb.build_scene(c.particles, h, clean=m == "clean")
+    )
+    fresh_adapter.close = lambda run: pb.p.disconnect(run.scene.client)  # type: ignore[method-assign]
+    fresh = fresh_adapter.simulate(case, method, dt)
+    other = "clean" if method == "default" else "default"
+    adapter.simulate(case_named("spring-damper-pair"), other, 0.01)
+    adapter.simulate(case, other, dt)
+    runs = [adapter.simulate(case, method, dt), adapter.simulate(case, method, dt)]
+    for run in runs:
+        assert run.status == fresh.status and run.message == fresh.message
+        assert np.array_equal(run.x, fresh.x) and np.array_equal(run.v, fresh.v)
