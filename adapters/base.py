@@ -168,8 +168,9 @@ class Adapter(Protocol):
        lowest and highest energy over every step; the harness then times plain runs and
        checks they end in the same state. An adapter whose watched run adds no more than
        a copy of the state a step to the same stepping, inside its timed region, may say
-       so (``light_watch = True``): a long row whose steps take a millisecond or more is
-       then timed from its watched run, not stepped again
+       so (``light_watch = True``, or the names of the methods it holds for): a long row
+       whose steps take a millisecond or more (``watched_step_s``, s, where the adapter
+       says less) is then timed from its watched run, not stepped again
        (:func:`truestep.execution.timing.timed_from_watched`);
     10. optionally, ``peers``: for a method, the reference method whose scheme it says it
         computes; the report sets their errors at the same steps side by side

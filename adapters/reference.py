@@ -145,6 +145,17 @@ class ReferenceAdapter:
         """Each solver's own facts, read from its class attribute ``facts`` when asked."""
         return MappingProxyType({m: cls.facts for m, cls in METHODS.items()})
 
+    light_watch: tuple[str, ...] = ("implicit-euler", "dopri5")
+    """The methods whose watched run (``monitor=True``) adds no more than keeping the state
+    after each step to the stepping of a plain one, inside its timed region (Adapter
+    protocol, item 9): both run on the numpy path, a step a Python call of tens of
+    microseconds or more, and Dormand-Prince keeps every accepted step in a plain run too.
+    A long row of theirs whose steps take :attr:`watched_step_s` or more is timed from its
+    watched run (watched over plain 0.99 to 1.02: ``benchmarks/light_watch.py --engine
+    reference``)."""
+    watched_step_s: float = 3e-5
+    """The shortest step (s) of those methods whose watch is hidden in it: the state kept, a
+    fraction of a microsecond, is 1% of a step of 30 microseconds."""
     bounce_methods: tuple[str, ...] = ("lecture", "symplectic-euler", "rk4")
     """The methods of the restitution sweep: the collision pass is the same for all, so a
     first-order, a symplectic and a fourth-order integrator show whether the integrator

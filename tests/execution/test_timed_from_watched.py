@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from truestep.adapters.drake_adapter import DrakeAdapter
+from truestep.adapters.reference import ReferenceAdapter
 from truestep.execution import runner, timing
 from truestep.execution.timing import Timing, light_watch, measured_run, merged, simulate_timed, timed_runs
 
@@ -44,7 +45,72 @@ def _same_numbers(a, b) -> None:
 def test_drake_says_its_watch_is_light_and_its_sweeps_are_not_split():
     assert light_watch(DrakeAdapter())
     assert not runner.split_sweep("drake", Timing())
-    assert runner.split_sweep("reference", Timing())  # its watch is not declared light
+    assert runner.split_sweep("reference", Timing())  # its watch is not light for every method
+
+
+def test_the_reference_says_its_watch_is_light_for_its_numpy_path_methods_alone():
+    """Implicit Euler and Dormand-Prince step on the numpy path (a Python call a step): their
+    sweeps run whole, timed from a long watched run; the compiled methods' sweeps stay
+    split, their measured runs on the untimed cores."""
+    reference = ReferenceAdapter()
+    assert not light_watch(reference)
+    for method in ("implicit-euler", "dopri5"):
+        assert light_watch(reference, method) and not runner.split_sweep("reference", Timing(), method)
+    for method in ("rk4", "lecture", "verlet"):
+        assert not light_watch(reference, method) and runner.split_sweep("reference", Timing(), method)
+    assert timing.watched_step_s(reference) == ReferenceAdapter.watched_step_s < timing.WATCHED_STEP_S
+    assert timing.watched_step_s(DrakeAdapter()) == timing.WATCHED_STEP_S
+
+
+@pytest.mark.parametrize(
+    ("name", "method", "dt"),
+    [
+        ("stiff-cloth", "implicit-euler", 0.004),
+        ("mass-ratio-chain", "implicit-euler", 0.01),
+        ("bouncing-ball", "dopri5", 1e-6),
+        ("kepler-orbit", "dopri5", 1e-7),
+    ],
+)
+def test_the_reference_s_watched_run_steps_as_its_plain_run(case_named, name, method, dt):
+    """What the light watch promises, held: the watched run makes the plain run's steps and
+    evaluations and ends in its state, bit for bit; it only keeps more of them (every step
+    of a fixed-step run; Dormand-Prince keeps every accepted step in both)."""
+    case = case_named(name)
+    reference = ReferenceAdapter()
+    watched = reference.simulate(case, method, dt, monitor=True)
+    plain = reference.simulate(case, method, dt)
+    assert watched.status == plain.status == "ok"
+    assert (watched.nfev, watched.steps) == (plain.nfev, plain.steps)
+    assert (watched.v is None) == (plain.v is None)
+    for name_ in ("t", "x") if plain.v is None else ("t", "x", "v"):
+        np.testing.assert_array_equal(getattr(watched, name_)[-1], getattr(plain, name_)[-1], err_msg=name_)
+    assert watched.extremes is not None
+
+
+def test_a_long_reference_row_of_long_steps_is_its_watched_run_timed_once(case_named, monkeypatch):
+    """The row timed from its watched run is the row the watched run and a plain timed run
+    give apart; steps shorter than the reference's threshold are timed by a plain run."""
+    made: list[bool] = []
+    plain = ReferenceAdapter.simulate
+
+    def spy(self, case, method, dt, *, monitor=False):
+        made.append(monitor)
+        return plain(self, case, method, dt, monitor=monitor)
+
+    monkeypatch.setattr(ReferenceAdapter, "simulate", spy)
+    case = case_named("mass-ratio-chain")
+    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", 0.0)
+    row = simulate_timed("reference", case, "implicit-euler", 0.01, LONG, warm_up=False)
+    assert made == [True] and int(row.extra["repeats"]) == 1
+    apart = merged(
+        measured_run(ReferenceAdapter(), case, "implicit-euler", 0.01),
+        timed_runs(ReferenceAdapter(), case, "implicit-euler", 0.01, LONG, warm_up=False, lean=True)[1],
+    )
+    _same_numbers(row, apart)
+    made.clear()
+    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", float("inf"))
+    simulate_timed("reference", case, "implicit-euler", 0.01, LONG, warm_up=False)
+    assert made == [True, False]
 
 
 def test_a_long_row_of_long_steps_is_its_watched_run_timed_once(case_named, monkeypatch, runs):

@@ -161,13 +161,13 @@ def simulate_sweeps(sweeps: list[tuple]) -> list[list[Trajectory | TimedRuns | O
     return [simulate_sweep(*args) for args in sweeps]
 
 
-def split_sweep(engine: str, timing: Timing) -> bool:
+def split_sweep(engine: str, timing: Timing, method: str | None = None) -> bool:
     """Whether a sweep's measured runs go apart from its timed runs (:data:`PARTS`): for an
     engine that makes a speed claim and watches every step, whose measured run is a
     second stepping of every row, where the timing allows it (:attr:`Timing.apart`),
-    unless its watch is light (:func:`~truestep.execution.timing.light_watch`: its sweeps
-    run whole where the timed runs run, a long row of long steps timed from its watched
-    run). Apart, it is untimed work on a core of its own while
+    unless its watch of ``method`` is light (:func:`~truestep.execution.timing.light_watch`:
+    its sweeps run whole where the timed runs run, a long row of long steps timed from its
+    watched run). Apart, it is untimed work on a core of its own while
     the timed runs keep theirs, and the row's numbers are the same
     (:func:`~truestep.execution.timing.merged`)."""
     adapter = get_adapter(engine)
@@ -176,7 +176,7 @@ def split_sweep(engine: str, timing: Timing) -> bool:
         and timing.apart
         and makes_speed_claim(adapter)
         and watches_every_step(adapter)
-        and not light_watch(adapter)
+        and not light_watch(adapter, method)
     )
 
 
@@ -685,7 +685,7 @@ class _LocalSweeps:
         self.halves = [
             (j, part)
             for j, t in enumerate(self.timings)
-            for part in (("measured", "timed") if split_sweep(self._sweep(j)[1], t) else ("both",))
+            for part in (("measured", "timed") if self._split(j, t) else ("both",))
         ]
         self.units = group_sweeps(
             [self._shares(j, part) for j, part in self.halves], [self._weight(j) for j, _ in self.halves]
@@ -703,6 +703,11 @@ class _LocalSweeps:
     def _sweep(self, j: int) -> tuple:
         """(case, engine, method, entries) of the ``j``-th local sweep."""
         return self.planned[self.local[j][0]]
+
+    def _split(self, j: int, timing: Timing) -> bool:
+        """Whether the ``j``-th sweep runs as two halves (:func:`split_sweep`)."""
+        _, engine, method = self._sweep(j)[:3]
+        return split_sweep(engine, timing, method)
 
     def _shares(self, j: int, part: str) -> tuple | None:
         """What the ``j``-th sweep's ``part`` shares with the others of its group, or

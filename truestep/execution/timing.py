@@ -140,15 +140,29 @@ WATCHED_STEP_S = 1e-3
 watch (:func:`light_watch`: a copy of the state a step, a few microseconds; watched and
 plain runs of Drake's such rows differ by about 1%, the noise of one run:
 ``benchmarks/light_watch.py``): a long row (:attr:`Timing.long_run_s`) whose steps take this long is timed
-from its watched run, not stepped once more."""
+from its watched run, not stepped once more. An adapter whose watch costs less says its own
+(:func:`watched_step_s`)."""
 
 
-def light_watch(adapter) -> bool:
+def light_watch(adapter, method: str | None = None) -> bool:
     """Whether ``adapter`` watches every step (:func:`watches_every_step`) and says that
-    watching adds no more than a copy of the state a step to the same stepping, inside its
-    timed region (its optional ``light_watch``, Adapter protocol item 9): a long row of
-    long steps is then timed from its watched run (:func:`timed_from_watched`)."""
-    return watches_every_step(adapter) and bool(getattr(adapter, "light_watch", False))
+    watching ``method`` adds no more than a copy of the state a step to the same stepping,
+    inside its timed region (its optional ``light_watch``, Adapter protocol item 9:
+    ``True`` for every method, or the methods it holds for): a long row of long steps is
+    then timed from its watched run (:func:`timed_from_watched`). Without ``method``:
+    whether it holds for every method."""
+    if not watches_every_step(adapter):
+        return False
+    said = getattr(adapter, "light_watch", False)
+    if isinstance(said, bool):
+        return said
+    return method is not None and method in said
+
+
+def watched_step_s(adapter) -> float:
+    """The shortest step (s) whose watch ``adapter`` says is hidden in it: its optional
+    ``watched_step_s`` (Adapter protocol item 9), else :data:`WATCHED_STEP_S`."""
+    return float(getattr(adapter, "watched_step_s", WATCHED_STEP_S))
 
 
 @dataclass
@@ -227,14 +241,14 @@ def timed_from_watched(
     """A row of an adapter whose watch is light (:func:`light_watch`), made where the timed
     runs are made: the watched run, after a short warm-up when ``warm_up``. Where it ended
     ``ok`` and was long (:attr:`Timing.long_run_s`, the length timed once) of steps of
-    :data:`WATCHED_STEP_S` or more, it is also the row's one timed run: what the watch
+    :func:`watched_step_s` or more, it is also the row's one timed run: what the watch
     added is within the noise of one run, and a second stepping of seconds would buy nothing.
     Otherwise the timed runs follow as for any row (:func:`timed_runs`; the watched run
     warmed the process up), each checked to end where it did (:func:`merged`)."""
     if warm_up:
         _warm_up(adapter, case, method, dt, timing)
     traj = measured_run(adapter, case, method, dt)
-    long_steps = traj.wall_s >= WATCHED_STEP_S * max(traj.steps, 1)
+    long_steps = traj.wall_s >= watched_step_s(adapter) * max(traj.steps, 1)
     if traj.status == "ok" and traj.wall_s >= timing.long_run_s and long_steps:
         return merged(traj, TimedRuns([traj.wall_s], [end_of(traj)], traj.path))
     _, runs = timed_runs(adapter, case, method, dt, timing, warm_up=False, lean=True, known_s=traj.wall_s)
@@ -285,7 +299,7 @@ def simulate_timed(
         once.extra["repeats"] = np.array(0)
         once.extra["wall_s_spread"] = np.array(np.nan)
         return once
-    if light_watch(adapter):
+    if light_watch(adapter, method):
         return timed_from_watched(adapter, case, method, dt, timing, warm_up=warm_up)
     monitor = watches_every_step(adapter)
     traj = measured_run(adapter, case, method, dt) if monitor else None

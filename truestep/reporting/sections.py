@@ -386,6 +386,7 @@ def scorecard_section(cases: list[Case], found: Findings, fig_dir) -> list[str]:
 
 def methods_section(cases: list[Case]) -> list[str]:
     """How the numbers are made, with every number read from the constant that sets it."""
+    from truestep.adapters.reference import ReferenceAdapter
     from truestep.execution.analyses import RESTITUTION_DTS, RESTITUTION_SET, drop_geometry
     from truestep.execution.runner import Timing
     from truestep.execution.timing import WATCHED_STEP_S
@@ -402,9 +403,11 @@ def methods_section(cases: list[Case]) -> list[str]:
         f"method runs in a process of its own, one at a time, on one thread; each row is "
         f"first run untimed and watched at every step (its numbers come from that run, "
         f"which also warms the process up), then timed, each timed run checked to end "
-        f"where it did (an engine whose watch adds only a copy of the state a step, "
-        f"Drake, times a row of {timing.long_run_s:g} s or more whose steps take "
-        f"{1000 * WATCHED_STEP_S:g} ms or more from its watched run); runs shorter than "
+        f"where it did (an engine whose watch adds only a copy of the state a step times "
+        f"a row of {timing.long_run_s:g} s or more of long steps from its watched run: "
+        f"Drake, steps of {1000 * WATCHED_STEP_S:g} ms or more; the reference's "
+        f"{' and '.join(ReferenceAdapter.light_watch)}, {1e6 * ReferenceAdapter.watched_step_s:g} µs "
+        f"or more); runs shorter than "
         f"{1000 * timing.min_total_s:.0f} ms are repeated until they add up to "
         f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
         f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
