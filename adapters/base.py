@@ -169,8 +169,9 @@ class Adapter(Protocol):
        checks they end in the same state. An adapter whose watched run adds no more than
        a copy of the state a step to the same stepping, inside its timed region, may say
        so (``light_watch = True``, or the names of the methods it holds for): a long row
-       whose steps take a millisecond or more (``watched_step_s``, s, where the adapter
-       says less) is then timed from its watched run, not stepped again
+       whose steps take a millisecond or more (``watched_step_s``, s, one number or one
+       for each method, where the adapter says less) is then timed from its watched run,
+       not stepped again
        (:func:`truestep.execution.timing.timed_from_watched`);
     10. optionally, ``peers``: for a method, the reference method whose scheme it says it
         computes; the report sets their errors at the same steps side by side
@@ -255,6 +256,13 @@ def facts_of(adapter: Any, method: str) -> MethodFacts | None:
                 raise KeyError(f"{name}: {attribute}[{method!r}]: {err.args[0]}") from None
     return None
 
+
+COPY_HIDDEN_STEP_S = 2e-4
+"""The shortest step (s) in which a watch that keeps the state after each step costs 1% or
+less: the copy takes 0.3 to 2.8 microseconds a step on the reference's numpy path (one
+body to the stiff cloth's) and 0.8 to 1.9 in Drake's ``AdvanceTo`` loop
+(``benchmarks/light_watch.py``, 2026-12-07). An adapter's ``watched_step_s`` (Adapter
+protocol item 9) may say it."""
 
 MONITOR_BYTES = 512 * 2**20
 """The most memory a run watched at every step may take for its states (positions and

@@ -262,7 +262,7 @@ def run(case, engine: str, method: str, dt: float) -> Run:
             # a row is one is read from the clock, so this audit never takes that path (it
             # checks one measured and one timed run; tests/execution/test_timed_from_watched.py
             # checks the other)
-            patch.setattr(timing, "watched_step_s", lambda adapter: math.inf)
+            patch.setattr(timing, "watched_step_s", lambda adapter, method: math.inf)
             traj = runner.simulate_timed(
                 engine, case, method, dt, ONE_TIMED_RUN if timed_here else timing.UNTIMED, warm_up=False
             )

@@ -10,15 +10,22 @@ import dataclasses
 import numpy as np
 import pytest
 
+from truestep.adapters.base import COPY_HIDDEN_STEP_S
 from truestep.adapters.drake_adapter import DrakeAdapter
 from truestep.adapters.reference import ReferenceAdapter
 from truestep.execution import runner, timing
 from truestep.execution.timing import Timing, light_watch, measured_run, merged, simulate_timed, timed_runs
+from truestep.reporting.sections import methods_section
 
 pytestmark = pytest.mark.engine
 
 LONG = Timing(min_total_s=0.0, min_repeats=2, max_repeats=2, long_run_s=0.0)
 """Every run counts as long (timed once) unless the step rule says otherwise."""
+
+
+def _every_step(step_s: float) -> dict[str, float]:
+    """Drake's ``watched_step_s`` set to ``step_s`` for every method."""
+    return dict.fromkeys(DrakeAdapter.methods, step_s)
 
 
 @pytest.fixture
@@ -58,8 +65,41 @@ def test_the_reference_says_its_watch_is_light_for_its_numpy_path_methods_alone(
         assert light_watch(reference, method) and not runner.split_sweep("reference", Timing(), method)
     for method in ("rk4", "lecture", "verlet"):
         assert not light_watch(reference, method) and runner.split_sweep("reference", Timing(), method)
-    assert timing.watched_step_s(reference) == ReferenceAdapter.watched_step_s < timing.WATCHED_STEP_S
-    assert timing.watched_step_s(DrakeAdapter()) == timing.WATCHED_STEP_S
+
+
+def test_each_engine_s_watched_step_is_the_one_the_report_states():
+    """The report's methods section names these thresholds without importing an engine:
+    a state copy's (COPY_HIDDEN_STEP_S) for fixed steps, none where the plain run keeps
+    every step too; a plugin that says nothing keeps the millisecond."""
+    reference, drake = ReferenceAdapter(), DrakeAdapter()
+    assert timing.watched_step_s(reference, "implicit-euler") == COPY_HIDDEN_STEP_S
+    assert timing.watched_step_s(reference, "dopri5") == 0.0
+    for method in drake.methods:
+        said = timing.watched_step_s(drake, method)
+        assert said == (0.0 if method in drake.adaptive_methods else COPY_HIDDEN_STEP_S), method
+    assert timing.watched_step_s(object(), "any") == timing.WATCHED_STEP_S
+    text = methods_section([])[1]
+    assert f"at steps of {1000 * COPY_HIDDEN_STEP_S:g} ms or more" in text
+
+
+@pytest.mark.parametrize(
+    ("name", "method", "dt"),
+    [
+        ("earth-orbit", "bogacki_shampine3", 1e-5),
+        ("stiff-spring", "radau3-ec", 1e-6),
+        ("kepler-orbit", "runge_kutta5", 1e-7),
+    ],
+)
+def test_drake_s_error_controlled_watched_run_is_its_plain_run(case_named, name, method, dt):
+    """An error-controlled Drake run keeps every step its monitor sees, watched or not: the
+    same steps, evaluations and end, bit for bit."""
+    drake = DrakeAdapter()
+    watched = drake.simulate(case_named(name), method, dt, monitor=True)
+    plain = drake.simulate(case_named(name), method, dt)
+    assert watched.status == plain.status == "ok"
+    assert (watched.nfev, watched.steps) == (plain.nfev, plain.steps)
+    np.testing.assert_array_equal(watched.x[-1], plain.x[-1])
+    np.testing.assert_array_equal(watched.t, plain.t)
 
 
 @pytest.mark.parametrize(
@@ -99,7 +139,7 @@ def test_a_long_reference_row_of_long_steps_is_its_watched_run_timed_once(case_n
 
     monkeypatch.setattr(ReferenceAdapter, "simulate", spy)
     case = case_named("mass-ratio-chain")
-    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", 0.0)
+    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", {"implicit-euler": 0.0})
     row = simulate_timed("reference", case, "implicit-euler", 0.01, LONG, warm_up=False)
     assert made == [True] and int(row.extra["repeats"]) == 1
     apart = merged(
@@ -108,13 +148,13 @@ def test_a_long_reference_row_of_long_steps_is_its_watched_run_timed_once(case_n
     )
     _same_numbers(row, apart)
     made.clear()
-    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", float("inf"))
+    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", {"implicit-euler": float("inf")})
     simulate_timed("reference", case, "implicit-euler", 0.01, LONG, warm_up=False)
     assert made == [True, False]
 
 
 def test_a_long_row_of_long_steps_is_its_watched_run_timed_once(case_named, monkeypatch, runs):
-    monkeypatch.setattr(timing, "WATCHED_STEP_S", 0.0)
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(0.0))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
     row = simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=False)
     assert runs == [True]
@@ -127,16 +167,16 @@ def test_a_long_row_of_long_steps_is_its_watched_run_timed_once(case_named, monk
 
 
 def test_the_first_row_of_a_process_is_warmed_up_first(case_named, monkeypatch, runs):
-    monkeypatch.setattr(timing, "WATCHED_STEP_S", 0.0)
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(0.0))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
     simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=True)
     assert runs == [False, True]
 
 
 def test_short_steps_are_timed_by_plain_runs_after_the_watched_one(case_named, monkeypatch, runs):
-    """Steps shorter than WATCHED_STEP_S (here every step): the watched run warms the
+    """Steps shorter than the watched step (here every step): the watched run warms the
     process up, and plain runs are timed, each checked to end where it did."""
-    monkeypatch.setattr(timing, "WATCHED_STEP_S", float("inf"))
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(float("inf")))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
     row = simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=True)
     assert runs == [False, True, False]  # the warm-up, the watched run, the timed run
@@ -146,7 +186,7 @@ def test_short_steps_are_timed_by_plain_runs_after_the_watched_one(case_named, m
 def test_a_row_that_did_not_end_ok_is_timed_as_any_row(case_named, monkeypatch, runs):
     """An explicit Euler run far past its limit blows up: its time to the blow-up is not a
     long row's, and a plain run is timed after it, as for every engine."""
-    monkeypatch.setattr(timing, "WATCHED_STEP_S", 0.0)
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(0.0))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=50.0)
     row = simulate_timed("drake", case, "explicit_euler", 0.5, LONG, warm_up=False)
     assert row.status == "unstable"

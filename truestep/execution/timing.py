@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import statistics
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -159,10 +160,14 @@ def light_watch(adapter, method: str | None = None) -> bool:
     return method is not None and method in said
 
 
-def watched_step_s(adapter) -> float:
-    """The shortest step (s) whose watch ``adapter`` says is hidden in it: its optional
-    ``watched_step_s`` (Adapter protocol item 9), else :data:`WATCHED_STEP_S`."""
-    return float(getattr(adapter, "watched_step_s", WATCHED_STEP_S))
+def watched_step_s(adapter, method: str) -> float:
+    """The shortest step (s) of ``method`` whose watch ``adapter`` says is hidden in it:
+    its optional ``watched_step_s`` (Adapter protocol item 9: one number, or one for each
+    method), else :data:`WATCHED_STEP_S`."""
+    said = getattr(adapter, "watched_step_s", WATCHED_STEP_S)
+    if isinstance(said, Mapping):
+        said = said.get(method, WATCHED_STEP_S)
+    return float(said)
 
 
 @dataclass
@@ -248,7 +253,7 @@ def timed_from_watched(
     if warm_up:
         _warm_up(adapter, case, method, dt, timing)
     traj = measured_run(adapter, case, method, dt)
-    long_steps = traj.wall_s >= watched_step_s(adapter) * max(traj.steps, 1)
+    long_steps = traj.wall_s >= watched_step_s(adapter, method) * max(traj.steps, 1)
     if traj.status == "ok" and traj.wall_s >= timing.long_run_s and long_steps:
         return merged(traj, TimedRuns([traj.wall_s], [end_of(traj)], traj.path))
     _, runs = timed_runs(adapter, case, method, dt, timing, warm_up=False, lean=True, known_s=traj.wall_s)
