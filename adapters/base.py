@@ -170,8 +170,9 @@ class Adapter(Protocol):
        a copy of the state a step to the same stepping, inside its timed region, may say
        so (``light_watch = True``, or the names of the methods it holds for): a long row
        whose steps take a millisecond or more (``watched_step_s``, s, one number or one
-       for each method, where the adapter says less) is then timed from its watched run,
-       not stepped again
+       for each method, where the adapter says less; 0 says the watched run is the plain
+       run, and a long one is timed from it however it ended) is then timed from its
+       watched run, not stepped again
        (:func:`truestep.execution.timing.timed_from_watched`);
     10. optionally, ``peers``: for a method, the reference method whose scheme it says it
         computes; the report sets their errors at the same steps side by side

@@ -139,7 +139,7 @@ def test_a_long_reference_row_of_long_steps_is_its_watched_run_timed_once(case_n
 
     monkeypatch.setattr(ReferenceAdapter, "simulate", spy)
     case = case_named("mass-ratio-chain")
-    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", {"implicit-euler": 0.0})
+    monkeypatch.setattr(ReferenceAdapter, "watched_step_s", {"implicit-euler": 1e-12})
     row = simulate_timed("reference", case, "implicit-euler", 0.01, LONG, warm_up=False)
     assert made == [True] and int(row.extra["repeats"]) == 1
     apart = merged(
@@ -154,7 +154,7 @@ def test_a_long_reference_row_of_long_steps_is_its_watched_run_timed_once(case_n
 
 
 def test_a_long_row_of_long_steps_is_its_watched_run_timed_once(case_named, monkeypatch, runs):
-    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(0.0))
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(1e-12))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
     row = simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=False)
     assert runs == [True]
@@ -167,7 +167,7 @@ def test_a_long_row_of_long_steps_is_its_watched_run_timed_once(case_named, monk
 
 
 def test_the_first_row_of_a_process_is_warmed_up_first(case_named, monkeypatch, runs):
-    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(0.0))
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(1e-12))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=1.0)
     simulate_timed("drake", case, "runge_kutta2", 0.01, LONG, warm_up=True)
     assert runs == [False, True]
@@ -186,8 +186,26 @@ def test_short_steps_are_timed_by_plain_runs_after_the_watched_one(case_named, m
 def test_a_row_that_did_not_end_ok_is_timed_as_any_row(case_named, monkeypatch, runs):
     """An explicit Euler run far past its limit blows up: its time to the blow-up is not a
     long row's, and a plain run is timed after it, as for every engine."""
-    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(0.0))
+    monkeypatch.setattr(DrakeAdapter, "watched_step_s", _every_step(1e-12))
     case = dataclasses.replace(case_named("harmonic-oscillator"), duration=50.0)
     row = simulate_timed("drake", case, "explicit_euler", 0.5, LONG, warm_up=False)
     assert row.status == "unstable"
     assert runs == [True, False]
+
+
+def test_a_long_error_controlled_row_that_failed_is_its_watched_run_timed_once(case_named, monkeypatch, runs):
+    """Drake's error-controlled run keeps every step watched or not (its watched step is 0):
+    a run stopped by truestep's bound on work stops at the same step either way, so a long
+    one is timed from its watched run, where a fixed-step method's failed row is timed by
+    a plain run (the test above)."""
+    from truestep.adapters import drake_adapter
+
+    monkeypatch.setattr(drake_adapter, "MAX_EVALUATIONS", 2000)
+    case = case_named("earth-orbit")
+    watched = DrakeAdapter().simulate(case, "bogacki_shampine3", 1e-8, monitor=True)
+    plain = DrakeAdapter().simulate(case, "bogacki_shampine3", 1e-8)
+    assert watched.status == plain.status == "solver-failed"
+    assert (watched.t_fail, watched.nfev, watched.steps) == (plain.t_fail, plain.nfev, plain.steps)
+    runs.clear()
+    row = simulate_timed("drake", case, "bogacki_shampine3", 1e-8, LONG, warm_up=False)
+    assert row.status == "solver-failed" and runs == [True] and int(row.extra["repeats"]) == 1

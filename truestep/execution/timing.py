@@ -248,13 +248,17 @@ def timed_from_watched(
     ``ok`` and was long (:attr:`Timing.long_run_s`, the length timed once) of steps of
     :func:`watched_step_s` or more, it is also the row's one timed run: what the watch
     added is within the noise of one run, and a second stepping of seconds would buy nothing.
+    A method whose ``watched_step_s`` is 0 says its watched run is its plain run, the same
+    code in the timed region: a long run of it is the row's timed run however it ended
+    (a run that failed stops at the same step watched or not).
     Otherwise the timed runs follow as for any row (:func:`timed_runs`; the watched run
     warmed the process up), each checked to end where it did (:func:`merged`)."""
     if warm_up:
         _warm_up(adapter, case, method, dt, timing)
     traj = measured_run(adapter, case, method, dt)
-    long_steps = traj.wall_s >= watched_step_s(adapter, method) * max(traj.steps, 1)
-    if traj.status == "ok" and traj.wall_s >= timing.long_run_s and long_steps:
+    step_s = watched_step_s(adapter, method)
+    long_steps = traj.status == "ok" and traj.wall_s >= step_s * max(traj.steps, 1)
+    if traj.wall_s >= timing.long_run_s and (long_steps or step_s == 0.0):
         return merged(traj, TimedRuns([traj.wall_s], [end_of(traj)], traj.path))
     _, runs = timed_runs(adapter, case, method, dt, timing, warm_up=False, lean=True, known_s=traj.wall_s)
     return merged(traj, runs)

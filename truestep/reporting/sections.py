@@ -392,7 +392,8 @@ def _light_watches() -> str:
     return (
         f"Drake's fixed-step methods and the reference's implicit Euler at steps of "
         f"{1000 * COPY_HIDDEN_STEP_S:g} ms or more; Drake's error-controlled methods and the "
-        f"reference's Dormand-Prince at any step, their plain runs keeping every step too"
+        f"reference's Dormand-Prince at any step and however the run ended, their plain runs "
+        f"keeping every step too"
     )
 
 
