@@ -138,6 +138,19 @@ def test_fingerprint_differences_name_what_moved():
     assert numerics.differences(fp, fp) == []
 
 
+def test_a_scheduling_package_s_version_is_recorded_and_decides_no_comparison():
+    """A fresh install takes the newest distributed; a cluster run's tables are a local
+    run's, so its version is recorded but does not make two runs incomparable (it did,
+    and CI's quick gate fell back to tolerances when Dask released)."""
+    fp = numerics.fingerprint()
+    assert "distributed" in numerics.PACKAGES and "distributed" in numerics.SCHEDULING_ONLY
+    other = json.loads(json.dumps(fp))
+    other["packages"]["distributed"] = "9999.1.0"
+    assert numerics.differences(fp, other) == []
+    other["packages"]["scipy"] = "0.0"
+    assert numerics.differences(fp, other) == [f"scipy {fp['packages']['scipy']} -> 0.0"]
+
+
 def test_timing_repeats_short_runs_and_times_long_ones_once():
     t = Timing()
     assert t.runs_after(1e-5) == t.max_repeats
