@@ -28,18 +28,23 @@ def _every_step(step_s: float) -> dict[str, float]:
     return dict.fromkeys(DrakeAdapter.methods, step_s)
 
 
-@pytest.fixture
-def runs(monkeypatch) -> list[bool]:
-    """Each Drake run made, as its ``monitor`` flag."""
+def _spied(monkeypatch, cls) -> list[bool]:
+    """Each run of adapter class ``cls`` made from now on, as its ``monitor`` flag."""
     made: list[bool] = []
-    plain = DrakeAdapter.simulate
+    plain = cls.simulate
 
     def spy(self, case, method, dt, *, monitor=False):
         made.append(monitor)
         return plain(self, case, method, dt, monitor=monitor)
 
-    monkeypatch.setattr(DrakeAdapter, "simulate", spy)
+    monkeypatch.setattr(cls, "simulate", spy)
     return made
+
+
+@pytest.fixture
+def runs(monkeypatch) -> list[bool]:
+    """Each Drake run made, as its ``monitor`` flag."""
+    return _spied(monkeypatch, DrakeAdapter)
 
 
 def _same_numbers(a, b) -> None:
@@ -130,14 +135,7 @@ def test_the_reference_s_watched_run_steps_as_its_plain_run(case_named, name, me
 def test_a_long_reference_row_of_long_steps_is_its_watched_run_timed_once(case_named, monkeypatch):
     """The row timed from its watched run is the row the watched run and a plain timed run
     give apart; steps shorter than the reference's threshold are timed by a plain run."""
-    made: list[bool] = []
-    plain = ReferenceAdapter.simulate
-
-    def spy(self, case, method, dt, *, monitor=False):
-        made.append(monitor)
-        return plain(self, case, method, dt, monitor=monitor)
-
-    monkeypatch.setattr(ReferenceAdapter, "simulate", spy)
+    made = _spied(monkeypatch, ReferenceAdapter)
     case = case_named("mass-ratio-chain")
     monkeypatch.setattr(ReferenceAdapter, "watched_step_s", {"implicit-euler": 1e-12})
     row = simulate_timed("reference", case, "implicit-euler", 0.01, LONG, warm_up=False)
