@@ -357,3 +357,38 @@ def test_a_search_that_started_at_a_hint_says_so_after_searching_again(case_name
     assert found.dt_limit < 0.0500 <= found.dt_unstable
     assert found.note.startswith("searched first at peer's bracket (0.0504, 0.0506) s; ")
     assert "searched again over that horizon" in found.note
+
+
+def test_a_search_again_below_a_failed_probe_makes_no_run_twice(case_named):
+    """A monotone probe found unstable starts the bisection again from ``dt_lo`` up to the
+    probe: both ends were run already, with the same step, length and start, and are not
+    run again; ``runs`` counts the simulations made. The runs are made up: unstable above
+    0.1 s and in a narrow band about 0.9 of the limit the first bisection finds (a band
+    that bisection stepped over), stable elsewhere."""
+    from truestep.adapters.base import Trajectory
+    from truestep.measures.stability import MONOTONE_PROBES, search_case
+
+    case = case_named("harmonic-oscillator")
+    made: list[tuple[float, int, bytes]] = []
+
+    def simulate_with(band):
+        def simulate(c, dt):
+            n = round(c.duration / dt)
+            made.append((dt, n, np.asarray(c.scene.x0).tobytes()))
+            t = np.arange(n + 1) * dt
+            grows = dt > 0.1 or band[0] < dt < band[1]
+            energy = 0.5 + (np.expm1(30 * t / t[-1]) if grows else np.zeros(n + 1))
+            return Trajectory.of_ode(
+                t, np.zeros((n + 1, 2)), energy, status="ok", steps=n, nfev=n, wall_s=0.0
+            )
+
+        return simulate
+
+    first = search_case(case, simulate_with((0.0, 0.0)))
+    band = (0.895 * first.dt_limit, 0.905 * first.dt_limit)
+    probe = MONOTONE_PROBES[0] * first.dt_limit
+    assert not any(band[0] < dt < band[1] for dt, _, _ in made if dt != probe)  # stepped over
+    made.clear()
+    found = search_case(case, simulate_with(band))
+    assert "not monotone" in found.note and found.dt_limit < band[0]
+    assert len(set(made)) == len(made) and found.runs == len(made)

@@ -645,6 +645,9 @@ def search_case(
     it only chooses where to look, every verdict is this engine's own run, and the note
     says where the search started also when a later step searched again from elsewhere.
     A run whose solver fails ends the search with status ``solver-failed`` and no limit. A
+    run already made (the same step, number of steps and start: a search again below a failed
+    probe starts from ``dt_lo`` and ends at the probe) is not made again, its verdict is
+    reused, and ``runs`` counts the simulations made. A
     search still running after ``budget_s`` seconds raises :class:`SearchTimeout` (a
     safety valve: it never shortens a search).
     """
@@ -658,6 +661,7 @@ def search_case(
     scale = energy_scale(case)
 
     made = [0]
+    known: dict[tuple[float, int, int], bool] = {}  # (dt, steps, ulps) -> the run's verdict
     longer = [1]  # how many times the search's horizon its runs cover
 
     def horizon_steps(dt: float) -> int:
@@ -667,13 +671,16 @@ def search_case(
         return run_steps(dt, horizon_steps(dt))
 
     def run_steps(dt: float, n: int, ulps: int = 0) -> bool:
+        if (dt, n, ulps) in known:  # the same run again (a search again from dt_lo): its verdict
+            return known[dt, n, ulps]
         start = nudged(case, ulps) if ulps else case
         trial = dataclasses.replace(start, duration=n * dt, max_records=n)
         made[0] += 1
         traj = simulate(trial, dt)
         if traj.status == "solver-failed":
             raise _SolverFailedAt(dt, traj.message)
-        return is_stable(traj, case=case, scale=scale)
+        known[dt, n, ulps] = verdict = is_stable(traj, case=case, scale=scale)
+        return verdict
 
     start = time.perf_counter()
 
@@ -730,6 +737,7 @@ def search_case(
         said = hint.words() if hint is not None and hint.usable(spec.dt_lo, spec.dt_hi) else ""
         if said and not result.note.startswith(said):  # searched again from elsewhere since
             result = dataclasses.replace(result, note="; ".join(n for n in (said, result.note) if n))
+        result = dataclasses.replace(result, runs=made[0])
     except _SolverFailedAt as err:
         return SearchResult(
             float("nan"),
