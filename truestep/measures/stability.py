@@ -646,7 +646,7 @@ def search_case(
     says where the search started also when a later step searched again from elsewhere.
     A run whose solver fails ends the search with status ``solver-failed`` and no limit. A
     run already made (the same step, number of steps and start: a search again below a failed
-    probe starts from ``dt_lo`` and ends at the probe) is not made again, its verdict is
+    probe or confirmation starts from ends already run) is not made again, its verdict is
     reused, and ``runs`` counts the simulations made. A
     search still running after ``budget_s`` seconds raises :class:`SearchTimeout` (a
     safety valve: it never shortens a search).
@@ -671,7 +671,7 @@ def search_case(
         return run_steps(dt, horizon_steps(dt))
 
     def run_steps(dt: float, n: int, ulps: int = 0) -> bool:
-        if (dt, n, ulps) in known:  # the same run again (a search again from dt_lo): its verdict
+        if (dt, n, ulps) in known:  # the same run again (a search again from its ends)
             return known[dt, n, ulps]
         start = nudged(case, ulps) if ulps else case
         trial = dataclasses.replace(start, duration=n * dt, max_records=n)
