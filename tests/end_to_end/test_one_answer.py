@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import truestep
 from truestep import numerics
 from truestep.cli import main
 from truestep.execution.runner import MACHINE_COLUMNS, NOT_REPEATABLE, Timing, simulate_timed, spread
@@ -222,6 +223,11 @@ def _gateless(tmp_path: Path) -> str:
     return str(path)
 
 
+def _gateless_again(tmp_path: Path) -> str:
+    """The case file :func:`_gateless` wrote."""
+    return str(tmp_path / "cases" / "harmonic-oscillator.toml")
+
+
 def _write_run(out: Path, rows: pd.DataFrame, cases: list[str], engines: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows.to_csv(out / "results.csv", index=False)
@@ -283,6 +289,70 @@ def test_identical_does_not_apply_across_package_versions(tmp_path, capsys):
         == 0
     )
     assert "not comparable bit for bit (scipy 0.1 ->" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("missing", [False, True], ids=["other-versions", "no-run-json"])
+def test_require_identical_fails_where_the_runs_cannot_be_compared_bit_for_bit(tmp_path, capsys, missing):
+    """``--require-identical`` is ``--identical`` that does not fall back: a baseline made
+    with another scipy (or without its ``run.json``) fails the gate (exit 1), one line
+    saying why, though its tolerances hold; the same runs under one environment pass, and a
+    cell one ulp off fails as under ``--identical``. The API says the same."""
+    rows = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0))
+    _write_run(tmp_path / "base", rows, ["harmonic-oscillator"], ["reference"])
+    _write_run(tmp_path / "run", rows, ["harmonic-oscillator"], ["reference"])
+    argv = [
+        "gate",
+        "--results",
+        str(tmp_path / "run" / "results.csv"),
+        "--cases",
+        _gateless(tmp_path),
+        "--baseline",
+        str(tmp_path / "base"),
+        "--require-identical",
+    ]
+    assert main(argv) == 0
+    assert "--identical: 8 non-timing cells compared, 0 differ" in capsys.readouterr().out.splitlines()[0]
+
+    record_path = tmp_path / "base" / "run.json"
+    if missing:
+        record_path.unlink()
+        why = "run.json is missing"
+    else:
+        record = json.loads(record_path.read_text())
+        record["numerics"]["packages"]["scipy"] = "0.1"
+        record_path.write_text(json.dumps(record))
+        why = "not comparable bit for bit (scipy 0.1 ->"
+    assert main(argv) == 1
+    out = capsys.readouterr().out.splitlines()
+    failed = [line for line in out if line.startswith("FAIL --require-identical: ")]
+    assert len(failed) == 1 and why in failed[0], out
+    assert "0 worse" in out[-1]  # the tolerances held: only the requirement failed
+    report = truestep.gate(
+        tmp_path / "run" / "results.csv",
+        cases=_gateless_again(tmp_path),
+        baseline=tmp_path / "base",
+        require_identical=True,
+    )
+    assert not report.passed and report.reasons == [failed[0].removeprefix("FAIL ")]
+    assert truestep.gate(
+        tmp_path / "run" / "results.csv",
+        cases=_gateless_again(tmp_path),
+        baseline=tmp_path / "base",
+        identical=True,
+    ).passed
+
+    _write_run(tmp_path / "base", rows, ["harmonic-oscillator"], ["reference"])
+    one_ulp_off = rows.assign(error=np.nextafter(1e-9, 1.0))
+    _write_run(tmp_path / "run", one_ulp_off, ["harmonic-oscillator"], ["reference"])
+    assert main(argv) == 1
+    assert "DIFFERS results harmonic-oscillator reference rk4 dt=0.01 error" in capsys.readouterr().out
+
+
+def test_require_identical_without_a_baseline_is_bad_input(tmp_path, capsys):
+    rows = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0))
+    _write_run(tmp_path / "run", rows, ["harmonic-oscillator"], ["reference"])
+    assert main(["gate", "--results", str(tmp_path / "run" / "results.csv"), "--require-identical"]) == 2
+    assert "add --baseline DIR" in capsys.readouterr().err
 
 
 def test_machine_columns_are_the_only_ones_left_out():

@@ -45,6 +45,9 @@ class GateRequest:
         ``module:Class``); ``None``: every engine
     declared_orders : also gate every method's declared order
     identical : with a baseline, every non-timing cell must equal the baseline's
+    require_identical : ``identical``, and a baseline that cannot be compared bit for bit
+        (other package versions or floating-point environment, or a ``run.json`` missing)
+        fails the check instead of leaving the tolerances alone to decide
     tolerances : ``QUANTITY=X`` baseline tolerances;  time_against : ``ENGINE/METHOD``
     limits : ``KEY=VALUE`` cost limits the run was made under;  trust_limits : past their ceiling
     """
@@ -56,6 +59,7 @@ class GateRequest:
     engines: str | None = None
     declared_orders: bool = False
     identical: bool = False
+    require_identical: bool = False
     tolerances: tuple[str, ...] = ()
     time_against: str | None = None
     limits: tuple[str, ...] = ()
@@ -177,7 +181,7 @@ def gate(request: GateRequest) -> GateReport:
     take(*under, read_run_record(request.results.parent))
     asked = {e.strip() for e in engines.split(",") if e.strip()} if engines else None
     cases, verdicts = _verdicts(request, tables)
-    report = GateReport(verdicts, identical=request.identical)
+    report = GateReport(verdicts, identical=request.identical or request.require_identical)
     baseline = _compare(request, tables, cases, engines, report)
     if baseline is not None:
         from truestep.ci.gates import lost_since
@@ -185,7 +189,7 @@ def gate(request: GateRequest) -> GateReport:
         report.verdicts = lost_since(report.verdicts, _verdicts_on(request, baseline, cases))
     if asked is not None:
         report.verdicts = [v for v in report.verdicts if v.gate.engine in asked or v.gate.engine == "*"]
-    report.reasons = _reasons(request, report, tables["results"], asked)
+    report.reasons += _reasons(request, report, tables["results"], asked)
     report.notes += unexercised(cases, tables["results"], asked)
     return report
 
@@ -415,9 +419,10 @@ def _compare(
     from truestep.ci.baseline import narrow
 
     if request.baseline is None:
-        if request.tolerances or request.time_against or request.identical:
+        if request.tolerances or request.time_against or request.identical or request.require_identical:
             raise GateInputError(
-                "--tolerance, --time-against and --identical compare against a baseline: add --baseline DIR"
+                "--tolerance, --time-against, --identical and --require-identical compare against a "
+                "baseline: add --baseline DIR"
             )
         return None
     base_dir = request.baseline
@@ -437,16 +442,17 @@ def _compare(
         tolerances=tolerances_of(request.tolerances, request.gates),
         time_against=request.time_against,
     )
-    if request.identical:
-        report.notes.append(
-            _identical(
-                report.comparison,
-                narrow(baseline, engines=scope_engines),
-                narrow(current, engines=scope_engines),
-                base_dir,
-                request.results.parent,
-            )
+    if request.identical or request.require_identical:
+        line, compared = _identical(
+            report.comparison,
+            narrow(baseline, engines=scope_engines),
+            narrow(current, engines=scope_engines),
+            base_dir,
+            request.results.parent,
         )
+        report.notes.append(line)
+        if request.require_identical and not compared:
+            report.reasons.append(f"--require-identical: {line.removeprefix('--identical: ')}")
     return whole
 
 
@@ -493,11 +499,14 @@ def _baseline_scope(
     return ran_cases, ran_engines
 
 
-def _identical(comparison: Comparison, baseline: dict, current: dict, base_dir: Path, run_dir: Path) -> str:
+def _identical(
+    comparison: Comparison, baseline: dict, current: dict, base_dir: Path, run_dir: Path
+) -> tuple[str, bool]:
     """``--identical``: every non-timing cell equal to the baseline's (its findings go into
     ``comparison``), when both runs had the same packages and floating-point environment
-    (their ``run.json``); the line that says how many cells differ, or why the promise does
-    not apply and the tolerances alone decide."""
+    (their ``run.json``). Returns the line that says how many cells differ, or why the
+    promise does not apply and the tolerances alone decide; and whether the cells were
+    compared bit for bit."""
     from truestep.ci.baseline import identical
     from truestep.numerics import differences
     from truestep.reporting.run_record import read_run_record
@@ -507,7 +516,8 @@ def _identical(comparison: Comparison, baseline: dict, current: dict, base_dir: 
         missing = base_dir if old is None else run_dir
         return (
             f"--identical: {missing}/run.json is missing: cannot tell whether both runs "
-            "had the same packages; compared with tolerances only"
+            "had the same packages; compared with tolerances only",
+            False,
         )
     diff = differences(old.get("numerics", {}), new.get("numerics", {}))
     if old.get("truestep") != new.get("truestep"):
@@ -515,7 +525,8 @@ def _identical(comparison: Comparison, baseline: dict, current: dict, base_dir: 
     if diff:
         return (
             f"--identical: not comparable bit for bit ({'; '.join(diff)[:300]}); "
-            "compared with tolerances only"
+            "compared with tolerances only",
+            False,
         )
     findings, cells = identical(baseline, current)
     seen = {(f.change, f.table, f.key) for f in comparison.findings if f.change in ("appeared", "vanished")}
@@ -523,4 +534,4 @@ def _identical(comparison: Comparison, baseline: dict, current: dict, base_dir: 
         f for f in findings if (f.change, f.table, f.key) not in seen
     ]
     differ = sum(f.change == "differs" for f in findings)
-    return f"--identical: {cells} non-timing cells compared, {differ} differ"
+    return f"--identical: {cells} non-timing cells compared, {differ} differ", True

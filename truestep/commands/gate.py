@@ -75,6 +75,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "and floating-point environment; else says why not and uses tolerances)",
     )
     gate.add_argument(
+        "--require-identical",
+        action="store_true",
+        help="--identical, and a baseline that cannot be compared bit for bit (other package "
+        "versions or floating-point environment, or no run.json) fails the gate instead of "
+        "falling back to tolerances: for CI that pins the packages its baseline was made with",
+    )
+    gate.add_argument(
         "--tolerance",
         action="append",
         default=[],
@@ -117,6 +124,7 @@ def main(args: argparse.Namespace) -> int:
         engines=args.engines,
         declared_orders=args.declared_orders,
         identical=args.identical,
+        require_identical=args.require_identical,
         tolerances=tuple(args.tolerance),
         time_against=args.time_against,
         limits=tuple(args.limit),
