@@ -221,7 +221,7 @@ def test_a_limit_round_off_decides_is_published_as_the_interval_it_lies_in():
     nudge changes leave the result as it was, two runs more."""
     from truestep.measures.stability import DOWN_PROBES, UP_PROBES, SearchResult, _roundoff_interval
 
-    def chaotic(dt: float, ulps: int) -> bool:
+    def chaotic(dt: float, ulps: int, times: int) -> bool:
         return dt < 1.0 or (dt <= 1.2 and (ulps == 0) == (dt <= 1.1))
 
     found = SearchResult(1.1, 1.11, 20, "")
@@ -231,11 +231,56 @@ def test_a_limit_round_off_decides_is_published_as_the_interval_it_lies_in():
     assert (out.dt_limit, out.dt_unstable) == (lo, hi) and out.note.startswith("round-off decides: ")
     assert "the limit is the largest step tried" in out.note and "smallest step tried" in out.note
     edge = _roundoff_interval(
-        found, lambda dt, ulps: dt < 1.0 or (dt <= 6 and (ulps == 0) == (dt <= 1.1)), 0.1, 5.0
+        found, lambda dt, ulps, times: dt < 1.0 or (dt <= 6 and (ulps == 0) == (dt <= 1.1)), 0.1, 5.0
     )
     assert edge.dt_unstable == 5.0 and "the unstable end is that high end" in edge.note
-    steady = _roundoff_interval(found, lambda dt, ulps: dt <= 1.1, 0.1, 5.0)
+    steady = _roundoff_interval(found, lambda dt, ulps, times: dt <= 1.1, 0.1, 5.0)
     assert (steady.dt_limit, steady.dt_unstable, steady.runs, steady.note) == (1.1, 1.11, 22, "")
+
+
+def test_each_end_is_nudged_over_the_horizon_its_own_verdict_came_from(case_named):
+    """The limit's verdict is the confirmation's (5 times the search's horizon), the
+    unstable end's the search's own: each nudged run, and each probe about that end, is
+    as long as the verdict it checks. Made-up runs on harmonic-oscillator: unstable above
+    0.1 s, where a run grows over its last half whatever its length, and, nudged, also
+    stable up to 0.11 s over the search's horizon but not over 5 times it (a start whose
+    last bits hold the growth back for a while). Nudged over 5 times the horizon, as the
+    unstable end was before, that start's say went unseen; over the unstable end's own
+    horizon the search finds that round-off decides there, and the unstable end it
+    publishes is a step at which both starts are unstable over that horizon."""
+    from truestep.adapters.base import Trajectory
+    from truestep.measures.stability import CONFIRM, NUDGE, UP_PROBES, nudged, search_case
+
+    case = case_named("harmonic-oscillator")
+    spec = case.stability
+    shifted = np.asarray(nudged(case, NUDGE).scene.x0).tobytes()
+    made: list[tuple[float, int, bool]] = []
+
+    def times(dt: float, n: int) -> float:
+        """How many times the search's horizon ``n`` steps of ``dt`` cover."""
+        return n / max(spec.min_steps, np.ceil(spec.horizon / dt))
+
+    def simulate(c, dt):
+        n = round(c.duration / dt)
+        is_nudged = np.asarray(c.scene.x0).tobytes() == shifted
+        made.append((dt, n, is_nudged))
+        held_back = is_nudged and dt <= 0.11 and times(dt, n) < 2
+        grows = dt > 0.1 and not held_back
+        t = np.arange(n + 1) * dt
+        energy = 0.5 + (np.expm1(30 * t / t[-1]) if grows else np.zeros(n + 1))
+        return Trajectory.of_ode(t, np.zeros((n + 1, 2)), energy, status="ok", steps=n, nfev=n, wall_s=0.0)
+
+    found = search_case(case, simulate)
+
+    plain = {dt: times(dt, n) for dt, n, is_nudged in made if not is_nudged}
+    nudges = [(dt, times(dt, n)) for dt, n, is_nudged in made if is_nudged]
+    first_unstable = min(dt for dt, n, is_nudged in made[: len(made) - len(nudges) - 1] if dt > 0.1)
+    assert nudges[0][1] == CONFIRM  # at the limit: the confirmation's horizon
+    assert nudges[1] == (first_unstable, 1)  # at the unstable end: the search's own
+    assert found.note.startswith("round-off decides: ") and "stable at" in found.note
+    assert found.dt_unstable == next(f * first_unstable for f in UP_PROBES if f * first_unstable > 0.11)
+    assert all(t == 1 for dt, t in nudges[1:]) and plain[found.dt_unstable] == 1
+    assert found.runs == len(made) == len(set(made))
 
 
 def test_the_rope_s_limit_is_an_interval_because_its_motion_is_chaotic(case_named):

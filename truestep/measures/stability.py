@@ -469,12 +469,16 @@ NUDGE = 4
 """float32 ulps by which a search's start is nudged (positions, or an ODE's state, times
 ``1 + 4 eps32``, 4.8e-7 of each: a float32 engine's start moves by a few of its ulps, a
 float64 one's far below any length of the scene), one run at the limit found and one at
-the smallest unstable step, over the horizon of the search's last runs: where the nudged
-run is unstable at the limit, or stable at the unstable step, round-off decides the
-verdict there (rope-pendulum: the reference's symplectic Euler and Drake's semi-explicit
-Euler, one scheme, agree to 2e-15 at 1 s and differ by 0.19 m at 10 s, and their limits
-0.0035 and 0.0041 s were each other's noise). Cases with an exact limit (linear scenes)
-are not nudged."""
+the smallest unstable step, each over the horizon its own verdict was reached over (the
+limit's: the confirmation's, :data:`CONFIRM` times the search's; the unstable end's: the
+search's, unless it was found over the longer horizon): where the nudged run is unstable
+at the limit, or stable at the unstable step, round-off decides the verdict there
+(rope-pendulum: the reference's symplectic Euler and Drake's semi-explicit Euler, one
+scheme, agree to 2e-15 at 1 s and differ by 0.19 m at 10 s, and their limits 0.0035 and
+0.0041 s were each other's noise). The unstable end is not nudged over a longer run than
+its verdict: a mode that grows shows more over a longer run, so a longer nudged run would
+agree more often and hide the start's say. Cases with an exact limit (linear scenes) are
+not nudged."""
 ROUNDOFF_DECIDES = "round-off decides:"
 """How the note of a search whose limit round-off decides begins (the report's figure
 draws those rows' intervals)."""
@@ -499,27 +503,35 @@ def nudged(case: Case, ulps: int) -> Case:
 
 
 def _roundoff_interval(
-    result: SearchResult, stable_with: Callable[[float, int], bool], dt_lo: float, dt_hi: float
+    result: SearchResult,
+    stable_with: Callable[[float, int, int], bool],
+    dt_lo: float,
+    dt_hi: float,
+    times_of: Callable[[float], int] = lambda dt: 1,
 ) -> SearchResult:
     """``result`` where the start nudged by :data:`NUDGE` ulps keeps the run stable at its
     limit and unstable at its unstable end (two runs); else the interval round-off decides
     in: from the first of :data:`DOWN_PROBES` of the limit at which the run
-    (``stable_with(dt, 0)``) and its nudged copy (``stable_with(dt, NUDGE)``) are both
-    stable, to the first of :data:`UP_PROBES` of the unstable end (below ``dt_hi``, else
-    ``dt_hi``) at which both are unstable; the note begins with :data:`ROUNDOFF_DECIDES`."""
+    (``stable_with(dt, 0, times)``) and its nudged copy (``stable_with(dt, NUDGE, times)``)
+    are both stable, to the first of :data:`UP_PROBES` of the unstable end (below
+    ``dt_hi``, else ``dt_hi``) at which both are unstable; the note begins with
+    :data:`ROUNDOFF_DECIDES`. ``times``: how many times the search's horizon a run covers,
+    at each end and its probes the horizon of that end's own verdict (``times_of(dt)``)."""
     limit, unstable = result.dt_limit, result.dt_unstable
     if not (limit > dt_lo and math.isfinite(unstable)):
         return result
+    low, high = times_of(limit), times_of(unstable)
     runs = result.runs + 2
-    low_flip, high_flip = not stable_with(limit, NUDGE), stable_with(unstable, NUDGE)
+    low_flip, high_flip = not stable_with(limit, NUDGE, low), stable_with(unstable, NUDGE, high)
     if not (low_flip or high_flip):
         return dataclasses.replace(result, runs=runs)
 
     def both(dt: float, stable: bool) -> bool:
         nonlocal runs
+        times = low if stable else high
         for ulps in (0, NUDGE):
             runs += 1
-            if stable_with(dt, ulps) != stable:
+            if stable_with(dt, ulps, times) != stable:
                 return False
         return True
 
@@ -663,11 +675,16 @@ def search_case(
     made = [0]
     known: dict[tuple[float, int, int], bool] = {}  # (dt, steps, ulps) -> the run's verdict
     longer = [1]  # how many times the search's horizon its runs cover
+    judged: dict[float, int] = {}  # dt -> the longest horizon (times the search's) it was run over
+
+    def steps_over(dt: float, times: int) -> int:
+        return times * max(min_steps, math.ceil(spec.horizon / dt))
 
     def horizon_steps(dt: float) -> int:
-        return longer[0] * max(min_steps, math.ceil(spec.horizon / dt))
+        return steps_over(dt, longer[0])
 
     def stable_at(dt: float) -> bool:
+        judged[dt] = max(judged.get(dt, 0), longer[0])
         return run_steps(dt, horizon_steps(dt))
 
     def run_steps(dt: float, n: int, ulps: int = 0) -> bool:
@@ -732,7 +749,11 @@ def search_case(
         )
         if exact is None:  # a linear scene's limit is not decided by round-off
             result = _roundoff_interval(
-                result, lambda dt, ulps: run_steps(dt, horizon_steps(dt), ulps), spec.dt_lo, spec.dt_hi
+                result,
+                lambda dt, ulps, times: run_steps(dt, steps_over(dt, times), ulps),
+                spec.dt_lo,
+                spec.dt_hi,
+                lambda dt: judged.get(dt, longer[0]),
             )
         said = hint.words() if hint is not None and hint.usable(spec.dt_lo, spec.dt_hi) else ""
         if said and not result.note.startswith(said):  # searched again from elsewhere since
