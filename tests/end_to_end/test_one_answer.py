@@ -223,6 +223,13 @@ def _gateless(tmp_path: Path) -> str:
     return str(path)
 
 
+def _gate_run_against_base(tmp_path: Path, option: str) -> list[str]:
+    """``truestep gate``'s arguments for ``tmp_path``'s ``run`` against its ``base``, the
+    case without its gates (:func:`_gateless`), with ``option``."""
+    results, base = str(tmp_path / "run" / "results.csv"), str(tmp_path / "base")
+    return ["gate", "--results", results, "--cases", _gateless(tmp_path), "--baseline", base, option]
+
+
 def _gateless_again(tmp_path: Path) -> str:
     """The case file :func:`_gateless` wrote."""
     return str(tmp_path / "cases" / "harmonic-oscillator.toml")
@@ -273,21 +280,7 @@ def test_identical_does_not_apply_across_package_versions(tmp_path, capsys):
     record["numerics"]["packages"]["scipy"] = "0.1"
     (tmp_path / "base" / "run.json").write_text(json.dumps(record))
     _write_run(tmp_path / "run", rows.assign(error=1.0000001e-9), ["harmonic-oscillator"], ["reference"])
-    assert (
-        main(
-            [
-                "gate",
-                "--results",
-                str(tmp_path / "run" / "results.csv"),
-                "--cases",
-                _gateless(tmp_path),
-                "--baseline",
-                str(tmp_path / "base"),
-                "--identical",
-            ]
-        )
-        == 0
-    )
+    assert main(_gate_run_against_base(tmp_path, "--identical")) == 0
     assert "not comparable bit for bit (scipy 0.1 ->" in capsys.readouterr().out
 
 
@@ -300,16 +293,7 @@ def test_require_identical_fails_where_the_runs_cannot_be_compared_bit_for_bit(t
     rows = _rows(("reference", "rk4", 0.01, "step", "ok", 1e-9, 400, 1e-3, 0))
     _write_run(tmp_path / "base", rows, ["harmonic-oscillator"], ["reference"])
     _write_run(tmp_path / "run", rows, ["harmonic-oscillator"], ["reference"])
-    argv = [
-        "gate",
-        "--results",
-        str(tmp_path / "run" / "results.csv"),
-        "--cases",
-        _gateless(tmp_path),
-        "--baseline",
-        str(tmp_path / "base"),
-        "--require-identical",
-    ]
+    argv = _gate_run_against_base(tmp_path, "--require-identical")
     assert main(argv) == 0
     assert "--identical: 8 non-timing cells compared, 0 differ" in capsys.readouterr().out.splitlines()[0]
 
