@@ -21,7 +21,12 @@ method's declared order, or exactness, on every smooth case with an exact soluti
 ``truestep gate --declared-orders`` does; default false) and ``baseline`` (a baseline's folder,
 ``truestep baseline save``: one more test per table, ``baseline/results``,
 ``baseline/orders``, ``baseline/stability``, ``baseline/restitution``, failing with every
-row of the marker's cases and engines that got worse or vanished). The cases run once
+row of the marker's cases and engines that got worse or vanished), ``identical`` (with
+``baseline``: one more test, ``baseline/identical``, failing with every non-timing cell of
+the marker's cases and engines that is not the baseline's bit for bit, as
+``truestep gate --identical``; skipped, with the reason, where the two runs had other
+package versions or floating-point environments) and ``require_identical`` (the same, but
+failing where the runs cannot be compared bit for bit, as ``--require-identical``). The cases run once
 per session for each distinct marker; a gate the run cannot evaluate (its engine did not
 run the case) is a skipped test, and a marker whose gates name nothing fails.
 
@@ -47,9 +52,9 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
         f"{MARKER}(engines, cases, gates=None, quick=False, case_gates=True, results=None, "
-        "baseline=None, declared_orders=False): run truestep cases on these engines (or read "
-        "results=), and compare with baseline=; the test takes `truestep_gate`, once per gate "
-        "and baseline table",
+        "baseline=None, declared_orders=False, identical=False, require_identical=False): run "
+        "truestep cases on these engines (or read results=), and compare with baseline=; the "
+        "test takes `truestep_gate`, once per gate and baseline table",
     )
 
 
@@ -65,6 +70,8 @@ class Selection:
     results: str | None = None
     baseline: str | None = None
     declared_orders: bool = False
+    identical: bool = False
+    require_identical: bool = False
 
 
 def _paths(value: Any, base: Path) -> tuple[str, ...]:
@@ -99,11 +106,17 @@ def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
         "results",
         "baseline",
         "declared_orders",
+        "identical",
+        "require_identical",
     }
     if unknown:
         raise pytest.UsageError(f"@pytest.mark.{MARKER}: unknown argument {sorted(unknown)[0]!r}")
     if "engines" not in kw or "cases" not in kw:
         raise pytest.UsageError(f"@pytest.mark.{MARKER} needs engines= and cases=")
+    if (kw.get("identical") or kw.get("require_identical")) and kw.get("baseline") is None:
+        raise pytest.UsageError(
+            f"@pytest.mark.{MARKER}: identical= and require_identical= compare with a baseline: add baseline="
+        )
     base = test_file.parent
     return Selection(
         engines=tuple(
@@ -118,6 +131,8 @@ def _selection(mark: pytest.Mark, test_file: Path) -> Selection:
         results=_one_path(kw.get("results"), base, "results"),
         baseline=_one_path(kw.get("baseline"), base, "baseline"),
         declared_orders=bool(kw.get("declared_orders", False)),
+        identical=bool(kw.get("identical", False)),
+        require_identical=bool(kw.get("require_identical", False)),
     )
 
 
@@ -222,11 +237,18 @@ def _plan(sel: Selection) -> list[GateCheck | BaselineCheck]:
     for c in checks:
         seen[c.id] = seen.get(c.id, 0) + 1
         c.copy = seen[c.id]
-    return [*checks, *(BaselineCheck(sel, t) for t in BASELINE_TABLES if sel.baseline is not None)]
+    tables = [t for t in BASELINE_TABLES if sel.baseline is not None]
+    if sel.identical or sel.require_identical:
+        tables.append(IDENTICAL)
+    return [*checks, *(BaselineCheck(sel, t) for t in tables)]
 
 
 BASELINE_TABLES = ("results", "orders", "stability", "restitution")
 """What a marker's ``baseline=`` compares, one test each (:func:`truestep.ci.baseline.compare`)."""
+IDENTICAL = "identical"
+"""The test of ``identical=`` and ``require_identical=``: every non-timing cell, bit for bit."""
+SHOWN = 20
+"""How many differing cells a failed ``baseline/identical`` lists (it counts them all)."""
 
 
 @dataclass
@@ -242,6 +264,9 @@ class BaselineCheck:
         return f"baseline/{self.table}"
 
     def check(self) -> None:
+        if self.table == IDENTICAL:
+            self._check_identical()
+            return
         comparison = _comparison(self.selection)
         if self.table == "results" and not comparison.compared:
             pytest.fail(
@@ -254,14 +279,63 @@ class BaselineCheck:
 
             pytest.fail("\n".join(visible(f.line()) for f in bad), pytrace=False)
 
+    def _check_identical(self) -> None:
+        """Every non-timing cell of the marker's cases and engines equal to the baseline's
+        (:func:`truestep.ci.baseline.identical`) where both runs' records promise it;
+        else skipped (``identical``) or failed (``require_identical``) with the reason."""
+        from truestep.ci.baseline import identical
+        from truestep.ci.gate_report import not_bit_for_bit
+        from truestep.reporting.run_record import read_run_record
+        from truestep.runtime.visible import visible
 
-def _comparison(sel: Selection):
-    """The marker's run compared with its baseline, in its cases and engines (made once)."""
+        sel = self.selection
+        old, new = read_run_record(Path(str(sel.baseline))), _record(sel)
+        if old is None or new is None:
+            where = sel.baseline if old is None else Path(str(sel.results)).parent
+            why = [f"{where}/run.json is missing: cannot tell whether both runs had the same packages"]
+        else:
+            why = not_bit_for_bit(old, new)
+        if why:
+            line = visible(f"not comparable bit for bit ({'; '.join(why)[:300]})")
+            if sel.require_identical:
+                pytest.fail(f"require_identical: {line}", pytrace=False)
+            pytest.skip(f"{line}; the other baseline tests compare with tolerances only")
+        findings, cells = identical(*_narrowed(sel))
+        if not cells:
+            pytest.fail(
+                f"baseline {sel.baseline}: no non-timing cell of the marker's cases and engines to compare",
+                pytrace=False,
+            )
+        if findings:
+            more = f"\n... and {len(findings) - SHOWN} more" if len(findings) > SHOWN else ""
+            pytest.fail(
+                f"{len(findings)} of {cells} non-timing cells differ from the baseline bit for bit:\n"
+                + "\n".join(visible(f.line()) for f in findings[:SHOWN])
+                + more,
+                pytrace=False,
+            )
+
+
+def _record(sel: Selection) -> dict | None:
+    """The marker's run's record as ``run.json`` keeps what decides its numbers: its
+    ``results=`` folder's, or the run made here (its truestep version and
+    :attr:`~truestep.api.Tables.numerics`)."""
+    if sel.results is not None:
+        from truestep.reporting.run_record import read_run_record
+
+        return read_run_record(Path(sel.results).parent)
+    from truestep import __version__
+
+    return {"truestep": __version__, "numerics": _tables(sel).numerics}
+
+
+def _narrowed(sel: Selection) -> tuple[dict, dict]:
+    """The baseline's tables and the marker's run's, each narrowed to the marker's cases
+    and engines (made once)."""
     from truestep.adapters import resolve_engine
     from truestep.ci.baseline import narrow, read_tables
-    from truestep.ci.gate_report import compare_with
 
-    key = ("baseline", *dataclasses.astuple(sel))
+    key = ("narrowed", *dataclasses.astuple(sel))
     if key not in _RUNS:
         tables = _tables(sel)
         current = {
@@ -270,11 +344,23 @@ def _comparison(sel: Selection):
             "restitution": tables.restitution,
         }
         current = {k: v if v is None or len(v.columns) else None for k, v in current.items()}
-        cases = _gates(sel)[0]
-        names = {c.name for c in cases}
+        names = {c.name for c in _gates(sel)[0]}
         engines = {resolve_engine(e) for e in sel.engines}
         before = narrow(read_tables(Path(str(sel.baseline))), cases=names, engines=engines)
-        _RUNS[key] = compare_with(before, narrow(current, cases=names, engines=engines), cases, engines)
+        _RUNS[key] = (before, narrow(current, cases=names, engines=engines))
+    return _RUNS[key]
+
+
+def _comparison(sel: Selection):
+    """The marker's run compared with its baseline, in its cases and engines (made once)."""
+    from truestep.adapters import resolve_engine
+    from truestep.ci.gate_report import compare_with
+
+    key = ("baseline", *dataclasses.astuple(sel))
+    if key not in _RUNS:
+        before, current = _narrowed(sel)
+        engines = {resolve_engine(e) for e in sel.engines}
+        _RUNS[key] = compare_with(before, current, _gates(sel)[0], engines)
     return _RUNS[key]
 
 

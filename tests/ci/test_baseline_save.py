@@ -5,10 +5,12 @@ that ran it, every engine's version, the project's git revision."""
 from __future__ import annotations
 
 import json
+import os
 import socket
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -136,26 +138,21 @@ def test_physics(truestep_gate):
 
 
 def _pytest(folder: Path, results: Path, baseline: Path) -> subprocess.CompletedProcess:
+    (folder / "test_physics.py").write_text(PLUGIN_TEST.format(results=results, baseline=baseline))
+    return _session(folder, "-p", "no:randomly")
+
+
+def _session(folder: Path, *options: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    """``pytest -q -rA`` on the test files in ``folder``, in a process of its own."""
     import sys
 
-    (folder / "test_physics.py").write_text(PLUGIN_TEST.format(results=results, baseline=baseline))
     return subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pytest",
-            "-q",
-            "-rA",
-            "-p",
-            "no:cacheprovider",
-            "-p",
-            "no:randomly",
-            str(folder),
-        ],
+        [sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", *options, str(folder)],
         cwd=folder,
         capture_output=True,
         text=True,
         timeout=600,
+        env=env,
     )
 
 
@@ -229,19 +226,11 @@ def test_the_pytest_mark_gates_declared_orders_on_request(project, tmp_path):
     """``declared_orders=True`` gives the mark ``truestep gate --declared-orders``'s gates, one
     test each (a new user found the mark had no such option): they hold on the run, and the
     rk4 one fails where its error at the larger step is an eighth (an order of 1, not 4)."""
-    import sys
-
     _, out = project
 
     def session(results: Path) -> subprocess.CompletedProcess:
         (tmp_path / "test_physics.py").write_text(DECLARED_TEST.format(results=results))
-        return subprocess.run(
-            [sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", str(tmp_path)],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
+        return _session(tmp_path)
 
     same = session(out / "results.csv")
     assert same.returncode == 0, same.stdout[-3000:]
@@ -257,3 +246,77 @@ def test_the_pytest_mark_gates_declared_orders_on_request(project, tmp_path):
         "FAILED test_physics.py::test_physics[harmonic-oscillator/order/reference/rk4/declared]",
     ], bad.stdout[-3000:]
     assert "measured order 0.995, required >= 4 - 0.25" in bad.stdout
+
+
+IDENTICAL_TEST = """
+import pytest
+
+
+@pytest.mark.truestep(
+    engines="reference", cases="harmonic-oscillator", quick=True,
+    {results}baseline="{baseline}", {option}=True,
+)
+def test_physics(truestep_gate):
+    truestep_gate.check()
+"""
+
+
+def _one_ulp_up(out: Path, dest: Path) -> Path:
+    """A copy of the run in ``out`` whose rk4 error at its largest step is the next double up."""
+    dest.mkdir()
+    for name in ("stability.csv", "restitution.csv", "run.json"):
+        (dest / name).write_bytes((out / name).read_bytes())
+    results = pd.read_csv(out / "results.csv")
+    hit = (results["method"] == "rk4") & (results["dt"] == results["dt"].max())
+    results.loc[hit, "error"] = np.nextafter(results.loc[hit, "error"].to_numpy(), np.inf)
+    results.to_csv(dest / "results.csv", index=False)
+    return dest
+
+
+def test_the_pytest_mark_compares_bit_for_bit_on_request(project, tmp_path):
+    """``identical=True`` gives the mark ``truestep gate --identical``'s check as one more
+    test, ``baseline/identical`` (a CI that wrote its gates as tests had no way to ask
+    for it): it passes on the run the baseline was saved from, and on the same cases run
+    in the test session itself (its environment set as the ``truestep`` command sets it);
+    it fails on a run one cell of which is one ulp off, printing both doubles in full;
+    where the baseline had another scipy it is skipped with that reason under
+    ``identical``, and fails under ``require_identical``."""
+
+    from truestep.numerics import environment
+
+    _, out = project
+    saved = tmp_path / "saved"
+    assert main(["baseline", "save", str(saved), "--results", str(out / "results.csv")]) == 0
+    env = {**os.environ, **environment()}
+
+    def session(results: Path | None, baseline: Path, option: str = "identical") -> str:
+        folder = tmp_path / f"s{len(list(tmp_path.glob('s*')))}"
+        folder.mkdir()
+        (folder / "test_physics.py").write_text(
+            IDENTICAL_TEST.format(
+                results="" if results is None else f'results="{results}", ', baseline=baseline, option=option
+            )
+        )
+        done = _session(folder, "-k", "identical", env=env)
+        return f"rc={done.returncode}\n{done.stdout}"
+
+    name = "test_physics.py::test_physics[baseline/identical]"
+    same = session(out / "results.csv", saved)
+    assert same.startswith("rc=0") and f"PASSED {name}" in same, same[-3000:]
+    here = session(None, saved)
+    assert here.startswith("rc=0") and f"PASSED {name}" in here, here[-3000:]
+    off = session(_one_ulp_up(out, tmp_path / "off") / "results.csv", saved)
+    assert off.startswith("rc=1") and f"FAILED {name}" in off, off[-3000:]
+    assert "1 of " in off and " non-timing cells differ from the baseline bit for bit" in off
+    row = next(line for line in off.splitlines() if line.startswith("DIFFERS results harmonic-oscillator"))
+    before, after = row.rsplit(": ", 1)[1].split(" -> ")
+    assert float(after) == np.nextafter(float(before), np.inf), row
+    record = json.loads((saved / "run.json").read_text())
+    record["numerics"]["packages"]["scipy"] = "0.1"
+    (saved / "run.json").write_text(json.dumps(record))
+    other = session(out / "results.csv", saved)
+    assert other.startswith("rc=0") and "SKIPPED" in other, other[-3000:]
+    assert "not comparable bit for bit (scipy 0.1 -> " in other
+    required = session(out / "results.csv", saved, "require_identical")
+    assert required.startswith("rc=1") and f"FAILED {name}" in required, required[-3000:]
+    assert "require_identical: not comparable bit for bit (scipy 0.1 -> " in required

@@ -290,7 +290,16 @@ def test_baseline_wall_time_only_as_a_ratio_in_the_same_run(run_dir, copy, capsy
     results.to_csv(d / "results.csv", index=False)
     args = ["gate", "--results", str(d / "results.csv"), "--baseline", str(base), "-q"]
     assert main([*args, "--time-against", "reference/rk4"]) == 0
-    capsys.readouterr()
+    assert "timed on" not in capsys.readouterr().out
+    for folder, cpu in ((base, "Intel(R) Xeon(R) Processor"), (d, "AMD EPYC")):  # another CPU: said
+        record = json.loads((folder / "run.json").read_text())
+        record["machine"] = {"cpu": cpu, "architecture": "x86_64", "cores": 2, "system": "Linux 6.1"}
+        (folder / "run.json").write_text(json.dumps(record))
+    assert main([*args, "--time-against", "reference/rk4"]) == 0
+    assert (
+        "--time-against: the baseline was timed on Intel(R) Xeon(R) Processor (x86_64), 2 cores, "
+        "Linux 6.1, this run on AMD EPYC (x86_64), 2 cores, Linux 6.1"
+    ) in capsys.readouterr().out
     euler = results["method"] == "euler"
     results.loc[euler, "wall_s"] *= 3.0  # euler three times slower relative to rk4
     results.to_csv(d / "results.csv", index=False)

@@ -329,7 +329,9 @@ def test_require_identical_fails_where_the_runs_cannot_be_compared_bit_for_bit(t
     one_ulp_off = rows.assign(error=np.nextafter(1e-9, 1.0))
     _write_run(tmp_path / "run", one_ulp_off, ["harmonic-oscillator"], ["reference"])
     assert main(argv) == 1
-    assert "DIFFERS results harmonic-oscillator reference rk4 dt=0.01 error" in capsys.readouterr().out
+    out = capsys.readouterr().out  # the two doubles as they read back, not alike to 6 figures
+    cell = "DIFFERS results harmonic-oscillator reference rk4 dt=0.01 error"
+    assert f"{cell}: 1e-09 -> {float(np.nextafter(1e-9, 1.0))!r}" in out, out
 
 
 def test_require_identical_without_a_baseline_is_bad_input(tmp_path, capsys):

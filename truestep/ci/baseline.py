@@ -69,14 +69,19 @@ class Finding:
         }[self.change]
         if self.change in ("appeared", "vanished"):
             return f"{head:6s} {self.table} {self.key}"
+        exact = self.change == "differs"  # cells one ulp apart must not print alike
         return (
-            f"{head:6s} {self.table} {self.key} {self.quantity}: {_show(self.baseline)} -> "
-            f"{_show(self.current)}" + (f" ({self.note})" if self.note else "")
+            f"{head:6s} {self.table} {self.key} {self.quantity}: {_show(self.baseline, exact)} -> "
+            f"{_show(self.current, exact)}" + (f" ({self.note})" if self.note else "")
         )
 
 
-def _show(x: object) -> str:
-    return f"{x:.6g}" if isinstance(x, float | np.floating) else str(x)
+def _show(x: object, exact: bool = False) -> str:
+    """A cell in a finding's line: a float to 6 figures, or (``exact``) its shortest repr
+    that reads back as the same double."""
+    if isinstance(x, float | np.floating):
+        return repr(float(x)) if exact else f"{x:.6g}"
+    return str(x)
 
 
 @dataclass

@@ -15,7 +15,7 @@ stays for the gates to read (a ``no-worse-than`` gate's other run, the rows a
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -442,6 +442,8 @@ def _compare(
         tolerances=tolerances_of(request.tolerances, request.gates),
         time_against=request.time_against,
     )
+    if request.time_against:
+        report.notes += _other_machine(base_dir, request.results.parent)
     if request.identical or request.require_identical:
         line, compared = _identical(
             report.comparison,
@@ -499,6 +501,33 @@ def _baseline_scope(
     return ran_cases, ran_engines
 
 
+def _other_machine(base_dir: Path, run_dir: Path) -> list[str]:
+    """A note where ``--time-against`` compares timings measured on two kinds of machine
+    (their ``run.json``'s ``machine``): a ratio to one engine cancels the CPU's speed only
+    where every engine gains or loses alike on the other CPU."""
+    from truestep.reporting.run_record import read_run_record
+    from truestep.runtime.machine import line
+
+    old, new = (read_run_record(d) or {} for d in (base_dir, run_dir))
+    a, b = old.get("machine"), new.get("machine")
+    if not a or not b or (a.get("cpu"), a.get("cores")) == (b.get("cpu"), b.get("cores")):
+        return []
+    return [f"--time-against: the baseline was timed on {line(a)}, this run on {line(b)}"]
+
+
+def not_bit_for_bit(old: Mapping, new: Mapping) -> list[str]:
+    """What keeps two runs' records (``run.json``) from promising equal non-timing cells:
+    another truestep version, then each difference of their floating-point environment
+    (:func:`truestep.numerics.differences`), one short line each; empty where the promise
+    holds. The machine they ran on (``machine``) is not among them: it moves timings only."""
+    from truestep.numerics import differences
+
+    diff = differences(old.get("numerics", {}), new.get("numerics", {}))
+    if old.get("truestep") != new.get("truestep"):
+        diff.insert(0, f"truestep {old.get('truestep')} -> {new.get('truestep')}")
+    return diff
+
+
 def _identical(
     comparison: Comparison, baseline: dict, current: dict, base_dir: Path, run_dir: Path
 ) -> tuple[str, bool]:
@@ -508,7 +537,6 @@ def _identical(
     promise does not apply and the tolerances alone decide; and whether the cells were
     compared bit for bit."""
     from truestep.ci.baseline import identical
-    from truestep.numerics import differences
     from truestep.reporting.run_record import read_run_record
 
     old, new = read_run_record(base_dir), read_run_record(run_dir)
@@ -519,9 +547,7 @@ def _identical(
             "had the same packages; compared with tolerances only",
             False,
         )
-    diff = differences(old.get("numerics", {}), new.get("numerics", {}))
-    if old.get("truestep") != new.get("truestep"):
-        diff.insert(0, f"truestep {old.get('truestep')} -> {new.get('truestep')}")
+    diff = not_bit_for_bit(old, new)
     if diff:
         return (
             f"--identical: not comparable bit for bit ({'; '.join(diff)[:300]}); "

@@ -44,6 +44,9 @@ class Tables:
         ``report``), s
     findings : what the run found (:class:`truestep.measures.findings.Findings`: picks, orders,
         scorecard), computed once beside the analyses; ``None`` without them
+    numerics : the floating-point environment the run computed in
+        (:func:`truestep.numerics.fingerprint`, as ``run.json`` records it): a run with the
+        same record and truestep version gives the same non-timing cells bit for bit
     """
 
     results: pd.DataFrame
@@ -53,6 +56,7 @@ class Tables:
     scaling: pd.DataFrame = field(default_factory=pd.DataFrame)
     seconds: dict[str, float] = field(default_factory=dict)
     findings: Findings | None = None
+    numerics: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -117,6 +121,7 @@ def run_experiment(exp: Experiment) -> Tables:
     journal keeps) when the cluster cannot be reached or goes away."""
     from truestep.execution.runner import run_matrix
     from truestep.measures.findings import find
+    from truestep.numerics import fingerprint
     from truestep.runtime import publish
     from truestep.runtime.isolation import Lanes, set_run_budget, untimed_workers
 
@@ -166,6 +171,7 @@ def run_experiment(exp: Experiment) -> Tables:
         tables["scaling"],
         seconds=laps.seconds,
         findings=found,
+        numerics=fingerprint(),
     )
 
 

@@ -7,7 +7,6 @@ that opens offline (:mod:`truestep.reporting.html`).
 
 from __future__ import annotations
 
-import os
 import platform
 import shutil
 import subprocess
@@ -67,6 +66,7 @@ def footer(argv: list[str]) -> str:
     """Machine, devices, package versions, git revision and the command that reproduces
     the page."""
     from truestep.adapters.devices import in_use
+    from truestep.runtime import machine
 
     devices = in_use()
     where = (
@@ -83,8 +83,7 @@ def footer(argv: list[str]) -> str:
     rev = git_revision()
     return (
         "---\n\n"
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.system()} "
-        f"{platform.release()}, Python {platform.python_version()}.  \n"
+        f"Machine (what the timings depend on): {machine.line()}, Python {platform.python_version()}.  \n"
         f"Devices: {where} (the `device` column of each table).  \n"
         f"Packages: {', '.join(versions)}.  \n"
         f"Numerics: {numerics_line()}.  \n"
@@ -416,7 +415,9 @@ def run_record(
     """``run.json``: the truestep version and revision, the command, whether it was quick,
     the cases and engines the run was asked for (in order), the floating-point
     environment (:func:`truestep.numerics.fingerprint`): with equal ``numerics`` and
-    revision, two runs' non-timing columns are equal bit for bit; and, where given, the
+    revision, two runs' non-timing columns are equal bit for bit; the machine the timings
+    were measured on (``machine``: :func:`truestep.runtime.machine.describe`, which decides
+    no non-timing number); and, where given, the
     ``precision`` of each engine's state (the facts a verdict on these tables reads, also
     where that engine is not installed: :func:`truestep.measures.metrics.recorded_precision`);
     each method's declared facts, peers and glossary notes (``method_facts``, ``peers``,
@@ -442,6 +443,7 @@ def run_record(
     from truestep.measures import engine_facts
     from truestep.measures.metrics import precision_of
     from truestep.numerics import fingerprint
+    from truestep.runtime import machine
 
     return {
         "truestep": __version__,
@@ -451,6 +453,7 @@ def run_record(
         "cases": [c.name for c in cases],
         "engines": list(dict.fromkeys(results["engine"].astype(str))) if len(results) else [],
         "numerics": fingerprint(),
+        "machine": machine.describe(),
         "precision": {e: precision_of(e) for e in dict.fromkeys(results["engine"].astype(str))}
         if len(results)
         else {},

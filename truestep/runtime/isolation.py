@@ -603,4 +603,6 @@ def run_isolated(fn: Callable[..., Any], args: tuple, timeout: float) -> Outcome
 
 def untimed_workers() -> int:
     """How many children may run at once for work that is not timed: the usable cores."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    from truestep.runtime.machine import usable_cores
+
+    return usable_cores()
