@@ -5,7 +5,8 @@ revision of the project, in the order they were added (``index.json``). ``truest
 history add`` saves the current run under the project's revision (a revision added again
 replaces its entry); ``truestep history show`` prints one row's quantity over the saved
 commits and names the commits where it stepped (:func:`steps`, as asv names the commit
-where a benchmark moved); ``truestep history export`` writes a run as the JSON
+where a benchmark moved) and, for a timing, the commits whose run was timed on another
+machine (:func:`machine_changes`); ``truestep history export`` writes a run as the JSON
 github-action-benchmark reads (``customSmallerIsBetter``).
 """
 
@@ -69,12 +70,15 @@ def add(results: Path, store: Path, *, root: Path | None = None) -> dict:
 
 @dataclass(frozen=True)
 class Point:
-    """One saved commit's value of a quantity (NaN where that run has no such row)."""
+    """One saved commit's value of a quantity (NaN where that run has no such row), and
+    the machine its run was timed on (:func:`truestep.runtime.machine.line` of its
+    ``run.json``; empty where the run recorded none)."""
 
     revision: str
     dirty: bool
     value: float
     status: str
+    machine: str = ""
 
 
 def series(store: Path, quantity: str, case: str, engine: str, method: str, dt: float | None) -> list[Point]:
@@ -95,7 +99,29 @@ def series(store: Path, quantity: str, case: str, engine: str, method: str, dt: 
             raise HistoryError(f"{case} {engine}/{method}: {len(rows)} rows in {path}: name the step (--dt)")
         value = float(pd.to_numeric(rows[quantity], errors="coerce").iloc[0]) if len(rows) else math.nan
         status = str(rows["status"].iloc[0]) if len(rows) else "absent"
-        out.append(Point(e["revision"], bool(e["dirty"]), value, status))
+        out.append(Point(e["revision"], bool(e["dirty"]), value, status, _machine(store / e["folder"])))
+    return out
+
+
+def _machine(folder: Path) -> str:
+    """The machine a saved run was timed on, in words; empty where it recorded none."""
+    from truestep.reporting.run_record import read_run_record
+    from truestep.runtime.machine import line
+
+    recorded = (read_run_record(folder) or {}).get("machine")
+    return line(recorded) if isinstance(recorded, dict) else ""
+
+
+def machine_changes(points: list[Point]) -> dict[int, str]:
+    """The indices of ``points`` whose run was timed on another machine than the run
+    before it that recorded one, each with that machine in words: a timing that steps
+    there may have stepped with the machine, not the commit."""
+    out: dict[int, str] = {}
+    last = ""
+    for k, p in enumerate(points):
+        if p.machine and last and p.machine != last:
+            out[k] = p.machine
+        last = p.machine or last
     return out
 
 

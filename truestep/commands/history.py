@@ -90,11 +90,17 @@ def main(args: argparse.Namespace) -> int:
     points, found, tol = kept.points, set(kept.stepped), kept.tolerance
     if not points:
         raise UsageError(f"{args.store}: no saved run (truestep history add first)")
+    from truestep.ci.history import machine_changes
+    from truestep.tables.spec import RESULTS
+
+    moved = machine_changes(points) if args.quantity in RESULTS.where(machine=True) else {}
     for k, p in enumerate(points):
         mark = ""
         if k in found:
             before = points[k - 1].value
             mark = f"  <- stepped: {before:.6g} -> {p.value:.6g}"
+        if k in moved:
+            mark += f"  [timed on another machine from here: {moved[k]}]"
         dirty = "+" if p.dirty else " "
         print(f"{p.revision[:12]}{dirty} {p.value:.6g} ({p.status}){mark}")
     print(
