@@ -475,11 +475,14 @@ def save_baseline(results: str | Path, dest: str | Path) -> dict:
 class History:
     """One row's quantity over the commits of a history (``truestep history show``): the
     saved ``points`` (:class:`truestep.ci.history.Point`, oldest first), the indices of
-    those where it ``stepped``, and the relative ``tolerance`` a step exceeds."""
+    those where it ``stepped``, the relative ``tolerance`` a step exceeds, and, for a
+    timing, the indices of those timed on ``another_machine`` than the point before, each
+    with that machine in words (:func:`truestep.ci.history.machine_changes`)."""
 
     points: list
     stepped: list[int]
     tolerance: float
+    another_machine: dict[int, str] = dataclasses.field(default_factory=dict)
 
 
 def history_add(results: str | Path, store: str | Path = ".truestep-history") -> dict:
@@ -507,10 +510,12 @@ def history(
     read."""
     from truestep.ci import history as kept
     from truestep.ci.baseline import TOLERANCES
+    from truestep.tables.spec import RESULTS
 
     points = kept.series(Path(store), quantity, case, engine, method, dt)
     tol = tolerance if tolerance is not None else TOLERANCES.get(quantity, 0.1)
-    return History(points, sorted(set(kept.steps([p.value for p in points], tol))), tol)
+    moved = kept.machine_changes(points) if quantity in RESULTS.where(machine=True) else {}
+    return History(points, sorted(set(kept.steps([p.value for p in points], tol))), tol, moved)
 
 
 def benchmark_json(results: str | Path) -> list[dict]:

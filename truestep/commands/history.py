@@ -90,10 +90,7 @@ def main(args: argparse.Namespace) -> int:
     points, found, tol = kept.points, set(kept.stepped), kept.tolerance
     if not points:
         raise UsageError(f"{args.store}: no saved run (truestep history add first)")
-    from truestep.ci.history import machine_changes
-    from truestep.tables.spec import RESULTS
-
-    moved = machine_changes(points) if args.quantity in RESULTS.where(machine=True) else {}
+    moved = kept.another_machine
     for k, p in enumerate(points):
         mark = ""
         if k in found:
