@@ -19,7 +19,7 @@ import truestep
 from truestep import numerics
 from truestep.cli import main
 from truestep.execution.runner import MACHINE_COLUMNS, NOT_REPEATABLE, Timing, simulate_timed, spread
-from truestep.measures.picks import TIE_NOISE, cheapest, tied_with_fastest
+from truestep.measures.picks import TIE_NOISE, cheapest, noise_interval, scorecard, tied_with_fastest
 
 
 def _python(code: str, **env: str) -> str:
@@ -210,6 +210,27 @@ def test_runs_within_noise_are_tied_and_the_fewest_evaluations_is_named(case_nam
     assert pick.loc["wall_s", "tied"] == "reference / rk4 (dt 0.01)"
     apart = rows.assign(wall_s=[1e-3, 1e-3 * (1 + 2.5 * TIE_NOISE), 2e-3])
     assert cheapest(apart, [case], targets=(1e-4,)).set_index("by").loc["wall_s", "tied"] == ""
+
+
+def test_a_row_whose_repeats_spread_past_their_median_is_not_tied_with_one_far_faster(case_named):
+    """Stop 72's finding: circle-field scipy / RK45 at tol 1e-3 timed at a median 1.569 ms
+    with half its interquartile range 2.111 ms, so ``wall - band`` fell below 0 and the row
+    was "tied" with a run 122 times faster: the scorecard gave RK45 a cost ratio of 1 there
+    and made it the orbit family's pick. Noise is a factor: that row is known to lie
+    between 1.569 / 2.345 = 0.669 ms and 3.68 ms, nowhere near 0.0128 ms."""
+    case = case_named("harmonic-oscillator")
+    rows = _rows(
+        ("scipy", "RK45", 1e-3, "tolerance", "ok", 1e-9, 300, 1.569e-3, 2.111e-3),
+        ("reference", "rk4", 0.01, "step", "ok", 1e-9, 4000, 1.28e-5, 1e-7),
+    )
+    assert tied_with_fastest(rows).tolist() == [False, True]
+    low, high = noise_interval(np.array([1.569e-3]), np.array([2.111e-3]))
+    assert low[0] == pytest.approx(1.569e-3 / (1 + 2.111 / 1.569)) and high[0] == pytest.approx(3.68e-3)
+    pick = cheapest(rows, [case], targets=(1e-4,)).set_index("by")
+    assert pick.loc["wall_s", "method"] == "rk4" and pick.loc["wall_s", "tied"] == ""
+    card = scorecard(rows, [case]).set_index(["engine", "method"])
+    assert card.loc[("scipy", "RK45"), "cost_ratio"] == pytest.approx(1.569e-3 / 1.28e-5)
+    assert card.loc[("reference", "rk4"), "cost_ratio"] == 1.0
 
 
 def _gateless(tmp_path: Path) -> str:

@@ -283,16 +283,19 @@ def _compare_timing(old: pd.DataFrame, new: pd.DataFrame, tol: float, findings: 
     """Wall-time ratios (:func:`_wall_ratios`) row by row: ``worse`` only where the new
     ratio, less its noise, exceeds the old one, plus its noise, by more than ``tol``
     (relative), ``better`` the other way; ratios whose noise bands leave no such gap are
-    a tie. An unchanged solver run twice (A/A) passes: single timings of a few
-    microseconds move by a large factor from run to run."""
+    a tie. Noise is a factor (:func:`~truestep.measures.picks.noise_interval`): a ratio
+    known to ``n`` lies between ``r / (1 + n)`` and ``r * (1 + n)``, so a row whose spread
+    passes its median still gates (``r * (1 - n)`` would fall below 0 and never be worse).
+    An unchanged solver run twice (A/A) passes: single timings of a few microseconds move
+    by a large factor from run to run."""
     a, b = _index(old, RESULT_KEYS), _index(new, RESULT_KEYS)
     for k in sorted(a.keys() & b.keys(), key=str):
         ra, rb = a[k], b[k]
         r0, r1 = float(ra["wall_ratio"]), float(rb["wall_ratio"])
         n0, n1 = float(ra["ratio_noise"]), float(rb["ratio_noise"])
-        if r1 * (1 - n1) > r0 * (1 + n0) * (1 + tol):
+        if r1 / (1 + n1) > r0 * (1 + n0) * (1 + tol):
             findings.append(Finding("worse", "timing", _key(rb, RESULT_KEYS), "wall_ratio", r0, r1))
-        elif r1 * (1 + n1) * (1 + tol) < r0 * (1 - n0):
+        elif r1 * (1 + n1) * (1 + tol) < r0 / (1 + n0):
             findings.append(Finding("better", "timing", _key(rb, RESULT_KEYS), "wall_ratio", r0, r1))
     return len(a.keys() & b.keys())
 

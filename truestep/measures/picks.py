@@ -71,20 +71,32 @@ def noise_band(wall: np.ndarray, spread: np.ndarray | None = None) -> np.ndarray
     return band
 
 
-def _bands(frame: pd.DataFrame) -> np.ndarray:
+def noise_interval(wall: np.ndarray, spread: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The intervals (s) wall times (s) are known to: ``wall / (1 + r)`` to ``wall * (1 + r)``
+    with ``r`` the relative :func:`noise_band`. Timing noise multiplies (a loaded core, a
+    lower clock slow every step alike), so the interval is symmetric in the logarithm and
+    its lower end stays above 0 however wide a row's spread: a row whose repeats spread
+    wider than their median is known to a factor, not to within 0 of anything."""
+    wall = np.asarray(wall, float)
+    grow = 1.0 + noise_band(wall, spread) / wall
+    return wall / grow, wall * grow
+
+
+def _bands(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     spread = _num(frame, "wall_s_spread") if "wall_s_spread" in frame else None
-    return noise_band(_num(frame, "wall_s"), spread)
+    return noise_interval(_num(frame, "wall_s"), spread)
 
 
 def tied_with_fastest(frame: pd.DataFrame) -> np.ndarray:
-    """Which rows' wall times cannot be told from the fastest's: their intervals
-    (:func:`noise_band`) reach down to the top of the fastest's. Rows without a wall
-    time are not tied."""
-    wall, band = _num(frame, "wall_s"), _bands(frame)
+    """Which rows' wall times cannot be told from the fastest's: the bottoms of their
+    intervals (:func:`noise_interval`) reach down to the top of the fastest's. Rows
+    without a wall time are not tied."""
+    wall = _num(frame, "wall_s")
+    low, high = _bands(frame)
     if not np.isfinite(wall).any():
         return np.zeros(len(frame), bool)
     k = int(np.nanargmin(wall))
-    return np.isfinite(wall) & (wall - band <= wall[k] + band[k])
+    return np.isfinite(wall) & (low <= high[k])
 
 
 def _label(r: pd.Series) -> str:
@@ -345,7 +357,8 @@ def scorecard(
 
     ``cost_ratio``: over the family's cases this engine/method reached ``target x scale``
     on, the median of its cheapest wall time there over the cheapest of all runs (1: the
-    fastest, or within timing noise of it, :func:`tied_with_fastest`); NaN if it reached
+    fastest, or within timing noise of it: the bottom of its :func:`noise_interval` reaches
+    the top of the fastest's, as in :func:`tied_with_fastest`); NaN if it reached
     none. A case whose error the reference's integrators do not set (:func:`scene_set_error`:
     the same error for its methods of different orders) is left out of the ratios of the
     reference's methods that share that error (:func:`shared_error_methods`), and stays in
@@ -371,7 +384,7 @@ def scorecard(
     ok = ran[ran["status"] == "ok"].copy()
     shared = {c.name: shared_error_methods(c, results) for c in cases if c.name in family}
     ok["reaches"] = _num(ok, "error") <= target * ok["case"].map(scale).to_numpy(float)
-    ok["band"] = _bands(ok) if len(ok) else np.zeros(0)
+    ok["low"], ok["high"] = _bands(ok) if len(ok) else (np.zeros(0), np.zeros(0))
     reached = ok[ok["reaches"] & np.isfinite(_num(ok, "wall_s"))]
     fastest = {
         case: g.iloc[int(np.argmin(_num(g, "wall_s")))] for case, g in reached.groupby("case", sort=False)
@@ -399,7 +412,7 @@ def scorecard(
                 if len(hit):
                     mine_best = hit.iloc[int(np.argmin(_num(hit, "wall_s")))]
                     top = fastest[case]
-                    tied = mine_best["wall_s"] - mine_best["band"] <= top["wall_s"] + top["band"]
+                    tied = mine_best["low"] <= top["high"]
                     ratios.append(1.0 if tied else float(mine_best["wall_s"] / top["wall_s"]))
             searched = [c for c in family if family[c] == fam]  # a search counts, run in the sweep or not
             s = (

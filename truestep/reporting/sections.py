@@ -180,17 +180,17 @@ def hard_case_line(case: Case, s: pd.DataFrame) -> str:
 
 def speedup_sentence(gate, others: pd.DataFrame, mine: pd.Series) -> str:
     """How many times as long the fastest engine takes as ``mine`` at the gate's step, with
-    the interval the timings' noise leaves (:func:`truestep.measures.picks.noise_band`); engines
+    the interval the timings' noise leaves (:func:`truestep.measures.picks.noise_interval`); engines
     tied for fastest are named together."""
-    from truestep.measures.picks import noise_band, tied_with_fastest
+    from truestep.measures.picks import noise_interval, tied_with_fastest
 
     tied = others[tied_with_fastest(others)].sort_values(["engine", "method"])
     names = " and ".join(f"{text(r.engine)} / {text(r.method)}" for r in tied.itertuples(index=False))
     fastest = tied.loc[tied["wall_s"].astype(float).idxmin()]
     w_e, w_r = float(fastest["wall_s"]), float(mine["wall_s"])
-    b_e = float(noise_band(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))[0])
-    b_r = float(noise_band(np.array([w_r]), np.array([mine.get("wall_s_spread", np.nan)]))[0])
-    low, high = (w_e - b_e) / (w_r + b_r), (w_e + b_e) / max(w_r - b_r, 1e-300)
+    (lo_e,), (hi_e,) = noise_interval(np.array([w_e]), np.array([fastest.get("wall_s_spread", np.nan)]))
+    (lo_r,), (hi_r,) = noise_interval(np.array([w_r]), np.array([mine.get("wall_s_spread", np.nan)]))
+    low, high = lo_e / hi_r, hi_e / lo_r
     who = (
         f"the fastest engine, {names},"
         if len(tied) == 1
@@ -254,7 +254,7 @@ def _tied_group(ranked: pd.DataFrame) -> pd.DataFrame:
     top = ranked.iloc[0]
     ratio = ranked["cost_ratio"].to_numpy(float)
     same = (ranked["cases_reached"].to_numpy() == top.cases_reached) & (
-        ratio * (1 - TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE)
+        ratio / (1 + TIE_NOISE) <= float(top.cost_ratio) * (1 + TIE_NOISE)
     )
     return ranked[same]
 
@@ -421,9 +421,10 @@ def methods_section(cases: list[Case]) -> list[str]:
         f"{1000 * timing.min_total_s:.0f} ms (at least {timing.min_repeats}, at most "
         f"{timing.max_repeats} runs), runs up to {timing.long_run_s:g} s are timed twice, "
         f"longer ones once; the wall time is the median and `wall_s_spread` half the "
-        f"interquartile range. Runs whose times lie within each other's noise "
-        f"(their spread, and at least {100 * TIE_NOISE:.0f}% of the time) are "
-        f"**tied**: a pick names them together.",
+        f"interquartile range. Noise is taken as a factor: a time `t` known to `r` "
+        f"(its spread over `t`, and at least {100 * TIE_NOISE:.0f}%) lies between "
+        f"`t / (1 + r)` and `t (1 + r)`. Runs whose intervals overlap are **tied**: a "
+        f"pick names them together.",
         "- **One answer on every machine**: every column but the timings and the host "
         "is the same, bit for bit, for the same revision and package versions "
         "(`run.json` records them, and the floating-point environment).",
