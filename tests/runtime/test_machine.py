@@ -69,3 +69,21 @@ def test_a_run_records_its_machine_apart_from_its_numerics(tmp_path):
     assert machine.cpu_model() not in json.dumps(record["numerics"])
     footer = f"Machine (what the timings depend on): {machine.line()}, Python "
     assert footer in (out / "index.md").read_text()
+
+
+def test_the_gate_and_the_history_call_the_same_machines_alike():
+    """One rule decides "another machine" for ``gate --time-against``'s note and for
+    ``history show``'s mark: the CPU, architecture and cores; a kernel update is the same
+    machine, and a run that recorded none (an earlier release's) is not called another."""
+    from truestep.ci.history import Point, machine_changes
+
+    amd = {"cpu": "AMD EPYC", "architecture": "x86_64", "cores": 2, "system": "Linux 6.1"}
+    kernel = {**amd, "system": "Linux 6.18"}
+    four = {**amd, "cores": 4}
+    intel = {**amd, "cpu": "Intel(R) Xeon(R) Processor"}
+    assert machine.timed_alike(amd, kernel) and machine.timed_alike(amd, None)
+    assert not machine.timed_alike(amd, four) and not machine.timed_alike(amd, intel)
+    points = [
+        Point(f"r{k}", False, 1.0, "ok", m) for k, m in enumerate([amd, kernel, None, intel, intel, four])
+    ]
+    assert machine_changes(points) == {3: machine.line(intel), 5: machine.line(four)}

@@ -506,11 +506,11 @@ def _other_machine(base_dir: Path, run_dir: Path) -> list[str]:
     (their ``run.json``'s ``machine``): a ratio to one engine cancels the CPU's speed only
     where every engine gains or loses alike on the other CPU."""
     from truestep.reporting.run_record import read_run_record
-    from truestep.runtime.machine import line
+    from truestep.runtime.machine import line, timed_alike
 
     old, new = (read_run_record(d) or {} for d in (base_dir, run_dir))
     a, b = old.get("machine"), new.get("machine")
-    if not a or not b or (a.get("cpu"), a.get("cores")) == (b.get("cpu"), b.get("cores")):
+    if timed_alike(a, b):
         return []
     return [f"--time-against: the baseline was timed on {line(a)}, this run on {line(b)}"]
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,14 +72,14 @@ def add(results: Path, store: Path, *, root: Path | None = None) -> dict:
 @dataclass(frozen=True)
 class Point:
     """One saved commit's value of a quantity (NaN where that run has no such row), and
-    the machine its run was timed on (:func:`truestep.runtime.machine.line` of its
-    ``run.json``; empty where the run recorded none)."""
+    the machine its run was timed on (its ``run.json``'s ``machine``; None where the run
+    recorded none)."""
 
     revision: str
     dirty: bool
     value: float
     status: str
-    machine: str = ""
+    machine: Mapping | None = None
 
 
 def series(store: Path, quantity: str, case: str, engine: str, method: str, dt: float | None) -> list[Point]:
@@ -103,24 +104,26 @@ def series(store: Path, quantity: str, case: str, engine: str, method: str, dt: 
     return out
 
 
-def _machine(folder: Path) -> str:
-    """The machine a saved run was timed on, in words; empty where it recorded none."""
+def _machine(folder: Path) -> Mapping | None:
+    """The machine a saved run was timed on; None where it recorded none."""
     from truestep.reporting.run_record import read_run_record
-    from truestep.runtime.machine import line
 
     recorded = (read_run_record(folder) or {}).get("machine")
-    return line(recorded) if isinstance(recorded, dict) else ""
+    return recorded if isinstance(recorded, dict) else None
 
 
 def machine_changes(points: list[Point]) -> dict[int, str]:
     """The indices of ``points`` whose run was timed on another machine than the run
-    before it that recorded one, each with that machine in words: a timing that steps
-    there may have stepped with the machine, not the commit."""
+    before it that recorded one (:func:`truestep.runtime.machine.timed_alike`, as the
+    gate's ``--time-against`` note decides), each with that machine in words: a timing
+    that steps there may have stepped with the machine, not the commit."""
+    from truestep.runtime.machine import line, timed_alike
+
     out: dict[int, str] = {}
-    last = ""
+    last: Mapping | None = None
     for k, p in enumerate(points):
-        if p.machine and last and p.machine != last:
-            out[k] = p.machine
+        if not timed_alike(p.machine, last):
+            out[k] = line(p.machine)
         last = p.machine or last
     return out
 

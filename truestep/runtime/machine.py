@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import platform
+from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
 
@@ -67,9 +68,19 @@ def describe() -> dict[str, str | int]:
     }
 
 
-def line(machine: dict | None = None) -> str:
+def line(machine: Mapping | None = None) -> str:
     """:func:`describe` (or a recorded one) in words: ``"AMD EPYC (x86_64), 2 cores,
     Linux 6.1.0"``."""
     m = describe() if machine is None else machine
     cpu, arch = m.get("cpu", "unknown"), m.get("architecture", "?")
     return f"{cpu} ({arch}), {m.get('cores', '?')} cores, {m.get('system', '?')}"
+
+
+def timed_alike(a: Mapping | None, b: Mapping | None) -> bool:
+    """Whether two recorded machines (``run.json``'s ``machine``) time alike: the same CPU,
+    architecture and usable cores. The operating system's release is left out: a kernel
+    update moves no timing the way another CPU does. A run that recorded no machine (an
+    earlier release's) is taken as alike: nothing says otherwise."""
+    if not a or not b:
+        return True
+    return all(a.get(k) == b.get(k) for k in ("cpu", "architecture", "cores"))
