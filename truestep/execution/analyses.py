@@ -3,6 +3,7 @@ cost grows with the number of particles."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import time
@@ -19,6 +20,7 @@ from truestep.cases.exact import stability_limit
 from truestep.cases.loader import CASE_DIR, load_case
 from truestep.execution.progress import Progress
 from truestep.execution.runner import preload, prepare_here
+from truestep.measures.energy_scale import energy_scale
 from truestep.measures.restitution import PHASE_BAND, PHASES, bounces, heights
 from truestep.measures.stability import Hint, SearchResult, SearchTimeout, search_case
 from truestep.numerics import own_run
@@ -125,8 +127,12 @@ class UntimedPart:
     ``prepares[k]`` is the (engine, case, method) whose adapter ``prepare`` the ``k``-th
     call needs (:func:`prepare_before_fork`): made just before its fork, once for each, so
     that planning holds up nothing (beside a sweep, the sweep has made most of them).
-    ``fill(k, call)``, where given, completes the ``k``-th call then from what the calls
-    done so far found (a search's :class:`~truestep.measures.stability.Hint`)."""
+    ``warm(case)``, where given, is made here once per case before its first call's fork,
+    for what every call of that case computes alike and keeps (a search's energy scale,
+    read along the case's reference path: 1.7-1.9 s for the cloths and the rope, which
+    each search process made again). ``fill(k, call)``, where given, completes the
+    ``k``-th call then from what the calls done so far found (a search's
+    :class:`~truestep.measures.stability.Hint`)."""
 
     def __init__(
         self,
@@ -137,9 +143,11 @@ class UntimedPart:
         progress: Callable[[str], None] | None,
         prepares: Sequence[tuple[str, Case, str]] = (),
         fill: Callable[[int, Call], Call] | None = None,
+        warm: Callable[[Case], object] | None = None,
     ) -> None:
         self.kind, self.calls = kind, calls
-        self._fill = fill
+        self._fill, self._warm = fill, warm
+        self._warmed: set[int] = set()
         self._on_done, self._make_table, self._progress = on_done, make_table, progress
         self._prepares = prepares
         self._prepared: set[tuple[str, str, str]] = set()
@@ -161,6 +169,11 @@ class UntimedPart:
             self._first = self._bar.start
         if self._prepares:
             prepare_before_fork([self._prepares[k]], self._prepared)
+            case = self._prepares[k][1]
+            if self._warm is not None and id(case) not in self._warmed:
+                self._warmed.add(id(case))
+                with contextlib.suppress(Exception):  # the call that needs it then fails in its own row
+                    self._warm(case)
         return self.calls[k] if self._fill is None else self._fill(k, self.calls[k])
 
     def done(self, k: int, out: Outcome) -> None:
@@ -295,7 +308,9 @@ def stability_part(
     order = sorted(range(len(calls)), key=_sources_first(calls))
     planned = [calls[k] for k in order]
     prepares = [(engine, case, method) for _, (engine, case, method, *_), _t in planned]
-    return UntimedPart("stability", planned, done, table, progress, prepares, fill=_peer_bracket(searched))
+    return UntimedPart(
+        "stability", planned, done, table, progress, prepares, fill=_peer_bracket(searched), warm=energy_scale
+    )
 
 
 def _sources_first(calls: list[Call]) -> Callable[[int], tuple[bool, float]]:
