@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -51,11 +52,24 @@ class Solver(ABC):
             raise TypeError(f"{self.name} needs a system with a position/velocity split")
         self.system = system
         self.nfev = 0
+        self._derivative: Callable[[np.ndarray, float], np.ndarray] = system.derivative
 
     def fun(self, x: np.ndarray, t: float) -> np.ndarray:
         """Evaluate ``f(x, t)`` of the system, counting the evaluation."""
         self.nfev += 1
-        return self.system.derivative(x, t)
+        return self._derivative(x, t)
+
+    def use_compiled_derivative(self) -> bool:
+        """Evaluate :meth:`fun` by the system's compiled twin of its derivative
+        (:meth:`~truestep.reference_impl.system.System.compiled_derivative`: the same bits,
+        a fraction of the cost) from here on, where it has one; whether it has. For a run
+        whose stepping has no compiled loop (implicit Euler's Newton iteration): the
+        numpy derivative stays the spec and the oracle, and a solver made without this
+        call evaluates it. The twin takes the system's parameters as they are now."""
+        fast = self.system.compiled_derivative()
+        if fast is not None:
+            self._derivative = fast
+        return fast is not None
 
     def accel(self, q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         """Evaluate ``a(q, v, t)`` of a second-order system, counting the evaluation."""

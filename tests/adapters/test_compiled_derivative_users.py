@@ -69,3 +69,42 @@ def test_the_twins_take_the_system_s_own_parameters():
     for system in (KeplerProblem(y, mu=2.5), Arenstorf(y, mu=0.1)):
         np.testing.assert_array_equal(system.compiled_derivative()(y, 0.0), system.derivative(y, 0.0))
     assert CircleField(y[:2]).compiled_derivative() is None
+
+
+@pytest.mark.parametrize(
+    ("name", "method", "dt"),
+    [
+        ("stiff-cloth", "implicit-euler", 1e-3),
+        ("rope-pendulum", "implicit-euler", 2e-3),
+        ("kepler-orbit", "implicit-euler", 1e-3),
+        ("hanging-cloth", "dopri5", 1e-6),
+    ],
+)
+def test_the_reference_s_numpy_path_calls_the_twin_and_runs_the_same(
+    monkeypatch, case_named, name, method, dt
+):
+    """A reference step with no compiled loop (implicit Euler's Newton iteration, an
+    adaptive step on the numpy path) evaluates the compiled twin of the derivative: the
+    run of ``ReferenceAdapter(compiled=False)`` (the numpy derivative), bit for bit, with
+    next to none of the numpy derivative's calls."""
+    from truestep.adapters.reference import ReferenceAdapter
+    from truestep.reference_impl.odes import KeplerProblem
+    from truestep.reference_impl.particles import ParticleSystem
+
+    calls = []
+    for system in (ParticleSystem, KeplerProblem):
+        numpy_derivative = system.derivative
+
+        def counted(self, x, t, _f=numpy_derivative):
+            calls.append(1)
+            return _f(self, x, t)
+
+        monkeypatch.setattr(system, "derivative", counted)
+    case = case_named(name)
+    case = dataclasses.replace(case, duration=case.duration / 10)
+    fast = ReferenceAdapter().simulate(case, method, dt)
+    fast_calls = len(calls)
+    slow = ReferenceAdapter(compiled=False).simulate(case, method, dt)
+    assert fast.path == slow.path == "numpy"
+    assert_same_run(fast, slow)
+    assert fast.nfev > 50 and len(calls) - fast_calls >= fast.nfev and fast_calls <= 2
