@@ -2,11 +2,14 @@
 (Drake's integrators, scipy's ``solve_ivp``; issue 34, item 3). Per case, the seconds of
 one call of the system's Python derivative and of its compiled twin
 (``System.compiled_derivative``), and whether both give the same bits on random states;
-then a few Drake rows run both ways, their wall times and whether the runs are the same.
+then a few Drake rows run both ways, their wall times and whether the runs are the same;
+then the reference's rows whose step has no compiled loop (implicit Euler's Newton
+iteration), which call the twin since stop 73: ``ReferenceAdapter(compiled=False)`` (the
+numpy derivative) against the default, alternated, the median of three each.
 A timing check, so a benchmark, never a unit test::
 
-    python benchmarks/compiled_derivative.py             # every case, and the Drake rows
-    python benchmarks/compiled_derivative.py --no-drake  # the derivatives only
+    python benchmarks/compiled_derivative.py             # every case, Drake's and the reference's rows
+    python benchmarks/compiled_derivative.py --no-drake --no-reference  # the derivatives only
 """
 
 from __future__ import annotations
@@ -23,6 +26,13 @@ DRAKE_ROWS = (
     ("hanging-cloth", "runge_kutta3", 2e-3),
 )
 """(case, Drake method, step or tolerance) of the rows run with each derivative."""
+REFERENCE_ROWS = (
+    ("stiff-cloth", "implicit-euler", 2.5e-4),
+    ("hanging-cloth", "implicit-euler", 2e-3),
+    ("rope-pendulum", "implicit-euler", 5e-4),
+    ("kepler-orbit", "implicit-euler", 1e-3),
+)
+"""(case, reference method, step) of the numpy-path rows run with each derivative."""
 
 
 def _seconds(fn, y: np.ndarray) -> float:
@@ -67,14 +77,35 @@ def drake_rows() -> None:
         print(f"{name + ' ' + method + f' {dt:g}':42s} {slow.wall_s:9.2f} {fast.wall_s:11.2f}  {same}")
 
 
+def reference_rows() -> None:
+    import statistics
+
+    from truestep.adapters.reference import ReferenceAdapter
+    from truestep.cases import load_cases
+
+    cases = {c.name: c for c in load_cases("*")}
+    print(f"\n{'reference row':42s} {'python s':>9s} {'compiled s':>11s}  same run")
+    for name, method, dt in REFERENCE_ROWS:
+        runs: dict[bool, list] = {True: [], False: []}
+        for twin in (True, False) * 3:
+            runs[twin].append(ReferenceAdapter(compiled=twin).simulate(cases[name], method, dt))
+        fast, slow = runs[True][0], runs[False][0]
+        same = (fast.nfev, fast.steps) == (slow.nfev, slow.steps) and np.array_equal(fast.x, slow.x)
+        slow_s, fast_s = (statistics.median(r.wall_s for r in runs[k]) for k in (False, True))
+        print(f"{name + ' ' + method + f' {dt:g}':42s} {slow_s:9.2f} {fast_s:11.2f}  {same}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--states", type=int, default=20, help="random states compared per case (default 20)")
-    parser.add_argument("--no-drake", action="store_true", help="the derivatives only")
+    parser.add_argument("--no-drake", action="store_true", help="leave out the Drake rows")
+    parser.add_argument("--no-reference", action="store_true", help="leave out the reference's rows")
     args = parser.parse_args()
     derivatives(args.states)
     if not args.no_drake:
         drake_rows()
+    if not args.no_reference:
+        reference_rows()
 
 
 if __name__ == "__main__":
